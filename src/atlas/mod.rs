@@ -1,0 +1,89 @@
+//! Stage 2 — `Atlas`: lightmap UVs for every instance, packed into pages.
+//!
+//! Either xatlas charts and packs the instances in world-space units (`xatlas.rs`, the only file
+//! that touches xatlas-rs), or the input's own `TEXCOORD_1` is reused (`existing.rs`), after
+//! checking it is inside [0,1] and free of overlaps.
+
+mod existing;
+mod xatlas;
+
+use glam::Vec2;
+
+use crate::config::{AtlasParams, UvMode};
+use crate::scene::{Scene, Source};
+use crate::Result;
+
+/// Size of one lightmap page in texels.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PageSize {
+    pub width: u32,
+    pub height: u32,
+}
+
+/// Lightmap UV layout of the whole scene.
+#[derive(Clone, Debug)]
+pub struct Atlas {
+    pub pages: Vec<PageSize>,
+    /// Parallel to [`Scene::instances`].
+    pub instances: Vec<InstanceUv>,
+    /// Texel density actually used (texels per world unit).
+    pub texels_per_unit: f32,
+    /// True when the input's `TEXCOORD_1` was reused.
+    pub reused_input_uvs: bool,
+}
+
+/// The lightmap parameterisation of one instance. Unwrapping splits vertices along chart seams,
+/// so an instance gets its own vertex list: atlas vertex `a` copies local source vertex `xref[a]`.
+#[derive(Clone, Debug, Default)]
+pub struct InstanceUv {
+    /// Local source vertex (index into the primitive's attribute accessors) of each atlas vertex.
+    pub xref: Vec<u32>,
+    /// Lightmap UV of each atlas vertex, in [0,1] of its page (glTF convention, v down).
+    pub uv: Vec<Vec2>,
+    /// One per instance triangle, same order as `Scene::triangles[instance.triangles]`,
+    /// as indices into `xref`/`uv`, same winding.
+    pub triangles: Vec<[u32; 3]>,
+    /// Page of each triangle.
+    pub triangle_page: Vec<u32>,
+}
+
+impl Atlas {
+    /// Lightmap UVs of scene triangle `t` (an index into `Scene::triangles`) and its page.
+    pub fn triangle_uv(&self, scene: &Scene, t: u32) -> ([Vec2; 3], u32) {
+        let i = scene.triangle_instance[t as usize];
+        let inst = &self.instances[i as usize];
+        let local = (t - scene.instances[i as usize].triangles.start) as usize;
+        let tri = inst.triangles[local];
+        ([inst.uv[tri[0] as usize], inst.uv[tri[1] as usize], inst.uv[tri[2] as usize]], inst.triangle_page[local])
+    }
+
+    /// Debug-build consistency check.
+    pub fn validate(&self, scene: &Scene) {
+        assert_eq!(self.instances.len(), scene.instances.len());
+        for (inst, si) in self.instances.iter().zip(&scene.instances) {
+            assert_eq!(inst.xref.len(), inst.uv.len());
+            assert_eq!(inst.triangles.len(), si.triangles.len());
+            assert_eq!(inst.triangle_page.len(), si.triangles.len());
+            let nv = si.vertices.end - si.vertices.start;
+            assert!(inst.xref.iter().all(|&x| x < nv));
+            assert!(inst.uv.iter().all(|uv| uv.is_finite() && uv.min_element() >= 0.0 && uv.max_element() <= 1.0));
+            assert!(inst.triangle_page.iter().all(|&p| (p as usize) < self.pages.len()));
+            assert!(inst.triangles.iter().flatten().all(|&a| (a as usize) < inst.xref.len()));
+        }
+    }
+}
+
+/// Builds the atlas: reuses the input's `TEXCOORD_1` or unwraps, as `params.uv` says.
+pub fn build(scene: &Scene, source: &Source, params: &AtlasParams) -> Result<Atlas> {
+    let atlas = match params.uv {
+        UvMode::Unwrap => xatlas::unwrap(scene, source, params)?,
+        UvMode::Existing => existing::reuse(scene, source, params)?,
+        UvMode::Auto => match existing::reuse(scene, source, params) {
+            Ok(atlas) => atlas,
+            Err(_) => xatlas::unwrap(scene, source, params)?,
+        },
+    };
+    #[cfg(debug_assertions)]
+    atlas.validate(scene);
+    Ok(atlas)
+}

@@ -1,0 +1,197 @@
+//! [`bake`]: the whole pipeline, file in, files out.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use glam::Vec3;
+
+use crate::config::BakeConfig;
+use crate::lightmap::{self, LightmapPages};
+use crate::output::{self, PageFiles, Staging};
+use crate::trace::Tracer;
+use crate::{atlas, scene, solve, texels, transport, Error, Progress, Result};
+
+/// Wall time of one pipeline stage.
+#[derive(Clone, Debug)]
+pub struct StageTime {
+    pub stage: &'static str,
+    pub seconds: f64,
+}
+
+/// What a bake did, for the one-line summary and for build tools.
+#[derive(Clone, Debug)]
+pub struct BakeReport {
+    pub triangles: usize,
+    pub texels: usize,
+    pub pages: usize,
+    pub rays: u64,
+    pub iterations: usize,
+    pub residual: f32,
+    /// False when the solver stopped on the iteration cap.
+    pub converged: bool,
+    pub stages: Vec<StageTime>,
+    /// The files written, the glTF first.
+    pub files: Vec<PathBuf>,
+}
+
+impl BakeReport {
+    /// One line: texels, pages, rays, iterations, residual, seconds per stage.
+    pub fn summary(&self) -> String {
+        let stages: Vec<String> = self.stages.iter().map(|s| format!("{} {:.2}s", s.stage, s.seconds)).collect();
+        let total: f64 = self.stages.iter().map(|s| s.seconds).sum();
+        format!(
+            "{} texels on {} page(s), {} triangles, {:.2} M rays, {} iterations, residual {:.1e}{}; {} (total {:.2}s)",
+            self.texels,
+            self.pages,
+            self.triangles,
+            self.rays as f64 * 1e-6,
+            self.iterations,
+            self.residual,
+            if self.converged { "" } else { " (NOT converged)" },
+            stages.join(", "),
+            total
+        )
+    }
+}
+
+/// Bakes `input` (.gltf or .glb) into `out_dir`: `<stem>.gltf` + `<stem>.bin` (or `<stem>.glb`),
+/// and per page `<stem>_lightmap<k>.exr` and a tone-mapped `<stem>_lightmap<k>.png`.
+pub fn bake(input: &Path, out_dir: &Path, config: &BakeConfig, progress: &dyn Progress) -> Result<BakeReport> {
+    config.validate()?;
+    let mut stages = Vec::new();
+    let mut timed = |stage: &'static str, start: Instant| stages.push(StageTime { stage, seconds: start.elapsed().as_secs_f64() });
+
+    let t = Instant::now();
+    let (scene, source) = scene::load(input)?;
+    for w in &scene.stats.warnings {
+        progress.warn(w);
+    }
+    if !scene.has_light_sources() && config.transport.sky.max_element() <= 0.0 {
+        progress.warn(&format!(
+            "{}: the scene has no lights, no emissive materials and no sky: the lightmap will be black",
+            input.display()
+        ));
+    }
+    if scene.triangles.is_empty() {
+        return Err(Error::invalid(input, "the scene has no triangles to bake"));
+    }
+    timed("load", t);
+
+    check_memory(&scene, input, config)?;
+    let t = Instant::now();
+    let atlas = atlas::build(&scene, &source, &config.atlas)?;
+    timed("atlas", t);
+    check_aborted(progress)?;
+
+    let t = Instant::now();
+    let texels = texels::build(&scene, &atlas)?;
+    timed("texels", t);
+    check_aborted(progress)?;
+
+    let t = Instant::now();
+    let tracer = Tracer::new(&scene);
+    timed("bvh", t);
+
+    let t = Instant::now();
+    let transport = transport::build(&scene, &texels, &tracer, &config.transport, progress)?;
+    timed("transport", t);
+
+    let t = Instant::now();
+    let solution = solve::solve(&transport, &texels, &config.solve, progress)?;
+    if !solution.converged {
+        progress.warn(&format!(
+            "the solver stopped on the iteration cap ({}) at residual {:.2e}, above the tolerance {:.1e}",
+            solution.history.len(),
+            solution.residual(),
+            config.solve.tolerance
+        ));
+    }
+    timed("solve", t);
+
+    let t = Instant::now();
+    let values: Vec<Vec3> = solution.irradiance.iter().map(|h| *h / std::f32::consts::PI).collect();
+    let mut pages = LightmapPages::from_texels(&texels, &values);
+    lightmap::dilate(&mut pages, config.atlas.padding.max(2) * 2);
+    timed("dilate", t);
+
+    let t = Instant::now();
+    let stem = input.file_stem().and_then(|s| s.to_str()).unwrap_or("scene").to_string();
+    let mut staging = Staging::new(out_dir, &protected_files(input, &source))?;
+    let mut page_files = Vec::with_capacity(pages.pages.len());
+    for (k, page) in pages.pages.iter().enumerate() {
+        let files = PageFiles { exr: format!("{stem}_lightmap{k}.exr"), png: format!("{stem}_lightmap{k}.png") };
+        staging.write(&files.exr, &output::write_exr(page, config.output.float, input)?)?;
+        staging.write(&files.png, &output::write_png_preview(page, config.output.preview_exposure)?)?;
+        page_files.push(files);
+    }
+    output::write_gltf(&scene, &source, &atlas, &page_files, &mut staging, &stem)?;
+    check_aborted(progress)?;
+    let mut files = staging.commit()?;
+    // The glTF (or .glb) first, then pages in order.
+    files.sort_by_key(|p| !matches!(p.extension().and_then(|e| e.to_str()), Some("gltf" | "glb")));
+    timed("write", t);
+
+    Ok(BakeReport {
+        triangles: scene.triangles.len(),
+        texels: texels.len(),
+        pages: pages.pages.len(),
+        rays: transport.rays,
+        iterations: solution.history.len(),
+        residual: solution.residual(),
+        converged: solution.converged,
+        stages,
+        files,
+    })
+}
+
+/// Texel budget: about 200 bytes per texel in the pipeline plus `gather_rays` × 8 bytes of
+/// form-factor row; refuse densities that would not fit before allocating anything.
+fn check_memory(scene: &scene::Scene, input: &Path, config: &BakeConfig) -> Result<()> {
+    let area: f64 = scene
+        .triangles
+        .iter()
+        .map(|t| {
+            let p = |i: usize| scene.positions[t[i] as usize].as_dvec3();
+            0.5 * (p(1) - p(0)).cross(p(2) - p(0)).length()
+        })
+        .sum();
+    let tpu = config.atlas.texels_per_unit as f64;
+    let texels = area * tpu * tpu;
+    let bytes_per_texel = 200.0 + 8.0 * config.transport.gather_rays.min(4096) as f64;
+    let bytes = texels * bytes_per_texel;
+    const LIMIT: f64 = 16.0 * (1u64 << 30) as f64;
+    if bytes > LIMIT || texels > 1.0e8 {
+        return Err(Error::Option(format!(
+            "{}: {:.0} m² of surface at {} texels per unit is about {:.1} M texels and {:.1} GiB; \
+             lower --texels-per-unit (or --rays)",
+            input.display(),
+            area,
+            tpu,
+            texels * 1e-6,
+            bytes / (1u64 << 30) as f64
+        )));
+    }
+    Ok(())
+}
+
+fn check_aborted(progress: &dyn Progress) -> Result<()> {
+    if progress.aborted() { Err(Error::Aborted) } else { Ok(()) }
+}
+
+/// The input glTF and every external file it references: the output must never overwrite them.
+fn protected_files(input: &Path, source: &scene::Source) -> Vec<PathBuf> {
+    let mut files = vec![input.to_path_buf()];
+    let base = input.parent().unwrap_or(Path::new("."));
+    for key in ["buffers", "images"] {
+        if let Some(items) = source.json.get(key).and_then(|v| v.as_array()) {
+            for item in items {
+                if let Some(uri) = item.get("uri").and_then(|u| u.as_str()) {
+                    if !uri.starts_with("data:") {
+                        files.push(base.join(uri));
+                    }
+                }
+            }
+        }
+    }
+    files
+}

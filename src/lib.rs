@@ -1,0 +1,58 @@
+//! # lightbake — a lightmap baker
+//!
+//! lightbake takes a glTF scene and gives back the same scene with lightmap UVs (`TEXCOORD_1`),
+//! OpenEXR lightmap pages and a glTF that references them. Diffuse global illumination is solved
+//! by radiosity: every lightmap texel is a patch, form factors between texels come from
+//! ray-cast visibility, and the system is iterated to a residual tolerance.
+//!
+//! ## Pipeline
+//!
+//! Each stage is a plain data type in and a plain data type out; the module tree follows it:
+//!
+//! ```text
+//!  input.gltf ─ scene::load ──▶ Scene + Source        world-space triangles, materials, lights
+//!            ─ atlas::build ──▶ Atlas                 xatlas charts + pages, or input TEXCOORD_1
+//!           ─ texels::build ──▶ Texels                one radiosity patch per covered texel
+//!             Tracer::new   ──▶ Tracer                obvhs CWBVH: closest hit, occlusion
+//!        ─ transport::build ──▶ Transport             form factors F_ij (CSR rows) + H_direct
+//!            ─ solve::solve ──▶ Solution              H = H_direct + F·(ρH), iterated
+//! ─ LightmapPages::from_texels ▶ LightmapPages         H/π per texel, dilated into the gutters
+//!                  ─ output ──▶ .exr + .png pages, .gltf/.bin or .glb
+//! ```
+//!
+//! [`bake`] chains the stages; build tools that want the intermediate data call them directly.
+//!
+//! ## Conventions
+//!
+//! Units are radiometric, linear Rec.709 RGB. Emitted radiance is
+//! `emissiveFactor × emissiveStrength`; reflectance is `baseColorFactor × baseColorTexture`
+//! (clamped to [`texels::MAX_ALBEDO`]). A lightmap texel stores `H/π` — the radiance a white
+//! Lambertian surface would reflect — so a renderer shades `baseColor × lightmap + emission`.
+//! Lightmap UVs are in `TEXCOORD_1`, glTF image convention (v down, EXR row 0 at the top).
+//!
+//! ## Determinism
+//!
+//! Every random number comes from a stream seeded by (seed, texel, sample); parallel loops
+//! collect in order. The same input and options give the same bytes on any thread count.
+
+pub mod atlas;
+pub mod config;
+pub mod error;
+pub mod lightmap;
+pub mod output;
+pub mod progress;
+pub mod scene;
+pub mod solve;
+pub mod texels;
+pub mod trace;
+pub mod transport;
+
+#[doc(hidden)]
+pub mod testing;
+
+mod bake;
+
+pub use bake::{bake, BakeReport, StageTime};
+pub use config::BakeConfig;
+pub use error::{Error, Result};
+pub use progress::{NoProgress, Progress};

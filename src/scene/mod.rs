@@ -1,0 +1,224 @@
+//! Stage 1 — `Scene`: the glTF input resolved into world-space triangles, materials and lights.
+//!
+//! The loader ([`load`]) resolves every input quirk (node transforms, instancing, strips and fans,
+//! missing normals, emissive strength, sRGB textures, double-sided materials) so later stages never
+//! look at glTF. It also keeps the untouched input document ([`Source`]) for the output writer.
+//!
+//! Double-sided surfaces: each face of a `doubleSided` primitive receives its own light (a wall
+//! between a lit and a dark room), so the loader emits a second, flipped instance (`back_of`) with
+//! reversed winding and negated normals. It gets its own lightmap charts and is written to the
+//! output glTF as an extra single-sided primitive.
+
+mod gltf_in;
+
+use std::ops::Range;
+use std::path::PathBuf;
+
+use glam::{Vec2, Vec3};
+
+pub use gltf_in::load;
+
+/// World-space geometry, materials and lights of the default scene.
+#[derive(Clone, Debug, Default)]
+pub struct Scene {
+    /// World-space vertex positions of all instances, concatenated.
+    pub positions: Vec<Vec3>,
+    /// World-space unit normals, per vertex (generated from faces when the input has none).
+    pub normals: Vec<Vec3>,
+    /// `TEXCOORD_0` per vertex (zero when the primitive has none).
+    pub uv0: Vec<Vec2>,
+    /// The input's `TEXCOORD_1` per vertex (zero when the primitive has none).
+    pub uv1: Vec<Vec2>,
+    /// Triangles as global vertex indices, counter-clockwise seen from the front face.
+    pub triangles: Vec<[u32; 3]>,
+    /// Instance of each triangle.
+    pub triangle_instance: Vec<u32>,
+    /// One per baked (node, primitive) pair, plus one per back face of a double-sided primitive.
+    pub instances: Vec<Instance>,
+    pub materials: Vec<Material>,
+    pub textures: Vec<Texture>,
+    pub lights: Vec<Light>,
+    /// Counts of what the loader skipped or changed (the CLI reports them).
+    pub stats: LoadStats,
+}
+
+/// One baked primitive placed by one node.
+#[derive(Clone, Debug)]
+pub struct Instance {
+    /// glTF node, mesh and primitive (within the mesh) indices.
+    pub node: u32,
+    pub mesh: u32,
+    pub primitive: u32,
+    /// Index into [`Scene::materials`].
+    pub material: u32,
+    /// Global vertex range; local vertex `k` (= element `k` of the primitive's attribute
+    /// accessors) is global vertex `vertices.start + k`.
+    pub vertices: Range<u32>,
+    /// Global triangle range of this instance.
+    pub triangles: Range<u32>,
+    /// For each triangle of the instance, its index in the primitive's own triangle list (after
+    /// converting strips and fans); degenerate triangles are skipped, so this may have gaps.
+    pub source_triangle: Vec<u32>,
+    /// Set on the flipped back-face copy of a double-sided primitive: the front instance.
+    pub back_of: Option<u32>,
+    /// Set on the front instance of a double-sided primitive: its back-face copy.
+    pub back: Option<u32>,
+    /// The primitive has a `TEXCOORD_1` of its own.
+    pub has_uv1: bool,
+}
+
+/// A material as the light transport sees it (linear RGB).
+#[derive(Clone, Debug)]
+pub struct Material {
+    pub name: Option<String>,
+    /// glTF material index (`None` for the default material).
+    pub source: Option<u32>,
+    /// `baseColorFactor.rgb` (linear); multiplied by the texture where there is one.
+    pub base_color: Vec3,
+    /// Index into [`Scene::textures`], sampled through `TEXCOORD_0`.
+    pub base_color_texture: Option<u32>,
+    /// Emitted radiance `Le = emissiveFactor × emissiveStrength` (W/(sr·m²)).
+    pub emission: Vec3,
+    /// Index into [`Scene::textures`], sampled through `TEXCOORD_0`.
+    pub emissive_texture: Option<u32>,
+    pub double_sided: bool,
+}
+
+impl Default for Material {
+    /// glTF's default material: white, not emissive, single-sided.
+    fn default() -> Self {
+        Material {
+            name: None,
+            source: None,
+            base_color: Vec3::ONE,
+            base_color_texture: None,
+            emission: Vec3::ZERO,
+            emissive_texture: None,
+            double_sided: false,
+        }
+    }
+}
+
+/// Texture addressing outside [0,1].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Wrap {
+    Repeat,
+    MirroredRepeat,
+    ClampToEdge,
+}
+
+/// A decoded texture in linear RGB (sRGB-decoded: both base colour and emissive textures are
+/// sRGB in glTF).
+#[derive(Clone, Debug)]
+pub struct Texture {
+    pub width: u32,
+    pub height: u32,
+    /// Row-major, row 0 at the top (v = 0).
+    pub texels: Vec<Vec3>,
+    pub wrap_s: Wrap,
+    pub wrap_t: Wrap,
+}
+
+impl Texture {
+    /// Bilinear lookup at `uv` (glTF convention: v grows downward).
+    pub fn sample(&self, uv: Vec2) -> Vec3 {
+        let (w, h) = (self.width as i64, self.height as i64);
+        let x = uv.x * w as f32 - 0.5;
+        let y = uv.y * h as f32 - 0.5;
+        let (x0, y0) = (x.floor(), y.floor());
+        let (fx, fy) = (x - x0, y - y0);
+        let fetch = |xi: i64, yi: i64| {
+            let xi = wrap(xi, w, self.wrap_s);
+            let yi = wrap(yi, h, self.wrap_t);
+            self.texels[(yi * w + xi) as usize]
+        };
+        let (x0, y0) = (x0 as i64, y0 as i64);
+        let top = fetch(x0, y0).lerp(fetch(x0 + 1, y0), fx);
+        let bottom = fetch(x0, y0 + 1).lerp(fetch(x0 + 1, y0 + 1), fx);
+        top.lerp(bottom, fy)
+    }
+}
+
+fn wrap(i: i64, n: i64, mode: Wrap) -> i64 {
+    match mode {
+        Wrap::Repeat => i.rem_euclid(n),
+        Wrap::ClampToEdge => i.clamp(0, n - 1),
+        Wrap::MirroredRepeat => {
+            let m = i.rem_euclid(2 * n);
+            if m < n { m } else { 2 * n - 1 - m }
+        }
+    }
+}
+
+/// A KHR_lights_punctual light in world space.
+#[derive(Clone, Debug)]
+pub struct Light {
+    pub name: Option<String>,
+    pub kind: LightKind,
+    /// World position (unused for directional lights).
+    pub position: Vec3,
+    /// Unit direction the light travels (the node's −Z; unused for point lights).
+    pub direction: Vec3,
+    /// `color × intensity`: radiant intensity (W/sr) for point and spot lights, irradiance
+    /// (W/m²) on a surface facing the light for directional lights.
+    pub intensity: Vec3,
+    /// Distance beyond which the light has no effect (`None` = infinite).
+    pub range: Option<f32>,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum LightKind {
+    Point,
+    /// Cone angles in radians, as in KHR_lights_punctual.
+    Spot { inner_cone_angle: f32, outer_cone_angle: f32 },
+    Directional,
+}
+
+/// What the loader skipped or changed.
+#[derive(Clone, Debug, Default)]
+pub struct LoadStats {
+    pub degenerate_triangles: u32,
+    pub skipped_primitives: u32,
+    pub generated_normals: u32,
+    /// Human-readable warnings (points and lines skipped, skinned meshes passed through, …).
+    pub warnings: Vec<String>,
+}
+
+/// The input document as read, for the output writer (which keeps everything it does not change).
+#[derive(Clone, Debug)]
+pub struct Source {
+    pub path: PathBuf,
+    pub is_glb: bool,
+    /// The glTF JSON exactly as parsed (unknown extensions and extras included).
+    pub json: serde_json::Value,
+    /// The bytes of every buffer, in document order.
+    pub buffers: Vec<Vec<u8>>,
+}
+
+impl Scene {
+    /// Emission is anywhere in the scene (an emissive material or a light).
+    pub fn has_light_sources(&self) -> bool {
+        !self.lights.is_empty()
+            || self.materials.iter().any(|m| m.emission.max_element() > 0.0)
+    }
+
+    /// Debug-build consistency check, run at the end of the loader.
+    pub fn validate(&self) {
+        let n = self.positions.len();
+        assert_eq!(self.normals.len(), n);
+        assert_eq!(self.uv0.len(), n);
+        assert_eq!(self.uv1.len(), n);
+        assert_eq!(self.triangle_instance.len(), self.triangles.len());
+        for t in &self.triangles {
+            assert!(t.iter().all(|&v| (v as usize) < n));
+        }
+        assert!(self.positions.iter().all(|p| p.is_finite()));
+        for (i, inst) in self.instances.iter().enumerate() {
+            assert!((inst.material as usize) < self.materials.len());
+            assert_eq!(inst.source_triangle.len(), inst.triangles.len());
+            for t in inst.triangles.clone() {
+                assert_eq!(self.triangle_instance[t as usize], i as u32);
+            }
+        }
+    }
+}

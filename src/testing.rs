@@ -1,0 +1,1 @@
+//! Procedural test scenes (stub: being written).

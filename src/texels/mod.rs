@@ -1,0 +1,96 @@
+//! Stage 3 — `Texels`: every covered lightmap texel becomes a radiosity patch.
+//!
+//! `raster.rs` rasterises each triangle into its page. A texel covered by several triangles
+//! (or partly covered) gets the area-weighted average of what covers it: position, normal,
+//! albedo and emission, and the world area actually covered.
+
+mod raster;
+
+use glam::{Vec2, Vec3};
+
+use crate::atlas::PageSize;
+
+pub use raster::build;
+
+/// Reflectance is clamped to this: ρ = 1 (glTF's default white) in a closed room would make
+/// the radiosity series diverge; 0.99 keeps it convergent (about 100 bounces carry the light).
+pub const MAX_ALBEDO: f32 = 0.99;
+
+/// No texel at this page position.
+pub const NO_TEXEL: u32 = u32::MAX;
+
+/// The radiosity patches, structure of arrays indexed by texel id.
+#[derive(Clone, Debug, Default)]
+pub struct Texels {
+    pub pages: Vec<PageSize>,
+    /// Area-weighted centroid of the covered part of the texel (world space).
+    pub position: Vec<Vec3>,
+    /// Area-weighted unit normal (front side of the surface the texel lies on).
+    pub normal: Vec<Vec3>,
+    /// World-space area covered (m²).
+    pub area: Vec<f32>,
+    /// Lambertian reflectance ρ (linear RGB, clamped to [0, [`MAX_ALBEDO`]]).
+    pub albedo: Vec<Vec3>,
+    /// Emitted radiance `Le` (W/(sr·m²)); emitted radiosity is `π·Le`.
+    pub emission: Vec<Vec3>,
+    /// Page and texel coordinates.
+    pub page: Vec<u32>,
+    pub xy: Vec<[u32; 2]>,
+    /// The triangle covering most of the texel.
+    pub triangle: Vec<u32>,
+    /// World-space vectors spanning one texel step in x and in y on `triangle`'s plane
+    /// (the texel footprint is `position + s·du + t·dv`, s,t ∈ [−½, ½]).
+    pub du: Vec<Vec3>,
+    pub dv: Vec<Vec3>,
+    /// Per page, row-major `width × height`: texel id or [`NO_TEXEL`].
+    pub index: Vec<Vec<u32>>,
+    /// Per scene triangle: one texel it covers (fallback for hit lookups that land in a gutter).
+    pub triangle_texel: Vec<u32>,
+    /// Triangle lightmap UVs in texel units of its page, per scene triangle (for hit lookups).
+    pub triangle_uv: Vec<[Vec2; 3]>,
+    pub triangle_page: Vec<u32>,
+}
+
+impl Texels {
+    pub fn len(&self) -> usize {
+        self.position.len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.position.is_empty()
+    }
+
+    /// The texel a surface hit on triangle `t` at barycentrics (`u`, `v`) lands in
+    /// (`p = (1−u−v)·p0 + u·p1 + v·p2`), or [`NO_TEXEL`] for triangles with no texels.
+    #[inline]
+    pub fn texel_at(&self, t: u32, bary: Vec2) -> u32 {
+        let [a, b, c] = self.triangle_uv[t as usize];
+        let p = a * (1.0 - bary.x - bary.y) + b * bary.x + c * bary.y;
+        let page = self.triangle_page[t as usize] as usize;
+        let size = self.pages[page];
+        let x = (p.x.max(0.0) as u32).min(size.width - 1);
+        let y = (p.y.max(0.0) as u32).min(size.height - 1);
+        let id = self.index[page][(y * size.width + x) as usize];
+        if id != NO_TEXEL { id } else { self.triangle_texel[t as usize] }
+    }
+
+    /// Debug-build consistency check: finite values, areas positive, index consistent.
+    pub fn validate(&self) {
+        let n = self.len();
+        for v in [&self.normal, &self.albedo, &self.emission, &self.du, &self.dv] {
+            assert_eq!(v.len(), n);
+        }
+        assert_eq!(self.area.len(), n);
+        assert_eq!(self.page.len(), n);
+        assert_eq!(self.xy.len(), n);
+        assert_eq!(self.triangle.len(), n);
+        for i in 0..n {
+            assert!(self.position[i].is_finite() && self.normal[i].is_finite());
+            assert!(self.area[i] > 0.0 && self.area[i].is_finite());
+            assert!(self.albedo[i].min_element() >= 0.0 && self.albedo[i].max_element() <= MAX_ALBEDO);
+            let [x, y] = self.xy[i];
+            let p = self.page[i] as usize;
+            assert_eq!(self.index[p][(y * self.pages[p].width + x) as usize], i as u32);
+        }
+    }
+}
+

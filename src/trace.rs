@@ -1,0 +1,152 @@
+//! Stage 4 — `Tracer`: an obvhs wide BVH (CWBVH) over every scene triangle, with closest-hit
+//! and occlusion queries.
+//!
+//! A double-sided primitive's flipped back-face copy is not put in the BVH twice: a ray that
+//! hits the front triangle from behind is reported as a hit on the back copy's triangle, so the
+//! hit lands in the texels of the face the ray actually sees.
+//!
+//! obvhs' CWBVH node test ignores `Ray::tmin` and clamps entry distances to 1e-4, so hits closer
+//! than that are lost. Ray origins are therefore offset by [`Tracer::epsilon`], a scale-aware
+//! distance well above 1e-4 scene units.
+
+use std::time::Duration;
+
+use glam::{Vec2, Vec3, Vec3A};
+use obvhs::{
+    BvhBuildParams,
+    cwbvh::{CwBvh, builder::build_cwbvh_from_tris},
+    ray::{Ray, RayHit},
+    rt_triangle::RtTriangle,
+    triangle::Triangle,
+};
+
+use crate::scene::Scene;
+
+/// A ray hit on a scene triangle.
+#[derive(Clone, Copy, Debug)]
+pub struct Hit {
+    /// Scene triangle of the face that was hit (the back-face copy when a double-sided
+    /// surface was hit from behind).
+    pub triangle: u32,
+    pub t: f32,
+    /// Barycentrics (u, v) on `triangle`: `p = (1−u−v)·p0 + u·p1 + v·p2`.
+    pub bary: Vec2,
+    /// The ray hit the side the triangle's normal points to. False only for single-sided
+    /// surfaces seen from behind (inside closed geometry, under a floor).
+    pub front: bool,
+}
+
+/// Ray queries against the scene.
+pub struct Tracer {
+    bvh: CwBvh,
+    /// Triangles in BVH order.
+    triangles: Vec<RtTriangle>,
+    /// Scene triangle of each BVH triangle.
+    scene_triangle: Vec<u32>,
+    /// For each scene triangle: the back-face copy, or `u32::MAX`.
+    back_copy: Vec<u32>,
+    /// Scale-aware self-intersection offset (world units).
+    pub epsilon: f32,
+}
+
+impl Tracer {
+    /// Builds the BVH over the scene's triangles (front faces only; see the module docs).
+    pub fn new(scene: &Scene) -> Tracer {
+        let mut back_copy = vec![u32::MAX; scene.triangles.len()];
+        let mut ids = Vec::with_capacity(scene.triangles.len());
+        for inst in &scene.instances {
+            if inst.back_of.is_some() {
+                continue;
+            }
+            if let Some(b) = inst.back {
+                let back = &scene.instances[b as usize];
+                for (t, tb) in inst.triangles.clone().zip(back.triangles.clone()) {
+                    back_copy[t as usize] = tb;
+                }
+            }
+            ids.extend(inst.triangles.clone());
+        }
+        let tri = |t: u32| {
+            let [a, b, c] = scene.triangles[t as usize];
+            let p = |v: u32| Vec3A::from(scene.positions[v as usize]);
+            Triangle { v0: p(a), v1: p(b), v2: p(c) }
+        };
+        let tris: Vec<Triangle> = ids.iter().map(|&t| tri(t)).collect();
+
+        let (lo, hi) = scene.positions.iter().fold((Vec3::MAX, Vec3::MIN), |(lo, hi), &p| (lo.min(p), hi.max(p)));
+        let extent = if scene.positions.is_empty() { 1.0 } else { (hi - lo).max_element().max(hi.abs().max(lo.abs()).max_element()) };
+        // 1e-5 of the scene size, but never within 4x of obvhs' fixed 1e-4 clamp.
+        let epsilon = (extent * 1e-5).max(4e-4);
+
+        if tris.is_empty() {
+            return Tracer { bvh: CwBvh::default(), triangles: vec![], scene_triangle: vec![], back_copy, epsilon };
+        }
+        let mut build_time = Duration::ZERO;
+        let bvh = build_cwbvh_from_tris(&tris, BvhBuildParams::medium_build(), &mut build_time);
+        let triangles = bvh.primitive_indices.iter().map(|&i| RtTriangle::from(&tris[i as usize])).collect();
+        let scene_triangle = bvh.primitive_indices.iter().map(|&i| ids[i as usize]).collect();
+        Tracer { bvh, triangles, scene_triangle, back_copy, epsilon }
+    }
+
+    /// Number of triangles in the BVH.
+    pub fn len(&self) -> usize {
+        self.triangles.len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.triangles.is_empty()
+    }
+
+    /// Closest hit along `dir` (unit) from `origin`, up to `tmax`. The caller offsets the origin.
+    #[inline]
+    pub fn closest(&self, origin: Vec3, dir: Vec3, tmax: f32) -> Option<Hit> {
+        if self.triangles.is_empty() {
+            return None;
+        }
+        let ray = Ray::new(origin.into(), dir.into(), 0.0, tmax);
+        let mut hit = RayHit::none();
+        let found = self.bvh.ray_traverse(ray, &mut hit, |ray, id| self.triangles[id].intersect(ray));
+        if !found {
+            return None;
+        }
+        let tri = &self.triangles[hit.primitive_id as usize];
+        let bary = tri.compute_barycentric(&ray);
+        // RtTriangle::ng = (v0 − v1) × (v2 − v0) points against the front normal.
+        let front = tri.ng.dot(ray.direction) > 0.0;
+        let mut triangle = self.scene_triangle[hit.primitive_id as usize];
+        let mut front_seen = front;
+        if !front {
+            let back = self.back_copy[triangle as usize];
+            if back != u32::MAX {
+                triangle = back;
+                front_seen = true;
+            }
+        }
+        Some(Hit { triangle, t: hit.t, bary, front: front_seen })
+    }
+
+    /// True when something blocks the open segment from `a` to `b` (both already offset by the
+    /// caller; the last `epsilon` before `b` is not tested so `b`'s own surface does not count).
+    #[inline]
+    pub fn occluded(&self, a: Vec3, b: Vec3) -> bool {
+        if self.triangles.is_empty() {
+            return false;
+        }
+        let d = b - a;
+        let len = d.length();
+        if len <= self.epsilon {
+            return false;
+        }
+        let ray = Ray::new(a.into(), (d / len).into(), 0.0, len - self.epsilon);
+        !self.bvh.ray_traverse_miss(ray, |ray, id| self.triangles[id].intersect(ray))
+    }
+
+    /// True when the ray from `origin` along unit `dir` hits nothing (escapes to the sky).
+    #[inline]
+    pub fn escapes(&self, origin: Vec3, dir: Vec3, tmax: f32) -> bool {
+        if self.triangles.is_empty() {
+            return true;
+        }
+        let ray = Ray::new(origin.into(), dir.into(), 0.0, tmax);
+        self.bvh.ray_traverse_miss(ray, |ray, id| self.triangles[id].intersect(ray))
+    }
+}

@@ -1,0 +1,85 @@
+//! Stage 5 — `Transport`: how light moves between texels.
+//!
+//! For each receiving texel `i` this holds a sparse row of form factors `F_ij` (compressed sparse
+//! rows: `row_start`, `col`, `f`), the fraction of its hemisphere that escapes to the sky, and the
+//! direct irradiance `H_direct,i` from punctual lights, emissive surfaces and the sky.
+//!
+//! The system solved downstream is, per colour channel,
+//!
+//! ```text
+//!   H_i = H_direct,i + Σ_j F_ij · ρ_j H_j        (W/m²)
+//! ```
+//!
+//! i.e. gathering carries only *reflected* radiosity `ρH`; emitted radiosity `π·Le` enters once,
+//! through `H_direct`, where it is estimated with explicit light sampling (small bright emitters
+//! are otherwise missed) combined with the gathering rays by multiple importance sampling.
+
+mod direct;
+mod montecarlo;
+pub mod sampling;
+
+use glam::Vec3;
+
+use crate::config::TransportParams;
+use crate::scene::Scene;
+use crate::texels::Texels;
+use crate::trace::Tracer;
+use crate::{Progress, Result};
+
+/// Form factors and direct light of every texel.
+#[derive(Clone, Debug, Default)]
+pub struct Transport {
+    /// Row `i` is `col[row_start[i]..row_start[i+1]]`, `f[…]` (length = texels + 1).
+    pub row_start: Vec<u32>,
+    /// Source texel of each entry.
+    pub col: Vec<u32>,
+    /// `F_ij`: fraction of the energy arriving at `i` that leaves `j` (rows sum to ≤ 1).
+    pub f: Vec<f32>,
+    /// Fraction of texel `i`'s hemisphere that sees the sky.
+    pub escape: Vec<f32>,
+    /// Direct irradiance `H_direct` (W/m²): punctual lights, emitters, sky.
+    pub direct: Vec<Vec3>,
+    /// Rays cast building this.
+    pub rays: u64,
+}
+
+impl Transport {
+    /// The entries of row `i` as (source texel, F_ij).
+    #[inline]
+    pub fn row(&self, i: usize) -> impl Iterator<Item = (u32, f32)> + '_ {
+        let r = self.row_start[i] as usize..self.row_start[i + 1] as usize;
+        self.col[r.clone()].iter().copied().zip(self.f[r].iter().copied())
+    }
+
+    pub fn len(&self) -> usize {
+        self.direct.len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.direct.is_empty()
+    }
+
+    /// Debug-build check: finite, non-negative, rows bounded.
+    pub fn validate(&self) {
+        assert_eq!(self.row_start.len(), self.direct.len() + 1);
+        assert_eq!(self.col.len(), self.f.len());
+        assert!(self.direct.iter().all(|d| d.is_finite() && d.min_element() >= 0.0));
+        for i in 0..self.len() {
+            let sum: f32 = self.row(i).map(|(_, f)| f).sum::<f32>() + self.escape[i];
+            assert!(sum <= 1.0 + 1e-3, "row {i} sums to {sum}");
+        }
+    }
+}
+
+/// Computes form factors (Monte Carlo hemisphere gathering) and direct light for every texel.
+pub fn build(
+    scene: &Scene,
+    texels: &Texels,
+    tracer: &Tracer,
+    params: &TransportParams,
+    progress: &dyn Progress,
+) -> Result<Transport> {
+    let transport = montecarlo::build(scene, texels, tracer, params, progress)?;
+    #[cfg(debug_assertions)]
+    transport.validate();
+    Ok(transport)
+}
