@@ -109,7 +109,13 @@ pub fn bake(input: &Path, out_dir: &Path, config: &BakeConfig, progress: &dyn Pr
     timed("solve", t);
 
     let t = Instant::now();
-    let values: Vec<Vec3> = solution.irradiance.iter().map(|h| *h / std::f32::consts::PI).collect();
+    // A texel stores H/π; indirect-only leaves out light that arrived without a bounce.
+    let values: Vec<Vec3> = solution
+        .irradiance
+        .iter()
+        .zip(&transport.direct)
+        .map(|(h, d)| if config.transport.indirect_only { (*h - *d).max(Vec3::ZERO) } else { *h } / std::f32::consts::PI)
+        .collect();
     let mut pages = LightmapPages::from_texels(&texels, &values);
     lightmap::dilate(&mut pages, config.atlas.padding.max(2) * 2);
     timed("dilate", t);

@@ -1,4 +1,4 @@
-//! Bake options. Every knob says what it trades; `BakeConfig::preview/medium/production` are
+//! Bake options. Every knob says what it trades; `BakeConfig::draft/medium/high` are
 //! the named presets (tests iterate over all of them).
 
 use glam::Vec3;
@@ -45,10 +45,21 @@ pub struct TransportParams {
     pub seed: u64,
 }
 
+/// Iterative method for the stored radiosity system.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Solver {
+    /// All texels updated from the previous sweep; parallel over rows.
+    Jacobi,
+    /// Texels updated in place in order; about twice the convergence per sweep, serial.
+    GaussSeidel,
+}
+
 /// How the radiosity system is iterated.
 #[derive(Clone, Debug)]
 pub struct SolveParams {
-    /// Stop when the relative residual ‖ΔH‖/‖H‖ falls below this.
+    pub solver: Solver,
+    /// Stop when the estimated relative error of the solution (the last update extrapolated
+    /// over the remaining geometric series) falls below this.
     pub tolerance: f32,
     /// Stop after this many sweeps even if the tolerance is not reached (a warning says so).
     pub max_iterations: u32,
@@ -83,12 +94,12 @@ impl BakeConfig {
                 indirect_only: false,
                 seed: 0,
             },
-            solve: SolveParams { tolerance, max_iterations: 1000 },
+            solve: SolveParams { solver: Solver::Jacobi, tolerance, max_iterations: 10_000 },
             output: OutputParams { float: false, preview_exposure: 0.0 },
         }
     }
     /// Fast look at the lighting: coarse texels, few rays.
-    pub const fn preview() -> Self {
+    pub const fn draft() -> Self {
         Self::with(8.0, 64, 16, 1e-3)
     }
     /// The default: good for most asset builds.
@@ -96,12 +107,12 @@ impl BakeConfig {
         Self::with(16.0, 256, 64, 1e-4)
     }
     /// Final quality: dense texels, many rays, tight tolerance.
-    pub const fn production() -> Self {
+    pub const fn high() -> Self {
         Self::with(32.0, 1024, 256, 1e-5)
     }
     /// All presets, for tests and benchmarks.
     pub const PRESETS: [(&'static str, BakeConfig); 3] =
-        [("preview", Self::preview()), ("medium", Self::medium()), ("production", Self::production())];
+        [("draft", Self::draft()), ("medium", Self::medium()), ("high", Self::high())];
 
     /// Checks option ranges before any work is done.
     pub fn validate(&self) -> crate::Result<()> {

@@ -1,1 +1,240 @@
-fn main() {}
+//! The `lightbake` command line: flags → [`BakeConfig`], progress bars, one-line summary.
+
+use std::io::IsTerminal;
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::sync::Mutex;
+use std::time::Duration;
+
+use anyhow::{Context, Result};
+use clap::{Parser, Subcommand, ValueEnum};
+use glam::Vec3;
+use indicatif::{ProgressBar, ProgressStyle};
+use lightbake::config::{Solver, UvMode};
+use lightbake::{BakeConfig, Progress};
+
+#[derive(Parser)]
+#[command(name = "lightbake", version, about = "Bake radiosity lightmaps for glTF scenes")]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Bake lightmaps: writes <stem>.gltf + .bin (or .glb), and per page an EXR and a PNG preview.
+    Bake(BakeArgs),
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum Quality {
+    /// 8 texels/m, 64 rays, 16 light samples, tolerance 1e-3: a quick look.
+    Draft,
+    /// 16 texels/m, 256 rays, 64 light samples, tolerance 1e-4.
+    Medium,
+    /// 32 texels/m, 1024 rays, 256 light samples, tolerance 1e-5: final quality.
+    High,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum UvArg {
+    /// Reuse the input's TEXCOORD_1 when every primitive has a valid one, else unwrap.
+    Auto,
+    /// Always unwrap new lightmap charts with xatlas.
+    Unwrap,
+    /// Reuse the input's TEXCOORD_1; fail if it is missing, overlapping or outside [0,1].
+    Existing,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum SolverArg {
+    /// Parallel sweeps from the previous iterate.
+    Jacobi,
+    /// Serial in-place sweeps; fewer iterations.
+    GaussSeidel,
+}
+
+#[derive(clap::Args)]
+struct BakeArgs {
+    /// Input scene (.gltf or .glb).
+    scene: PathBuf,
+    /// Output directory (created if missing; must not hold the input's own files).
+    #[arg(short, long)]
+    output: PathBuf,
+    /// Preset for density, rays and tolerance; the options below override it.
+    #[arg(long, value_enum, default_value = "medium")]
+    quality: Quality,
+    /// Lightmap texels per world unit (metre) [default: from --quality: 8 / 16 / 32].
+    #[arg(long)]
+    texels_per_unit: Option<f32>,
+    /// Largest page side in texels; more pages are made when charts do not fit.
+    #[arg(long, default_value_t = 1024)]
+    max_page_size: u32,
+    /// Empty texels between charts, filled by dilation.
+    #[arg(long, default_value_t = 2)]
+    padding: u32,
+    /// Where lightmap UVs come from.
+    #[arg(long, value_enum, default_value = "auto")]
+    uv: UvArg,
+    /// Gathering rays per texel (form factors) [default: from --quality: 64 / 256 / 1024].
+    #[arg(long)]
+    rays: Option<u32>,
+    /// Shadow rays per texel towards emissive surfaces [default: from --quality: 16 / 64 / 256].
+    #[arg(long)]
+    light_samples: Option<u32>,
+    /// Uniform sky radiance R,G,B (W/sr/m²) for rays leaving the scene.
+    #[arg(long, value_parser = parse_rgb, default_value = "0,0,0")]
+    sky: Vec3,
+    /// Solver for the radiosity system.
+    #[arg(long, value_enum, default_value = "jacobi")]
+    solver: SolverArg,
+    /// Relative error at which the solver stops [default: from --quality: 1e-3 / 1e-4 / 1e-5].
+    #[arg(long)]
+    tolerance: Option<f32>,
+    /// Iteration cap of the solver (a warning says when it stops here).
+    #[arg(long, default_value_t = 10_000)]
+    max_iterations: u32,
+    /// Store indirect light only (for engines that add direct light at runtime).
+    #[arg(long)]
+    indirect_only: bool,
+    /// Write 32-bit float EXR pages instead of half floats.
+    #[arg(long)]
+    float: bool,
+    /// Exposure of the PNG previews, in stops.
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    exposure: f32,
+    /// Seed of the random sample streams (output depends on it, never on --threads).
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Worker threads [default: all cores].
+    #[arg(long)]
+    threads: Option<usize>,
+    /// No progress bars and no summary; warnings and errors still go to stderr.
+    #[arg(short, long)]
+    quiet: bool,
+}
+
+fn parse_rgb(s: &str) -> Result<Vec3, String> {
+    let parts: Vec<&str> = s.split(',').collect();
+    let v: Vec<f32> = parts.iter().map(|p| p.trim().parse::<f32>()).collect::<Result<_, _>>().map_err(|e| format!("{s:?}: {e}"))?;
+    match v[..] {
+        [x] => Ok(Vec3::splat(x)),
+        [r, g, b] => Ok(Vec3::new(r, g, b)),
+        _ => Err(format!("expected R,G,B or a single value, got {s:?}")),
+    }
+}
+
+impl BakeArgs {
+    fn config(&self) -> BakeConfig {
+        let mut c = match self.quality {
+            Quality::Draft => BakeConfig::draft(),
+            Quality::Medium => BakeConfig::medium(),
+            Quality::High => BakeConfig::high(),
+        };
+        if let Some(t) = self.texels_per_unit {
+            c.atlas.texels_per_unit = t;
+        }
+        c.atlas.max_page_size = self.max_page_size;
+        c.atlas.padding = self.padding;
+        c.atlas.uv = match self.uv {
+            UvArg::Auto => UvMode::Auto,
+            UvArg::Unwrap => UvMode::Unwrap,
+            UvArg::Existing => UvMode::Existing,
+        };
+        if let Some(r) = self.rays {
+            c.transport.gather_rays = r;
+        }
+        if let Some(l) = self.light_samples {
+            c.transport.light_samples = l;
+        }
+        c.transport.sky = self.sky;
+        c.transport.indirect_only = self.indirect_only;
+        c.transport.seed = self.seed;
+        c.solve.solver = match self.solver {
+            SolverArg::Jacobi => Solver::Jacobi,
+            SolverArg::GaussSeidel => Solver::GaussSeidel,
+        };
+        if let Some(t) = self.tolerance {
+            c.solve.tolerance = t;
+        }
+        c.solve.max_iterations = self.max_iterations;
+        c.output.float = self.float;
+        c.output.preview_exposure = self.exposure;
+        c
+    }
+}
+
+/// Progress bars on a terminal (one per stage, with rate and ETA); nothing otherwise.
+struct Bars {
+    enabled: bool,
+    bar: Mutex<Option<ProgressBar>>,
+}
+
+impl Progress for Bars {
+    fn begin(&self, stage: &str, total: u64) {
+        if !self.enabled {
+            return;
+        }
+        let bar = ProgressBar::new(total);
+        bar.set_style(
+            ProgressStyle::with_template("{prefix:>10} [{bar:30}] {pos}/{len} {per_sec} ETA {eta}")
+                .unwrap()
+                .progress_chars("=> "),
+        );
+        bar.set_prefix(stage.to_string());
+        bar.enable_steady_tick(Duration::from_millis(200));
+        *self.bar.lock().unwrap() = Some(bar);
+    }
+    fn advance(&self, n: u64) {
+        if let Some(bar) = &*self.bar.lock().unwrap() {
+            bar.inc(n);
+        }
+    }
+    fn end(&self) {
+        if let Some(bar) = self.bar.lock().unwrap().take() {
+            bar.finish_and_clear();
+        }
+    }
+    fn warn(&self, message: &str) {
+        match &*self.bar.lock().unwrap() {
+            Some(bar) => bar.suspend(|| eprintln!("warning: {message}")),
+            None => eprintln!("warning: {message}"),
+        }
+    }
+}
+
+fn bake(args: &BakeArgs) -> Result<()> {
+    let config = args.config();
+    let bars = Bars { enabled: !args.quiet && std::io::stderr().is_terminal(), bar: Mutex::new(None) };
+    let report = lightbake::bake(&args.scene, &args.output, &config, &bars)
+        .with_context(|| format!("baking {} failed", args.scene.display()))?;
+    if !args.quiet {
+        println!("{}", report.summary());
+        if let Some(gltf) = report.files.first() {
+            println!("wrote {}", gltf.display());
+        }
+    }
+    Ok(())
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match &cli.command {
+        Command::Bake(args) => {
+            if let Some(n) = args.threads {
+                if let Err(e) = rayon::ThreadPoolBuilder::new().num_threads(n.max(1)).build_global() {
+                    eprintln!("error: cannot start {n} threads: {e}");
+                    return ExitCode::FAILURE;
+                }
+            }
+            bake(args)
+        }
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}

@@ -1,1 +1,119 @@
-//! stub
+//! Direct light: punctual lights (KHR_lights_punctual) with shadow rays, and the emissive
+//! triangles as area lights for explicit light sampling.
+
+use glam::{Vec2, Vec3};
+
+use super::sampling::sample_cdf;
+use crate::scene::{Light, LightKind, Scene};
+use crate::texels::Texels;
+use crate::trace::Tracer;
+
+/// Irradiance (W/m²) at `p` (normal `n`, origin already offset) from one punctual light.
+#[inline]
+pub fn punctual_irradiance(light: &Light, p: Vec3, n: Vec3, tracer: &Tracer) -> Vec3 {
+    match light.kind {
+        LightKind::Directional => {
+            let l = -light.direction;
+            let cos = n.dot(l);
+            if cos <= 0.0 || !tracer.escapes(p, l, f32::INFINITY) {
+                return Vec3::ZERO;
+            }
+            light.intensity * cos
+        }
+        LightKind::Point | LightKind::Spot { .. } => {
+            let to_light = light.position - p;
+            let d2 = to_light.length_squared();
+            if d2 <= 0.0 {
+                return Vec3::ZERO;
+            }
+            let d = d2.sqrt();
+            let l = to_light / d;
+            let cos = n.dot(l);
+            if cos <= 0.0 {
+                return Vec3::ZERO;
+            }
+            // KHR_lights_punctual range falloff: smooth window to zero at `range`.
+            let window = light.range.map_or(1.0, |r| (1.0 - (d / r).powi(4)).clamp(0.0, 1.0));
+            let cone = match light.kind {
+                LightKind::Spot { inner_cone_angle, outer_cone_angle } => {
+                    let scale = 1.0 / (inner_cone_angle.cos() - outer_cone_angle.cos()).max(1e-3);
+                    let offset = -outer_cone_angle.cos() * scale;
+                    let a = (light.direction.dot(-l) * scale + offset).clamp(0.0, 1.0);
+                    a * a
+                }
+                _ => 1.0,
+            };
+            if window * cone <= 0.0 || tracer.occluded(p, light.position) {
+                return Vec3::ZERO;
+            }
+            light.intensity * (cos * window * cone / d2)
+        }
+    }
+}
+
+/// Emissive triangles, sampled in proportion to their emitted power.
+pub struct Emitters {
+    /// Scene triangles that emit.
+    pub triangles: Vec<u32>,
+    /// Cumulative power over `triangles`.
+    pub cdf: Vec<f32>,
+    /// Per scene triangle: probability of picking it divided by its area (area density of a
+    /// light sample landing at a point on it), 0 for non-emitters.
+    pub pdf_area: Vec<f32>,
+}
+
+impl Emitters {
+    pub fn new(scene: &Scene, texels: &Texels) -> Emitters {
+        let mut triangles = Vec::new();
+        let mut power = Vec::new();
+        for (t, tri) in scene.triangles.iter().enumerate() {
+            let inst = &scene.instances[scene.triangle_instance[t] as usize];
+            let m = &scene.materials[inst.material as usize];
+            if m.emission.max_element() <= 0.0 {
+                continue;
+            }
+            let area = triangle_area(scene, tri);
+            // Emissive textures vary over the triangle: weigh by the texel it mostly covers.
+            let le = texels.emission.get(texels.triangle_texel[t] as usize).copied().unwrap_or(m.emission);
+            let weight = area * (le.x + le.y + le.z).max(1e-6 * m.emission.max_element());
+            if area > 0.0 && weight.is_finite() && weight > 0.0 {
+                triangles.push(t as u32);
+                power.push(weight);
+            }
+        }
+        let total: f64 = power.iter().map(|&p| p as f64).sum();
+        let mut cdf = Vec::with_capacity(power.len());
+        let mut pdf_area = vec![0.0; scene.triangles.len()];
+        let mut acc = 0.0f64;
+        for (&t, &p) in triangles.iter().zip(&power) {
+            acc += p as f64;
+            cdf.push((acc / total) as f32);
+            pdf_area[t as usize] = (p as f64 / total) as f32 / triangle_area(scene, &scene.triangles[t as usize]);
+        }
+        Emitters { triangles, cdf, pdf_area }
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.triangles.is_empty()
+    }
+
+    /// Picks an emissive triangle for `u ∈ [0,1)`.
+    #[inline]
+    pub fn pick(&self, u: f32) -> u32 {
+        self.triangles[sample_cdf(&self.cdf, u)]
+    }
+}
+
+pub fn triangle_area(scene: &Scene, tri: &[u32; 3]) -> f32 {
+    let p = |i: usize| scene.positions[tri[i] as usize];
+    0.5 * (p(1) - p(0)).cross(p(2) - p(0)).length()
+}
+
+/// World position and geometric unit normal at barycentrics `b` of scene triangle `t`.
+#[inline]
+pub fn triangle_point(scene: &Scene, t: u32, b: Vec2) -> (Vec3, Vec3) {
+    let [i0, i1, i2] = scene.triangles[t as usize];
+    let (p0, p1, p2) = (scene.positions[i0 as usize], scene.positions[i1 as usize], scene.positions[i2 as usize]);
+    let p = p0 * (1.0 - b.x - b.y) + p1 * b.x + p2 * b.y;
+    (p, (p1 - p0).cross(p2 - p0).normalize_or_zero())
+}
