@@ -54,9 +54,31 @@ impl BakeReport {
     }
 }
 
+/// Everything a bake computed, stage by stage, before anything is written.
+#[derive(Clone, Debug)]
+pub struct Baked {
+    pub scene: scene::Scene,
+    pub source: scene::Source,
+    pub atlas: atlas::Atlas,
+    pub texels: texels::Texels,
+    pub transport: transport::Transport,
+    pub solution: solve::Solution,
+    /// `H/π` per texel (what the pages hold before dilation).
+    pub lightmap: Vec<Vec3>,
+    pub pages: LightmapPages,
+    pub stages: Vec<StageTime>,
+}
+
 /// Bakes `input` (.gltf or .glb) into `out_dir`: `<stem>.gltf` + `<stem>.bin` (or `<stem>.glb`),
 /// and per page `<stem>_lightmap<k>.exr` and a tone-mapped `<stem>_lightmap<k>.png`.
 pub fn bake(input: &Path, out_dir: &Path, config: &BakeConfig, progress: &dyn Progress) -> Result<BakeReport> {
+    refuse_overwriting_input(input, out_dir)?;
+    let baked = compute(input, config, progress)?;
+    write(baked, input, out_dir, config, progress)
+}
+
+/// Runs every stage up to the dilated pages, in memory.
+pub fn compute(input: &Path, config: &BakeConfig, progress: &dyn Progress) -> Result<Baked> {
     config.validate()?;
     let mut stages = Vec::new();
     let mut timed = |stage: &'static str, start: Instant| stages.push(StageTime { stage, seconds: start.elapsed().as_secs_f64() });
@@ -110,16 +132,22 @@ pub fn bake(input: &Path, out_dir: &Path, config: &BakeConfig, progress: &dyn Pr
 
     let t = Instant::now();
     // A texel stores H/π; indirect-only leaves out light that arrived without a bounce.
-    let values: Vec<Vec3> = solution
+    let lightmap: Vec<Vec3> = solution
         .irradiance
         .iter()
         .zip(&transport.direct)
         .map(|(h, d)| if config.transport.indirect_only { (*h - *d).max(Vec3::ZERO) } else { *h } / std::f32::consts::PI)
         .collect();
-    let mut pages = LightmapPages::from_texels(&texels, &values);
+    let mut pages = LightmapPages::from_texels(&texels, &lightmap);
     lightmap::dilate(&mut pages, config.atlas.padding.max(2) * 2);
     timed("dilate", t);
 
+    Ok(Baked { scene, source, atlas, texels, transport, solution, lightmap, pages, stages })
+}
+
+/// Writes a computed bake: EXR + PNG pages and the glTF, atomically.
+pub fn write(baked: Baked, input: &Path, out_dir: &Path, config: &BakeConfig, progress: &dyn Progress) -> Result<BakeReport> {
+    let Baked { scene, source, atlas, texels, transport, solution, pages, mut stages, .. } = baked;
     let t = Instant::now();
     let stem = input.file_stem().and_then(|s| s.to_str()).unwrap_or("scene").to_string();
     let mut staging = Staging::new(out_dir, &protected_files(input, &source))?;
@@ -135,7 +163,7 @@ pub fn bake(input: &Path, out_dir: &Path, config: &BakeConfig, progress: &dyn Pr
     let mut files = staging.commit()?;
     // The glTF (or .glb) first, then pages in order.
     files.sort_by_key(|p| !matches!(p.extension().and_then(|e| e.to_str()), Some("gltf" | "glb")));
-    timed("write", t);
+    stages.push(StageTime { stage: "write", seconds: t.elapsed().as_secs_f64() });
 
     Ok(BakeReport {
         triangles: scene.triangles.len(),
@@ -150,7 +178,25 @@ pub fn bake(input: &Path, out_dir: &Path, config: &BakeConfig, progress: &dyn Pr
     })
 }
 
-/// Texel budget: about 200 bytes per texel in the pipeline plus `gather_rays` × 8 bytes of
+/// Fails early (before any work) when the output would replace the input file itself.
+fn refuse_overwriting_input(input: &Path, out_dir: &Path) -> Result<()> {
+    let (Ok(input_dir), Ok(out)) = (input.parent().unwrap_or(Path::new(".")).canonicalize(), out_dir.canonicalize()) else {
+        return Ok(()); // a missing input is reported by the loader; a missing out_dir is created
+    };
+    if input_dir == out {
+        let ext = input.extension().and_then(|e| e.to_str()).unwrap_or("");
+        if ext == "gltf" || ext == "glb" {
+            return Err(Error::Option(format!(
+                "the output directory {} holds the input {}: baking there would overwrite it; choose another -o",
+                out.display(),
+                input.display()
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// Texel budget: about 200 bytes per texel in the pipeline plus 8 bytes per gathering ray of
 /// form-factor row; refuse densities that would not fit before allocating anything.
 fn check_memory(scene: &scene::Scene, input: &Path, config: &BakeConfig) -> Result<()> {
     let area: f64 = scene
@@ -163,13 +209,12 @@ fn check_memory(scene: &scene::Scene, input: &Path, config: &BakeConfig) -> Resu
         .sum();
     let tpu = config.atlas.texels_per_unit as f64;
     let texels = area * tpu * tpu;
-    let bytes_per_texel = 200.0 + 8.0 * config.transport.gather_rays.min(4096) as f64;
-    let bytes = texels * bytes_per_texel;
+    let bytes = texels * (200.0 + 8.0 * config.transport.gather_rays as f64);
     const LIMIT: f64 = 16.0 * (1u64 << 30) as f64;
     if bytes > LIMIT || texels > 1.0e8 {
         return Err(Error::Option(format!(
-            "{}: {:.0} m² of surface at {} texels per unit is about {:.1} M texels and {:.1} GiB; \
-             lower --texels-per-unit (or --rays)",
+            "{}: {:.0} m² of surface at {} texels per unit is about {:.1} M texels needing about {:.1} GiB; \
+             lower --texels-per-unit or --rays",
             input.display(),
             area,
             tpu,

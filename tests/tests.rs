@@ -1,1 +1,7 @@
+//! The single integration-test binary (one link step; `autotests = false` in Cargo.toml).
 
+mod util;
+
+mod analytic;
+mod cli;
+mod pipeline;

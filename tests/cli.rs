@@ -1,0 +1,143 @@
+//! The `lightbake` binary: success path, summary, and every bad-input case (clear message,
+//! non-zero exit, nothing left behind).
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+use crate::util::{fixture, list_files, scratch};
+
+fn lightbake(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_lightbake")).args(args).output().expect("run lightbake")
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+const FAST: [&str; 6] = ["--texels-per-unit", "6", "--rays", "32", "--light-samples", "8"];
+
+fn bake(scene: &Path, out: &Path, extra: &[&str]) -> Output {
+    let mut args = vec!["bake", scene.to_str().unwrap(), "-o", out.to_str().unwrap()];
+    args.extend_from_slice(&FAST);
+    args.extend_from_slice(extra);
+    lightbake(&args)
+}
+
+#[test]
+fn bakes_cornell_box_and_prints_summary() {
+    let dir = scratch();
+    let out = dir.path().join("out");
+    let o = bake(&fixture("cornell_box.gltf"), &out, &[]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(stdout.contains("texels") && stdout.contains("iterations") && stdout.contains("residual"), "{stdout}");
+    let files = list_files(&out);
+    for f in ["cornell_box.gltf", "cornell_box.bin", "cornell_box_lightmap0.exr", "cornell_box_lightmap0.png"] {
+        assert!(files.contains(&f.to_string()), "{f} missing from {files:?}");
+    }
+    assert!(!files.iter().any(|f| f.contains("lightbake-tmp")), "{files:?}");
+}
+
+#[test]
+fn quiet_prints_nothing() {
+    let dir = scratch();
+    let o = bake(&fixture("point_light.gltf"), &dir.path().join("o"), &["--quiet"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(o.stdout.is_empty());
+}
+
+#[test]
+fn help_explains_every_option() {
+    let o = lightbake(&["bake", "--help"]);
+    let help = String::from_utf8_lossy(&o.stdout);
+    for flag in ["--texels-per-unit", "--max-page-size", "--uv", "--rays", "--sky", "--float", "--quiet", "--tolerance", "--solver"] {
+        assert!(help.contains(flag), "{flag} missing from help");
+    }
+    assert!(help.contains("default"), "defaults not shown");
+}
+
+/// Runs a bake that must fail; checks the message and that nothing was written.
+fn fails(scene: &Path, extra: &[&str], needle: &str) {
+    let dir = scratch();
+    let out = dir.path().join("out");
+    let o = bake(scene, &out, extra);
+    assert!(!o.status.success(), "expected failure for {}", scene.display());
+    let err = stderr(&o);
+    assert!(err.contains(needle), "stderr {err:?} should mention {needle:?}");
+    if out.exists() {
+        assert!(list_files(&out).is_empty(), "left behind: {:?}", list_files(&out));
+    }
+}
+
+fn write(dir: &Path, name: &str, text: &str) -> std::path::PathBuf {
+    let p = dir.join(name);
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+#[test]
+fn missing_file_is_named() {
+    fails(Path::new("/nonexistent/scene.gltf"), &[], "scene.gltf");
+}
+
+#[test]
+fn malformed_json_is_named() {
+    let dir = scratch();
+    let p = write(dir.path(), "broken.gltf", "{ \"asset\": { \"version\": \"2.0\" ");
+    fails(&p, &[], "broken.gltf");
+}
+
+#[test]
+fn missing_buffer_is_named() {
+    let dir = scratch();
+    let text = r#"{"asset":{"version":"2.0"},"buffers":[{"uri":"gone.bin","byteLength":36}],
+      "bufferViews":[{"buffer":0,"byteLength":36}],
+      "accessors":[{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3","min":[0,0,0],"max":[1,1,0]}],
+      "meshes":[{"primitives":[{"attributes":{"POSITION":0}}]}],"nodes":[{"mesh":0}],"scenes":[{"nodes":[0]}],"scene":0}"#;
+    let p = write(dir.path(), "nobuf.gltf", text);
+    fails(&p, &[], "gone.bin");
+}
+
+#[test]
+fn unsupported_required_extension_is_named() {
+    let dir = scratch();
+    let text = r#"{"asset":{"version":"2.0"},"extensionsUsed":["KHR_draco_mesh_compression"],
+      "extensionsRequired":["KHR_draco_mesh_compression"],"scenes":[{"nodes":[]}],"scene":0}"#;
+    let p = write(dir.path(), "draco.gltf", text);
+    fails(&p, &[], "KHR_draco_mesh_compression");
+}
+
+#[test]
+fn absurd_options_are_refused() {
+    fails(&fixture("cornell_box.gltf"), &["--texels-per-unit", "0"], "texels per unit");
+    fails(&fixture("cornell_box.gltf"), &["--texels-per-unit", "90000"], "texels");
+    fails(&fixture("cornell_box.gltf"), &["--max-page-size", "0"], "page size");
+}
+
+#[test]
+fn refuses_to_overwrite_the_input() {
+    let dir = scratch();
+    let scene = dir.path().join("cornell_box.gltf");
+    std::fs::copy(fixture("cornell_box.gltf"), &scene).unwrap();
+    let before = std::fs::read(&scene).unwrap();
+    let o = bake(&scene, dir.path(), &[]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("overwrite"), "{}", stderr(&o));
+    assert_eq!(std::fs::read(&scene).unwrap(), before);
+    assert_eq!(list_files(dir.path()), vec!["cornell_box.gltf".to_string()]);
+}
+
+#[test]
+fn scene_without_light_warns() {
+    let dir = scratch();
+    // The furnace with emission removed: no lights, no emission, no sky.
+    let text = std::fs::read_to_string(fixture("furnace.gltf")).unwrap();
+    let mut json: serde_json::Value = serde_json::from_str(&text).unwrap();
+    for m in json["materials"].as_array_mut().unwrap() {
+        m.as_object_mut().unwrap().remove("emissiveFactor");
+    }
+    let p = write(dir.path(), "dark.gltf", &json.to_string());
+    let o = bake(&p, &dir.path().join("out"), &[]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stderr(&o).contains("black"), "{}", stderr(&o));
+}
