@@ -1,1 +1,1802 @@
-//! Procedural test scenes (stub: being written).
+//! Procedural glTF test scenes with known answers, and the small glTF builder that writes them.
+//!
+//! Tests, examples and benches share these scenes; `cargo run --example make_fixtures` writes
+//! them to `fixtures/` (see `fixtures/README.md` for what each one tests and its expected
+//! answer). All units are metres, Y is up, front faces are counter-clockwise (glTF).
+//!
+//! The builder covers exactly what the scenes need and produces files that pass the Khronos
+//! glTF-Validator with no errors: one buffer, one tightly packed bufferView per accessor
+//! (4-byte aligned, with `target`), `POSITION` bounds, `u16` indices whenever they fit.
+
+use std::f32::consts::{FRAC_PI_2, PI};
+use std::path::Path;
+
+use base64::Engine;
+use glam::{Mat3, Mat4, Quat, Vec2, Vec3};
+use serde_json::{Map, Value, json};
+
+use crate::{Error, Result};
+
+/// Cornell box light: emitted radiance per channel, `emissiveFactor (1,1,1) × emissiveStrength`.
+pub const CORNELL_LIGHT_RADIANCE: f32 = 17.0;
+/// Cornell box light: size of the emitting quad along x and z (m).
+pub const CORNELL_LIGHT_SIZE: Vec2 = Vec2::new(0.25, 0.2);
+/// Cornell box light: height of the emitting quad (1 cm below the 1 m ceiling), facing down.
+pub const CORNELL_LIGHT_HEIGHT: f32 = 0.99;
+/// Cornell box light: emitted power per channel, `π · Le · area` (W).
+pub const CORNELL_LIGHT_POWER: f32 =
+    PI * CORNELL_LIGHT_RADIANCE * CORNELL_LIGHT_SIZE.x * CORNELL_LIGHT_SIZE.y;
+
+/// Triangle mesh data of one primitive; every attribute has one entry per vertex.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Geometry {
+    pub positions: Vec<Vec3>,
+    pub normals: Option<Vec<Vec3>>,
+    pub uv0: Option<Vec<Vec2>>,
+    /// Triangle list, counter-clockwise seen from the front.
+    pub indices: Vec<u32>,
+}
+
+impl Geometry {
+    pub fn new(
+        positions: &[Vec3],
+        normals: Option<&[Vec3]>,
+        uv0: Option<&[Vec2]>,
+        indices: &[u32],
+    ) -> Self {
+        Geometry {
+            positions: positions.to_vec(),
+            normals: normals.map(<[Vec3]>::to_vec),
+            uv0: uv0.map(<[Vec2]>::to_vec),
+            indices: indices.to_vec(),
+        }
+    }
+
+    /// A planar grid of `nu × nv` quads over `origin + s·edge_u + t·edge_v`, s, t ∈ [0, 1],
+    /// with flat normals, `uv0 = (s, t)`, front face towards `edge_u × edge_v`.
+    pub fn grid(origin: Vec3, edge_u: Vec3, edge_v: Vec3, nu: u32, nv: u32) -> Self {
+        assert!(nu > 0 && nv > 0, "a grid needs at least one quad");
+        let normal = edge_u.cross(edge_v).normalize();
+        let mut geometry = Geometry {
+            normals: Some(Vec::new()),
+            uv0: Some(Vec::new()),
+            ..Geometry::default()
+        };
+        for j in 0..=nv {
+            for i in 0..=nu {
+                let st = Vec2::new(i as f32 / nu as f32, j as f32 / nv as f32);
+                geometry
+                    .positions
+                    .push(origin + edge_u * st.x + edge_v * st.y);
+                geometry.normals.as_mut().unwrap().push(normal);
+                geometry.uv0.as_mut().unwrap().push(st);
+            }
+        }
+        let vertex = |i: u32, j: u32| j * (nu + 1) + i;
+        for j in 0..nv {
+            for i in 0..nu {
+                let (a, b) = (vertex(i, j), vertex(i + 1, j));
+                let (c, d) = (vertex(i + 1, j + 1), vertex(i, j + 1));
+                geometry.indices.extend_from_slice(&[a, b, c, a, c, d]);
+            }
+        }
+        geometry
+    }
+
+    /// The grid covering one face of the axis-aligned box `min..max`, facing outward.
+    pub fn box_face(min: Vec3, max: Vec3, face: Face, nu: u32, nv: u32) -> Self {
+        let size = max - min;
+        let (x, y, z) = (Vec3::X * size.x, Vec3::Y * size.y, Vec3::Z * size.z);
+        let (origin, edge_u, edge_v) = match face {
+            Face::PosX => (Vec3::new(max.x, min.y, max.z), -z, y),
+            Face::NegX => (min, z, y),
+            Face::PosY => (Vec3::new(min.x, max.y, max.z), x, -z),
+            Face::NegY => (min, x, z),
+            Face::PosZ => (Vec3::new(min.x, min.y, max.z), x, y),
+            Face::NegZ => (Vec3::new(max.x, min.y, min.z), -x, y),
+        };
+        Geometry::grid(origin, edge_u, edge_v, nu, nv)
+    }
+
+    /// The given faces of the box `min..max`, each an `n × n` grid, facing outward.
+    pub fn box_faces(min: Vec3, max: Vec3, faces: &[Face], n: u32) -> Self {
+        let mut geometry = Geometry::default();
+        for &face in faces {
+            geometry.append(&Geometry::box_face(min, max, face, n, n));
+        }
+        geometry
+    }
+
+    /// Appends `other`'s vertices and triangles; both must carry the same attributes
+    /// (an empty geometry takes on `other`'s).
+    pub fn append(&mut self, other: &Geometry) {
+        if self.positions.is_empty() {
+            *self = other.clone();
+            return;
+        }
+        assert_eq!(
+            self.normals.is_some(),
+            other.normals.is_some(),
+            "normals differ"
+        );
+        assert_eq!(self.uv0.is_some(), other.uv0.is_some(), "uv0 differs");
+        let base = self.positions.len() as u32;
+        self.positions.extend_from_slice(&other.positions);
+        if let (Some(mine), Some(theirs)) = (&mut self.normals, &other.normals) {
+            mine.extend_from_slice(theirs);
+        }
+        if let (Some(mine), Some(theirs)) = (&mut self.uv0, &other.uv0) {
+            mine.extend_from_slice(theirs);
+        }
+        self.indices.extend(other.indices.iter().map(|i| base + i));
+    }
+
+    /// The same surface facing the other way: reversed winding, negated normals.
+    pub fn flipped(mut self) -> Self {
+        for triangle in self.indices.chunks_exact_mut(3) {
+            triangle.swap(1, 2);
+        }
+        if let Some(normals) = &mut self.normals {
+            normals.iter_mut().for_each(|n| *n = -*n);
+        }
+        self
+    }
+
+    /// Drops the normals, so a loader has to generate flat ones (as glTF requires).
+    pub fn without_normals(mut self) -> Self {
+        self.normals = None;
+        self
+    }
+
+    /// Drops `TEXCOORD_0`.
+    pub fn without_uv0(mut self) -> Self {
+        self.uv0 = None;
+        self
+    }
+
+    pub fn triangle_count(&self) -> usize {
+        self.indices.len() / 3
+    }
+}
+
+/// A face of an axis-aligned box, named by its outward normal.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Face {
+    PosX,
+    NegX,
+    PosY,
+    NegY,
+    PosZ,
+    NegZ,
+}
+
+impl Face {
+    pub const ALL: [Face; 6] = [
+        Face::PosX,
+        Face::NegX,
+        Face::PosY,
+        Face::NegY,
+        Face::PosZ,
+        Face::NegZ,
+    ];
+    /// A box standing on the ground: every face but the bottom one.
+    pub const NO_BOTTOM: [Face; 5] = [Face::PosX, Face::NegX, Face::PosY, Face::PosZ, Face::NegZ];
+}
+
+/// A metal-free, fully rough glTF material.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Material {
+    pub name: String,
+    /// Linear `baseColorFactor`.
+    pub base_color: [f32; 4],
+    pub emissive: [f32; 3],
+    /// Written as `KHR_materials_emissive_strength` only when it is not 1.
+    pub emissive_strength: f32,
+    pub double_sided: bool,
+    /// Image index (each image is its own texture).
+    pub base_color_texture: Option<usize>,
+}
+
+impl Material {
+    pub fn diffuse(name: &str, rgb: [f32; 3]) -> Self {
+        Material {
+            name: name.to_owned(),
+            base_color: [rgb[0], rgb[1], rgb[2], 1.0],
+            emissive: [0.0; 3],
+            emissive_strength: 1.0,
+            double_sided: false,
+            base_color_texture: None,
+        }
+    }
+
+    pub fn grey(name: &str, rho: f32) -> Self {
+        Material::diffuse(name, [rho; 3])
+    }
+
+    /// Emits radiance `emissive × strength` (W/(sr·m²) per channel).
+    pub fn emitting(mut self, emissive: [f32; 3], strength: f32) -> Self {
+        self.emissive = emissive;
+        self.emissive_strength = strength;
+        self
+    }
+
+    pub fn double_sided(mut self) -> Self {
+        self.double_sided = true;
+        self
+    }
+
+    pub fn with_texture(mut self, image: usize) -> Self {
+        self.base_color_texture = Some(image);
+        self
+    }
+}
+
+/// Where an image's PNG bytes go.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ImageStorage {
+    /// In the binary buffer, referenced through a bufferView.
+    BufferView,
+    /// As a `data:image/png;base64,` URI.
+    DataUri,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+struct Image {
+    name: String,
+    png: Vec<u8>,
+    storage: ImageStorage,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+struct Mesh {
+    name: String,
+    primitives: Vec<(Geometry, usize)>,
+}
+
+/// A node's local transform.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Transform {
+    Trs {
+        translation: Vec3,
+        rotation: Quat,
+        scale: Vec3,
+    },
+    /// Written as `matrix`; must be decomposable into TRS (the validator checks).
+    Matrix(Mat4),
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct Node {
+    pub name: String,
+    pub transform: Transform,
+    pub mesh: Option<usize>,
+    pub light: Option<usize>,
+    pub camera: Option<usize>,
+    pub children: Vec<usize>,
+}
+
+impl Node {
+    pub fn new(name: &str) -> Self {
+        Node {
+            name: name.to_owned(),
+            transform: Transform::Trs {
+                translation: Vec3::ZERO,
+                rotation: Quat::IDENTITY,
+                scale: Vec3::ONE,
+            },
+            mesh: None,
+            light: None,
+            camera: None,
+            children: Vec::new(),
+        }
+    }
+
+    pub fn trs(mut self, translation: Vec3, rotation: Quat, scale: Vec3) -> Self {
+        self.transform = Transform::Trs {
+            translation,
+            rotation: rotation.normalize(),
+            scale,
+        };
+        self
+    }
+
+    pub fn at(self, translation: Vec3) -> Self {
+        self.trs(translation, Quat::IDENTITY, Vec3::ONE)
+    }
+
+    pub fn matrix(mut self, matrix: Mat4) -> Self {
+        self.transform = Transform::Matrix(matrix);
+        self
+    }
+
+    /// Placed at `eye` with its -Z axis (where cameras look and lights shine) towards `target`.
+    pub fn looking_at(self, eye: Vec3, target: Vec3) -> Self {
+        self.trs(eye, rotation_towards(target - eye), Vec3::ONE)
+    }
+
+    /// Placed at `position` with its -Z axis along `direction`.
+    pub fn pointing(self, position: Vec3, direction: Vec3) -> Self {
+        self.trs(position, rotation_towards(direction), Vec3::ONE)
+    }
+
+    pub fn with_mesh(mut self, mesh: usize) -> Self {
+        self.mesh = Some(mesh);
+        self
+    }
+
+    pub fn with_light(mut self, light: usize) -> Self {
+        self.light = Some(light);
+        self
+    }
+
+    pub fn with_camera(mut self, camera: usize) -> Self {
+        self.camera = Some(camera);
+        self
+    }
+
+    pub fn with_children(mut self, children: &[usize]) -> Self {
+        self.children = children.to_vec();
+        self
+    }
+}
+
+/// The rotation taking -Z to `direction`, keeping +Y as up where possible.
+fn rotation_towards(direction: Vec3) -> Quat {
+    let forward = direction.normalize();
+    let up_hint = if forward.cross(Vec3::Y).length() < 1e-3 {
+        Vec3::Z
+    } else {
+        Vec3::Y
+    };
+    let right = forward.cross(up_hint).normalize();
+    let up = right.cross(forward);
+    Quat::from_mat3(&Mat3::from_cols(right, up, -forward)).normalize()
+}
+
+/// A KHR_lights_punctual light type.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum LightKind {
+    Point,
+    Spot {
+        inner_cone_angle: f32,
+        outer_cone_angle: f32,
+    },
+    Directional,
+}
+
+/// A KHR_lights_punctual light: point/spot `intensity` in W/sr, directional in W/m².
+#[derive(Clone, Debug, PartialEq)]
+pub struct Light {
+    pub name: String,
+    pub kind: LightKind,
+    pub color: [f32; 3],
+    pub intensity: f32,
+    /// Not allowed on directional lights.
+    pub range: Option<f32>,
+}
+
+impl Light {
+    pub fn point(name: &str, color: [f32; 3], intensity: f32) -> Self {
+        Light {
+            name: name.to_owned(),
+            kind: LightKind::Point,
+            color,
+            intensity,
+            range: None,
+        }
+    }
+
+    pub fn spot(name: &str, color: [f32; 3], intensity: f32, inner: f32, outer: f32) -> Self {
+        let kind = LightKind::Spot {
+            inner_cone_angle: inner,
+            outer_cone_angle: outer,
+        };
+        Light {
+            name: name.to_owned(),
+            kind,
+            color,
+            intensity,
+            range: None,
+        }
+    }
+
+    pub fn directional(name: &str, color: [f32; 3], irradiance: f32) -> Self {
+        let kind = LightKind::Directional;
+        Light {
+            name: name.to_owned(),
+            kind,
+            color,
+            intensity: irradiance,
+            range: None,
+        }
+    }
+
+    pub fn with_range(mut self, range: f32) -> Self {
+        self.range = Some(range);
+        self
+    }
+}
+
+/// A perspective camera.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Camera {
+    pub name: String,
+    /// Vertical field of view (radians).
+    pub yfov: f32,
+    pub aspect_ratio: Option<f32>,
+    pub znear: f32,
+    pub zfar: Option<f32>,
+}
+
+impl Camera {
+    pub fn perspective(name: &str, yfov: f32, aspect_ratio: Option<f32>) -> Self {
+        Camera {
+            name: name.to_owned(),
+            yfov,
+            aspect_ratio,
+            znear: 0.01,
+            zfar: Some(100.0),
+        }
+    }
+}
+
+/// Collects meshes, materials, images, nodes, lights and cameras of one glTF scene.
+#[derive(Clone, Debug, PartialEq)]
+pub struct GltfBuilder {
+    scene_name: String,
+    materials: Vec<Material>,
+    images: Vec<Image>,
+    meshes: Vec<Mesh>,
+    nodes: Vec<Node>,
+    lights: Vec<Light>,
+    cameras: Vec<Camera>,
+}
+
+impl GltfBuilder {
+    pub fn new(scene_name: &str) -> Self {
+        GltfBuilder {
+            scene_name: scene_name.to_owned(),
+            materials: Vec::new(),
+            images: Vec::new(),
+            meshes: Vec::new(),
+            nodes: Vec::new(),
+            lights: Vec::new(),
+            cameras: Vec::new(),
+        }
+    }
+
+    pub fn add_material(&mut self, material: Material) -> usize {
+        self.materials.push(material);
+        self.materials.len() - 1
+    }
+
+    /// Encodes `image` as PNG (deterministic for a given `image` crate version).
+    pub fn add_image(
+        &mut self,
+        name: &str,
+        image: &image::DynamicImage,
+        storage: ImageStorage,
+    ) -> usize {
+        let mut png = Vec::new();
+        image
+            .write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
+            .expect("PNG encoding into memory cannot fail");
+        self.images.push(Image {
+            name: name.to_owned(),
+            png,
+            storage,
+        });
+        self.images.len() - 1
+    }
+
+    /// A mesh with one primitive.
+    pub fn add_mesh(&mut self, name: &str, geometry: Geometry, material: usize) -> usize {
+        self.meshes.push(Mesh {
+            name: name.to_owned(),
+            primitives: Vec::new(),
+        });
+        let mesh = self.meshes.len() - 1;
+        self.add_primitive(mesh, geometry, material);
+        mesh
+    }
+
+    /// Adds one more primitive to `mesh`.
+    pub fn add_primitive(&mut self, mesh: usize, geometry: Geometry, material: usize) {
+        let vertices = geometry.positions.len();
+        assert!(
+            vertices > 0 && geometry.indices.len().is_multiple_of(3),
+            "empty or ragged geometry"
+        );
+        assert!(
+            geometry.indices.iter().all(|&i| (i as usize) < vertices),
+            "index out of range"
+        );
+        assert!(
+            geometry
+                .normals
+                .as_ref()
+                .is_none_or(|n| n.len() == vertices),
+            "normal count"
+        );
+        assert!(
+            geometry.uv0.as_ref().is_none_or(|uv| uv.len() == vertices),
+            "uv0 count"
+        );
+        assert!(material < self.materials.len(), "unknown material");
+        self.meshes[mesh].primitives.push((geometry, material));
+    }
+
+    pub fn add_light(&mut self, light: Light) -> usize {
+        self.lights.push(light);
+        self.lights.len() - 1
+    }
+
+    pub fn add_camera(&mut self, camera: Camera) -> usize {
+        self.cameras.push(camera);
+        self.cameras.len() - 1
+    }
+
+    /// Adds a node; nodes that are nobody's child become the scene's roots.
+    pub fn add_node(&mut self, node: Node) -> usize {
+        self.nodes.push(node);
+        self.nodes.len() - 1
+    }
+
+    /// Adds a mesh node at the origin.
+    pub fn add_mesh_node(&mut self, name: &str, mesh: usize) -> usize {
+        self.add_node(Node::new(name).with_mesh(mesh))
+    }
+
+    /// Adds a light on a node at `position` shining along `direction` (ignored by point lights).
+    pub fn add_light_node(&mut self, light: Light, position: Vec3, direction: Vec3) -> usize {
+        let name = light.name.clone();
+        let light = self.add_light(light);
+        self.add_node(
+            Node::new(&name)
+                .pointing(position, direction)
+                .with_light(light),
+        )
+    }
+
+    /// Adds a perspective camera on a node at `eye` looking at `target`.
+    pub fn add_camera_node(&mut self, camera: Camera, eye: Vec3, target: Vec3) -> usize {
+        let name = camera.name.clone();
+        let camera = self.add_camera(camera);
+        self.add_node(Node::new(&name).looking_at(eye, target).with_camera(camera))
+    }
+
+    /// Number of triangles summed over meshes (not over instances).
+    pub fn mesh_triangle_count(&self) -> usize {
+        self.meshes
+            .iter()
+            .flat_map(|m| &m.primitives)
+            .map(|(g, _)| g.triangle_count())
+            .sum()
+    }
+
+    /// The glTF JSON and its binary buffer. `buffers[0]` has no `uri` (as in a GLB);
+    /// [`GltfBuilder::to_gltf_bytes`] embeds the buffer as a data URI.
+    pub fn to_gltf_json(&self) -> (Value, Vec<u8>) {
+        let mut packer = Packer::default();
+        let meshes: Vec<Value> = self
+            .meshes
+            .iter()
+            .map(|mesh| self.mesh_json(mesh, &mut packer))
+            .collect();
+        let images: Vec<Value> = self
+            .images
+            .iter()
+            .map(|image| image_json(image, &mut packer))
+            .collect();
+        let buffer_length = packer.finish();
+
+        let mut root = Map::new();
+        root.insert(
+            "asset".into(),
+            json!({ "version": "2.0", "generator": "lightbake testing" }),
+        );
+        let mut extensions_used = Vec::new();
+        if !self.lights.is_empty() {
+            extensions_used.push("KHR_lights_punctual");
+        }
+        if self.materials.iter().any(|m| m.emissive_strength != 1.0) {
+            extensions_used.push("KHR_materials_emissive_strength");
+        }
+        if !extensions_used.is_empty() {
+            root.insert("extensionsUsed".into(), json!(extensions_used));
+        }
+        if !self.lights.is_empty() {
+            let lights: Vec<Value> = self.lights.iter().map(light_json).collect();
+            root.insert(
+                "extensions".into(),
+                json!({ "KHR_lights_punctual": { "lights": lights } }),
+            );
+        }
+        let is_child: Vec<bool> = (0..self.nodes.len())
+            .map(|i| self.nodes.iter().any(|n| n.children.contains(&i)))
+            .collect();
+        let roots: Vec<usize> = (0..self.nodes.len()).filter(|&i| !is_child[i]).collect();
+        root.insert("scene".into(), json!(0));
+        root.insert(
+            "scenes".into(),
+            json!([{ "name": self.scene_name, "nodes": roots }]),
+        );
+        insert_array(
+            &mut root,
+            "nodes",
+            self.nodes.iter().map(node_json).collect(),
+        );
+        insert_array(&mut root, "meshes", meshes);
+        insert_array(
+            &mut root,
+            "materials",
+            self.materials.iter().map(material_json).collect(),
+        );
+        let textures: Vec<Value> = (0..self.images.len())
+            .map(|i| json!({ "sampler": 0, "source": i }))
+            .collect();
+        if !textures.is_empty() {
+            // Nearest filtering keeps the checker's squares crisp.
+            root.insert(
+                "samplers".into(),
+                json!([{ "magFilter": 9728, "minFilter": 9728 }]),
+            );
+        }
+        insert_array(&mut root, "textures", textures);
+        insert_array(&mut root, "images", images);
+        insert_array(
+            &mut root,
+            "cameras",
+            self.cameras.iter().map(camera_json).collect(),
+        );
+        insert_array(
+            &mut root,
+            "accessors",
+            std::mem::take(&mut packer.accessors),
+        );
+        insert_array(&mut root, "bufferViews", std::mem::take(&mut packer.views));
+        root.insert("buffers".into(), json!([{ "byteLength": buffer_length }]));
+        (Value::Object(root), packer.bin)
+    }
+
+    /// A self-contained `.gltf`: pretty-printed JSON, the buffer as a base64 data URI.
+    pub fn to_gltf_bytes(&self) -> Vec<u8> {
+        let (mut json, bin) = self.to_gltf_json();
+        let uri = format!(
+            "data:application/octet-stream;base64,{}",
+            base64::engine::general_purpose::STANDARD.encode(&bin)
+        );
+        json["buffers"][0]["uri"] = Value::String(uri);
+        let mut bytes = serde_json::to_vec_pretty(&json).expect("a JSON value always serialises");
+        bytes.push(b'\n');
+        bytes
+    }
+
+    /// A binary `.glb`: JSON chunk (space-padded) and BIN chunk (zero-padded).
+    pub fn to_glb_bytes(&self) -> Vec<u8> {
+        let (json, bin) = self.to_gltf_json();
+        let mut json = serde_json::to_vec(&json).expect("a JSON value always serialises");
+        while !json.len().is_multiple_of(4) {
+            json.push(b' ');
+        }
+        let total = 12 + 8 + json.len() + 8 + bin.len();
+        let mut glb = Vec::with_capacity(total);
+        glb.extend_from_slice(b"glTF");
+        glb.extend_from_slice(&2u32.to_le_bytes());
+        glb.extend_from_slice(&(total as u32).to_le_bytes());
+        glb.extend_from_slice(&(json.len() as u32).to_le_bytes());
+        glb.extend_from_slice(b"JSON");
+        glb.extend_from_slice(&json);
+        glb.extend_from_slice(&(bin.len() as u32).to_le_bytes());
+        glb.extend_from_slice(b"BIN\0");
+        glb.extend_from_slice(&bin);
+        glb
+    }
+
+    pub fn write_gltf(&self, path: impl AsRef<Path>) -> Result<()> {
+        let path = path.as_ref();
+        std::fs::write(path, self.to_gltf_bytes()).map_err(|e| Error::io(path, e))
+    }
+
+    pub fn write_glb(&self, path: impl AsRef<Path>) -> Result<()> {
+        let path = path.as_ref();
+        std::fs::write(path, self.to_glb_bytes()).map_err(|e| Error::io(path, e))
+    }
+
+    fn mesh_json(&self, mesh: &Mesh, packer: &mut Packer) -> Value {
+        let primitives: Vec<Value> = mesh
+            .primitives
+            .iter()
+            .map(|(geometry, material)| {
+                let mut attributes = Map::new();
+                attributes.insert(
+                    "POSITION".into(),
+                    json!(packer.positions(&geometry.positions)),
+                );
+                if let Some(normals) = &geometry.normals {
+                    let unit: Vec<Vec3> = normals.iter().map(|n| n.normalize()).collect();
+                    attributes.insert("NORMAL".into(), json!(packer.vec3(&unit)));
+                }
+                if let Some(uv0) = &geometry.uv0 {
+                    attributes.insert("TEXCOORD_0".into(), json!(packer.vec2(uv0)));
+                }
+                let indices = packer.indices(&geometry.indices, geometry.positions.len());
+                json!({ "attributes": attributes, "indices": indices, "material": material })
+            })
+            .collect();
+        json!({ "name": mesh.name, "primitives": primitives })
+    }
+}
+
+/// A finite f32 as a JSON number with its shortest decimal form (0.73, not 0.7300000190734863).
+fn num(x: f32) -> Value {
+    assert!(x.is_finite(), "non-finite number in a glTF");
+    let shortest: f64 = x.to_string().parse().expect("f32 display parses as f64");
+    Value::Number(serde_json::Number::from_f64(shortest).expect("finite"))
+}
+
+fn nums(xs: &[f32]) -> Value {
+    Value::Array(xs.iter().copied().map(num).collect())
+}
+
+fn insert_array(root: &mut Map<String, Value>, key: &str, items: Vec<Value>) {
+    // glTF forbids empty top-level arrays.
+    if !items.is_empty() {
+        root.insert(key.into(), Value::Array(items));
+    }
+}
+
+fn material_json(material: &Material) -> Value {
+    let mut pbr = Map::new();
+    pbr.insert("baseColorFactor".into(), nums(&material.base_color));
+    if let Some(image) = material.base_color_texture {
+        pbr.insert("baseColorTexture".into(), json!({ "index": image }));
+    }
+    pbr.insert("metallicFactor".into(), num(0.0));
+    pbr.insert("roughnessFactor".into(), num(1.0));
+    let mut out = Map::new();
+    out.insert("name".into(), json!(material.name));
+    out.insert("pbrMetallicRoughness".into(), Value::Object(pbr));
+    if material.emissive != [0.0; 3] {
+        out.insert("emissiveFactor".into(), nums(&material.emissive));
+    }
+    if material.double_sided {
+        out.insert("doubleSided".into(), json!(true));
+    }
+    if material.emissive_strength != 1.0 {
+        let strength = json!({ "emissiveStrength": num(material.emissive_strength) });
+        out.insert(
+            "extensions".into(),
+            json!({ "KHR_materials_emissive_strength": strength }),
+        );
+    }
+    Value::Object(out)
+}
+
+fn image_json(image: &Image, packer: &mut Packer) -> Value {
+    match image.storage {
+        ImageStorage::BufferView => {
+            let view = packer.view(&image.png, None);
+            json!({ "name": image.name, "bufferView": view, "mimeType": "image/png" })
+        }
+        ImageStorage::DataUri => {
+            let base64 = base64::engine::general_purpose::STANDARD.encode(&image.png);
+            json!({ "name": image.name, "uri": format!("data:image/png;base64,{base64}") })
+        }
+    }
+}
+
+fn node_json(node: &Node) -> Value {
+    let mut out = Map::new();
+    out.insert("name".into(), json!(node.name));
+    match node.transform {
+        Transform::Trs {
+            translation,
+            rotation,
+            scale,
+        } => {
+            if translation != Vec3::ZERO {
+                out.insert("translation".into(), nums(&translation.to_array()));
+            }
+            if rotation != Quat::IDENTITY {
+                out.insert("rotation".into(), nums(&rotation.to_array()));
+            }
+            if scale != Vec3::ONE {
+                out.insert("scale".into(), nums(&scale.to_array()));
+            }
+        }
+        Transform::Matrix(matrix) => {
+            out.insert("matrix".into(), nums(&matrix.to_cols_array()));
+        }
+    }
+    if let Some(mesh) = node.mesh {
+        out.insert("mesh".into(), json!(mesh));
+    }
+    if let Some(camera) = node.camera {
+        out.insert("camera".into(), json!(camera));
+    }
+    if !node.children.is_empty() {
+        out.insert("children".into(), json!(node.children));
+    }
+    if let Some(light) = node.light {
+        out.insert(
+            "extensions".into(),
+            json!({ "KHR_lights_punctual": { "light": light } }),
+        );
+    }
+    Value::Object(out)
+}
+
+fn light_json(light: &Light) -> Value {
+    let mut out = Map::new();
+    out.insert("name".into(), json!(light.name));
+    let kind = match light.kind {
+        LightKind::Point => "point",
+        LightKind::Spot { .. } => "spot",
+        LightKind::Directional => "directional",
+    };
+    out.insert("type".into(), json!(kind));
+    out.insert("color".into(), nums(&light.color));
+    out.insert("intensity".into(), num(light.intensity));
+    if let Some(range) = light.range {
+        assert!(
+            light.kind != LightKind::Directional,
+            "directional lights have no range"
+        );
+        out.insert("range".into(), num(range));
+    }
+    if let LightKind::Spot {
+        inner_cone_angle,
+        outer_cone_angle,
+    } = light.kind
+    {
+        assert!(
+            0.0 <= inner_cone_angle
+                && inner_cone_angle < outer_cone_angle
+                && outer_cone_angle <= FRAC_PI_2
+        );
+        let spot = json!({ "innerConeAngle": num(inner_cone_angle), "outerConeAngle": num(outer_cone_angle) });
+        out.insert("spot".into(), spot);
+    }
+    Value::Object(out)
+}
+
+fn camera_json(camera: &Camera) -> Value {
+    let mut perspective = Map::new();
+    if let Some(aspect) = camera.aspect_ratio {
+        perspective.insert("aspectRatio".into(), num(aspect));
+    }
+    perspective.insert("yfov".into(), num(camera.yfov));
+    if let Some(zfar) = camera.zfar {
+        perspective.insert("zfar".into(), num(zfar));
+    }
+    perspective.insert("znear".into(), num(camera.znear));
+    json!({ "name": camera.name, "type": "perspective", "perspective": perspective })
+}
+
+const ARRAY_BUFFER: u32 = 34962;
+const ELEMENT_ARRAY_BUFFER: u32 = 34963;
+const FLOAT: u32 = 5126;
+const UNSIGNED_SHORT: u32 = 5123;
+const UNSIGNED_INT: u32 = 5125;
+
+/// Lays out the binary buffer: one 4-byte aligned bufferView per accessor or image.
+#[derive(Default)]
+struct Packer {
+    bin: Vec<u8>,
+    views: Vec<Value>,
+    accessors: Vec<Value>,
+}
+
+impl Packer {
+    fn align(&mut self) {
+        while !self.bin.len().is_multiple_of(4) {
+            self.bin.push(0);
+        }
+    }
+
+    fn view(&mut self, bytes: &[u8], target: Option<u32>) -> usize {
+        self.align();
+        let mut view =
+            json!({ "buffer": 0, "byteOffset": self.bin.len(), "byteLength": bytes.len() });
+        if let Some(target) = target {
+            view["target"] = json!(target);
+        }
+        self.bin.extend_from_slice(bytes);
+        self.views.push(view);
+        self.views.len() - 1
+    }
+
+    fn accessor(
+        &mut self,
+        bytes: &[u8],
+        target: u32,
+        component: u32,
+        count: usize,
+        kind: &str,
+    ) -> (usize, Value) {
+        let view = self.view(bytes, Some(target));
+        let accessor =
+            json!({ "bufferView": view, "componentType": component, "count": count, "type": kind });
+        (self.accessors.len(), accessor)
+    }
+
+    fn push(&mut self, (index, accessor): (usize, Value)) -> usize {
+        self.accessors.push(accessor);
+        index
+    }
+
+    fn vec3(&mut self, data: &[Vec3]) -> usize {
+        let bytes: Vec<u8> = data
+            .iter()
+            .flat_map(|v| v.to_array())
+            .flat_map(f32::to_le_bytes)
+            .collect();
+        let accessor = self.accessor(&bytes, ARRAY_BUFFER, FLOAT, data.len(), "VEC3");
+        self.push(accessor)
+    }
+
+    /// POSITION accessors must carry their bounds.
+    fn positions(&mut self, data: &[Vec3]) -> usize {
+        let bytes: Vec<u8> = data
+            .iter()
+            .flat_map(|v| v.to_array())
+            .flat_map(f32::to_le_bytes)
+            .collect();
+        let (index, mut accessor) = self.accessor(&bytes, ARRAY_BUFFER, FLOAT, data.len(), "VEC3");
+        let min = data.iter().copied().fold(Vec3::INFINITY, Vec3::min);
+        let max = data.iter().copied().fold(Vec3::NEG_INFINITY, Vec3::max);
+        accessor["min"] = nums(&min.to_array());
+        accessor["max"] = nums(&max.to_array());
+        self.push((index, accessor))
+    }
+
+    fn vec2(&mut self, data: &[Vec2]) -> usize {
+        let bytes: Vec<u8> = data
+            .iter()
+            .flat_map(|v| v.to_array())
+            .flat_map(f32::to_le_bytes)
+            .collect();
+        let accessor = self.accessor(&bytes, ARRAY_BUFFER, FLOAT, data.len(), "VEC2");
+        self.push(accessor)
+    }
+
+    /// u16 when every index fits below 65535 (the primitive-restart value glTF forbids).
+    fn indices(&mut self, indices: &[u32], vertex_count: usize) -> usize {
+        let (bytes, component): (Vec<u8>, u32) = if vertex_count <= u16::MAX as usize {
+            (
+                indices
+                    .iter()
+                    .flat_map(|&i| (i as u16).to_le_bytes())
+                    .collect(),
+                UNSIGNED_SHORT,
+            )
+        } else {
+            (
+                indices.iter().flat_map(|&i| i.to_le_bytes()).collect(),
+                UNSIGNED_INT,
+            )
+        };
+        let accessor = self.accessor(
+            &bytes,
+            ELEMENT_ARRAY_BUFFER,
+            component,
+            indices.len(),
+            "SCALAR",
+        );
+        self.push(accessor)
+    }
+
+    /// Pads the buffer to a multiple of 4 bytes and returns its length.
+    fn finish(&mut self) -> usize {
+        self.align();
+        self.bin.len()
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Scenes
+// ---------------------------------------------------------------------------------------------
+
+/// The Cornell box scaled to 1 m: interior x ∈ [−0.5, 0.5], y ∈ [0, 1], z ∈ [−0.5, 0.5], open
+/// towards +z. White floor, ceiling and back wall (ρ = 0.73), red left wall (x = −0.5), green
+/// right wall, a tall and a short block, and a 0.25 × 0.2 m light 1 cm below the ceiling facing
+/// down with `Le` = [`CORNELL_LIGHT_RADIANCE`] (emitted power [`CORNELL_LIGHT_POWER`] ≈ 2.67 W
+/// per channel). A camera looks in from the open side.
+pub fn cornell_box() -> GltfBuilder {
+    let mut gltf = GltfBuilder::new("cornell_box");
+    let white = gltf.add_material(Material::grey("white", 0.73));
+    let red = gltf.add_material(Material::diffuse("red", [0.63, 0.065, 0.05]));
+    let green = gltf.add_material(Material::diffuse("green", [0.14, 0.45, 0.09]));
+    let light =
+        gltf.add_material(Material::grey("light", 0.78).emitting([1.0; 3], CORNELL_LIGHT_RADIANCE));
+
+    let (min, max) = (Vec3::new(-0.5, 0.0, -0.5), Vec3::new(0.5, 1.0, 0.5));
+    let wall = |face| Geometry::box_face(min, max, face, 4, 4).flipped();
+    let mut white_walls = wall(Face::NegY);
+    white_walls.append(&wall(Face::PosY));
+    white_walls.append(&wall(Face::NegZ));
+    let room = gltf.add_mesh("room", white_walls, white);
+    gltf.add_primitive(room, wall(Face::NegX), red);
+    gltf.add_primitive(room, wall(Face::PosX), green);
+    gltf.add_mesh_node("room", room);
+
+    let size = CORNELL_LIGHT_SIZE;
+    let corner = Vec3::new(-size.x / 2.0, CORNELL_LIGHT_HEIGHT, -size.y / 2.0);
+    let quad = Geometry::grid(corner, Vec3::X * size.x, Vec3::Z * size.y, 1, 1);
+    let light_mesh = gltf.add_mesh("light", quad, light);
+    gltf.add_mesh_node("light", light_mesh);
+
+    // Blocks stand on the floor, modelled around their own base centre and placed by their node.
+    let block = |height: f32| {
+        Geometry::box_faces(
+            Vec3::new(-0.15, 0.0, -0.15),
+            Vec3::new(0.15, height, 0.15),
+            &Face::NO_BOTTOM,
+            2,
+        )
+    };
+    let short = gltf.add_mesh("short_block", block(0.3), white);
+    let tall = gltf.add_mesh("tall_block", block(0.6), white);
+    let turn = |degrees: f32| Quat::from_rotation_y(degrees.to_radians());
+    gltf.add_node(
+        Node::new("short_block")
+            .trs(Vec3::new(0.2, 0.0, 0.15), turn(-18.0), Vec3::ONE)
+            .with_mesh(short),
+    );
+    gltf.add_node(
+        Node::new("tall_block")
+            .trs(Vec3::new(-0.17, 0.0, -0.15), turn(17.0), Vec3::ONE)
+            .with_mesh(tall),
+    );
+
+    let camera = Camera::perspective("camera", 39.3f32.to_radians(), Some(1.0));
+    gltf.add_camera_node(camera, Vec3::new(0.0, 0.5, 1.94), Vec3::new(0.0, 0.5, 0.0));
+    gltf
+}
+
+/// A closed 1 m cube (x, z ∈ [−0.5, 0.5], y ∈ [0, 1]) facing inward, every face reflectance
+/// `rho` and emitted radiance `le`. Expected lightmap everywhere: `le / (1 − rho)`.
+pub fn furnace(rho: f32, le: f32) -> GltfBuilder {
+    let mut gltf = GltfBuilder::new("furnace");
+    let material = gltf.add_material(Material::grey("furnace", rho).emitting([1.0; 3], le));
+    let cube = Geometry::box_faces(
+        Vec3::new(-0.5, 0.0, -0.5),
+        Vec3::new(0.5, 1.0, 0.5),
+        &Face::ALL,
+        4,
+    )
+    .flipped();
+    let mesh = gltf.add_mesh("cube", cube.without_uv0(), material);
+    gltf.add_mesh_node("cube", mesh);
+    let camera = Camera::perspective("camera", 1.2, None);
+    gltf.add_camera_node(camera, Vec3::new(0.0, 0.5, 0.45), Vec3::new(0.0, 0.5, 0.0));
+    gltf
+}
+
+/// A black 4 × 4 m floor at y = 0 centred at the origin and a white point light of `intensity`
+/// W/sr at (0, `height`, 0). Expected lightmap at angle θ from straight below:
+/// `intensity · cos³θ / (π · height²)`.
+pub fn point_light_floor(intensity: f32, height: f32) -> GltfBuilder {
+    let mut gltf = GltfBuilder::new("point_light");
+    let black = gltf.add_material(Material::grey("black", 0.0));
+    let floor = floor(4.0, 8).without_uv0();
+    let mesh = gltf.add_mesh("floor", floor, black);
+    gltf.add_mesh_node("floor", mesh);
+    gltf.add_light_node(
+        Light::point("point", [1.0; 3], intensity),
+        Vec3::new(0.0, height, 0.0),
+        Vec3::NEG_Y,
+    );
+    let camera = Camera::perspective("camera", 0.8, None);
+    gltf.add_camera_node(camera, Vec3::new(0.0, 3.0, 4.0), Vec3::ZERO);
+    gltf
+}
+
+/// Spot light: position, direction, intensity (W/sr), colour, cone angles and range.
+pub const SPOT_POSITION: Vec3 = Vec3::new(-0.8, 2.0, 0.2);
+pub const SPOT_INTENSITY: f32 = 15.0;
+pub const SPOT_COLOR: [f32; 3] = [1.0, 0.85, 0.6];
+pub const SPOT_CONE: (f32, f32) = (0.3, 0.6);
+pub const SPOT_RANGE: f32 = 6.0;
+/// Directional light: travel direction (not normalised), irradiance (W/m²) and colour.
+pub const SUN_DIRECTION: Vec3 = Vec3::new(0.5, -1.0, -0.6);
+pub const SUN_IRRADIANCE: f32 = 1.5;
+pub const SUN_COLOR: [f32; 3] = [0.9, 0.95, 1.0];
+
+/// A grey 4 × 4 m floor, a back wall at z = −2 facing +z and a small blue box, lit by a spot
+/// light pointing straight down (cone angles 0.3/0.6 rad, range 6 m) and a directional light.
+pub fn spot_and_directional() -> GltfBuilder {
+    let mut gltf = GltfBuilder::new("spot_and_directional");
+    let grey = gltf.add_material(Material::grey("floor", 0.5));
+    let wall_material = gltf.add_material(Material::grey("wall", 0.6));
+    let blue = gltf.add_material(Material::diffuse("box", [0.2, 0.3, 0.7]));
+
+    let floor_mesh = gltf.add_mesh("floor", floor(4.0, 8).without_uv0(), grey);
+    gltf.add_mesh_node("floor", floor_mesh);
+    let wall = Geometry::grid(
+        Vec3::new(-2.0, 0.0, -2.0),
+        Vec3::X * 4.0,
+        Vec3::Y * 2.5,
+        8,
+        5,
+    )
+    .without_uv0();
+    let wall_mesh = gltf.add_mesh("back_wall", wall, wall_material);
+    gltf.add_mesh_node("back_wall", wall_mesh);
+    let cube = Geometry::box_faces(
+        Vec3::new(0.3, 0.0, -0.7),
+        Vec3::new(0.9, 0.6, -0.1),
+        &Face::NO_BOTTOM,
+        2,
+    );
+    let box_mesh = gltf.add_mesh("box", cube.without_uv0(), blue);
+    gltf.add_mesh_node("box", box_mesh);
+
+    let (inner, outer) = SPOT_CONE;
+    let spot = Light::spot("spot", SPOT_COLOR, SPOT_INTENSITY, inner, outer).with_range(SPOT_RANGE);
+    gltf.add_light_node(spot, SPOT_POSITION, Vec3::NEG_Y);
+    let sun = Light::directional("sun", SUN_COLOR, SUN_IRRADIANCE);
+    gltf.add_light_node(sun, Vec3::new(0.0, 3.0, 0.0), SUN_DIRECTION);
+    let camera = Camera::perspective("camera", 0.9, None);
+    gltf.add_camera_node(camera, Vec3::new(0.0, 2.5, 4.5), Vec3::new(0.0, 0.5, -0.5));
+    gltf
+}
+
+/// One 0.5 m box mesh (no bottom, no normals: the loader must make flat ones) placed twice —
+/// through a parent node with a `matrix` and two children, one rotated and stretched — on a
+/// grey floor, lit by a 10 W/sr point light.
+pub fn instanced() -> GltfBuilder {
+    let mut gltf = GltfBuilder::new("instanced");
+    let grey = gltf.add_material(Material::grey("floor", 0.5));
+    let white = gltf.add_material(Material::grey("box", 0.8));
+    let floor_mesh = gltf.add_mesh("floor", floor(4.0, 8).without_uv0(), grey);
+    gltf.add_mesh_node("floor", floor_mesh);
+
+    let cube = Geometry::box_faces(
+        Vec3::new(-0.25, 0.0, -0.25),
+        Vec3::new(0.25, 0.5, 0.25),
+        &Face::NO_BOTTOM,
+        2,
+    );
+    let box_mesh = gltf.add_mesh("box", cube.without_normals().without_uv0(), white);
+    let a = gltf.add_node(
+        Node::new("box_a")
+            .at(Vec3::new(-0.8, 0.0, 0.0))
+            .with_mesh(box_mesh),
+    );
+    let rotation = Quat::from_rotation_y(30f32.to_radians());
+    let b_node =
+        Node::new("box_b").trs(Vec3::new(0.8, 0.0, 0.0), rotation, Vec3::new(1.0, 1.6, 1.0));
+    let b = gltf.add_node(b_node.with_mesh(box_mesh));
+    let parent = Node::new("boxes").matrix(Mat4::from_translation(Vec3::new(0.0, 0.0, -0.25)));
+    gltf.add_node(parent.with_children(&[a, b]));
+
+    gltf.add_light_node(
+        Light::point("point", [1.0; 3], 10.0),
+        Vec3::new(0.0, 2.5, 0.5),
+        Vec3::NEG_Y,
+    );
+    let camera = Camera::perspective("camera", 0.8, None);
+    gltf.add_camera_node(camera, Vec3::new(0.0, 2.5, 4.0), Vec3::ZERO);
+    gltf
+}
+
+/// The two colours of the `textured` checker (sRGB bytes).
+pub const CHECKER_COLORS: [[u8; 3]; 2] = [[220, 220, 220], [200, 60, 40]];
+
+/// A 2 × 2 m floor whose base colour is a 4 × 4 checker texture (a 64 × 64 PNG in the buffer,
+/// one square per grid quad), lit by a 5 W/sr point light 1.5 m above its centre. A lone plane
+/// receives only direct light, so the lightmap is `5 cos³θ / (π · 1.5²)` whatever the texture.
+pub fn textured() -> GltfBuilder {
+    let mut gltf = GltfBuilder::new("textured");
+    let image = gltf.add_image("checker", &checker(64, 4).into(), ImageStorage::BufferView);
+    let material = gltf.add_material(Material::grey("checker", 1.0).with_texture(image));
+    let mesh = gltf.add_mesh("floor", floor(2.0, 4), material);
+    gltf.add_mesh_node("floor", mesh);
+    gltf.add_light_node(
+        Light::point("point", [1.0; 3], 5.0),
+        Vec3::new(0.0, 1.5, 0.0),
+        Vec3::NEG_Y,
+    );
+    let camera = Camera::perspective("camera", 0.8, None);
+    gltf.add_camera_node(camera, Vec3::new(0.0, 2.0, 2.5), Vec3::ZERO);
+    gltf
+}
+
+/// A `size`-pixel square image of `squares × squares` alternating [`CHECKER_COLORS`].
+pub fn checker(size: u32, squares: u32) -> image::RgbImage {
+    image::RgbImage::from_fn(size, size, |x, y| {
+        let square = size / squares;
+        image::Rgb(CHECKER_COLORS[((x / square + y / square) % 2) as usize])
+    })
+}
+
+/// Emissive ceiling panel of `two_rooms`: radiance per channel.
+pub const TWO_ROOMS_PANEL_RADIANCE: f32 = 10.0;
+
+/// Two 2 × 2 × 2 m rooms side by side (x ∈ [−2, 0] is room A, x ∈ [0, 2] room B; z ∈ [−1, 1],
+/// y ∈ [0, 2]), separated by a zero-thickness double-sided wall at x = 0 with a 0.8 × 1.6 m
+/// doorway. One floor and one ceiling span both rooms (their triangles cross under and over
+/// the wall); the outer shell faces inward, single-sided. Room A is lit by an emissive ceiling
+/// panel; room B receives light only through the doorway — light leaking under or through the
+/// wall shows up as light on B's side of the wall and floor far from the door.
+pub fn two_rooms() -> GltfBuilder {
+    let mut gltf = GltfBuilder::new("two_rooms");
+    let shell = gltf.add_material(Material::grey("shell", 0.7));
+    let floor_material = gltf.add_material(Material::grey("floor", 0.5));
+    let partition_material = gltf.add_material(Material::grey("partition", 0.7).double_sided());
+    let panel_material = gltf
+        .add_material(Material::grey("panel", 0.8).emitting([1.0; 3], TWO_ROOMS_PANEL_RADIANCE));
+
+    let (min, max) = (Vec3::new(-2.0, 0.0, -1.0), Vec3::new(2.0, 2.0, 1.0));
+    // 7 × 3 quads: no grid line at x = 0, so floor and ceiling triangles straddle the wall.
+    let floor = Geometry::box_face(min, max, Face::NegY, 7, 3)
+        .flipped()
+        .without_uv0();
+    let floor_mesh = gltf.add_mesh("floor", floor, floor_material);
+    gltf.add_mesh_node("floor", floor_mesh);
+    let mut walls = Geometry::box_face(min, max, Face::PosY, 7, 3).flipped();
+    walls.append(&Geometry::box_face(min, max, Face::NegX, 4, 4).flipped());
+    walls.append(&Geometry::box_face(min, max, Face::PosX, 4, 4).flipped());
+    walls.append(&Geometry::box_face(min, max, Face::NegZ, 8, 4).flipped());
+    walls.append(&Geometry::box_face(min, max, Face::PosZ, 8, 4).flipped());
+    let shell_mesh = gltf.add_mesh("shell", walls.without_uv0(), shell);
+    gltf.add_mesh_node("shell", shell_mesh);
+
+    // The partition faces +x (room B); its material is double-sided. Doorway: z ∈ [−0.4, 0.4],
+    // y ∈ [0, 1.6].
+    let piece = |z0: f32, z1: f32, y0: f32, nz: u32, ny: u32| {
+        let origin = Vec3::new(0.0, y0, z1);
+        Geometry::grid(
+            origin,
+            Vec3::NEG_Z * (z1 - z0),
+            Vec3::Y * (2.0 - y0),
+            nz,
+            ny,
+        )
+    };
+    let mut partition = piece(-1.0, -0.4, 0.0, 2, 4);
+    partition.append(&piece(0.4, 1.0, 0.0, 2, 4));
+    partition.append(&piece(-0.4, 0.4, 1.6, 2, 1));
+    let partition_mesh = gltf.add_mesh("partition", partition.without_uv0(), partition_material);
+    gltf.add_mesh_node("partition", partition_mesh);
+
+    let panel = Geometry::grid(Vec3::new(-1.5, 1.99, -0.4), Vec3::X, Vec3::Z * 0.8, 1, 1);
+    let panel_mesh = gltf.add_mesh("panel", panel.without_uv0(), panel_material);
+    gltf.add_mesh_node("panel", panel_mesh);
+
+    let camera = Camera::perspective("camera", 1.2, None);
+    gltf.add_camera_node(camera, Vec3::new(1.9, 1.5, 0.9), Vec3::new(-1.0, 0.5, -0.2));
+    gltf
+}
+
+/// A `size × size` m floor at y = 0 centred at the origin, facing up, `n × n` quads.
+fn floor(size: f32, n: u32) -> Geometry {
+    let half = size / 2.0;
+    Geometry::grid(
+        Vec3::new(-half, 0.0, half),
+        Vec3::X * size,
+        Vec3::NEG_Z * size,
+        n,
+        n,
+    )
+}
+
+/// Every committed fixture: file name in `fixtures/` and its bytes.
+pub fn fixture_files() -> Vec<(&'static str, Vec<u8>)> {
+    vec![
+        ("cornell_box.gltf", cornell_box().to_gltf_bytes()),
+        ("cornell_box.glb", cornell_box().to_glb_bytes()),
+        ("furnace.gltf", furnace(0.5, 1.0).to_gltf_bytes()),
+        ("furnace_09.gltf", furnace(0.9, 1.0).to_gltf_bytes()),
+        (
+            "point_light.gltf",
+            point_light_floor(10.0, 2.0).to_gltf_bytes(),
+        ),
+        (
+            "spot_and_directional.gltf",
+            spot_and_directional().to_gltf_bytes(),
+        ),
+        ("instanced.gltf", instanced().to_gltf_bytes()),
+        ("textured.gltf", textured().to_gltf_bytes()),
+        ("two_rooms.gltf", two_rooms().to_gltf_bytes()),
+    ]
+}
+
+#[cfg(test)]
+mod tests {
+    use std::collections::BTreeMap;
+
+    use gltf::khr_lights_punctual::Kind;
+
+    use super::*;
+
+    /// A world-space triangle with its glTF material index.
+    type Triangle = ([Vec3; 3], Option<usize>);
+
+    fn import(
+        bytes: &[u8],
+    ) -> (
+        gltf::Document,
+        Vec<gltf::buffer::Data>,
+        Vec<gltf::image::Data>,
+    ) {
+        gltf::import_slice(bytes).expect("the glTF imports")
+    }
+
+    /// World-space triangles of the default scene, walking the node hierarchy.
+    fn world_triangles(document: &gltf::Document, buffers: &[gltf::buffer::Data]) -> Vec<Triangle> {
+        fn visit(
+            node: gltf::Node,
+            parent: Mat4,
+            buffers: &[gltf::buffer::Data],
+            out: &mut Vec<Triangle>,
+        ) {
+            let world = parent * Mat4::from_cols_array_2d(&node.transform().matrix());
+            for primitive in node.mesh().iter().flat_map(|mesh| mesh.primitives()) {
+                let reader = primitive.reader(|buffer| Some(&buffers[buffer.index()]));
+                let positions: Vec<Vec3> = reader
+                    .read_positions()
+                    .unwrap()
+                    .map(|p| world.transform_point3(Vec3::from(p)))
+                    .collect();
+                let indices: Vec<u32> = reader.read_indices().unwrap().into_u32().collect();
+                for t in indices.chunks_exact(3) {
+                    let corners = [0, 1, 2].map(|k| positions[t[k] as usize]);
+                    out.push((corners, primitive.material().index()));
+                }
+            }
+            for child in node.children() {
+                visit(child, world, buffers, out);
+            }
+        }
+        let mut out = Vec::new();
+        for node in document.default_scene().unwrap().nodes() {
+            visit(node, Mat4::IDENTITY, buffers, &mut out);
+        }
+        out
+    }
+
+    /// World transform of the node named `name`.
+    fn node_world(document: &gltf::Document, name: &str) -> Mat4 {
+        fn find(node: gltf::Node, parent: Mat4, name: &str) -> Option<Mat4> {
+            let world = parent * Mat4::from_cols_array_2d(&node.transform().matrix());
+            if node.name() == Some(name) {
+                return Some(world);
+            }
+            node.children().find_map(|child| find(child, world, name))
+        }
+        let scene = document.default_scene().unwrap();
+        scene
+            .nodes()
+            .find_map(|node| find(node, Mat4::IDENTITY, name))
+            .expect("node exists")
+    }
+
+    fn normal([a, b, c]: [Vec3; 3]) -> Vec3 {
+        (b - a).cross(c - a).normalize()
+    }
+
+    fn area([a, b, c]: [Vec3; 3]) -> f32 {
+        (b - a).cross(c - a).length() / 2.0
+    }
+
+    fn assert_close(actual: f32, expected: f32, tolerance: f32, what: &str) {
+        assert!(
+            (actual - expected).abs() <= tolerance,
+            "{what}: {actual} != {expected}"
+        );
+    }
+
+    #[test]
+    fn every_scene_parses_and_has_the_expected_triangles() {
+        // (scene, triangles summed over meshes, triangles summed over instances)
+        let scenes = [
+            (cornell_box(), 242, 242),
+            (furnace(0.5, 1.0), 192, 192),
+            (point_light_floor(10.0, 2.0), 128, 128),
+            (spot_and_directional(), 248, 248),
+            (instanced(), 168, 208),
+            (textured(), 32, 32),
+            (two_rooms(), 314, 314),
+        ];
+        for (scene, mesh_triangles, world_triangle_count) in scenes {
+            let (json, bin) = scene.to_gltf_json();
+            assert_eq!(json["buffers"][0]["byteLength"], bin.len());
+            assert_eq!(bin.len() % 4, 0);
+            gltf::Gltf::from_slice(&serde_json::to_vec(&json).unwrap()).expect("valid glTF JSON");
+            assert_eq!(
+                scene.mesh_triangle_count(),
+                mesh_triangles,
+                "{}",
+                scene.scene_name
+            );
+            for bytes in [scene.to_gltf_bytes(), scene.to_glb_bytes()] {
+                let (document, buffers, _) = import(&bytes);
+                let triangles = world_triangles(&document, &buffers);
+                assert_eq!(
+                    triangles.len(),
+                    world_triangle_count,
+                    "{}",
+                    scene.scene_name
+                );
+                assert!(
+                    triangles.iter().all(|&(t, _)| area(t) > 1e-6),
+                    "degenerate triangle"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn written_gltf_and_glb_import_identically() {
+        let dir = tempfile::tempdir().unwrap();
+        let (gltf_path, glb_path) = (dir.path().join("box.gltf"), dir.path().join("box.glb"));
+        cornell_box().write_gltf(&gltf_path).unwrap();
+        cornell_box().write_glb(&glb_path).unwrap();
+        let (document, buffers, _) = gltf::import(&gltf_path).unwrap();
+        let from_gltf = world_triangles(&document, &buffers);
+        let (document, buffers, _) = gltf::import(&glb_path).unwrap();
+        assert_eq!(from_gltf, world_triangles(&document, &buffers));
+        assert!(matches!(
+            cornell_box().write_gltf(dir.path()),
+            Err(Error::Io { .. })
+        ));
+    }
+
+    #[test]
+    fn furnace_is_closed_faces_inward_and_emits_le() {
+        let (document, buffers, _) = import(&furnace(0.5, 3.0).to_gltf_bytes());
+        let triangles = world_triangles(&document, &buffers);
+
+        // Weld positions to a 1 µm grid, then every directed edge must appear exactly once and
+        // its reverse exactly once: closed, manifold and consistently wound.
+        let mut welded = BTreeMap::new();
+        let mut vertex = |p: Vec3| {
+            let key = (p * 1e6).round().as_ivec3().to_array();
+            let next = welded.len();
+            *welded.entry(key).or_insert(next)
+        };
+        let mut directed_edges = BTreeMap::new();
+        for &(corners, _) in &triangles {
+            let ids = corners.map(&mut vertex);
+            for k in 0..3 {
+                *directed_edges
+                    .entry((ids[k], ids[(k + 1) % 3]))
+                    .or_insert(0) += 1;
+            }
+        }
+        for (&(a, b), &count) in &directed_edges {
+            assert_eq!(count, 1, "edge {a}-{b} used {count} times in one direction");
+            assert_eq!(
+                directed_edges.get(&(b, a)),
+                Some(&1),
+                "edge {a}-{b} is open"
+            );
+        }
+        assert_eq!(welded.len(), 6 * 4 * 4 + 2); // Euler: V = E − F + 2 = 288 − 192 + 2
+
+        let centre = Vec3::new(0.0, 0.5, 0.0);
+        for &(corners, _) in &triangles {
+            let centroid = (corners[0] + corners[1] + corners[2]) / 3.0;
+            assert!(
+                normal(corners).dot(centre - centroid) > 0.0,
+                "face looks outward"
+            );
+        }
+        let total_area: f32 = triangles.iter().map(|&(t, _)| area(t)).sum();
+        assert_close(total_area, 6.0, 1e-4, "cube area");
+
+        let material = document.materials().next().unwrap();
+        assert_eq!(material.emissive_factor(), [1.0; 3]);
+        assert_eq!(material.emissive_strength(), Some(3.0));
+        assert_eq!(
+            material.pbr_metallic_roughness().base_color_factor(),
+            [0.5, 0.5, 0.5, 1.0]
+        );
+
+        // Strength 1 is the default: no extension at all.
+        let (json, _) = furnace(0.5, 1.0).to_gltf_json();
+        assert!(json.get("extensionsUsed").is_none());
+        assert!(json["materials"][0].get("extensions").is_none());
+    }
+
+    #[test]
+    fn cornell_light_emits_the_documented_power() {
+        let (document, buffers, _) = import(&cornell_box().to_glb_bytes());
+        let materials: Vec<gltf::Material> = document.materials().collect();
+        let mut power = Vec3::ZERO;
+        for (corners, material) in world_triangles(&document, &buffers) {
+            let material = &materials[material.unwrap()];
+            let radiance = Vec3::from(material.emissive_factor())
+                * material.emissive_strength().unwrap_or(1.0);
+            if radiance != Vec3::ZERO {
+                assert_close(normal(corners).y, -1.0, 1e-6, "the light faces down");
+                assert!(
+                    corners.iter().all(|p| p.y == CORNELL_LIGHT_HEIGHT),
+                    "light height"
+                );
+                power += PI * radiance * area(corners);
+            }
+        }
+        assert_close(CORNELL_LIGHT_POWER, 2.670354, 1e-5, "documented power");
+        for channel in power.to_array() {
+            assert_close(channel, CORNELL_LIGHT_POWER, 1e-5, "emitted power");
+        }
+    }
+
+    #[test]
+    fn cornell_walls_blocks_and_camera_are_where_the_docs_say() {
+        let (document, buffers, _) = import(&cornell_box().to_gltf_bytes());
+        let materials: Vec<_> = document
+            .materials()
+            .map(|m| m.name().unwrap().to_owned())
+            .collect();
+        let mut block_top = 0.0f32;
+        for (corners, material) in world_triangles(&document, &buffers) {
+            let centroid = (corners[0] + corners[1] + corners[2]) / 3.0;
+            let n = normal(corners);
+            match materials[material.unwrap()].as_str() {
+                "red" => assert!(
+                    centroid.x == -0.5 && n.x > 0.999,
+                    "red wall on the left, facing in"
+                ),
+                "green" => assert!(centroid.x == 0.5 && n.x < -0.999, "green wall on the right"),
+                "white"
+                    if centroid.x.abs().max(centroid.z.abs()) < 0.499
+                        && centroid.y > 0.001
+                        && centroid.y < 0.999 =>
+                {
+                    // A block: inside the room, facing out of its own vertical axis or up.
+                    block_top = block_top.max(centroid.y);
+                }
+                "white" => assert!(
+                    n.dot(Vec3::new(0.0, 0.5, 0.0) - centroid) > 0.0,
+                    "wall faces in"
+                ),
+                "light" => {}
+                other => panic!("unexpected material {other}"),
+            }
+        }
+        assert_close(block_top, 0.6, 1e-5, "tall block height");
+
+        let camera_node = document.nodes().find(|n| n.camera().is_some()).unwrap();
+        let camera = camera_node.camera().unwrap();
+        let gltf::camera::Projection::Perspective(perspective) = camera.projection() else {
+            panic!("perspective camera expected");
+        };
+        assert_close(perspective.yfov(), 39.3f32.to_radians(), 1e-6, "yfov");
+        let world = node_world(&document, "camera");
+        assert_close(
+            world.transform_vector3(Vec3::NEG_Z).z,
+            -1.0,
+            1e-6,
+            "camera looks into the box",
+        );
+        assert!(world.w_axis.z > 0.5, "camera outside the open side");
+    }
+
+    #[test]
+    fn punctual_lights_round_trip() {
+        let (document, _, _) = import(&point_light_floor(10.0, 2.0).to_gltf_bytes());
+        let light = document.lights().unwrap().next().unwrap();
+        assert!(matches!(light.kind(), Kind::Point));
+        assert_eq!(
+            (light.intensity(), light.color(), light.range()),
+            (10.0, [1.0; 3], None)
+        );
+        assert_eq!(
+            node_world(&document, "point").w_axis.truncate(),
+            Vec3::new(0.0, 2.0, 0.0)
+        );
+        let floor = document.materials().next().unwrap();
+        assert_eq!(
+            floor.pbr_metallic_roughness().base_color_factor(),
+            [0.0, 0.0, 0.0, 1.0]
+        );
+
+        let (document, _, _) = import(&spot_and_directional().to_gltf_bytes());
+        let lights: Vec<_> = document.lights().unwrap().collect();
+        let Kind::Spot {
+            inner_cone_angle,
+            outer_cone_angle,
+        } = lights[0].kind()
+        else {
+            panic!("the first light is the spot");
+        };
+        assert_eq!((inner_cone_angle, outer_cone_angle), SPOT_CONE);
+        assert_eq!(lights[0].range(), Some(SPOT_RANGE));
+        assert!(matches!(lights[1].kind(), Kind::Directional) && lights[1].range().is_none());
+        let spot = node_world(&document, "spot");
+        assert!(
+            spot.transform_vector3(Vec3::NEG_Z)
+                .abs_diff_eq(Vec3::NEG_Y, 1e-6)
+        );
+        assert!(spot.w_axis.truncate().abs_diff_eq(SPOT_POSITION, 1e-6));
+        let sun = node_world(&document, "sun").transform_vector3(Vec3::NEG_Z);
+        assert!(
+            sun.abs_diff_eq(SUN_DIRECTION.normalize(), 1e-6),
+            "sun shines along {sun}"
+        );
+    }
+
+    #[test]
+    fn instanced_box_is_placed_twice_without_normals() {
+        let (json, _) = instanced().to_gltf_json();
+        let box_mesh = json["meshes"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .position(|m| m["name"] == "box")
+            .unwrap();
+        let users = json["nodes"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|n| n["mesh"] == box_mesh)
+            .count();
+        assert_eq!(users, 2);
+        assert!(
+            json["meshes"][box_mesh]["primitives"][0]["attributes"]
+                .get("NORMAL")
+                .is_none()
+        );
+        assert!(
+            json["nodes"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .any(|n| n.get("matrix").is_some())
+        );
+
+        let (document, _, _) = import(&instanced().to_gltf_bytes());
+        let a = node_world(&document, "box_a").w_axis.truncate();
+        let b = node_world(&document, "box_b");
+        assert!(
+            a.abs_diff_eq(Vec3::new(-0.8, 0.0, -0.25), 1e-6),
+            "parent matrix applies: {a}"
+        );
+        assert!(
+            b.transform_point3(Vec3::new(0.0, 0.5, 0.0))
+                .abs_diff_eq(Vec3::new(0.8, 0.8, -0.25), 1e-5)
+        );
+    }
+
+    #[test]
+    fn textured_floor_carries_the_checker() {
+        let (document, buffers, images) = import(&textured().to_gltf_bytes());
+        let material = document.materials().next().unwrap();
+        let texture = material
+            .pbr_metallic_roughness()
+            .base_color_texture()
+            .unwrap();
+        assert_eq!(texture.tex_coord(), 0);
+        let image = &images[texture.texture().source().index()];
+        assert_eq!(
+            (image.width, image.height, image.format),
+            (64, 64, gltf::image::Format::R8G8B8)
+        );
+        let pixel = |x: usize, y: usize| &image.pixels[(y * 64 + x) * 3..][..3];
+        assert_eq!(pixel(0, 0), CHECKER_COLORS[0]);
+        assert_eq!(pixel(16, 0), CHECKER_COLORS[1]);
+        assert_eq!(pixel(63, 63), CHECKER_COLORS[0]);
+
+        let mesh = document.meshes().next().unwrap();
+        let primitive = mesh.primitives().next().unwrap();
+        let reader = primitive.reader(|buffer| Some(&buffers[buffer.index()]));
+        let uvs: Vec<[f32; 2]> = reader.read_tex_coords(0).unwrap().into_f32().collect();
+        assert!(uvs.contains(&[0.0, 0.0]) && uvs.contains(&[1.0, 1.0]));
+    }
+
+    #[test]
+    fn two_rooms_share_a_zero_thickness_double_sided_wall() {
+        let (document, buffers, _) = import(&two_rooms().to_gltf_bytes());
+        let materials: Vec<gltf::Material> = document.materials().collect();
+        let name = |index: Option<usize>| materials[index.unwrap()].name().unwrap();
+        let triangles = world_triangles(&document, &buffers);
+        let partition: Vec<_> = triangles
+            .iter()
+            .filter(|t| name(t.1) == "partition")
+            .collect();
+        assert!(
+            partition.iter().all(|(t, _)| t.iter().all(|p| p.x == 0.0)),
+            "zero thickness"
+        );
+        assert!(
+            materials
+                .iter()
+                .filter(|m| m.double_sided())
+                .all(|m| m.name() == Some("partition"))
+        );
+        assert!(materials.iter().any(|m| m.double_sided()));
+
+        // The doorway is open: no partition triangle contains (0, 0.8, 0); the wall beside it is shut.
+        let covers = |y: f32, z: f32| {
+            partition.iter().any(|(t, _)| {
+                let [a, b, c] = t.map(|p| Vec2::new(p.z, p.y));
+                let p = Vec2::new(z, y);
+                let side = |u: Vec2, v: Vec2| (v - u).perp_dot(p - u);
+                let s = [side(a, b), side(b, c), side(c, a)];
+                s.iter().all(|&x| x >= 0.0) || s.iter().all(|&x| x <= 0.0)
+            })
+        };
+        assert!(!covers(0.8, 0.0) && covers(0.8, 0.7) && covers(1.8, 0.0));
+
+        let floor: Vec<_> = triangles.iter().filter(|t| name(t.1) == "floor").collect();
+        let straddles = floor
+            .iter()
+            .filter(|(t, _)| t.iter().any(|p| p.x < 0.0) && t.iter().any(|p| p.x > 0.0));
+        assert!(straddles.count() > 0, "floor triangles pass under the wall");
+        assert!(floor.iter().all(|(t, _)| normal(*t).y > 0.999));
+
+        let panel: Vec<_> = triangles.iter().filter(|t| name(t.1) == "panel").collect();
+        assert!(
+            panel
+                .iter()
+                .all(|(t, _)| t.iter().all(|p| p.x < 0.0 && p.y < 2.0)),
+            "panel lights room A"
+        );
+    }
+
+    #[test]
+    fn index_width_and_image_storage_follow_the_data() {
+        let mut gltf = GltfBuilder::new("big");
+        let material = gltf.add_material(Material::grey("grey", 0.5));
+        let image = gltf.add_image("checker", &checker(8, 2).into(), ImageStorage::DataUri);
+        gltf.materials[material].base_color_texture = Some(image);
+        let small = Geometry::grid(Vec3::ZERO, Vec3::X, Vec3::NEG_Z, 1, 1);
+        let big = Geometry::grid(Vec3::ZERO, Vec3::X, Vec3::NEG_Z, 256, 256); // 66 049 vertices
+        let small_mesh = gltf.add_mesh("small", small, material);
+        let big_mesh = gltf.add_mesh("big", big, material);
+        gltf.add_mesh_node("small", small_mesh);
+        gltf.add_mesh_node("big", big_mesh);
+        let (json, _) = gltf.to_gltf_json();
+        let component = |mesh: usize| {
+            let accessor = json["meshes"][mesh]["primitives"][0]["indices"]
+                .as_u64()
+                .unwrap() as usize;
+            json["accessors"][accessor]["componentType"]
+                .as_u64()
+                .unwrap() as u32
+        };
+        assert_eq!(
+            (component(small_mesh), component(big_mesh)),
+            (UNSIGNED_SHORT, UNSIGNED_INT)
+        );
+        assert!(
+            json["images"][0]["uri"]
+                .as_str()
+                .unwrap()
+                .starts_with("data:image/png;base64,")
+        );
+        for view in json["bufferViews"].as_array().unwrap() {
+            assert_eq!(view["byteOffset"].as_u64().unwrap() % 4, 0);
+            assert!(view.get("target").is_some());
+        }
+        // gltf 1.4's import_slice rejects data-URI images; importing from a path works.
+        let dir = tempfile::tempdir().unwrap();
+        gltf.write_glb(dir.path().join("big.glb")).unwrap();
+        let (document, buffers, images) = gltf::import(dir.path().join("big.glb")).unwrap();
+        assert_eq!(
+            world_triangles(&document, &buffers).len(),
+            2 + 2 * 256 * 256
+        );
+        assert_eq!(
+            (images[0].width, images[0].pixels[0]),
+            (8, CHECKER_COLORS[0][0])
+        );
+    }
+
+    #[test]
+    fn committed_fixtures_are_up_to_date() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures");
+        for (name, bytes) in fixture_files() {
+            let committed = std::fs::read(dir.join(name)).unwrap_or_default();
+            assert!(
+                committed == bytes,
+                "fixtures/{name} is stale or hand-edited: run `cargo run --example make_fixtures`"
+            );
+        }
+    }
+}
