@@ -57,21 +57,20 @@ impl Geometry {
     pub fn grid(origin: Vec3, edge_u: Vec3, edge_v: Vec3, nu: u32, nv: u32) -> Self {
         assert!(nu > 0 && nv > 0, "a grid needs at least one quad");
         let normal = edge_u.cross(edge_v).normalize();
+        let uv0: Vec<Vec2> = (0..=nv)
+            .flat_map(|j| {
+                (0..=nu).map(move |i| Vec2::new(i as f32 / nu as f32, j as f32 / nv as f32))
+            })
+            .collect();
         let mut geometry = Geometry {
-            normals: Some(Vec::new()),
-            uv0: Some(Vec::new()),
-            ..Geometry::default()
+            positions: uv0
+                .iter()
+                .map(|st| origin + edge_u * st.x + edge_v * st.y)
+                .collect(),
+            normals: Some(vec![normal; uv0.len()]),
+            uv0: Some(uv0),
+            indices: Vec::new(),
         };
-        for j in 0..=nv {
-            for i in 0..=nu {
-                let st = Vec2::new(i as f32 / nu as f32, j as f32 / nv as f32);
-                geometry
-                    .positions
-                    .push(origin + edge_u * st.x + edge_v * st.y);
-                geometry.normals.as_mut().unwrap().push(normal);
-                geometry.uv0.as_mut().unwrap().push(st);
-            }
-        }
         let vertex = |i: u32, j: u32| j * (nu + 1) + i;
         for j in 0..nv {
             for i in 0..nu {
@@ -466,6 +465,19 @@ impl GltfBuilder {
     }
 
     pub fn add_material(&mut self, material: Material) -> usize {
+        let unit = |x: &f32| (0.0..=1.0).contains(x);
+        assert!(
+            material.base_color.iter().all(unit),
+            "baseColorFactor outside [0, 1]"
+        );
+        assert!(
+            material.emissive.iter().all(unit),
+            "emissiveFactor outside [0, 1]: use the strength"
+        );
+        assert!(
+            material.emissive_strength >= 0.0,
+            "negative emissive strength"
+        );
         self.materials.push(material);
         self.materials.len() - 1
     }
@@ -581,7 +593,7 @@ impl GltfBuilder {
         let meshes: Vec<Value> = self
             .meshes
             .iter()
-            .map(|mesh| self.mesh_json(mesh, &mut packer))
+            .map(|mesh| mesh_json(mesh, &mut packer))
             .collect();
         let images: Vec<Value> = self
             .images
@@ -702,30 +714,30 @@ impl GltfBuilder {
         let path = path.as_ref();
         std::fs::write(path, self.to_glb_bytes()).map_err(|e| Error::io(path, e))
     }
+}
 
-    fn mesh_json(&self, mesh: &Mesh, packer: &mut Packer) -> Value {
-        let primitives: Vec<Value> = mesh
-            .primitives
-            .iter()
-            .map(|(geometry, material)| {
-                let mut attributes = Map::new();
-                attributes.insert(
-                    "POSITION".into(),
-                    json!(packer.positions(&geometry.positions)),
-                );
-                if let Some(normals) = &geometry.normals {
-                    let unit: Vec<Vec3> = normals.iter().map(|n| n.normalize()).collect();
-                    attributes.insert("NORMAL".into(), json!(packer.vec3(&unit)));
-                }
-                if let Some(uv0) = &geometry.uv0 {
-                    attributes.insert("TEXCOORD_0".into(), json!(packer.vec2(uv0)));
-                }
-                let indices = packer.indices(&geometry.indices, geometry.positions.len());
-                json!({ "attributes": attributes, "indices": indices, "material": material })
-            })
-            .collect();
-        json!({ "name": mesh.name, "primitives": primitives })
-    }
+fn mesh_json(mesh: &Mesh, packer: &mut Packer) -> Value {
+    let primitives: Vec<Value> = mesh
+        .primitives
+        .iter()
+        .map(|(geometry, material)| {
+            let mut attributes = Map::new();
+            attributes.insert(
+                "POSITION".into(),
+                json!(packer.positions(&geometry.positions)),
+            );
+            if let Some(normals) = &geometry.normals {
+                let unit: Vec<Vec3> = normals.iter().map(|n| n.normalize()).collect();
+                attributes.insert("NORMAL".into(), json!(packer.vec3(&unit)));
+            }
+            if let Some(uv0) = &geometry.uv0 {
+                attributes.insert("TEXCOORD_0".into(), json!(packer.vec2(uv0)));
+            }
+            let indices = packer.indices(&geometry.indices, geometry.positions.len());
+            json!({ "attributes": attributes, "indices": indices, "material": material })
+        })
+        .collect();
+    json!({ "name": mesh.name, "primitives": primitives })
 }
 
 /// A finite f32 as a JSON number with its shortest decimal form (0.73, not 0.7300000190734863).
@@ -907,6 +919,7 @@ impl Packer {
         self.views.len() - 1
     }
 
+    /// Stores `bytes` in a new bufferView and describes them with a new accessor.
     fn accessor(
         &mut self,
         bytes: &[u8],
@@ -914,77 +927,58 @@ impl Packer {
         component: u32,
         count: usize,
         kind: &str,
-    ) -> (usize, Value) {
+    ) -> usize {
         let view = self.view(bytes, Some(target));
         let accessor =
             json!({ "bufferView": view, "componentType": component, "count": count, "type": kind });
-        (self.accessors.len(), accessor)
+        self.accessors.push(accessor);
+        self.accessors.len() - 1
     }
 
-    fn push(&mut self, (index, accessor): (usize, Value)) -> usize {
-        self.accessors.push(accessor);
-        index
+    fn floats(&mut self, floats: impl Iterator<Item = f32>, count: usize, kind: &str) -> usize {
+        let bytes: Vec<u8> = floats.flat_map(f32::to_le_bytes).collect();
+        self.accessor(&bytes, ARRAY_BUFFER, FLOAT, count, kind)
     }
 
     fn vec3(&mut self, data: &[Vec3]) -> usize {
-        let bytes: Vec<u8> = data
-            .iter()
-            .flat_map(|v| v.to_array())
-            .flat_map(f32::to_le_bytes)
-            .collect();
-        let accessor = self.accessor(&bytes, ARRAY_BUFFER, FLOAT, data.len(), "VEC3");
-        self.push(accessor)
+        self.floats(data.iter().flat_map(|v| v.to_array()), data.len(), "VEC3")
     }
 
     /// POSITION accessors must carry their bounds.
     fn positions(&mut self, data: &[Vec3]) -> usize {
-        let bytes: Vec<u8> = data
-            .iter()
-            .flat_map(|v| v.to_array())
-            .flat_map(f32::to_le_bytes)
-            .collect();
-        let (index, mut accessor) = self.accessor(&bytes, ARRAY_BUFFER, FLOAT, data.len(), "VEC3");
+        let index = self.vec3(data);
         let min = data.iter().copied().fold(Vec3::INFINITY, Vec3::min);
         let max = data.iter().copied().fold(Vec3::NEG_INFINITY, Vec3::max);
-        accessor["min"] = nums(&min.to_array());
-        accessor["max"] = nums(&max.to_array());
-        self.push((index, accessor))
+        self.accessors[index]["min"] = nums(&min.to_array());
+        self.accessors[index]["max"] = nums(&max.to_array());
+        index
     }
 
     fn vec2(&mut self, data: &[Vec2]) -> usize {
-        let bytes: Vec<u8> = data
-            .iter()
-            .flat_map(|v| v.to_array())
-            .flat_map(f32::to_le_bytes)
-            .collect();
-        let accessor = self.accessor(&bytes, ARRAY_BUFFER, FLOAT, data.len(), "VEC2");
-        self.push(accessor)
+        self.floats(data.iter().flat_map(|v| v.to_array()), data.len(), "VEC2")
     }
 
     /// u16 when every index fits below 65535 (the primitive-restart value glTF forbids).
     fn indices(&mut self, indices: &[u32], vertex_count: usize) -> usize {
-        let (bytes, component): (Vec<u8>, u32) = if vertex_count <= u16::MAX as usize {
-            (
-                indices
-                    .iter()
-                    .flat_map(|&i| (i as u16).to_le_bytes())
-                    .collect(),
-                UNSIGNED_SHORT,
-            )
+        let (bytes, component): (Vec<u8>, _) = if vertex_count <= u16::MAX as usize {
+            let bytes = indices
+                .iter()
+                .flat_map(|&i| (i as u16).to_le_bytes())
+                .collect();
+            (bytes, UNSIGNED_SHORT)
         } else {
             (
                 indices.iter().flat_map(|&i| i.to_le_bytes()).collect(),
                 UNSIGNED_INT,
             )
         };
-        let accessor = self.accessor(
+        self.accessor(
             &bytes,
             ELEMENT_ARRAY_BUFFER,
             component,
             indices.len(),
             "SCALAR",
-        );
-        self.push(accessor)
+        )
     }
 
     /// Pads the buffer to a multiple of 4 bytes and returns its length.
