@@ -1,19 +1,245 @@
-//! EXR and PNG page encoding (stub: being written).
+//! Page encoding: OpenEXR (the HDR lightmap a renderer uses) and a PNG preview (for eyes).
+//!
+//! EXR pages hold channels R, G, B of linear `H/π`, half float by default or 32-bit float on
+//! request, ZIP-compressed scanlines in increasing order (so the bytes do not depend on how
+//! many threads compressed them), row 0 at the top, with `software = lightbake`.
+//! Invalid texels (never solved nor dilated) and non-finite values are written as black.
+
+use std::io::Cursor;
 use std::path::Path;
+
+use exr::prelude::traits::*;
+use exr::prelude::{
+    Encoding, Image, IntoSample, Layer, LayerAttributes, SpecificChannels, Text, Vec2 as ExrVec2,
+    f16,
+};
+use glam::Vec3;
+use image::{ExtendedColorType, ImageEncoder};
+
 use crate::lightmap::Page;
-use crate::Result;
+use crate::{Error, Result};
+
 /// Encodes a page as OpenEXR (linear RGB, half or float). `input` names the scene in errors.
 pub fn write_exr(page: &Page, float: bool, input: &Path) -> Result<Vec<u8>> {
-    let _ = (page, float, input);
-    todo!()
+    let texel = |p: ExrVec2<usize>| {
+        let k = p.y() * page.width as usize + p.x();
+        if page.valid[k] && page.rgb[k].is_finite() { page.rgb[k] } else { Vec3::ZERO }
+    };
+    let result = if float {
+        encode(page, move |p: ExrVec2<usize>| {
+            let v = texel(p);
+            (v.x, v.y, v.z)
+        })
+    } else {
+        // Clamp to the largest half, or bright texels would turn into infinities.
+        let half = |x: f32| f16::from_f32(x.clamp(-f16::MAX.to_f32(), f16::MAX.to_f32()));
+        encode(page, move |p: ExrVec2<usize>| {
+            let v = texel(p);
+            (half(v.x), half(v.y), half(v.z))
+        })
+    };
+    result.map_err(|e| Error::io(input, exr_to_io(e)))
 }
-/// Reads an EXR page back (round-trip tests, `render`, `--reference`).
+
+fn encode<T, F>(page: &Page, pixels: F) -> exr::error::Result<Vec<u8>>
+where
+    T: IntoSample,
+    F: Sync + Fn(ExrVec2<usize>) -> (T, T, T),
+    F: GetPixel<Pixel = (T, T, T)>,
+{
+    let attributes = LayerAttributes {
+        software_name: Some(Text::from("lightbake")),
+        ..LayerAttributes::default()
+    };
+    let layer = Layer::new(
+        (page.width as usize, page.height as usize),
+        attributes,
+        Encoding::SMALL_LOSSLESS,
+        SpecificChannels::rgb(pixels),
+    );
+    let mut bytes = Cursor::new(Vec::new());
+    Image::from_layer(layer).write().to_buffered(&mut bytes)?;
+    Ok(bytes.into_inner())
+}
+
+fn exr_to_io(e: exr::error::Error) -> std::io::Error {
+    match e {
+        exr::error::Error::Io(e) => e,
+        other => std::io::Error::other(other.to_string()),
+    }
+}
+
+/// Reads an EXR page back (round-trip tests, `render`, `--reference`): channels R, G, B of the
+/// first layer, every texel valid, non-finite values read as black.
 pub fn read_exr(path: &Path) -> Result<Page> {
-    let _ = path;
-    todo!()
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let image = exr::prelude::read()
+        .no_deep_data()
+        .largest_resolution_level()
+        .rgb_channels(
+            |size, _| (size.width(), vec![Vec3::ZERO; size.width() * size.height()]),
+            |(width, rgb): &mut (usize, Vec<Vec3>), p, (r, g, b): (f32, f32, f32)| {
+                let v = Vec3::new(r, g, b);
+                rgb[p.y() * *width + p.x()] = if v.is_finite() { v } else { Vec3::ZERO };
+            },
+        )
+        .first_valid_layer()
+        .all_attributes()
+        .from_buffered(Cursor::new(bytes))
+        .map_err(|e| match e {
+            exr::error::Error::Io(e) => Error::io(path, e),
+            other => Error::invalid(path, format!("not a readable RGB OpenEXR file: {other}")),
+        })?;
+    let layer = image.layer_data;
+    let (width, rgb) = layer.channel_data.pixels;
+    let height = layer.size.height();
+    Ok(Page {
+        width: width as u32,
+        height: height as u32,
+        valid: vec![true; rgb.len()],
+        rgb,
+    })
 }
-/// Encodes a tone-mapped 8-bit sRGB PNG preview of a page.
+
+/// Encodes an 8-bit sRGB PNG preview of a page.
+///
+/// Tone mapping is deliberately plain: scale by `2^exposure`, clip to [0, 1], apply the sRGB
+/// transfer function. Unlike Reinhard `x/(1+x)` it keeps mid-tones true (a lightmap value of
+/// 0.5 looks like 0.5), at the cost of clipping highlights — lower the exposure to see them.
+/// Invalid texels (never solved nor dilated) are black.
 pub fn write_png_preview(page: &Page, exposure: f32) -> Result<Vec<u8>> {
-    let _ = (page, exposure);
-    todo!()
+    let scale = exposure.exp2();
+    let mut srgb = Vec::with_capacity(page.rgb.len() * 3);
+    for (v, &valid) in page.rgb.iter().zip(&page.valid) {
+        let v = if valid { *v * scale } else { Vec3::ZERO };
+        srgb.extend(v.to_array().map(encode_srgb));
+    }
+    let mut png = Vec::new();
+    image::codecs::png::PngEncoder::new(&mut png)
+        .write_image(&srgb, page.width, page.height, ExtendedColorType::Rgb8)
+        .map_err(|e| Error::io("<png preview>", std::io::Error::other(e.to_string())))?;
+    Ok(png)
+}
+
+/// Linear value → 8-bit sRGB, clipped (NaN → 0).
+fn encode_srgb(linear: f32) -> u8 {
+    let x = if linear.is_nan() { 0.0 } else { linear.clamp(0.0, 1.0) };
+    let encoded = if x <= 0.003_130_8 { 12.92 * x } else { 1.055 * x.powf(1.0 / 2.4) - 0.055 };
+    (encoded * 255.0 + 0.5) as u8
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A 3 × 2 page whose texels are all different, with one invalid texel.
+    fn test_page() -> Page {
+        let rgb = vec![
+            Vec3::new(0.123, 5.5, 1000.0),
+            Vec3::new(0.0, 1.0, 2.0),
+            Vec3::new(7.25, 0.001, 0.5),
+            Vec3::new(3.0, 3.0, 3.0),
+            Vec3::new(0.75, 0.0625, 42.0),
+            Vec3::new(9.0, 9.0, 9.0),
+        ];
+        let mut valid = vec![true; 6];
+        valid[3] = false;
+        Page { width: 3, height: 2, rgb, valid }
+    }
+
+    fn round_trip(float: bool) -> Page {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("page.exr");
+        std::fs::write(&path, write_exr(&test_page(), float, Path::new("scene.gltf")).unwrap())
+            .unwrap();
+        read_exr(&path).unwrap()
+    }
+
+    #[test]
+    fn float_exr_round_trips_exactly_with_invalid_texels_black() {
+        let page = test_page();
+        let back = round_trip(true);
+        assert_eq!((back.width, back.height), (3, 2));
+        assert!(back.valid.iter().all(|&v| v));
+        for k in 0..6 {
+            let expected = if page.valid[k] { page.rgb[k] } else { Vec3::ZERO };
+            assert_eq!(back.rgb[k], expected, "texel {k}");
+        }
+    }
+
+    #[test]
+    fn half_exr_round_trips_within_half_precision() {
+        let page = test_page();
+        let back = round_trip(false);
+        assert_eq!((back.width, back.height), (3, 2));
+        for k in 0..6 {
+            let expected = if page.valid[k] { page.rgb[k] } else { Vec3::ZERO };
+            let error = (back.rgb[k] - expected).abs();
+            assert!(error.cmple(expected * 1e-3 + Vec3::splat(1e-6)).all(), "texel {k}: {}", back.rgb[k]);
+        }
+        // Exactly representable values survive exactly, in the right place (row 0 = top).
+        assert_eq!(back.rgb[0].y, 5.5);
+        assert_eq!(back.rgb[0].z, 1000.0);
+        assert_eq!(back.rgb[4], Vec3::new(0.75, 0.0625, 42.0));
+    }
+
+    #[test]
+    fn half_exr_clamps_instead_of_overflowing() {
+        let page = Page { width: 1, height: 1, rgb: vec![Vec3::splat(1.0e6)], valid: vec![true] };
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("bright.exr");
+        std::fs::write(&path, write_exr(&page, false, Path::new("in.gltf")).unwrap()).unwrap();
+        assert_eq!(read_exr(&path).unwrap().rgb[0], Vec3::splat(65504.0));
+    }
+
+    #[test]
+    fn exr_bytes_are_deterministic_and_carry_the_software_name() {
+        let a = write_exr(&test_page(), false, Path::new("a.gltf")).unwrap();
+        let b = write_exr(&test_page(), false, Path::new("a.gltf")).unwrap();
+        assert_eq!(a, b);
+        assert!(a.windows(9).any(|w| w == b"lightbake"));
+    }
+
+    #[test]
+    fn read_errors_name_the_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let missing = dir.path().join("missing.exr");
+        assert!(read_exr(&missing).unwrap_err().to_string().contains("missing.exr"));
+        let garbage = dir.path().join("garbage.exr");
+        std::fs::write(&garbage, b"this is not an exr file").unwrap();
+        let error = read_exr(&garbage).unwrap_err();
+        assert!(matches!(error, Error::Invalid { .. }), "{error}");
+        assert!(error.to_string().contains("garbage.exr"));
+    }
+
+    #[test]
+    fn png_preview_has_the_page_size_and_srgb_values() {
+        let page = Page {
+            width: 4,
+            height: 2,
+            rgb: vec![
+                Vec3::new(1.0, 0.0, 0.5),
+                Vec3::splat(0.25),
+                Vec3::splat(8.0),
+                Vec3::splat(-1.0),
+                Vec3::splat(0.5),
+                Vec3::splat(0.5),
+                Vec3::splat(0.5),
+                Vec3::splat(0.5),
+            ],
+            valid: vec![true, true, true, true, true, false, true, true],
+        };
+        let png = write_png_preview(&page, 1.0).unwrap();
+        let decoded = image::load_from_memory(&png).unwrap().to_rgb8();
+        assert_eq!(decoded.dimensions(), (4, 2));
+        // Exposure +1 doubles: 0.5 → 1.0 → 255, 0.25 → 0.5 → sRGB 0.7354 → 188.
+        assert_eq!(decoded.get_pixel(0, 0).0, [255, 0, 255]);
+        assert_eq!(decoded.get_pixel(1, 0).0, [188, 188, 188]);
+        assert_eq!(decoded.get_pixel(2, 0).0, [255, 255, 255]);
+        assert_eq!(decoded.get_pixel(3, 0).0, [0, 0, 0]);
+        assert_eq!(decoded.get_pixel(1, 1).0, [0, 0, 0], "invalid texels are black");
+        assert_eq!(write_png_preview(&page, 1.0).unwrap(), png);
+        let darker = image::load_from_memory(&write_png_preview(&page, 0.0).unwrap()).unwrap().to_rgb8();
+        assert_eq!(darker.get_pixel(0, 1).0, [188, 188, 188]);
+    }
 }
