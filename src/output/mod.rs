@@ -4,6 +4,7 @@
 
 mod exr;
 mod gltf_out;
+mod gltf_out_accessor;
 mod staging;
 
 pub use exr::{read_exr, write_exr, write_png_preview};
