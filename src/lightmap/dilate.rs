@@ -21,13 +21,12 @@ pub fn dilate(pages: &mut LightmapPages, radius: u32) {
 fn dilate_page(page: &mut Page, radius: u32) {
     let (w, h) = (page.width as usize, page.height as usize);
     // The ring to fill next: invalid texels next to a valid one, each listed once.
+    let mut ring: Vec<usize> = (0..w * h)
+        .filter(|&k| !page.valid[k] && neighbours(k, w, h).any(|n| page.valid[n]))
+        .collect();
     let mut queued = vec![false; w * h];
-    let mut ring: Vec<usize> = Vec::new();
-    for k in 0..w * h {
-        if !page.valid[k] && neighbours(k, w, h).any(|n| page.valid[n]) {
-            queued[k] = true;
-            ring.push(k);
-        }
+    for &k in &ring {
+        queued[k] = true;
     }
     let mut filled: Vec<(usize, Vec3)> = Vec::with_capacity(ring.len());
     for _ in 0..radius {
@@ -77,7 +76,12 @@ mod tests {
 
     fn page(width: u32, height: u32, valid: &[((u32, u32), Vec3)]) -> LightmapPages {
         let n = (width * height) as usize;
-        let mut page = Page { width, height, rgb: vec![Vec3::ZERO; n], valid: vec![false; n] };
+        let mut page = Page {
+            width,
+            height,
+            rgb: vec![Vec3::ZERO; n],
+            valid: vec![false; n],
+        };
         for &((x, y), v) in valid {
             let k = (y * width + x) as usize;
             page.rgb[k] = v;
@@ -107,10 +111,16 @@ mod tests {
         // A scan-order (in-place) dilation would run the value along the whole row at once.
         let mut pages = page(6, 1, &[((0, 0), Vec3::ONE)]);
         dilate(&mut pages, 1);
-        assert_eq!(pages.pages[0].valid, [true, true, false, false, false, false]);
+        assert_eq!(
+            pages.pages[0].valid,
+            [true, true, false, false, false, false]
+        );
         let mut pages = page(6, 1, &[((5, 0), Vec3::ONE)]);
         dilate(&mut pages, 1);
-        assert_eq!(pages.pages[0].valid, [false, false, false, false, true, true]);
+        assert_eq!(
+            pages.pages[0].valid,
+            [false, false, false, false, true, true]
+        );
     }
 
     #[test]

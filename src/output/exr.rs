@@ -23,7 +23,11 @@ use crate::{Error, Result};
 pub fn write_exr(page: &Page, float: bool, input: &Path) -> Result<Vec<u8>> {
     let texel = |p: ExrVec2<usize>| {
         let k = p.y() * page.width as usize + p.x();
-        if page.valid[k] && page.rgb[k].is_finite() { page.rgb[k] } else { Vec3::ZERO }
+        if page.valid[k] && page.rgb[k].is_finite() {
+            page.rgb[k]
+        } else {
+            Vec3::ZERO
+        }
     };
     let result = if float {
         encode(page, move |p: ExrVec2<usize>| {
@@ -123,8 +127,16 @@ pub fn write_png_preview(page: &Page, exposure: f32) -> Result<Vec<u8>> {
 
 /// Linear value → 8-bit sRGB, clipped (NaN → 0).
 fn encode_srgb(linear: f32) -> u8 {
-    let x = if linear.is_nan() { 0.0 } else { linear.clamp(0.0, 1.0) };
-    let encoded = if x <= 0.003_130_8 { 12.92 * x } else { 1.055 * x.powf(1.0 / 2.4) - 0.055 };
+    let x = if linear.is_nan() {
+        0.0
+    } else {
+        linear.clamp(0.0, 1.0)
+    };
+    let encoded = if x <= 0.003_130_8 {
+        12.92 * x
+    } else {
+        1.055 * x.powf(1.0 / 2.4) - 0.055
+    };
     (encoded * 255.0 + 0.5) as u8
 }
 
@@ -144,14 +156,22 @@ mod tests {
         ];
         let mut valid = vec![true; 6];
         valid[3] = false;
-        Page { width: 3, height: 2, rgb, valid }
+        Page {
+            width: 3,
+            height: 2,
+            rgb,
+            valid,
+        }
     }
 
     fn round_trip(float: bool) -> Page {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("page.exr");
-        std::fs::write(&path, write_exr(&test_page(), float, Path::new("scene.gltf")).unwrap())
-            .unwrap();
+        std::fs::write(
+            &path,
+            write_exr(&test_page(), float, Path::new("scene.gltf")).unwrap(),
+        )
+        .unwrap();
         read_exr(&path).unwrap()
     }
 
@@ -162,7 +182,11 @@ mod tests {
         assert_eq!((back.width, back.height), (3, 2));
         assert!(back.valid.iter().all(|&v| v));
         for k in 0..6 {
-            let expected = if page.valid[k] { page.rgb[k] } else { Vec3::ZERO };
+            let expected = if page.valid[k] {
+                page.rgb[k]
+            } else {
+                Vec3::ZERO
+            };
             assert_eq!(back.rgb[k], expected, "texel {k}");
         }
     }
@@ -173,9 +197,17 @@ mod tests {
         let back = round_trip(false);
         assert_eq!((back.width, back.height), (3, 2));
         for k in 0..6 {
-            let expected = if page.valid[k] { page.rgb[k] } else { Vec3::ZERO };
+            let expected = if page.valid[k] {
+                page.rgb[k]
+            } else {
+                Vec3::ZERO
+            };
             let error = (back.rgb[k] - expected).abs();
-            assert!(error.cmple(expected * 1e-3 + Vec3::splat(1e-6)).all(), "texel {k}: {}", back.rgb[k]);
+            assert!(
+                error.cmple(expected * 1e-3 + Vec3::splat(1e-6)).all(),
+                "texel {k}: {}",
+                back.rgb[k]
+            );
         }
         // Exactly representable values survive exactly, in the right place (row 0 = top).
         assert_eq!(back.rgb[0].y, 5.5);
@@ -185,10 +217,19 @@ mod tests {
 
     #[test]
     fn half_exr_clamps_instead_of_overflowing() {
-        let page = Page { width: 1, height: 1, rgb: vec![Vec3::splat(1.0e6)], valid: vec![true] };
+        let page = Page {
+            width: 1,
+            height: 1,
+            rgb: vec![Vec3::splat(1.0e6)],
+            valid: vec![true],
+        };
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("bright.exr");
-        std::fs::write(&path, write_exr(&page, false, Path::new("in.gltf")).unwrap()).unwrap();
+        std::fs::write(
+            &path,
+            write_exr(&page, false, Path::new("in.gltf")).unwrap(),
+        )
+        .unwrap();
         assert_eq!(read_exr(&path).unwrap().rgb[0], Vec3::splat(65504.0));
     }
 
@@ -204,7 +245,12 @@ mod tests {
     fn read_errors_name_the_file() {
         let dir = tempfile::tempdir().unwrap();
         let missing = dir.path().join("missing.exr");
-        assert!(read_exr(&missing).unwrap_err().to_string().contains("missing.exr"));
+        assert!(
+            read_exr(&missing)
+                .unwrap_err()
+                .to_string()
+                .contains("missing.exr")
+        );
         let garbage = dir.path().join("garbage.exr");
         std::fs::write(&garbage, b"this is not an exr file").unwrap();
         let error = read_exr(&garbage).unwrap_err();
@@ -237,9 +283,15 @@ mod tests {
         assert_eq!(decoded.get_pixel(1, 0).0, [188, 188, 188]);
         assert_eq!(decoded.get_pixel(2, 0).0, [255, 255, 255]);
         assert_eq!(decoded.get_pixel(3, 0).0, [0, 0, 0]);
-        assert_eq!(decoded.get_pixel(1, 1).0, [0, 0, 0], "invalid texels are black");
+        assert_eq!(
+            decoded.get_pixel(1, 1).0,
+            [0, 0, 0],
+            "invalid texels are black"
+        );
         assert_eq!(write_png_preview(&page, 1.0).unwrap(), png);
-        let darker = image::load_from_memory(&write_png_preview(&page, 0.0).unwrap()).unwrap().to_rgb8();
+        let darker = image::load_from_memory(&write_png_preview(&page, 0.0).unwrap())
+            .unwrap()
+            .to_rgb8();
         assert_eq!(darker.get_pixel(0, 1).0, [188, 188, 188]);
     }
 }

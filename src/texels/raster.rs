@@ -10,7 +10,7 @@
 //! |------------|-----------------------------------------------------------------------------|
 //! | `area`     | covered fraction × triangle world area / triangle UV area (summed)          |
 //! | `position` | clipped polygon's centroid in world space                                   |
-//! | `normal`   | vertex normals interpolated at that centroid (dominant triangle's geometric normal if they cancel) |
+//! | `normal`   | vertex normals interpolated there (dominant face's normal if they cancel)    |
 //! | `albedo`   | `base_color × base_color_texture`, texture averaged over the polygon        |
 //! | `emission` | `emission × emissive_texture`, same sampling                                |
 //!
@@ -52,8 +52,10 @@ pub fn build(scene: &Scene, atlas: &Atlas) -> Result<Texels> {
         .map(|t| TriangleSetup::new(scene, atlas, t))
         .collect();
     let bands = bin_into_bands(&atlas.pages, &setups);
-    let results: Vec<BandResult> =
-        bands.par_iter().map(|band| rasterise_band(scene, &setups, band)).collect();
+    let results: Vec<BandResult> = bands
+        .par_iter()
+        .map(|band| rasterise_band(scene, &setups, band))
+        .collect();
 
     // Flatten the bands (already in (page, y, x) order) and pick each triangle's best texel.
     let mut records = Vec::with_capacity(results.iter().map(|r| r.texels.len()).sum());
@@ -68,7 +70,10 @@ pub fn build(scene: &Scene, atlas: &Atlas) -> Result<Texels> {
         }
         records.extend(result.texels);
     }
-    let mut keep: Vec<bool> = records.iter().map(|r| r.coverage.fraction > MIN_COVERAGE).collect();
+    let mut keep: Vec<bool> = records
+        .iter()
+        .map(|r| r.coverage.fraction > MIN_COVERAGE)
+        .collect();
     for &(record, _) in best.iter().flatten() {
         keep[record] = true;
     }
@@ -96,11 +101,18 @@ pub fn build(scene: &Scene, atlas: &Atlas) -> Result<Texels> {
         .into_iter()
         .zip(keep)
         .filter_map(|(r, k)| k.then_some(r))
-        .chain(fallback_texels.into_iter().map(|(key, coverage)| Record { key, coverage }))
+        .chain(
+            fallback_texels
+                .into_iter()
+                .map(|(key, coverage)| Record { key, coverage }),
+        )
         .collect();
     kept.sort_by_key(|r| r.key);
 
-    let patches: Vec<Patch> = kept.par_iter().map(|r| Patch::new(scene, &setups, r)).collect();
+    let patches: Vec<Patch> = kept
+        .par_iter()
+        .map(|r| Patch::new(scene, &setups, r))
+        .collect();
     let texels = assemble(atlas, &setups, &kept, &patches, &triangle_keys);
     #[cfg(debug_assertions)]
     texels.validate();
@@ -128,12 +140,21 @@ fn assemble(
         triangle: Vec::with_capacity(n),
         du: Vec::with_capacity(n),
         dv: Vec::with_capacity(n),
-        index: atlas.pages.iter().map(|p| vec![NO_TEXEL; (p.width * p.height) as usize]).collect(),
+        index: atlas
+            .pages
+            .iter()
+            .map(|p| vec![NO_TEXEL; (p.width * p.height) as usize])
+            .collect(),
         triangle_texel: Vec::new(),
         triangle_uv: setups.iter().map(|s| s.uv.map(|q| q.as_vec2())).collect(),
         triangle_page: setups.iter().map(|s| s.page).collect(),
     };
-    let cell = |(page, y, x): TexelKey| (page as usize, (y * atlas.pages[page as usize].width + x) as usize);
+    let cell = |(page, y, x): TexelKey| {
+        (
+            page as usize,
+            (y * atlas.pages[page as usize].width + x) as usize,
+        )
+    };
     for (id, (record, patch)) in kept.iter().zip(patches).enumerate() {
         let (page, y, x) = record.key;
         let (p, k) = cell(record.key);
@@ -198,7 +219,10 @@ impl TriangleSetup {
         let to_barycentric = usable.then(|| uv_edges.inverse());
         let (du, dv) = match to_barycentric {
             // The UV→world Jacobian: world(q) = p0 + [e1 e2]·M⁻¹·(q − q0).
-            Some(m) => (e1 * m.x_axis.x + e2 * m.x_axis.y, e1 * m.y_axis.x + e2 * m.y_axis.y),
+            Some(m) => (
+                e1 * m.x_axis.x + e2 * m.x_axis.y,
+                e1 * m.y_axis.x + e2 * m.y_axis.y,
+            ),
             // No parameterisation: an orthonormal frame on the plane, one texel ≈ the triangle.
             None => {
                 let tangent = e1.normalize_or_zero();
@@ -232,7 +256,11 @@ impl TriangleSetup {
     /// Texel rows the triangle overlaps, clamped to the page.
     fn rows(&self, height: u32) -> std::ops::Range<u32> {
         let min = self.uv.iter().map(|q| q.y).fold(f64::INFINITY, f64::min);
-        let max = self.uv.iter().map(|q| q.y).fold(f64::NEG_INFINITY, f64::max);
+        let max = self
+            .uv
+            .iter()
+            .map(|q| q.y)
+            .fold(f64::NEG_INFINITY, f64::max);
         span(min, max, height)
     }
 }
@@ -317,7 +345,7 @@ impl Coverage {
         self.normal += f.normal * f.area;
         self.albedo += f.albedo * f.area;
         self.emission += f.emission * f.area;
-        if f.area > self.dominant_area || self.dominant_area == 0.0 && self.area == f.area {
+        if f.area > self.dominant_area {
             self.dominant = f.triangle;
             self.dominant_area = f.area;
         }
@@ -341,10 +369,17 @@ struct BandResult {
 /// Clips every triangle of the band against every texel square it overlaps.
 fn rasterise_band(scene: &Scene, setups: &[TriangleSetup], band: &Band) -> BandResult {
     if band.triangles.is_empty() {
-        return BandResult { texels: Vec::new(), best: Vec::new() };
+        return BandResult {
+            texels: Vec::new(),
+            best: Vec::new(),
+        };
     }
     // Accumulate on a dense grid spanning the columns the band's triangles reach.
-    let min_x = band.triangles.iter().flat_map(|&t| setups[t as usize].uv).map(|q| q.x);
+    let min_x = band
+        .triangles
+        .iter()
+        .flat_map(|&t| setups[t as usize].uv)
+        .map(|q| q.x);
     let max_x = min_x.clone();
     let columns = span(
         min_x.fold(f64::INFINITY, f64::min),
@@ -358,7 +393,9 @@ fn rasterise_band(scene: &Scene, setups: &[TriangleSetup], band: &Band) -> BandR
 
     for &t in &band.triangles {
         let s = &setups[t as usize];
-        let Some(to_barycentric) = s.to_barycentric else { continue };
+        let Some(to_barycentric) = s.to_barycentric else {
+            continue;
+        };
         let material = &scene.materials[s.material as usize];
         let textured = material.base_color_texture.is_some() || material.emissive_texture.is_some();
         let triangle = Polygon::triangle(s.uv);
@@ -372,7 +409,9 @@ fn rasterise_band(scene: &Scene, setups: &[TriangleSetup], band: &Band) -> BandR
             let (lo, hi) = row.extent(0);
             for x in span(lo, hi, band.width) {
                 let cell = row.clip(0, x as f64, x as f64 + 1.0);
-                let Some((fraction, centroid)) = cell.area_centroid() else { continue };
+                let Some((fraction, centroid)) = cell.area_centroid() else {
+                    continue;
+                };
                 let weights = |q: DVec2| {
                     let b = to_barycentric * (q - s.uv[0]);
                     DVec3::new(1.0 - b.x - b.y, b.x, b.y)
@@ -407,7 +446,10 @@ fn rasterise_band(scene: &Scene, setups: &[TriangleSetup], band: &Band) -> BandR
             record_of_cell[k] = texels.len();
             let y = band.rows.start + (k / grid_width) as u32;
             let x = columns.start + (k % grid_width) as u32;
-            texels.push(Record { key: (band.page, y, x), coverage });
+            texels.push(Record {
+                key: (band.page, y, x),
+                coverage,
+            });
         }
     }
     let best = best_cells
@@ -422,15 +464,18 @@ fn rasterise_band(scene: &Scene, setups: &[TriangleSetup], band: &Band) -> BandR
 /// over the `TEXCOORD_0` samples `uv0`; coverage fields are left for the caller.
 fn shade(scene: &Scene, material: &Material, t: u32, w: DVec3, uv0: &[Vec2]) -> Fragment {
     let [i0, i1, i2] = scene.triangles[t as usize].map(|v| v as usize);
-    let blend = |a: &[Vec3]| a[i0].as_dvec3() * w.x + a[i1].as_dvec3() * w.y + a[i2].as_dvec3() * w.z;
+    let blend =
+        |a: &[Vec3]| a[i0].as_dvec3() * w.x + a[i1].as_dvec3() * w.y + a[i2].as_dvec3() * w.z;
     Fragment {
         triangle: t,
         fraction: 0.0,
         area: 0.0,
         position: blend(&scene.positions),
         normal: blend(&scene.normals),
-        albedo: material.base_color.as_dvec3() * average_texture(scene, material.base_color_texture, uv0),
-        emission: material.emission.as_dvec3() * average_texture(scene, material.emissive_texture, uv0),
+        albedo: material.base_color.as_dvec3()
+            * average_texture(scene, material.base_color_texture, uv0),
+        emission: material.emission.as_dvec3()
+            * average_texture(scene, material.emissive_texture, uv0),
     }
 }
 
@@ -445,7 +490,8 @@ fn footprint_uv0(
     uv0: &mut [Vec2; MAX_SAMPLES],
 ) -> usize {
     let [i0, i1, i2] = scene.triangles[t as usize].map(|v| v as usize);
-    let points = std::iter::once(centroid).chain(cell.vertices().iter().map(|&v| (v + centroid) * 0.5));
+    let points =
+        std::iter::once(centroid).chain(cell.vertices().iter().map(|&v| (v + centroid) * 0.5));
     let mut n = 0;
     for q in points {
         let w = weights(q).as_vec3();
@@ -474,7 +520,11 @@ fn whole_triangle_fragment(scene: &Scene, s: &TriangleSetup, t: u32) -> Fragment
     let f = shade(scene, material, t, DVec3::splat(1.0 / 3.0), &uv0);
     Fragment {
         area: s.world_area.max(f64::MIN_POSITIVE),
-        normal: if s.geometric_normal != DVec3::ZERO { s.geometric_normal } else { f.normal },
+        normal: if s.geometric_normal != DVec3::ZERO {
+            s.geometric_normal
+        } else {
+            f.normal
+        },
         ..f
     }
 }
@@ -500,14 +550,19 @@ impl Patch {
         let position = if position.is_finite() {
             position
         } else {
-            let p = scene.triangles[c.dominant as usize].map(|v| scene.positions[v as usize].as_dvec3());
+            let p = scene.triangles[c.dominant as usize]
+                .map(|v| scene.positions[v as usize].as_dvec3());
             (p[0] + p[1] + p[2]) / 3.0
         };
         // Interpolated normals, unless they cancel out or turn against the dominant face
         // (opposite faces mapped onto one texel by bad input UVs).
         let g = dominant.geometric_normal;
         let normal = match c.normal.try_normalize() {
-            Some(n) if c.normal.length() > 1e-6 * c.area && (g == DVec3::ZERO || n.dot(g) > 0.0) => n,
+            Some(n)
+                if c.normal.length() > 1e-6 * c.area && (g == DVec3::ZERO || n.dot(g) > 0.0) =>
+            {
+                n
+            }
             _ if g != DVec3::ZERO => g,
             n => n.unwrap_or(DVec3::Z),
         };
@@ -515,7 +570,9 @@ impl Patch {
             position: position.as_vec3(),
             normal: normal.as_vec3(),
             area: (c.area as f32).max(f32::MIN_POSITIVE),
-            albedo: finite_or_zero(mean(c.albedo)).clamp(DVec3::ZERO, DVec3::splat(MAX_ALBEDO as f64)).as_vec3(),
+            albedo: finite_or_zero(mean(c.albedo))
+                .clamp(DVec3::ZERO, DVec3::splat(MAX_ALBEDO as f64))
+                .as_vec3(),
             emission: finite_or_zero(mean(c.emission)).max(DVec3::ZERO).as_vec3(),
             triangle: c.dominant,
             du: dominant.du,
@@ -537,7 +594,10 @@ struct Polygon {
 
 impl Polygon {
     fn triangle(v: [DVec2; 3]) -> Polygon {
-        let mut p = Polygon { len: 3, v: [DVec2::ZERO; MAX_POLYGON] };
+        let mut p = Polygon {
+            len: 3,
+            v: [DVec2::ZERO; MAX_POLYGON],
+        };
         p.v[..3].copy_from_slice(&v);
         p
     }
@@ -550,7 +610,9 @@ impl Polygon {
     fn extent(&self, axis: usize) -> (f64, f64) {
         self.vertices()
             .iter()
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| (lo.min(v[axis]), hi.max(v[axis])))
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
+                (lo.min(v[axis]), hi.max(v[axis]))
+            })
     }
 
     /// The part with `lo ≤ coordinate[axis] ≤ hi`.
@@ -560,7 +622,10 @@ impl Polygon {
 
     /// Sutherland–Hodgman against one half-plane: keeps `side·(coordinate[axis] − bound) ≥ 0`.
     fn clip_half(&self, axis: usize, bound: f64, side: f64) -> Polygon {
-        let mut out = Polygon { len: 0, v: [DVec2::ZERO; MAX_POLYGON] };
+        let mut out = Polygon {
+            len: 0,
+            v: [DVec2::ZERO; MAX_POLYGON],
+        };
         let n = self.len;
         for i in 0..n {
             let (a, b) = (self.v[i], self.v[(i + 1) % n]);
@@ -635,7 +700,11 @@ mod tests {
         let scene = Scene {
             positions: positions.to_vec(),
             normals,
-            uv0: if uv0.is_empty() { vec![Vec2::ZERO; positions.len()] } else { uv0.to_vec() },
+            uv0: if uv0.is_empty() {
+                vec![Vec2::ZERO; positions.len()]
+            } else {
+                uv0.to_vec()
+            },
             uv1: vec![Vec2::ZERO; positions.len()],
             triangles: triangles.to_vec(),
             triangle_instance: vec![0; triangles.len()],
@@ -671,9 +740,25 @@ mod tests {
 
     /// The unit square in z = 0 facing +z, mapped onto the whole page (v down, so y flips).
     fn unit_quad(material: Material, textures: Vec<Texture>, size: (u32, u32)) -> (Scene, Atlas) {
-        let positions = [Vec3::new(0.0, 0.0, 0.0), Vec3::X, Vec3::new(1.0, 1.0, 0.0), Vec3::Y];
-        let uv: Vec<Vec2> = positions.iter().map(|p| Vec2::new(p.x, 1.0 - p.y)).collect();
-        scene(&positions, &uv, &uv, &[[0, 1, 2], [0, 2, 3]], material, textures, size)
+        let positions = [
+            Vec3::new(0.0, 0.0, 0.0),
+            Vec3::X,
+            Vec3::new(1.0, 1.0, 0.0),
+            Vec3::Y,
+        ];
+        let uv: Vec<Vec2> = positions
+            .iter()
+            .map(|p| Vec2::new(p.x, 1.0 - p.y))
+            .collect();
+        scene(
+            &positions,
+            &uv,
+            &uv,
+            &[[0, 1, 2], [0, 2, 3]],
+            material,
+            textures,
+            size,
+        )
     }
 
     #[test]
@@ -683,14 +768,30 @@ mod tests {
         assert_eq!(texels.len(), 16);
         for i in 0..16 {
             let [x, y] = texels.xy[i];
-            assert_eq!([x, y], [i as u32 % 4, i as u32 / 4], "ids in (page, y, x) order");
-            assert!((texels.area[i] - 1.0 / 16.0).abs() < 1e-6, "area {}", texels.area[i]);
+            assert_eq!(
+                [x, y],
+                [i as u32 % 4, i as u32 / 4],
+                "ids in (page, y, x) order"
+            );
+            assert!(
+                (texels.area[i] - 1.0 / 16.0).abs() < 1e-6,
+                "area {}",
+                texels.area[i]
+            );
             let centre = Vec3::new((x as f32 + 0.5) / 4.0, 1.0 - (y as f32 + 0.5) / 4.0, 0.0);
-            assert!(texels.position[i].distance(centre) < 1e-5, "{} vs {centre}", texels.position[i]);
+            assert!(
+                texels.position[i].distance(centre) < 1e-5,
+                "{} vs {centre}",
+                texels.position[i]
+            );
             assert_eq!(texels.normal[i], Vec3::Z);
             assert!(texels.du[i].distance(Vec3::new(0.25, 0.0, 0.0)) < 1e-6);
             assert!(texels.dv[i].distance(Vec3::new(0.0, -0.25, 0.0)) < 1e-6);
-            assert_eq!(texels.albedo[i], Vec3::splat(MAX_ALBEDO), "white is clamped");
+            assert_eq!(
+                texels.albedo[i],
+                Vec3::splat(MAX_ALBEDO),
+                "white is clamped"
+            );
             assert_eq!(texels.emission[i], Vec3::ZERO);
             assert_eq!(texels.index[0][(y * 4 + x) as usize], i as u32);
         }
@@ -705,9 +806,21 @@ mod tests {
     #[test]
     fn half_covered_texel_gets_half_the_area_at_the_covered_centroid() {
         // Texel units: the triangle (0,0) (1,0) (0,1) covers half of texel (0,0) of a 2 × 2 page.
-        let positions = [Vec3::ZERO, Vec3::new(2.0, 0.0, 0.0), Vec3::new(0.0, 0.0, -2.0)];
+        let positions = [
+            Vec3::ZERO,
+            Vec3::new(2.0, 0.0, 0.0),
+            Vec3::new(0.0, 0.0, -2.0),
+        ];
         let uv = [Vec2::ZERO, Vec2::new(0.5, 0.0), Vec2::new(0.0, 0.5)];
-        let (scene, atlas) = scene(&positions, &uv, &[], &[[0, 1, 2]], Material::default(), vec![], (2, 2));
+        let (scene, atlas) = scene(
+            &positions,
+            &uv,
+            &[],
+            &[[0, 1, 2]],
+            Material::default(),
+            vec![],
+            (2, 2),
+        );
         let texels = build(&scene, &atlas).unwrap();
         assert_eq!(texels.len(), 1);
         // A full texel is 4 m² here; half of it is the whole triangle.
@@ -718,18 +831,51 @@ mod tests {
 
     #[test]
     fn clipped_areas_sum_to_the_triangle_area_across_many_texels() {
-        let positions = [Vec3::new(0.3, 0.1, 2.0), Vec3::new(4.1, -0.7, 1.0), Vec3::new(1.2, 3.3, 0.5)];
-        let uv = [Vec2::new(0.03, 0.11), Vec2::new(0.91, 0.27), Vec2::new(0.36, 0.97)];
-        let (scene, atlas) = scene(&positions, &uv, &[], &[[0, 1, 2]], Material::default(), vec![], (37, 29));
+        let positions = [
+            Vec3::new(0.3, 0.1, 2.0),
+            Vec3::new(4.1, -0.7, 1.0),
+            Vec3::new(1.2, 3.3, 0.5),
+        ];
+        let uv = [
+            Vec2::new(0.03, 0.11),
+            Vec2::new(0.91, 0.27),
+            Vec2::new(0.36, 0.97),
+        ];
+        let (scene, atlas) = scene(
+            &positions,
+            &uv,
+            &[],
+            &[[0, 1, 2]],
+            Material::default(),
+            vec![],
+            (37, 29),
+        );
         let texels = build(&scene, &atlas).unwrap();
         let area: f64 = texels.area.iter().map(|&a| a as f64).sum();
-        let expected = 0.5 * (positions[1] - positions[0]).cross(positions[2] - positions[0]).length() as f64;
-        assert!((area - expected).abs() < 1e-5 * expected, "{area} vs {expected}");
-        let centroid: Vec3 = texels.position.iter().zip(&texels.area).map(|(p, a)| *p * *a).sum::<Vec3>() / area as f32;
+        let expected = 0.5
+            * (positions[1] - positions[0])
+                .cross(positions[2] - positions[0])
+                .length() as f64;
+        assert!(
+            (area - expected).abs() < 1e-5 * expected,
+            "{area} vs {expected}"
+        );
+        let centroid: Vec3 = texels
+            .position
+            .iter()
+            .zip(&texels.area)
+            .map(|(p, a)| *p * *a)
+            .sum::<Vec3>()
+            / area as f32;
         let expected_centroid = (positions[0] + positions[1] + positions[2]) / 3.0;
-        assert!(centroid.distance(expected_centroid) < 1e-4, "{centroid} vs {expected_centroid}");
+        assert!(
+            centroid.distance(expected_centroid) < 1e-4,
+            "{centroid} vs {expected_centroid}"
+        );
         // Partly covered texels are patches too: more than the texels whose centre is inside.
-        assert!(texels.len() as f64 > expected / texels.area.iter().cloned().fold(0.0, f32::max) as f64);
+        assert!(
+            texels.len() as f64 > expected / texels.area.iter().cloned().fold(0.0, f32::max) as f64
+        );
     }
 
     #[test]
@@ -751,7 +897,11 @@ mod tests {
     fn textures_are_averaged_over_the_texel_footprint() {
         // 2 × 2 texture on the quad, 2 × 2 lightmap page: each texel sees one texture texel,
         // blended towards its neighbours by bilinear filtering away from the texel centre.
-        let (red, green, blue) = (Vec3::new(0.8, 0.0, 0.0), Vec3::new(0.0, 0.8, 0.0), Vec3::new(0.0, 0.0, 0.8));
+        let (red, green, blue) = (
+            Vec3::new(0.8, 0.0, 0.0),
+            Vec3::new(0.0, 0.8, 0.0),
+            Vec3::new(0.0, 0.0, 0.8),
+        );
         let texture = Texture {
             width: 2,
             height: 2,
@@ -759,7 +909,10 @@ mod tests {
             wrap_s: Wrap::ClampToEdge,
             wrap_t: Wrap::ClampToEdge,
         };
-        let material = Material { base_color_texture: Some(0), ..Material::default() };
+        let material = Material {
+            base_color_texture: Some(0),
+            ..Material::default()
+        };
         let (scene, atlas) = unit_quad(material, vec![texture], (2, 2));
         let texels = build(&scene, &atlas).unwrap();
         let top_left = texels.albedo[texels.index[0][0] as usize];
@@ -767,14 +920,33 @@ mod tests {
         // weights 0.875² (own), 0.875·0.125 (each side neighbour), 0.125² (diagonal).
         let exact = red * 0.875 * 0.875 + (green + blue) * 0.875 * 0.125;
         assert!(top_left.distance(exact) < 0.06, "{top_left} vs {exact}");
-        assert!(top_left.x < 0.75 && top_left.y > 0.02 && top_left.z > 0.02, "point sampling: {top_left}");
+        assert!(
+            top_left.x < 0.75 && top_left.y > 0.02 && top_left.z > 0.02,
+            "point sampling: {top_left}"
+        );
     }
 
     #[test]
     fn a_triangle_smaller_than_a_texel_still_gets_one() {
-        let positions = [Vec3::ZERO, Vec3::new(0.001, 0.0, 0.0), Vec3::new(0.0, 0.001, 0.0)];
-        let uv = [Vec2::new(0.6, 0.6), Vec2::new(0.6001, 0.6), Vec2::new(0.6, 0.6001)];
-        let (scene, atlas) = scene(&positions, &uv, &[], &[[0, 1, 2]], Material::default(), vec![], (4, 4));
+        let positions = [
+            Vec3::ZERO,
+            Vec3::new(0.001, 0.0, 0.0),
+            Vec3::new(0.0, 0.001, 0.0),
+        ];
+        let uv = [
+            Vec2::new(0.6, 0.6),
+            Vec2::new(0.6001, 0.6),
+            Vec2::new(0.6, 0.6001),
+        ];
+        let (scene, atlas) = scene(
+            &positions,
+            &uv,
+            &[],
+            &[[0, 1, 2]],
+            Material::default(),
+            vec![],
+            (4, 4),
+        );
         let texels = build(&scene, &atlas).unwrap();
         assert_eq!(texels.len(), 1);
         assert_eq!(texels.xy[0], [2, 2]);
@@ -786,7 +958,15 @@ mod tests {
     fn degenerate_lightmap_uvs_fall_back_to_the_centroid_texel() {
         let positions = [Vec3::ZERO, Vec3::X, Vec3::Y];
         let uv = [Vec2::splat(0.3); 3];
-        let (scene, atlas) = scene(&positions, &uv, &[], &[[0, 1, 2]], Material::default(), vec![], (4, 4));
+        let (scene, atlas) = scene(
+            &positions,
+            &uv,
+            &[],
+            &[[0, 1, 2]],
+            Material::default(),
+            vec![],
+            (4, 4),
+        );
         let texels = build(&scene, &atlas).unwrap();
         assert_eq!(texels.len(), 1);
         assert_eq!(texels.xy[0], [1, 1]);
@@ -799,12 +979,31 @@ mod tests {
     fn opposite_faces_in_one_texel_keep_the_dominant_normal() {
         // Bad input UVs: a large front triangle and a smaller back-facing one share a texel.
         let positions = [
-            Vec3::ZERO, Vec3::X, Vec3::Y, // facing +z
-            Vec3::ZERO, Vec3::new(0.0, 0.5, 0.0), Vec3::new(0.5, 0.0, 0.0), // facing −z
+            Vec3::ZERO,
+            Vec3::X,
+            Vec3::Y, // facing +z
+            Vec3::ZERO,
+            Vec3::new(0.0, 0.5, 0.0),
+            Vec3::new(0.5, 0.0, 0.0), // facing −z
         ];
-        let uv = [Vec2::ZERO, Vec2::X, Vec2::Y, Vec2::ZERO, Vec2::new(0.0, 0.5), Vec2::new(0.5, 0.0)];
+        let uv = [
+            Vec2::ZERO,
+            Vec2::X,
+            Vec2::Y,
+            Vec2::ZERO,
+            Vec2::new(0.0, 0.5),
+            Vec2::new(0.5, 0.0),
+        ];
         let tris = [[0, 1, 2], [3, 4, 5]];
-        let (scene, atlas) = scene(&positions, &uv, &[], &tris, Material::default(), vec![], (1, 1));
+        let (scene, atlas) = scene(
+            &positions,
+            &uv,
+            &[],
+            &tris,
+            Material::default(),
+            vec![],
+            (1, 1),
+        );
         let texels = build(&scene, &atlas).unwrap();
         assert_eq!(texels.len(), 1);
         assert_eq!(texels.normal[0], Vec3::Z);
@@ -822,7 +1021,10 @@ mod tests {
                 let (s, t) = (i as f32 / n as f32, j as f32 / n as f32);
                 let wobble = ((i * 7 + j * 13) % 5) as f32 * 0.004;
                 positions.push(Vec3::new(s * 3.0, (s * 9.0).sin() * 0.3 + t * 0.2, t * 2.0));
-                uv.push(Vec2::new(0.02 + 0.95 * s + wobble, 0.03 + 0.94 * t - wobble));
+                uv.push(Vec2::new(
+                    0.02 + 0.95 * s + wobble,
+                    0.03 + 0.94 * t - wobble,
+                ));
             }
         }
         let mut triangles = Vec::new();
@@ -833,7 +1035,10 @@ mod tests {
                 triangles.push([a + 1, a + n + 1, a + n + 2]);
             }
         }
-        let material = Material { base_color: Vec3::new(0.7, 0.6, 0.5), ..Material::default() };
+        let material = Material {
+            base_color: Vec3::new(0.7, 0.6, 0.5),
+            ..Material::default()
+        };
         scene(&positions, &uv, &[], &triangles, material, vec![], (64, 64))
     }
 
@@ -841,7 +1046,10 @@ mod tests {
     fn results_do_not_depend_on_the_thread_count() {
         let (scene, atlas) = bumpy_grid();
         let run = |threads| {
-            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
             pool.install(|| build(&scene, &atlas).unwrap())
         };
         let (a, b) = (run(1), run(3));
