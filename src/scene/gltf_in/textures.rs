@@ -1,0 +1,200 @@
+//! Materials and their textures: base colour and emission, sRGB-decoded to linear RGB.
+
+use std::collections::BTreeMap;
+
+use glam::Vec3;
+
+use super::{Files, warn};
+use crate::Result;
+use crate::scene::{Material, Scene, Texture, Wrap};
+
+/// Appends one [`Material`] per glTF material, in document order, plus glTF's default material
+/// when some instance has none. Only materials that instances use get their textures decoded.
+pub(super) fn add_materials(
+    files: &Files,
+    document: &gltf::Document,
+    buffers: &[Vec<u8>],
+    scene: &mut Scene,
+) -> Result<()> {
+    let count = document.materials().len();
+    let mut used = vec![false; count + 1];
+    for instance in &scene.instances {
+        used[instance.material as usize] = true;
+    }
+    let mut textures = TextureCache {
+        files,
+        buffers,
+        images: BTreeMap::new(),
+        textures: BTreeMap::new(),
+    };
+    for material in document.materials() {
+        let index = material.index().unwrap_or_default();
+        let pbr = material.pbr_metallic_roughness();
+        let [r, g, b, _] = pbr.base_color_factor();
+        let strength = material.emissive_strength().unwrap_or(1.0);
+        let mut converted = Material {
+            name: material.name().map(str::to_string),
+            source: Some(index as u32),
+            base_color: Vec3::new(r, g, b).max(Vec3::ZERO),
+            base_color_texture: None,
+            emission: (Vec3::from(material.emissive_factor()) * strength).max(Vec3::ZERO),
+            emissive_texture: None,
+            double_sided: material.double_sided(),
+        };
+        if used[index] {
+            let label = |slot: &str| format!("material {index} {slot}");
+            converted.base_color_texture =
+                textures.get(pbr.base_color_texture(), &label("baseColorTexture"), scene)?;
+            converted.emissive_texture = textures.get(
+                material.emissive_texture(),
+                &label("emissiveTexture"),
+                scene,
+            )?;
+        }
+        scene.materials.push(converted);
+    }
+    if used[count] {
+        scene.materials.push(Material::default());
+    }
+    Ok(())
+}
+
+/// Decodes each image once and stores each (image, sampler) pair once in `scene.textures`.
+struct TextureCache<'a> {
+    files: &'a Files<'a>,
+    buffers: &'a [Vec<u8>],
+    /// Decoded linear texels by image index; `None` when the image could not be decoded.
+    images: BTreeMap<usize, Option<(u32, u32, Vec<Vec3>)>>,
+    /// Scene texture index by (image, sampler).
+    textures: BTreeMap<(usize, Option<usize>), Option<u32>>,
+}
+
+impl TextureCache<'_> {
+    /// The scene texture for a material slot; `None` when there is none or it cannot be
+    /// decoded (then the slot acts as white, with a warning).
+    fn get(
+        &mut self,
+        info: Option<gltf::texture::Info>,
+        label: &str,
+        scene: &mut Scene,
+    ) -> Result<Option<u32>> {
+        let Some(info) = info else { return Ok(None) };
+        if info.tex_coord() != 0 {
+            let message = format!(
+                "{label} uses TEXCOORD_{}; lightbake samples it through TEXCOORD_0",
+                info.tex_coord()
+            );
+            warn(scene, message);
+        }
+        let texture = info.texture();
+        let image = texture.source();
+        let sampler = texture.sampler();
+        let key = (image.index(), sampler.index());
+        if let Some(&cached) = self.textures.get(&key) {
+            return Ok(cached);
+        }
+        let decoded = match self.images.get(&image.index()) {
+            Some(decoded) => decoded.clone(),
+            None => {
+                let decoded = self.decode_image(&image, scene)?;
+                self.images.insert(image.index(), decoded.clone());
+                decoded
+            }
+        };
+        let index = decoded.map(|(width, height, texels)| {
+            scene.textures.push(Texture {
+                width,
+                height,
+                texels,
+                wrap_s: wrap(sampler.wrap_s()),
+                wrap_t: wrap(sampler.wrap_t()),
+            });
+            scene.textures.len() as u32 - 1
+        });
+        self.textures.insert(key, index);
+        Ok(index)
+    }
+
+    /// Missing files are errors; unreadable formats (KTX2, WebP, …) only warnings.
+    fn decode_image(
+        &self,
+        image: &gltf::Image,
+        scene: &mut Scene,
+    ) -> Result<Option<(u32, u32, Vec<Vec3>)>> {
+        let i = image.index();
+        let (bytes, what) = match image.source() {
+            gltf::image::Source::Uri { uri, .. } => {
+                let what = if uri.starts_with("data:") {
+                    format!("image {i}")
+                } else {
+                    format!("image {i} '{uri}'")
+                };
+                (self.files.read_uri(uri, &what)?, what)
+            }
+            gltf::image::Source::View { view, .. } => {
+                let start = view.offset();
+                let bytes = self.buffers[view.buffer().index()]
+                    .get(start..start + view.length())
+                    .ok_or_else(|| {
+                        let message = format!(
+                            "image {i}: bufferView {} is outside its buffer",
+                            view.index()
+                        );
+                        self.files.invalid(message)
+                    })?;
+                (bytes.to_vec(), format!("image {i}"))
+            }
+        };
+        match decode_srgb(&bytes) {
+            Ok(decoded) => Ok(Some(decoded)),
+            Err(e) => {
+                warn(
+                    scene,
+                    format!("{what} cannot be decoded ({e}); treated as white"),
+                );
+                Ok(None)
+            }
+        }
+    }
+}
+
+fn wrap(mode: gltf::texture::WrappingMode) -> Wrap {
+    match mode {
+        gltf::texture::WrappingMode::Repeat => Wrap::Repeat,
+        gltf::texture::WrappingMode::MirroredRepeat => Wrap::MirroredRepeat,
+        gltf::texture::WrappingMode::ClampToEdge => Wrap::ClampToEdge,
+    }
+}
+
+/// Decodes a PNG or JPEG to linear RGB (alpha dropped), row 0 at the top.
+fn decode_srgb(bytes: &[u8]) -> image::ImageResult<(u32, u32, Vec<Vec3>)> {
+    use image::DynamicImage as D;
+    let image = image::load_from_memory(bytes)?;
+    let (width, height) = (image.width(), image.height());
+    let texels = match image {
+        D::ImageLuma8(_) | D::ImageLumaA8(_) | D::ImageRgb8(_) | D::ImageRgba8(_) => {
+            let table: Vec<f32> = (0..=255u8)
+                .map(|v| srgb_to_linear(v as f32 / 255.0))
+                .collect();
+            let rgb = image.to_rgb8();
+            rgb.pixels()
+                .map(|p| Vec3::from(p.0.map(|v| table[v as usize])))
+                .collect()
+        }
+        _ => {
+            let rgb = image.to_rgb32f();
+            rgb.pixels()
+                .map(|p| Vec3::from(p.0.map(|v| srgb_to_linear(v.clamp(0.0, 1.0)))))
+                .collect()
+        }
+    };
+    Ok((width, height, texels))
+}
+
+fn srgb_to_linear(c: f32) -> f32 {
+    if c <= 0.04045 {
+        c / 12.92
+    } else {
+        ((c + 0.055) / 1.055).powf(2.4)
+    }
+}
