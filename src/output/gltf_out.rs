@@ -98,9 +98,17 @@ struct Part {
     triangles: Vec<u32>,
 }
 
-/// A lightmapped material: glTF material (`None` = the default material), forced single-sided
-/// (double-sided surfaces are baked as two single-sided primitives), page.
-type MaterialKey = (Option<usize>, bool, u32);
+/// What a lightmapped material depends on.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+struct MaterialKey {
+    /// glTF material (`None` = the default material).
+    material: Option<usize>,
+    /// Double-sided surfaces are baked as two single-sided primitives.
+    single_sided: bool,
+    page: u32,
+    /// Where the primitive's own `TEXCOORD_1` moved (textures sampling set 1 follow it).
+    uv1_moved_to: Option<u32>,
+}
 
 impl<'a> Document<'a> {
     /// Concatenates the input buffers (16-byte aligned) into one and points every buffer view
@@ -368,17 +376,22 @@ impl<'a> Document<'a> {
             }));
         }
 
-        // Materials: one per (material, single-sided, page) in first-use order.
+        // Materials: one per key, in first-use order.
+        let moved_uv1 = |atlas: &Atlas, inst: &crate::scene::Instance| {
+            let primitive = original_primitive(inst.mesh, inst.primitive)?;
+            moved_uv1(primitive, atlas.reused_input_uvs)
+        };
         let material_key = |part: &Part| -> MaterialKey {
             let inst = &scene.instances[part.instance];
             let material = original_primitive(inst.mesh, inst.primitive)
                 .and_then(|p| p.get("material"))
                 .and_then(Value::as_u64);
-            (
-                material.map(|m| m as usize),
-                inst.back.is_some() || inst.back_of.is_some(),
-                part.page,
-            )
+            MaterialKey {
+                material: material.map(|m| m as usize),
+                single_sided: inst.back.is_some() || inst.back_of.is_some(),
+                page: part.page,
+                uv1_moved_to: moved_uv1(atlas, inst),
+            }
         };
         let mut keys: Vec<MaterialKey> = Vec::new();
         for part in &parts {
@@ -400,7 +413,8 @@ impl<'a> Document<'a> {
                 .count();
             let inst = &scene.instances[instance];
             let original = original_primitive(inst.mesh, inst.primitive).expect("checked above");
-            let attributes = self.read_attributes(original, inst.back_of.is_some())?;
+            let attributes =
+                self.read_attributes(original, inst.back_of.is_some(), moved_uv1(atlas, inst))?;
             let target = (
                 target_meshes[&(inst.node, inst.mesh)],
                 inst.primitive as usize,
@@ -433,8 +447,8 @@ impl<'a> Document<'a> {
         Ok(())
     }
 
-    /// Creates (or, when a glTF material is used by exactly one key and nothing else, edits) the
-    /// lightmapped materials. Returns the material index of each key.
+    /// Creates the lightmapped materials: copies named "<name> (lightmap k)", except that the
+    /// first key of a material only baked primitives use edits the original in place. Returns the material index of each key.
     fn add_lightmap_materials(
         &mut self,
         scene: &Scene,
@@ -468,20 +482,20 @@ impl<'a> Document<'a> {
                 }
             }
         }
-        let mut uses: BTreeMap<Option<usize>, usize> = BTreeMap::new();
-        for key in keys {
-            *uses.entry(key.0).or_default() += 1;
-        }
-
         let mut indices = BTreeMap::new();
         for &key in keys {
-            let (material, single_sided, page) = key;
+            let MaterialKey {
+                material,
+                single_sided,
+                page,
+                uv1_moved_to,
+            } = key;
             let lightmap = json!({
                 "lightmapTexture": {"index": page_textures[page as usize], "texCoord": 1},
                 "lightmapFactor": [1.0, 1.0, 1.0]
             });
-            let edit_in_place =
-                material.is_some_and(|m| uses[&Some(m)] == 1 && !shared.contains(&m));
+            // The first key of a material no untouched primitive uses takes over the original.
+            let edit_in_place = material.is_some_and(|m| shared.insert(m));
             let mut value = match material {
                 Some(m) => self
                     .json
@@ -505,6 +519,9 @@ impl<'a> Document<'a> {
             if single_sided {
                 value["doubleSided"] = json!(false);
             }
+            if let Some(set) = uv1_moved_to {
+                retarget_texcoord_1(&mut value, set);
+            }
             object_entry(&mut value, "extensions").insert(LIGHTMAP_EXTENSION.to_string(), lightmap);
             let index = match (edit_in_place, material) {
                 (true, Some(m)) => {
@@ -518,12 +535,14 @@ impl<'a> Document<'a> {
         Ok(indices)
     }
 
-    /// The attributes of `primitive` except `TEXCOORD_1` (replaced by the lightmap UVs), in
-    /// document order; for a back face, normals negated and tangent handedness flipped.
+    /// The attributes of `primitive` in document order, its own `TEXCOORD_1` renamed to
+    /// `TEXCOORD_<uv1_moved_to>` or left out (the lightmap UVs take set 1); for a back face,
+    /// normals negated and tangent handedness flipped.
     fn read_attributes(
         &self,
         primitive: &Value,
         back: bool,
+        uv1_moved_to: Option<u32>,
     ) -> Result<Vec<(String, usize, Elements)>> {
         let attributes = primitive
             .get("attributes")
@@ -531,9 +550,11 @@ impl<'a> Document<'a> {
             .ok_or_else(|| self.invalid("primitive without attributes"))?;
         let mut read = Vec::new();
         for (name, accessor) in attributes {
-            if name == "TEXCOORD_1" {
-                continue;
-            }
+            let name = match (name.as_str(), uv1_moved_to) {
+                ("TEXCOORD_1", None) => continue,
+                ("TEXCOORD_1", Some(set)) => format!("TEXCOORD_{set}"),
+                _ => name.clone(),
+            };
             let index = accessor
                 .as_u64()
                 .ok_or_else(|| self.invalid(format!("attribute {name} is not an accessor index")))?
@@ -545,7 +566,7 @@ impl<'a> Document<'a> {
                 (true, "TANGENT") => elements.negate(3..4),
                 _ => {}
             }
-            read.push((name.clone(), index, elements));
+            read.push((name, index, elements));
         }
         Ok(read)
     }
@@ -752,6 +773,38 @@ impl<'a> Document<'a> {
     }
 }
 
+/// The free texture-coordinate set a primitive's own `TEXCOORD_1` moves to, so textures that
+/// sample it (an occlusion map, say) keep working; `None` when it has none or the lightmap
+/// reuses it.
+fn moved_uv1(primitive: &Value, reused_input_uvs: bool) -> Option<u32> {
+    let attributes = primitive.get("attributes")?.as_object()?;
+    if reused_input_uvs || !attributes.contains_key("TEXCOORD_1") {
+        return None;
+    }
+    (2..).find(|set| !attributes.contains_key(&format!("TEXCOORD_{set}")))
+}
+
+/// Points every texture reference of `material` that samples set 1 at set `set` (texture infos
+/// are the objects with an `index`; `extras` are left alone).
+fn retarget_texcoord_1(material: &mut Value, set: u32) {
+    match material {
+        Value::Object(object) => {
+            if object.contains_key("index") && object.get("texCoord") == Some(&json!(1)) {
+                object.insert("texCoord".to_string(), json!(set));
+            }
+            for (key, value) in object.iter_mut() {
+                if key != "extras" {
+                    retarget_texcoord_1(value, set);
+                }
+            }
+        }
+        Value::Array(items) => items
+            .iter_mut()
+            .for_each(|item| retarget_texcoord_1(item, set)),
+        _ => {}
+    }
+}
+
 /// The object under `key` of `value` (created, or replacing a non-object).
 fn object_entry<'v>(value: &'v mut Value, key: &str) -> &'v mut Map<String, Value> {
     let object = value.as_object_mut().expect("callers pass objects");
@@ -861,6 +914,8 @@ mod tests {
     #[derive(Clone, Copy)]
     struct Variant {
         indexed: bool,
+        /// The input has a `TEXCOORD_1` (a copy of set 0) and an occlusion map sampling it.
+        uv1: bool,
         texcoord0: bool,
         double_sided: bool,
         glb: bool,
@@ -951,11 +1006,17 @@ mod tests {
         if !variant.indexed {
             primitive.as_object_mut().unwrap().remove("indices");
         }
+        if variant.uv1 {
+            primitive["attributes"]["TEXCOORD_1"] = json!(2);
+        }
         if !variant.texcoord0 {
             primitive["attributes"]
                 .as_object_mut()
                 .unwrap()
                 .remove("TEXCOORD_0");
+        }
+        if variant.uv1 {
+            json["materials"][0]["occlusionTexture"] = json!({"index": 0, "texCoord": 1});
         }
         if !variant.glb {
             let data = base64::engine::general_purpose::STANDARD.encode(&bin);
@@ -1177,6 +1238,16 @@ mod tests {
                 };
                 assert_eq!(uv0[v], expected_uv0);
             }
+            if variant.uv1 {
+                let moved: Vec<[f32; 2]> = reader.read_tex_coords(2).unwrap().into_f32().collect();
+                for (v, &s) in source.iter().enumerate() {
+                    assert_eq!(
+                        moved[v],
+                        texcoord0(s).map(|c| c as f32 / 65535.0),
+                        "own TEXCOORD_1 kept as set 2"
+                    );
+                }
+            }
             let ids = read_accessor(
                 json,
                 &buffers[0].0,
@@ -1221,6 +1292,14 @@ mod tests {
                 "unknown extension kept"
             );
             assert_eq!(material["doubleSided"].as_bool(), Some(false));
+            let occlusion = material
+                .get("occlusionTexture")
+                .map(|o| o["texCoord"].clone());
+            assert_eq!(
+                occlusion,
+                variant.uv1.then(|| json!(2)),
+                "occlusion map follows its UVs"
+            );
         }
         pages
     }
@@ -1243,6 +1322,7 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let variant = Variant {
             indexed: true,
+            uv1: true,
             texcoord0: true,
             double_sided: false,
             glb: false,
@@ -1278,12 +1358,16 @@ mod tests {
             |node: usize, p: usize| json["meshes"][node]["primitives"][p]["material"].clone();
         assert_eq!(material(0, 0), material(1, 0));
         assert_ne!(material(0, 0), material(0, 1));
-        assert!(
-            json["materials"]
-                .as_array()
-                .unwrap()
-                .iter()
-                .any(|m| m["name"] == json!("Wall (lightmap 1)"))
+        let names: Vec<&Value> = json["materials"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|m| &m["name"])
+            .collect();
+        assert_eq!(
+            names,
+            [&json!("Wall"), &json!("Wall (lightmap 1)")],
+            "no material left unused"
         );
 
         // 3-byte colours are written with a 4-byte stride; positions carry exact bounds.
@@ -1323,6 +1407,7 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let variant = Variant {
             indexed: false,
+            uv1: false,
             texcoord0: false,
             double_sided: true,
             glb: true,
@@ -1371,6 +1456,7 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let variant = Variant {
             indexed: true,
+            uv1: true,
             texcoord0: true,
             double_sided: false,
             glb: false,
@@ -1435,12 +1521,14 @@ mod tests {
         for (k, variant) in [
             Variant {
                 indexed: true,
+                uv1: true,
                 texcoord0: true,
                 double_sided: false,
                 glb: false,
             },
             Variant {
                 indexed: false,
+                uv1: false,
                 texcoord0: false,
                 double_sided: true,
                 glb: true,
