@@ -1030,6 +1030,43 @@ mod tests {
     }
 
     #[test]
+    fn u8_and_u32_indices_and_normalized_texcoords_are_decoded() {
+        let mut bin = Bin::default();
+        let position = bin.vec3(&UNIT_TRIANGLE);
+        let u8_indices = bin.accessor(
+            &[0, 1, 2],
+            json!({"componentType": 5121, "type": "SCALAR", "count": 3}),
+        );
+        let u32_bytes: Vec<u8> = [2u32, 0, 1].iter().flat_map(|i| i.to_le_bytes()).collect();
+        let u32_indices = bin.accessor(
+            &u32_bytes,
+            json!({"componentType": 5125, "type": "SCALAR", "count": 3}),
+        );
+        let uv_bytes = [0u8, 255, 255, 0, 51, 102];
+        let uv = bin.accessor(
+            &uv_bytes,
+            json!({"componentType": 5121, "normalized": true, "type": "VEC2", "count": 3}),
+        );
+        let doc = bin.document(json!({
+            "scenes": [{"nodes": [0]}], "nodes": [{"mesh": 0}],
+            "meshes": [{"primitives": [
+                {"attributes": {"POSITION": position, "TEXCOORD_0": uv}, "indices": u8_indices},
+                {"attributes": {"POSITION": position}, "indices": u32_indices},
+            ]}],
+        }));
+        let scene = load_ok(&doc);
+        assert_eq!(scene.triangles, vec![[0, 1, 2], [5, 3, 4]]);
+        let expected = [
+            Vec2::new(0.0, 1.0),
+            Vec2::new(1.0, 0.0),
+            Vec2::new(0.2, 0.4),
+        ];
+        for (uv, expected) in scene.uv0.iter().zip(expected) {
+            assert!(uv.abs_diff_eq(expected, 1e-6), "{uv} != {expected}");
+        }
+    }
+
+    #[test]
     fn double_sided_material_adds_a_flipped_back_instance() {
         let (bin, meshes) = triangle_mesh(Some(0));
         let doc = bin.document(json!({
