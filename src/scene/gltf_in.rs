@@ -751,7 +751,7 @@ mod tests {
         fn view(&mut self, data: &[u8]) -> usize {
             let offset = self.bytes.len();
             self.bytes.extend_from_slice(data);
-            while self.bytes.len() % 4 != 0 {
+            while !self.bytes.len().is_multiple_of(4) {
                 self.bytes.push(0);
             }
             self.views
@@ -1345,11 +1345,11 @@ mod tests {
     /// A GLB container: header, JSON chunk (space padded), BIN chunk (zero padded).
     fn glb(json: &Value, bin: &[u8]) -> Vec<u8> {
         let mut json = serde_json::to_vec(json).unwrap();
-        while json.len() % 4 != 0 {
+        while !json.len().is_multiple_of(4) {
             json.push(b' ');
         }
         let mut bin = bin.to_vec();
-        while bin.len() % 4 != 0 {
+        while !bin.len().is_multiple_of(4) {
             bin.push(0);
         }
         let total = 12 + 8 + json.len() + 8 + bin.len();
