@@ -73,6 +73,12 @@ impl Atlas {
     }
 }
 
+/// Smallest page side that holds `texels` texels: a multiple of 4, within [16, `max`].
+pub(crate) fn page_side(texels: f32, max: u32) -> u32 {
+    let side = if texels.is_finite() { texels.max(0.0).min(max as f32).ceil() as u32 } else { max };
+    side.next_multiple_of(4).clamp(16.min(max), max)
+}
+
 /// Builds the atlas: reuses the input's `TEXCOORD_1` or unwraps, as `params.uv` says.
 pub fn build(scene: &Scene, source: &Source, params: &AtlasParams) -> Result<Atlas> {
     let atlas = match params.uv {

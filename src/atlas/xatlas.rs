@@ -1,9 +1,948 @@
-//! xatlas unwrapping (stub: being written).
-use super::Atlas;
+//! xatlas unwrapping: one xatlas mesh per scene instance, charted and packed into pages of at
+//! most `max_page_size`², each page then trimmed to the texels it uses.
+//!
+//! What we found in the xatlas (2019) vendored by xatlas-rs 0.1.3, and why this file looks the
+//! way it does:
+//! - Linking: the crate's bindings were generated on Windows and name MSVC-mangled symbols, so
+//!   its `Xatlas` wrapper does not link on Linux or macOS. We declare the few entry points we use
+//!   ourselves ([`ffi`]), with the mangled name of each C++ ABI; xatlas-rs still compiles and
+//!   links the vendored C++.
+//! - Printing: xatlas prints warnings with `printf` unless told otherwise; we pass a null print
+//!   function (the library never prints).
+//! - Determinism: `Create` starts a task scheduler with worker threads. Charting and
+//!   parameterisation run one job per chart group; each job owns its group and a fixed-seed
+//!   random generator. Packing is single-threaded with a fixed-seed generator in a fresh packer,
+//!   and the output is assembled in (mesh, chart group, chart) order. Nothing depends on thread
+//!   scheduling; `unwrap_is_deterministic` checks it.
+//! - Order: output triangle `f` of a mesh is input triangle `f` (xatlas writes indices at
+//!   `3·sourceFace`), same winding. An output vertex's `xref` may name a colocal twin of the
+//!   input vertex (same position, other normal or UV), so the source vertex of each corner is
+//!   taken from the input triangle instead, after checking the positions agree.
+//! - Units: xatlas' epsilons are absolute (colocal vertices within 1e-4, faces of area
+//!   ≤ FLT_EPSILON left out of every chart). Positions are fed in texel units (world × texels per
+//!   unit, relative to the instance's bounding box) with `texelsPerUnit = 1`, so those epsilons
+//!   are a ten-thousandth of a texel whatever the scene scale. Faces xatlas leaves out are then
+//!   too small to reach a texel centre; they get a zero-area UV at the corner of page 0.
+//! - Padding: `PackOptions::padding` only applies with `conservative`. xatlas reserves the padded
+//!   chart image but places the UVs `padding` texels up-left of it, so the gap to the next chart
+//!   lies right of and below each chart: at least `padding` texels between charts, none at the
+//!   page's left and top borders.
+//! - Page size: xatlas places each chart at the best of random positions within the area used so
+//!   far, so charts pack from the origin outwards. Packing at `max_page_size` and trimming each
+//!   page to its used extent gives small pages for small scenes in one xatlas run.
+
+use glam::{DVec3, Vec2, Vec3};
+// Only for the vendored C++ library (and libstdc++) it builds and links; see [`ffi`].
+use xatlas_rs as _;
+
+use super::{Atlas, InstanceUv, PageSize, page_side};
 use crate::config::AtlasParams;
-use crate::scene::{Scene, Source};
-use crate::Result;
+use crate::scene::{Instance, Scene, Source};
+use crate::{Error, Result};
+
+/// Refuse to unwrap beyond this many texels (the pipeline's memory check is coarser).
+const MAX_TEXELS: f64 = 64.0 * 1024.0 * 1024.0;
+
+/// Faces xatlas leaves out of every chart are accepted below this size (texels²).
+const NEGLIGIBLE_TEXEL_AREA: f64 = 1e-3;
+
+/// Unwraps every instance with xatlas at `params.texels_per_unit` and packs the charts.
 pub fn unwrap(scene: &Scene, source: &Source, params: &AtlasParams) -> Result<Atlas> {
-    let _ = (scene, source, params);
-    todo!("xatlas")
+    let tpu = params.texels_per_unit;
+    let estimated_texels: f64 = (0..scene.triangles.len())
+        .map(|t| world_area(scene, t))
+        .sum::<f64>()
+        * f64::from(tpu).powi(2);
+    if estimated_texels > MAX_TEXELS {
+        return Err(Error::Option(format!(
+            "{} texels per unit would need about {:.0} M lightmap texels (at most {:.0} M): lower the texel density",
+            tpu,
+            estimated_texels / 1e6,
+            MAX_TEXELS / 1e6
+        )));
+    }
+    if scene.triangles.is_empty() {
+        return Err(Error::invalid(
+            &source.path,
+            "the scene has no triangles to unwrap",
+        ));
+    }
+
+    let resolution = params.max_page_size;
+    let output = run_xatlas(scene, tpu, resolution, params.padding);
+    if output.page_count == 0 {
+        return Err(Error::invalid(
+            &source.path,
+            "xatlas produced no lightmap page",
+        ));
+    }
+
+    // UVs in texels of a `resolution`² page first; pages are trimmed once all are known.
+    let mut instances = Vec::with_capacity(scene.instances.len());
+    for (i, inst) in scene.instances.iter().enumerate() {
+        let uv = match &output.meshes[i] {
+            Some(mesh) => instance_uv(scene, source, inst, mesh, tpu, output.page_count)?,
+            None => InstanceUv::default(),
+        };
+        instances.push(uv);
+    }
+
+    let mut extent = vec![Vec2::ZERO; output.page_count as usize];
+    for inst in &instances {
+        for (tri, &page) in inst.triangles.iter().zip(&inst.triangle_page) {
+            for &a in tri {
+                extent[page as usize] = extent[page as usize].max(inst.uv[a as usize]);
+            }
+        }
+    }
+    let padding = params.padding as f32;
+    let pages: Vec<PageSize> = extent
+        .iter()
+        .map(|e| PageSize {
+            width: page_side(e.x.ceil() + padding, resolution),
+            height: page_side(e.y.ceil() + padding, resolution),
+        })
+        .collect();
+    for inst in &mut instances {
+        normalise(inst, &pages);
+    }
+
+    Ok(Atlas {
+        pages,
+        instances,
+        texels_per_unit: tpu,
+        reused_input_uvs: false,
+    })
+}
+
+/// World-space area of scene triangle `t`.
+fn world_area(scene: &Scene, t: usize) -> f64 {
+    let [a, b, c] = scene.triangles[t].map(|v| scene.positions[v as usize].as_dvec3());
+    0.5 * (b - a).cross(c - a).length()
+}
+
+/// What xatlas returned, copied out before the atlas is destroyed.
+struct XatlasOutput {
+    page_count: u32,
+    /// Per scene instance; `None` for instances without triangles (not given to xatlas).
+    meshes: Vec<Option<MeshOutput>>,
+}
+
+struct MeshOutput {
+    vertices: Vec<ffi::Vertex>,
+    indices: Vec<u32>,
+}
+
+fn run_xatlas(scene: &Scene, tpu: f32, resolution: u32, padding: u32) -> XatlasOutput {
+    let atlas = ffi::Handle::create();
+    let mut given = Vec::with_capacity(scene.instances.len());
+    for inst in &scene.instances {
+        let has_triangles = !inst.triangles.is_empty();
+        if has_triangles {
+            let (positions, normals, indices) = mesh_input(scene, inst, tpu);
+            let decl = ffi::MeshDecl {
+                vertex_count: positions.len() as u32,
+                vertex_position_data: positions.as_ptr().cast(),
+                vertex_position_stride: 12,
+                vertex_normal_data: normals.as_ptr().cast(),
+                vertex_normal_stride: 12,
+                vertex_uv_data: std::ptr::null(),
+                vertex_uv_stride: 0,
+                index_count: indices.len() as u32,
+                index_data: indices.as_ptr().cast(),
+                index_offset: 0,
+                index_format: ffi::INDEX_FORMAT_U32,
+                face_ignore_data: std::ptr::null(),
+            };
+            // The indices are local and in range, and a multiple of three: AddMesh cannot fail.
+            let status = atlas.add_mesh(&decl);
+            debug_assert_eq!(status, 0, "xatlas AddMesh failed");
+        }
+        given.push(has_triangles);
+    }
+
+    // Big charts are split while growing (`max_chart_area`) and, as a last resort, scaled down
+    // to fit an empty page (`max_chart_size`), so no chart is ever left unplaced.
+    let side = resolution as f32;
+    let chart_options = ffi::ChartOptions {
+        max_chart_area: 0.25 * side * side,
+        ..ffi::ChartOptions::default()
+    };
+    let pack_options = ffi::PackOptions {
+        attempts: 4096,
+        texels_per_unit: 1.0,
+        resolution,
+        max_chart_size: resolution.saturating_sub(padding + 2).max(1),
+        block_align: false,
+        conservative: true,
+        padding,
+    };
+    atlas.generate(chart_options, pack_options);
+
+    let raw = atlas.output();
+    let mut meshes = Vec::with_capacity(given.len());
+    let mut next = 0;
+    for has_triangles in given {
+        meshes.push(has_triangles.then(|| {
+            let mesh = &raw.meshes[next];
+            next += 1;
+            MeshOutput {
+                vertices: mesh.vertices.to_vec(),
+                indices: mesh.indices.to_vec(),
+            }
+        }));
+    }
+    XatlasOutput {
+        page_count: raw.page_count,
+        meshes,
+    }
+}
+
+/// Positions in texel units relative to the instance's bounding box, normals, local indices.
+fn mesh_input(
+    scene: &Scene,
+    inst: &Instance,
+    tpu: f32,
+) -> (Vec<[f32; 3]>, Vec<[f32; 3]>, Vec<u32>) {
+    let range = inst.vertices.start as usize..inst.vertices.end as usize;
+    let origin = scene.positions[range.clone()]
+        .iter()
+        .fold(Vec3::INFINITY, |m, p| m.min(*p));
+    let positions = scene.positions[range.clone()]
+        .iter()
+        .map(|p| ((*p - origin) * tpu).to_array())
+        .collect();
+    let normals = scene.normals[range].iter().map(|n| n.to_array()).collect();
+    let indices = scene.triangles[inst.triangles.start as usize..inst.triangles.end as usize]
+        .iter()
+        .flat_map(|t| t.map(|v| v - inst.vertices.start))
+        .collect();
+    (positions, normals, indices)
+}
+
+/// Maps one xatlas output mesh back onto the instance's triangles (UVs still in texels).
+fn instance_uv(
+    scene: &Scene,
+    source: &Source,
+    inst: &Instance,
+    mesh: &MeshOutput,
+    tpu: f32,
+    page_count: u32,
+) -> Result<InstanceUv> {
+    let fail = |what: String| {
+        Error::invalid(
+            &source.path,
+            format!(
+                "mesh {} primitive {} (node {}): xatlas {what}",
+                inst.mesh, inst.primitive, inst.node
+            ),
+        )
+    };
+    let triangles = &scene.triangles[inst.triangles.start as usize..inst.triangles.end as usize];
+    if mesh.indices.len() != 3 * triangles.len() {
+        return Err(fail(format!(
+            "returned {} indices for {} triangles",
+            mesh.indices.len(),
+            triangles.len()
+        )));
+    }
+    let scaled = |global: u32| scene.positions[global as usize].as_dvec3() * f64::from(tpu);
+
+    let mut uv = InstanceUv::default();
+    // Atlas vertex of each (xatlas vertex, local source vertex) pair, in first-seen order.
+    let mut atlas_vertex = std::collections::BTreeMap::new();
+    for (local_t, (tri, out)) in triangles
+        .iter()
+        .zip(mesh.indices.chunks_exact(3))
+        .enumerate()
+    {
+        let out_vertices = [out[0], out[1], out[2]].map(|o| mesh.vertices.get(o as usize));
+        let [Some(a), Some(b), Some(c)] = out_vertices else {
+            return Err(fail(format!(
+                "returned an out-of-range index for triangle {local_t}"
+            )));
+        };
+        let page = a.atlas_index;
+        if b.atlas_index != page || c.atlas_index != page || page >= page_count as i32 {
+            return Err(fail(format!("split triangle {local_t} across pages")));
+        }
+        let charted = page >= 0;
+        if !charted
+            && world_area(scene, (inst.triangles.start as usize) + local_t) * f64::from(tpu).powi(2)
+                > NEGLIGIBLE_TEXEL_AREA
+        {
+            return Err(fail(format!("left triangle {local_t} out of every chart")));
+        }
+        let mut corners = [0u32; 3];
+        for (corner, (&global, (&o, v))) in tri.iter().zip(out.iter().zip([a, b, c])).enumerate() {
+            let xref_global = inst.vertices.start + v.xref;
+            if v.xref >= inst.vertices.end - inst.vertices.start
+                || DVec3::distance(scaled(xref_global), scaled(global)) > 1e-3
+            {
+                return Err(fail(format!("reordered the corners of triangle {local_t}")));
+            }
+            let local = global - inst.vertices.start;
+            corners[corner] = *atlas_vertex.entry((o, local)).or_insert_with(|| {
+                uv.xref.push(local);
+                uv.uv.push(if charted {
+                    Vec2::from(v.uv)
+                } else {
+                    Vec2::ZERO
+                });
+                uv.xref.len() as u32 - 1
+            });
+        }
+        uv.triangles.push(corners);
+        uv.triangle_page.push(page.max(0) as u32);
+    }
+    Ok(uv)
+}
+
+/// Texel UVs → [0,1] of each vertex's page (a vertex only ever belongs to one page).
+fn normalise(inst: &mut InstanceUv, pages: &[PageSize]) {
+    let mut page_of = vec![0u32; inst.uv.len()];
+    for (tri, &page) in inst.triangles.iter().zip(&inst.triangle_page) {
+        for &a in tri {
+            page_of[a as usize] = page;
+        }
+    }
+    for (uv, page) in inst.uv.iter_mut().zip(page_of) {
+        let size = pages[page as usize];
+        *uv = (*uv / Vec2::new(size.width as f32, size.height as f32)).clamp(Vec2::ZERO, Vec2::ONE);
+    }
+}
+
+/// The xatlas C++ entry points we use, declared here because xatlas-rs 0.1.3's bindings only
+/// carry MSVC symbol names (see the module comment). Layouts follow the vendored `xatlas.h`.
+mod ffi {
+    use std::ffi::{c_char, c_int, c_void};
+
+    #[repr(C)]
+    #[allow(dead_code, reason = "C layout: not every field is read")]
+    pub struct Atlas {
+        pub width: u32,
+        pub height: u32,
+        pub atlas_count: u32,
+        pub chart_count: u32,
+        pub mesh_count: u32,
+        pub meshes: *const Mesh,
+        pub utilization: *const f32,
+        pub texels_per_unit: f32,
+    }
+
+    #[repr(C)]
+    #[allow(dead_code, reason = "C layout: not every field is read")]
+    pub struct Chart {
+        pub atlas_index: u32,
+        pub index_array: *const u32,
+        pub index_count: u32,
+    }
+
+    #[repr(C)]
+    #[allow(dead_code, reason = "C layout: not every field is read")]
+    pub struct Mesh {
+        pub chart_array: *const Chart,
+        pub chart_count: u32,
+        pub index_array: *const u32,
+        pub index_count: u32,
+        pub vertex_array: *const Vertex,
+        pub vertex_count: u32,
+    }
+
+    /// Output vertex: `uv` in texels of the page, `atlas_index` −1 when in no chart.
+    #[repr(C)]
+    #[derive(Clone, Copy, Debug, PartialEq)]
+    pub struct Vertex {
+        pub atlas_index: i32,
+        pub uv: [f32; 2],
+        pub xref: u32,
+    }
+
+    pub const INDEX_FORMAT_U32: c_int = 1;
+
+    #[repr(C)]
+    pub struct MeshDecl {
+        pub vertex_count: u32,
+        pub vertex_position_data: *const c_void,
+        pub vertex_position_stride: u32,
+        pub vertex_normal_data: *const c_void,
+        pub vertex_normal_stride: u32,
+        pub vertex_uv_data: *const c_void,
+        pub vertex_uv_stride: u32,
+        pub index_count: u32,
+        pub index_data: *const c_void,
+        pub index_offset: i32,
+        pub index_format: c_int,
+        pub face_ignore_data: *const bool,
+    }
+
+    #[repr(C)]
+    pub struct ChartOptions {
+        pub max_chart_area: f32,
+        pub max_boundary_length: f32,
+        pub proxy_fit_metric_weight: f32,
+        pub roundness_metric_weight: f32,
+        pub straightness_metric_weight: f32,
+        pub normal_seam_metric_weight: f32,
+        pub texture_seam_metric_weight: f32,
+        pub max_threshold: f32,
+        pub grow_face_count: u32,
+        pub max_iterations: u32,
+    }
+
+    impl Default for ChartOptions {
+        /// xatlas' own defaults.
+        fn default() -> Self {
+            ChartOptions {
+                max_chart_area: 0.0,
+                max_boundary_length: 0.0,
+                proxy_fit_metric_weight: 2.0,
+                roundness_metric_weight: 0.01,
+                straightness_metric_weight: 6.0,
+                normal_seam_metric_weight: 4.0,
+                texture_seam_metric_weight: 0.5,
+                max_threshold: 2.0,
+                grow_face_count: 32,
+                max_iterations: 1,
+            }
+        }
+    }
+
+    #[repr(C)]
+    pub struct PackOptions {
+        pub attempts: c_int,
+        pub texels_per_unit: f32,
+        pub resolution: u32,
+        pub max_chart_size: u32,
+        pub block_align: bool,
+        pub conservative: bool,
+        pub padding: u32,
+    }
+
+    type ParameterizeFunc = unsafe extern "C" fn(*const f32, *mut f32, u32, *const u32, u32, bool);
+    type ProgressFunc = unsafe extern "C" fn(c_int, c_int, *mut c_void);
+    type PrintFunc = unsafe extern "C" fn(*const c_char, ...) -> c_int;
+
+    unsafe extern "C" {
+        #[cfg_attr(
+            target_env = "msvc",
+            link_name = "\u{1}?Create@xatlas@@YAPEAUAtlas@1@XZ"
+        )]
+        #[cfg_attr(not(target_env = "msvc"), link_name = "_ZN6xatlas6CreateEv")]
+        fn xatlas_create() -> *mut Atlas;
+
+        #[cfg_attr(
+            target_env = "msvc",
+            link_name = "\u{1}?Destroy@xatlas@@YAXPEAUAtlas@1@@Z"
+        )]
+        #[cfg_attr(not(target_env = "msvc"), link_name = "_ZN6xatlas7DestroyEPNS_5AtlasE")]
+        fn xatlas_destroy(atlas: *mut Atlas);
+
+        #[cfg_attr(
+            target_env = "msvc",
+            link_name = "\u{1}?AddMesh@xatlas@@YA?AW4Enum@AddMeshError@1@PEAUAtlas@1@AEBUMeshDecl@1@@Z"
+        )]
+        #[cfg_attr(
+            not(target_env = "msvc"),
+            link_name = "_ZN6xatlas7AddMeshEPNS_5AtlasERKNS_8MeshDeclE"
+        )]
+        fn xatlas_add_mesh(atlas: *mut Atlas, decl: *const MeshDecl) -> c_int;
+
+        #[cfg_attr(
+            target_env = "msvc",
+            link_name = "\u{1}?Generate@xatlas@@YAXPEAUAtlas@1@UChartOptions@1@P6AXPEBMPEAMIPEBII_N@ZUPackOptions@1@P6AXW4Enum@ProgressCategory@1@HPEAX@Z9@Z"
+        )]
+        #[cfg_attr(
+            not(target_env = "msvc"),
+            link_name = "_ZN6xatlas8GenerateEPNS_5AtlasENS_12ChartOptionsEPFvPKfPfjPKjjbENS_11PackOptionsEPFvNS_16ProgressCategory4EnumEiPvESD_"
+        )]
+        fn xatlas_generate(
+            atlas: *mut Atlas,
+            chart_options: ChartOptions,
+            parameterize: Option<ParameterizeFunc>,
+            pack_options: PackOptions,
+            progress: Option<ProgressFunc>,
+            progress_user_data: *mut c_void,
+        );
+
+        #[cfg_attr(
+            target_env = "msvc",
+            link_name = "\u{1}?SetPrint@xatlas@@YAXP6AHPEBDZZ_N@Z"
+        )]
+        #[cfg_attr(not(target_env = "msvc"), link_name = "_ZN6xatlas8SetPrintEPFiPKczEb")]
+        fn xatlas_set_print(print: Option<PrintFunc>, verbose: bool);
+    }
+
+    /// One xatlas atlas, destroyed on drop.
+    pub struct Handle(*mut Atlas);
+
+    /// Borrowed views of the output, valid while the handle lives and is not regenerated.
+    pub struct Output<'a> {
+        pub page_count: u32,
+        pub meshes: Vec<MeshView<'a>>,
+    }
+
+    pub struct MeshView<'a> {
+        pub indices: &'a [u32],
+        pub vertices: &'a [Vertex],
+    }
+
+    impl Handle {
+        pub fn create() -> Self {
+            // SAFETY: plain calls without preconditions; a null print function silences xatlas.
+            unsafe {
+                xatlas_set_print(None, false);
+                Handle(xatlas_create())
+            }
+        }
+
+        /// Returns xatlas' `AddMeshError` (0 = success). The data is copied by xatlas.
+        pub fn add_mesh(&self, decl: &MeshDecl) -> c_int {
+            // SAFETY: `decl` points at live buffers of the declared sizes for this call.
+            unsafe { xatlas_add_mesh(self.0, decl) }
+        }
+
+        pub fn generate(&self, chart_options: ChartOptions, pack_options: PackOptions) {
+            // SAFETY: a live atlas; no callbacks are passed.
+            unsafe {
+                xatlas_generate(
+                    self.0,
+                    chart_options,
+                    None,
+                    pack_options,
+                    None,
+                    std::ptr::null_mut(),
+                )
+            }
+        }
+
+        pub fn output(&self) -> Output<'_> {
+            // SAFETY: after `generate`, `meshes` holds `mesh_count` meshes whose arrays have the
+            // stated lengths; they live until the atlas is destroyed, which `&self` prevents.
+            unsafe {
+                let atlas = &*self.0;
+                let meshes = slice(atlas.meshes, atlas.mesh_count)
+                    .iter()
+                    .map(|m| MeshView {
+                        indices: slice(m.index_array, m.index_count),
+                        vertices: slice(m.vertex_array, m.vertex_count),
+                    })
+                    .collect();
+                Output {
+                    page_count: atlas.atlas_count,
+                    meshes,
+                }
+            }
+        }
+    }
+
+    /// A slice from an xatlas array (which may be null when empty).
+    unsafe fn slice<'a, T>(data: *const T, len: u32) -> &'a [T] {
+        if data.is_null() || len == 0 {
+            &[]
+        } else {
+            unsafe { std::slice::from_raw_parts(data, len as usize) }
+        }
+    }
+
+    impl Drop for Handle {
+        fn drop(&mut self) {
+            // SAFETY: created by `xatlas_create`, destroyed once.
+            unsafe { xatlas_destroy(self.0) }
+        }
+    }
+}
+
+#[cfg(test)]
+pub(super) mod tests {
+    use glam::{Vec2, Vec3};
+
+    use super::super::existing::Overlaps;
+    use super::*;
+    use crate::config::UvMode;
+    use crate::scene::{Material, Scene};
+
+    /// One instance to put in a test scene.
+    #[derive(Clone, Default)]
+    pub struct Part {
+        pub positions: Vec<Vec3>,
+        pub triangles: Vec<[u32; 3]>,
+        pub uv1: Option<Vec<Vec2>>,
+        pub mesh: u32,
+        pub node: u32,
+    }
+
+    impl Part {
+        pub fn new(positions: Vec<Vec3>, triangles: Vec<[u32; 3]>) -> Part {
+            Part {
+                positions,
+                triangles,
+                ..Part::default()
+            }
+        }
+        pub fn with_uv1(mut self, uv1: Vec<Vec2>) -> Part {
+            self.uv1 = Some(uv1);
+            self
+        }
+        pub fn moved(mut self, offset: Vec3, node: u32) -> Part {
+            self.positions.iter_mut().for_each(|p| *p += offset);
+            self.node = node;
+            self
+        }
+    }
+
+    /// A `w × h` quad in the z = 0 plane facing +z, its corner at `origin`; TEXCOORD_1 = [0,1]².
+    pub fn quad(origin: Vec3, w: f32, h: f32) -> Part {
+        let positions = vec![
+            origin,
+            origin + Vec3::new(w, 0.0, 0.0),
+            origin + Vec3::new(w, h, 0.0),
+            origin + Vec3::new(0.0, h, 0.0),
+        ];
+        Part::new(positions, vec![[0, 1, 2], [0, 2, 3]]).with_uv1(vec![
+            Vec2::new(0.0, 1.0),
+            Vec2::ONE,
+            Vec2::X,
+            Vec2::ZERO,
+        ])
+    }
+
+    /// An axis-aligned cube of side `size`, each face an `n × n` grid with its own vertices.
+    pub fn cube(size: f32, n: u32) -> Part {
+        let mut part = Part::default();
+        let axes = [Vec3::X, Vec3::Y, Vec3::Z];
+        for (k, &normal) in axes.iter().chain(&axes.map(|a| -a)).enumerate() {
+            let u = axes[(k + 1) % 3];
+            let v = normal.cross(u);
+            let base = part.positions.len() as u32;
+            for j in 0..=n {
+                for i in 0..=n {
+                    let (s, t) = (i as f32 / n as f32 - 0.5, j as f32 / n as f32 - 0.5);
+                    part.positions.push((normal * 0.5 + u * s + v * t) * size);
+                }
+            }
+            for j in 0..n {
+                for i in 0..n {
+                    let a = base + j * (n + 1) + i;
+                    part.triangles.push([a, a + 1, a + n + 2]);
+                    part.triangles.push([a, a + n + 2, a + n + 1]);
+                }
+            }
+        }
+        part
+    }
+
+    /// A latitude-longitude sphere (shared vertices, poles split per segment).
+    pub fn sphere(center: Vec3, radius: f32, rings: u32, segments: u32) -> Part {
+        let mut part = Part::default();
+        for r in 0..=rings {
+            let theta = std::f32::consts::PI * r as f32 / rings as f32;
+            for s in 0..=segments {
+                let phi = std::f32::consts::TAU * s as f32 / segments as f32;
+                let d = Vec3::new(
+                    theta.sin() * phi.cos(),
+                    theta.cos(),
+                    theta.sin() * phi.sin(),
+                );
+                part.positions.push(center + d * radius);
+            }
+        }
+        for r in 0..rings {
+            for s in 0..segments {
+                let a = r * (segments + 1) + s;
+                let b = a + segments + 1;
+                if r != 0 {
+                    part.triangles.push([a, a + 1, b]);
+                }
+                if r != rings - 1 {
+                    part.triangles.push([a + 1, b + 1, b]);
+                }
+            }
+        }
+        part
+    }
+
+    /// A scene with one instance per part (default material, face-averaged normals); `backs`
+    /// lists parts that get a flipped back-face copy, appended after all parts.
+    pub fn scene_of(parts: &[Part], backs: &[usize]) -> Scene {
+        let mut scene = Scene {
+            materials: vec![Material::default()],
+            ..Scene::default()
+        };
+        let add = |scene: &mut Scene, part: &Part, flip: bool| {
+            let start = scene.positions.len() as u32;
+            let first_triangle = scene.triangles.len() as u32;
+            let mut normals = vec![Vec3::ZERO; part.positions.len()];
+            for t in &part.triangles {
+                let [a, b, c] = t.map(|v| part.positions[v as usize]);
+                t.iter()
+                    .for_each(|&v| normals[v as usize] += (b - a).cross(c - a));
+            }
+            let sign = if flip { -1.0 } else { 1.0 };
+            scene.positions.extend(&part.positions);
+            scene
+                .normals
+                .extend(normals.iter().map(|n| n.normalize_or(Vec3::Z) * sign));
+            scene.uv0.extend(part.positions.iter().map(|_| Vec2::ZERO));
+            match &part.uv1 {
+                Some(uv1) => scene.uv1.extend(uv1),
+                None => scene.uv1.extend(part.positions.iter().map(|_| Vec2::ZERO)),
+            }
+            let index = scene.instances.len() as u32;
+            for t in &part.triangles {
+                let t = if flip { [t[0], t[2], t[1]] } else { *t };
+                scene.triangles.push(t.map(|v| v + start));
+                scene.triangle_instance.push(index);
+            }
+            scene.instances.push(Instance {
+                node: part.node,
+                mesh: part.mesh,
+                primitive: 0,
+                material: 0,
+                vertices: start..scene.positions.len() as u32,
+                triangles: first_triangle..scene.triangles.len() as u32,
+                source_triangle: (0..part.triangles.len() as u32).collect(),
+                back_of: None,
+                back: None,
+                has_uv1: part.uv1.is_some(),
+            });
+        };
+        for part in parts {
+            add(&mut scene, part, false);
+        }
+        for &front in backs {
+            add(&mut scene, &parts[front], true);
+            let back = scene.instances.len() as u32 - 1;
+            scene.instances[back as usize].back_of = Some(front as u32);
+            scene.instances[front].back = Some(back);
+        }
+        scene.validate();
+        scene
+    }
+
+    pub fn source() -> Source {
+        Source {
+            path: "test.gltf".into(),
+            is_glb: false,
+            json: serde_json::json!({}),
+            buffers: Vec::new(),
+        }
+    }
+
+    pub fn params(texels_per_unit: f32, max_page_size: u32) -> AtlasParams {
+        AtlasParams {
+            uv: UvMode::Unwrap,
+            texels_per_unit,
+            max_page_size,
+            padding: 2,
+        }
+    }
+
+    /// A box of 192 triangles next to a sphere of 448.
+    fn box_and_sphere() -> Scene {
+        scene_of(
+            &[cube(1.0, 4), sphere(Vec3::new(2.0, 0.0, 0.0), 0.5, 16, 16)],
+            &[],
+        )
+    }
+
+    /// Unwraps and runs the atlas' own consistency check.
+    fn unwrap_ok(scene: &Scene, params: &AtlasParams) -> Atlas {
+        let atlas = unwrap(scene, &source(), params).unwrap();
+        atlas.validate(scene);
+        atlas
+    }
+
+    /// Triangle UVs of each page, in [0,1].
+    fn page_triangles(scene: &Scene, atlas: &Atlas, page: u32) -> Vec<[Vec2; 3]> {
+        (0..scene.triangles.len() as u32)
+            .map(|t| atlas.triangle_uv(scene, t))
+            .filter(|(_, p)| *p == page)
+            .map(|(uv, _)| uv)
+            .collect()
+    }
+
+    /// Texel area of every triangle over world area × tpu².
+    fn texel_area_ratio(scene: &Scene, atlas: &Atlas) -> f64 {
+        let mut texels = 0.0;
+        for t in 0..scene.triangles.len() as u32 {
+            let ([a, b, c], page) = atlas.triangle_uv(scene, t);
+            let size = atlas.pages[page as usize];
+            texels += 0.5
+                * f64::from((b - a).perp_dot(c - a).abs())
+                * f64::from(size.width * size.height);
+        }
+        let world: f64 = (0..scene.triangles.len())
+            .map(|t| world_area(scene, t))
+            .sum();
+        texels / (world * f64::from(atlas.texels_per_unit).powi(2))
+    }
+
+    #[test]
+    fn small_scene_gets_one_small_page() {
+        let scene = scene_of(&[quad(Vec3::ZERO, 1.0, 1.0)], &[]);
+        let atlas = unwrap_ok(&scene, &params(16.0, 1024));
+        assert_eq!(atlas.pages.len(), 1);
+        let page = atlas.pages[0];
+        // 16×16 texels of quad plus padding, rounded to a multiple of 4.
+        assert!(
+            (16..=28).contains(&page.width) && (16..=28).contains(&page.height),
+            "{page:?}"
+        );
+        assert_eq!(page.width % 4, 0);
+        assert!(!atlas.reused_input_uvs);
+    }
+
+    #[test]
+    fn dense_scene_spreads_over_several_pages() {
+        let scene = box_and_sphere();
+        let atlas = unwrap_ok(&scene, &params(64.0, 64));
+        assert!(atlas.pages.len() >= 4, "{} pages", atlas.pages.len());
+        assert!(
+            atlas
+                .pages
+                .iter()
+                .all(|p| p.width <= 64 && p.height <= 64 && p.width % 4 == 0)
+        );
+        for page in 0..atlas.pages.len() as u32 {
+            assert!(
+                !page_triangles(&scene, &atlas, page).is_empty(),
+                "page {page} is empty"
+            );
+        }
+        let ratio = texel_area_ratio(&scene, &atlas);
+        assert!(
+            (0.7..1.6).contains(&ratio),
+            "texel area / expected = {ratio}"
+        );
+    }
+
+    #[test]
+    fn charts_do_not_overlap_and_keep_their_density() {
+        let scene = box_and_sphere();
+        let atlas = unwrap_ok(&scene, &params(32.0, 1024));
+        assert_eq!(atlas.pages.len(), 1);
+        let overlaps = Overlaps::find(
+            atlas.pages[0],
+            page_triangles(&scene, &atlas, 0).into_iter(),
+        );
+        assert!(overlaps.covered > 6 * 32 * 32, "{overlaps:?}");
+        assert_eq!(overlaps.overlapping, 0, "{overlaps:?}");
+        let ratio = texel_area_ratio(&scene, &atlas);
+        assert!(
+            (0.7..1.6).contains(&ratio),
+            "texel area / expected = {ratio}"
+        );
+        // Packed tightly: the page is not much bigger than the charts.
+        let page = atlas.pages[0];
+        let fill = overlaps.covered as f64 / f64::from(page.width * page.height);
+        assert!(fill > 0.3, "page {page:?} is {:.0}% covered", fill * 100.0);
+    }
+
+    #[test]
+    fn unwrap_is_deterministic() {
+        let scene = box_and_sphere();
+        let bits = |atlas: &Atlas| -> Vec<u32> {
+            let mut bits: Vec<u32> = atlas
+                .pages
+                .iter()
+                .flat_map(|p| [p.width, p.height])
+                .collect();
+            for inst in &atlas.instances {
+                bits.extend(&inst.xref);
+                bits.extend(
+                    inst.uv
+                        .iter()
+                        .flat_map(|uv| [uv.x.to_bits(), uv.y.to_bits()]),
+                );
+                bits.extend(inst.triangles.iter().flatten());
+                bits.extend(&inst.triangle_page);
+            }
+            bits
+        };
+        let first = bits(&unwrap_ok(&scene, &params(24.0, 128)));
+        for _ in 0..4 {
+            assert!(
+                bits(&unwrap_ok(&scene, &params(24.0, 128))) == first,
+                "xatlas output changed between runs"
+            );
+        }
+    }
+
+    #[test]
+    fn corners_keep_their_source_vertex_and_order() {
+        // Split cube faces: 24 vertices share 8 positions, xatlas sees colocal twins.
+        let scene = scene_of(
+            &[cube(2.0, 1), quad(Vec3::new(3.0, 0.0, 0.0), 1.0, 1.0)],
+            &[],
+        );
+        let atlas = unwrap_ok(&scene, &params(8.0, 256));
+        for (inst, si) in atlas.instances.iter().zip(&scene.instances) {
+            for (tri, source) in inst
+                .triangles
+                .iter()
+                .zip(&scene.triangles[si.triangles.start as usize..si.triangles.end as usize])
+            {
+                assert_eq!(
+                    tri.map(|a| inst.xref[a as usize] + si.vertices.start),
+                    *source
+                );
+            }
+        }
+        // Each xref appears with one UV per chart it borders: at most 3 copies of a cube corner.
+        assert!(atlas.instances[0].xref.len() <= 24 * 3);
+    }
+
+    #[test]
+    fn back_faces_get_their_own_charts() {
+        let scene = scene_of(&[quad(Vec3::ZERO, 1.0, 1.0)], &[0]);
+        let atlas = unwrap_ok(&scene, &params(16.0, 1024));
+        let overlaps = Overlaps::find(
+            atlas.pages[0],
+            page_triangles(&scene, &atlas, 0).into_iter(),
+        );
+        assert_eq!(atlas.pages.len(), 1);
+        assert_eq!(overlaps.overlapping, 0);
+        // Each 16×16-texel chart starts half a texel into its first texel; centres on the
+        // boundary or on the diagonal belong to no triangle, so at least 14² per chart.
+        assert!(overlaps.covered >= 2 * 14 * 14, "{overlaps:?}");
+    }
+
+    #[test]
+    fn instance_without_triangles_is_empty() {
+        let mut scene = scene_of(
+            &[quad(Vec3::ZERO, 1.0, 1.0), quad(Vec3::ONE, 1.0, 1.0)],
+            &[],
+        );
+        // Drop the second instance's triangles (as the loader does for all-degenerate ones).
+        scene.triangles.truncate(2);
+        scene.triangle_instance.truncate(2);
+        scene.instances[1].triangles = 2..2;
+        scene.instances[1].source_triangle.clear();
+        let atlas = unwrap_ok(&scene, &params(16.0, 1024));
+        assert!(atlas.instances[1].triangles.is_empty());
+        assert_eq!(atlas.instances[0].triangles.len(), 2);
+    }
+
+    #[test]
+    fn tiny_scenes_still_unwrap() {
+        // A millimetre-sized cube at 10000 texels per unit: 10×10 texels a face; in world units
+        // every triangle is below xatlas' absolute area epsilon.
+        let scene = scene_of(&[cube(1e-3, 2)], &[]);
+        let atlas = unwrap_ok(&scene, &params(10_000.0, 256));
+        let ratio = texel_area_ratio(&scene, &atlas);
+        assert!(
+            (0.7..1.8).contains(&ratio),
+            "texel area / expected = {ratio}"
+        );
+    }
+
+    #[test]
+    fn absurd_density_is_refused_before_unwrapping() {
+        let scene = scene_of(&[quad(Vec3::ZERO, 100.0, 100.0)], &[]);
+        assert!(matches!(
+            unwrap(&scene, &source(), &params(1000.0, 1024)),
+            Err(Error::Option(_))
+        ));
+    }
 }
