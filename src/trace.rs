@@ -13,14 +13,35 @@ use std::time::Duration;
 
 use glam::{Vec2, Vec3, Vec3A};
 use obvhs::{
-    BvhBuildParams,
-    cwbvh::{CwBvh, builder::build_cwbvh_from_tris},
+    Boundable, BvhBuildParams,
+    aabb::Aabb,
+    cwbvh::{CwBvh, builder::build_cwbvh},
     ray::{Ray, RayHit},
     rt_triangle::RtTriangle,
     triangle::Triangle,
 };
 
 use crate::scene::Scene;
+
+/// A triangle whose bounding box is padded: CWBVH nodes quantise child boxes relative to the
+/// parent's extent, and a scene that is flat along an axis (a single floor) has zero extent
+/// there, which made every ray miss. Padding by the ray epsilon keeps boxes non-degenerate.
+struct Padded(Triangle, f32);
+
+impl Boundable for Padded {
+    fn aabb(&self) -> Aabb {
+        let b = self.0.aabb();
+        Aabb { min: b.min - Vec3A::splat(self.1), max: b.max + Vec3A::splat(self.1) }
+    }
+}
+
+/// An obvhs ray. Adding +0.0 turns −0.0 direction components into +0.0: obvhs derives the
+/// traversal octant from the sign bits, and a −0.0 component (as in `-Vec3::Y`) made rays
+/// straight along an axis miss everything (found by `tests::axis_aligned_rays_hit`).
+#[inline]
+fn make_ray(origin: Vec3, dir: Vec3, tmax: f32) -> Ray {
+    Ray::new(origin.into(), Vec3A::from(dir) + Vec3A::ZERO, 0.0, tmax)
+}
 
 /// A ray hit on a scene triangle.
 #[derive(Clone, Copy, Debug)]
@@ -82,7 +103,8 @@ impl Tracer {
             return Tracer { bvh: CwBvh::default(), triangles: vec![], scene_triangle: vec![], back_copy, epsilon };
         }
         let mut build_time = Duration::ZERO;
-        let bvh = build_cwbvh_from_tris(&tris, BvhBuildParams::medium_build(), &mut build_time);
+        let padded: Vec<Padded> = tris.iter().map(|t| Padded(*t, epsilon)).collect();
+        let bvh = build_cwbvh(&padded, BvhBuildParams::medium_build(), &mut build_time);
         let triangles = bvh.primitive_indices.iter().map(|&i| RtTriangle::from(&tris[i as usize])).collect();
         let scene_triangle = bvh.primitive_indices.iter().map(|&i| ids[i as usize]).collect();
         Tracer { bvh, triangles, scene_triangle, back_copy, epsilon }
@@ -102,7 +124,7 @@ impl Tracer {
         if self.triangles.is_empty() {
             return None;
         }
-        let ray = Ray::new(origin.into(), dir.into(), 0.0, tmax);
+        let ray = make_ray(origin, dir, tmax);
         let mut hit = RayHit::none();
         let found = self.bvh.ray_traverse(ray, &mut hit, |ray, id| self.triangles[id].intersect(ray));
         if !found {
@@ -136,7 +158,7 @@ impl Tracer {
         if len <= self.epsilon {
             return false;
         }
-        let ray = Ray::new(a.into(), (d / len).into(), 0.0, len - self.epsilon);
+        let ray = make_ray(a, d / len, len - self.epsilon);
         !self.bvh.ray_traverse_miss(ray, |ray, id| self.triangles[id].intersect(ray))
     }
 
@@ -146,7 +168,97 @@ impl Tracer {
         if self.triangles.is_empty() {
             return true;
         }
-        let ray = Ray::new(origin.into(), dir.into(), 0.0, tmax);
+        let ray = make_ray(origin, dir, tmax);
         self.bvh.ray_traverse_miss(ray, |ray, id| self.triangles[id].intersect(ray))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::{Instance, Material};
+
+    /// One triangle in the z = 0 plane facing +z; optionally double-sided (with a back copy).
+    fn scene(double_sided: bool) -> Scene {
+        let p = [Vec3::new(0.0, 0.0, 0.0), Vec3::new(1.0, 0.0, 0.0), Vec3::new(0.0, 1.0, 0.0)];
+        let mut s = Scene::default();
+        let mut add = |normal: Vec3, tri: [u32; 3], back_of: Option<u32>| {
+            let base = s.positions.len() as u32;
+            s.positions.extend(p);
+            s.normals.extend([normal; 3]);
+            s.uv0.extend([Vec2::ZERO; 3]);
+            s.uv1.extend([Vec2::ZERO; 3]);
+            let t = s.triangles.len() as u32;
+            s.triangles.push(tri.map(|v| v + base));
+            s.triangle_instance.push(s.instances.len() as u32);
+            s.instances.push(Instance {
+                node: 0,
+                mesh: 0,
+                primitive: 0,
+                material: 0,
+                vertices: base..base + 3,
+                triangles: t..t + 1,
+                source_triangle: vec![0],
+                back_of,
+                back: None,
+                has_uv1: false,
+            });
+        };
+        add(Vec3::Z, [0, 1, 2], None);
+        if double_sided {
+            add(-Vec3::Z, [0, 2, 1], Some(0));
+            s.instances[0].back = Some(1);
+        }
+        s.materials.push(Material::default());
+        s
+    }
+
+    #[test]
+    fn barycentrics_reconstruct_the_hit_point() {
+        let s = scene(false);
+        let tracer = Tracer::new(&s);
+        let hit = tracer.closest(Vec3::new(0.2, 0.3, 1.0), -Vec3::Z, f32::INFINITY).unwrap();
+        assert!((hit.t - 1.0).abs() < 1e-5);
+        // p = (1−u−v)·p0 + u·p1 + v·p2 with p1 = +x, p2 = +y.
+        assert!((hit.bary - Vec2::new(0.2, 0.3)).length() < 1e-5, "{}", hit.bary);
+        assert!(hit.front && hit.triangle == 0);
+    }
+
+    #[test]
+    fn back_hits_map_to_the_back_copy_or_report_the_back() {
+        let single = Tracer::new(&scene(false));
+        let hit = single.closest(Vec3::new(0.2, 0.3, -1.0), Vec3::Z, f32::INFINITY).unwrap();
+        assert!(!hit.front && hit.triangle == 0);
+
+        let double = Tracer::new(&scene(true));
+        assert_eq!(double.len(), 1, "the back copy must not be traced twice");
+        let hit = double.closest(Vec3::new(0.2, 0.3, -1.0), Vec3::Z, f32::INFINITY).unwrap();
+        assert!(hit.front && hit.triangle == 1);
+    }
+
+    #[test]
+    fn occlusion_and_escape() {
+        let tracer = Tracer::new(&scene(false));
+        assert!(tracer.occluded(Vec3::new(0.2, 0.2, 1.0), Vec3::new(0.2, 0.2, -1.0)));
+        assert!(!tracer.occluded(Vec3::new(2.0, 2.0, 1.0), Vec3::new(2.0, 2.0, -1.0)));
+        assert!(!tracer.escapes(Vec3::new(0.2, 0.2, 1.0), -Vec3::Z, f32::INFINITY));
+        assert!(tracer.escapes(Vec3::new(0.2, 0.2, 1.0), Vec3::Z, f32::INFINITY));
+    }
+
+    #[test]
+    fn axis_aligned_rays_hit() {
+        let tracer = Tracer::new(&scene(false));
+        for dir in [-Vec3::Z, Vec3::new(-0.0, -0.0, -1.0)] {
+            assert!(tracer.closest(Vec3::new(0.2, 0.3, 1.0), dir, f32::INFINITY).is_some());
+        }
+    }
+
+    #[test]
+    fn epsilon_stays_above_the_bvh_clamp_for_tiny_scenes() {
+        let mut s = scene(false);
+        for p in &mut s.positions {
+            *p *= 1e-3;
+        }
+        assert!(Tracer::new(&s).epsilon >= 4e-4);
     }
 }

@@ -18,8 +18,11 @@ const FAST: [&str; 6] = ["--texels-per-unit", "6", "--rays", "32", "--light-samp
 
 fn bake(scene: &Path, out: &Path, extra: &[&str]) -> Output {
     let mut args = vec!["bake", scene.to_str().unwrap(), "-o", out.to_str().unwrap()];
-    args.extend_from_slice(&FAST);
     args.extend_from_slice(extra);
+    if !extra.contains(&"--texels-per-unit") {
+        args.extend_from_slice(&FAST[..2]);
+    }
+    args.extend_from_slice(&FAST[2..]);
     lightbake(&args)
 }
 

@@ -51,7 +51,14 @@ pub fn punctual_irradiance(light: &Light, p: Vec3, n: Vec3, tracer: &Tracer) -> 
     }
 }
 
-/// Emissive triangles, sampled in proportion to their emitted power.
+/// Emitters whose material covers more than this fraction of the scene's surface are left to the
+/// gathering rays: they subtend large solid angles, where cosine-distributed rays find them with
+/// little noise, while area sampling of a large emitter is noisy (1/r² near corners). Measured
+/// on the furnace (every face emits): sampling them too raised the worst texel error from 0.01%
+/// to 3.3% at K = L = 256. Small emitters (the Cornell light, 0.8% of its scene) are sampled.
+pub const LARGE_EMITTER_FRACTION: f32 = 0.25;
+
+/// Small emissive triangles, sampled in proportion to their emitted power.
 pub struct Emitters {
     /// Scene triangles that emit.
     pub triangles: Vec<u32>,
@@ -64,12 +71,21 @@ pub struct Emitters {
 
 impl Emitters {
     pub fn new(scene: &Scene, texels: &Texels) -> Emitters {
+        // Surface area per material, to leave large emitters to the gathering rays.
+        let mut material_area = vec![0.0f64; scene.materials.len()];
+        let mut total_area = 0.0f64;
+        for (t, tri) in scene.triangles.iter().enumerate() {
+            let a = triangle_area(scene, tri) as f64;
+            material_area[scene.instances[scene.triangle_instance[t] as usize].material as usize] += a;
+            total_area += a;
+        }
+        let large = |m: usize| material_area[m] > LARGE_EMITTER_FRACTION as f64 * total_area;
         let mut triangles = Vec::new();
         let mut power = Vec::new();
         for (t, tri) in scene.triangles.iter().enumerate() {
             let inst = &scene.instances[scene.triangle_instance[t] as usize];
             let m = &scene.materials[inst.material as usize];
-            if m.emission.max_element() <= 0.0 {
+            if m.emission.max_element() <= 0.0 || large(inst.material as usize) {
                 continue;
             }
             let area = triangle_area(scene, tri);
