@@ -9,7 +9,7 @@ use crate::config::BakeConfig;
 use crate::lightmap::{self, LightmapPages};
 use crate::output::{self, PageFiles, Staging};
 use crate::trace::Tracer;
-use crate::{atlas, scene, solve, texels, transport, Error, Progress, Result};
+use crate::{Error, Progress, Result, atlas, scene, solve, texels, transport};
 
 /// Wall time of one pipeline stage.
 #[derive(Clone, Debug)]
@@ -37,7 +37,11 @@ pub struct BakeReport {
 impl BakeReport {
     /// One line: texels, pages, rays, iterations, residual, seconds per stage.
     pub fn summary(&self) -> String {
-        let stages: Vec<String> = self.stages.iter().map(|s| format!("{} {:.2}s", s.stage, s.seconds)).collect();
+        let stages: Vec<String> = self
+            .stages
+            .iter()
+            .map(|s| format!("{} {:.2}s", s.stage, s.seconds))
+            .collect();
         let total: f64 = self.stages.iter().map(|s| s.seconds).sum();
         format!(
             "{} texels on {} page(s), {} triangles, {:.2} M rays, {} iterations, residual {:.1e}{}; {} (total {:.2}s)",
@@ -47,7 +51,11 @@ impl BakeReport {
             self.rays as f64 * 1e-6,
             self.iterations,
             self.residual,
-            if self.converged { "" } else { " (NOT converged)" },
+            if self.converged {
+                ""
+            } else {
+                " (NOT converged)"
+            },
             stages.join(", "),
             total
         )
@@ -71,7 +79,12 @@ pub struct Baked {
 
 /// Bakes `input` (.gltf or .glb) into `out_dir`: `<stem>.gltf` + `<stem>.bin` (or `<stem>.glb`),
 /// and per page `<stem>_lightmap<k>.exr` and a tone-mapped `<stem>_lightmap<k>.png`.
-pub fn bake(input: &Path, out_dir: &Path, config: &BakeConfig, progress: &dyn Progress) -> Result<BakeReport> {
+pub fn bake(
+    input: &Path,
+    out_dir: &Path,
+    config: &BakeConfig,
+    progress: &dyn Progress,
+) -> Result<BakeReport> {
     refuse_overwriting_input(input, out_dir)?;
     let baked = compute(input, config, progress)?;
     write(baked, input, out_dir, config, progress)
@@ -81,7 +94,12 @@ pub fn bake(input: &Path, out_dir: &Path, config: &BakeConfig, progress: &dyn Pr
 pub fn compute(input: &Path, config: &BakeConfig, progress: &dyn Progress) -> Result<Baked> {
     config.validate()?;
     let mut stages = Vec::new();
-    let mut timed = |stage: &'static str, start: Instant| stages.push(StageTime { stage, seconds: start.elapsed().as_secs_f64() });
+    let mut timed = |stage: &'static str, start: Instant| {
+        stages.push(StageTime {
+            stage,
+            seconds: start.elapsed().as_secs_f64(),
+        })
+    };
 
     let t = Instant::now();
     let (scene, source) = scene::load(input)?;
@@ -142,20 +160,59 @@ pub fn compute(input: &Path, config: &BakeConfig, progress: &dyn Progress) -> Re
     lightmap::dilate(&mut pages, config.atlas.padding.max(2) * 2);
     timed("dilate", t);
 
-    Ok(Baked { scene, source, atlas, texels, transport, solution, lightmap, pages, stages })
+    Ok(Baked {
+        scene,
+        source,
+        atlas,
+        texels,
+        transport,
+        solution,
+        lightmap,
+        pages,
+        stages,
+    })
 }
 
 /// Writes a computed bake: EXR + PNG pages and the glTF, atomically.
-pub fn write(baked: Baked, input: &Path, out_dir: &Path, config: &BakeConfig, progress: &dyn Progress) -> Result<BakeReport> {
-    let Baked { scene, source, atlas, texels, transport, solution, pages, mut stages, .. } = baked;
+pub fn write(
+    baked: Baked,
+    input: &Path,
+    out_dir: &Path,
+    config: &BakeConfig,
+    progress: &dyn Progress,
+) -> Result<BakeReport> {
+    let Baked {
+        scene,
+        source,
+        atlas,
+        texels,
+        transport,
+        solution,
+        pages,
+        mut stages,
+        ..
+    } = baked;
     let t = Instant::now();
-    let stem = input.file_stem().and_then(|s| s.to_str()).unwrap_or("scene").to_string();
+    let stem = input
+        .file_stem()
+        .and_then(|s| s.to_str())
+        .unwrap_or("scene")
+        .to_string();
     let mut staging = Staging::new(out_dir, &protected_files(input, &source))?;
     let mut page_files = Vec::with_capacity(pages.pages.len());
     for (k, page) in pages.pages.iter().enumerate() {
-        let files = PageFiles { exr: format!("{stem}_lightmap{k}.exr"), png: format!("{stem}_lightmap{k}.png") };
-        staging.write(&files.exr, &output::write_exr(page, config.output.float, input)?)?;
-        staging.write(&files.png, &output::write_png_preview(page, config.output.preview_exposure)?)?;
+        let files = PageFiles {
+            exr: format!("{stem}_lightmap{k}.exr"),
+            png: format!("{stem}_lightmap{k}.png"),
+        };
+        staging.write(
+            &files.exr,
+            &output::write_exr(page, config.output.float, input)?,
+        )?;
+        staging.write(
+            &files.png,
+            &output::write_png_preview(page, config.output.preview_exposure)?,
+        )?;
         page_files.push(files);
     }
     output::write_gltf(&scene, &source, &atlas, &page_files, &mut staging, &stem)?;
@@ -163,7 +220,10 @@ pub fn write(baked: Baked, input: &Path, out_dir: &Path, config: &BakeConfig, pr
     let mut files = staging.commit()?;
     // The glTF (or .glb) first, then pages in order.
     files.sort_by_key(|p| !matches!(p.extension().and_then(|e| e.to_str()), Some("gltf" | "glb")));
-    stages.push(StageTime { stage: "write", seconds: t.elapsed().as_secs_f64() });
+    stages.push(StageTime {
+        stage: "write",
+        seconds: t.elapsed().as_secs_f64(),
+    });
 
     Ok(BakeReport {
         triangles: scene.triangles.len(),
@@ -180,7 +240,10 @@ pub fn write(baked: Baked, input: &Path, out_dir: &Path, config: &BakeConfig, pr
 
 /// Fails early (before any work) when the output would replace the input file itself.
 fn refuse_overwriting_input(input: &Path, out_dir: &Path) -> Result<()> {
-    let (Ok(input_dir), Ok(out)) = (input.parent().unwrap_or(Path::new(".")).canonicalize(), out_dir.canonicalize()) else {
+    let (Ok(input_dir), Ok(out)) = (
+        input.parent().unwrap_or(Path::new(".")).canonicalize(),
+        out_dir.canonicalize(),
+    ) else {
         return Ok(()); // a missing input is reported by the loader; a missing out_dir is created
     };
     if input_dir == out {
@@ -226,7 +289,11 @@ fn check_memory(scene: &scene::Scene, input: &Path, config: &BakeConfig) -> Resu
 }
 
 fn check_aborted(progress: &dyn Progress) -> Result<()> {
-    if progress.aborted() { Err(Error::Aborted) } else { Ok(()) }
+    if progress.aborted() {
+        Err(Error::Aborted)
+    } else {
+        Ok(())
+    }
 }
 
 /// The input glTF and every external file it references: the output must never overwrite them.
@@ -236,10 +303,10 @@ fn protected_files(input: &Path, source: &scene::Source) -> Vec<PathBuf> {
     for key in ["buffers", "images"] {
         if let Some(items) = source.json.get(key).and_then(|v| v.as_array()) {
             for item in items {
-                if let Some(uri) = item.get("uri").and_then(|u| u.as_str()) {
-                    if !uri.starts_with("data:") {
-                        files.push(base.join(uri));
-                    }
+                if let Some(uri) = item.get("uri").and_then(|u| u.as_str())
+                    && !uri.starts_with("data:")
+                {
+                    files.push(base.join(uri));
                 }
             }
         }

@@ -84,9 +84,19 @@ pub struct BakeConfig {
 }
 
 impl BakeConfig {
-    const fn with(texels_per_unit: f32, gather_rays: u32, light_samples: u32, tolerance: f32) -> Self {
+    const fn with(
+        texels_per_unit: f32,
+        gather_rays: u32,
+        light_samples: u32,
+        tolerance: f32,
+    ) -> Self {
         BakeConfig {
-            atlas: AtlasParams { uv: UvMode::Auto, texels_per_unit, max_page_size: 1024, padding: 2 },
+            atlas: AtlasParams {
+                uv: UvMode::Auto,
+                texels_per_unit,
+                max_page_size: 1024,
+                padding: 2,
+            },
             transport: TransportParams {
                 gather_rays,
                 light_samples,
@@ -94,8 +104,15 @@ impl BakeConfig {
                 indirect_only: false,
                 seed: 0,
             },
-            solve: SolveParams { solver: Solver::Jacobi, tolerance, max_iterations: 10_000 },
-            output: OutputParams { float: false, preview_exposure: 0.0 },
+            solve: SolveParams {
+                solver: Solver::Jacobi,
+                tolerance,
+                max_iterations: 10_000,
+            },
+            output: OutputParams {
+                float: false,
+                preview_exposure: 0.0,
+            },
         }
     }
     /// Fast look at the lighting: coarse texels, few rays.
@@ -111,38 +128,65 @@ impl BakeConfig {
         Self::with(32.0, 1024, 256, 1e-5)
     }
     /// All presets, for tests and benchmarks.
-    pub const PRESETS: [(&'static str, BakeConfig); 3] =
-        [("draft", Self::draft()), ("medium", Self::medium()), ("high", Self::high())];
+    pub const PRESETS: [(&'static str, BakeConfig); 3] = [
+        ("draft", Self::draft()),
+        ("medium", Self::medium()),
+        ("high", Self::high()),
+    ];
 
     /// Checks option ranges before any work is done.
     pub fn validate(&self) -> crate::Result<()> {
         use crate::Error::Option;
         let a = &self.atlas;
         if !(a.texels_per_unit.is_finite() && a.texels_per_unit > 0.0) {
-            return Err(Option(format!("texels per unit must be a positive number, got {}", a.texels_per_unit)));
+            return Err(Option(format!(
+                "texels per unit must be a positive number, got {}",
+                a.texels_per_unit
+            )));
         }
         if a.texels_per_unit > 100_000.0 {
-            return Err(Option(format!("texels per unit {} is absurdly high (max 100000)", a.texels_per_unit)));
+            return Err(Option(format!(
+                "texels per unit {} is absurdly high (max 100000)",
+                a.texels_per_unit
+            )));
         }
         if !(16..=16384).contains(&a.max_page_size) {
-            return Err(Option(format!("max page size must be within 16..=16384, got {}", a.max_page_size)));
+            return Err(Option(format!(
+                "max page size must be within 16..=16384, got {}",
+                a.max_page_size
+            )));
         }
         if a.padding == 0 || a.padding > 64 {
-            return Err(Option(format!("padding must be within 1..=64 texels, got {}", a.padding)));
+            return Err(Option(format!(
+                "padding must be within 1..=64 texels, got {}",
+                a.padding
+            )));
         }
         let t = &self.transport;
         if t.gather_rays == 0 || t.gather_rays > 1 << 20 {
-            return Err(Option(format!("gather rays must be within 1..=1048576, got {}", t.gather_rays)));
+            return Err(Option(format!(
+                "gather rays must be within 1..=1048576, got {}",
+                t.gather_rays
+            )));
         }
         if t.light_samples > 1 << 20 {
-            return Err(Option(format!("light samples must be at most 1048576, got {}", t.light_samples)));
+            return Err(Option(format!(
+                "light samples must be at most 1048576, got {}",
+                t.light_samples
+            )));
         }
         if !(t.sky.is_finite() && t.sky.min_element() >= 0.0) {
-            return Err(Option(format!("sky radiance must be finite and non-negative, got {}", t.sky)));
+            return Err(Option(format!(
+                "sky radiance must be finite and non-negative, got {}",
+                t.sky
+            )));
         }
         let s = &self.solve;
         if !(s.tolerance.is_finite() && s.tolerance > 0.0 && s.tolerance < 1.0) {
-            return Err(Option(format!("tolerance must be within (0, 1), got {}", s.tolerance)));
+            return Err(Option(format!(
+                "tolerance must be within (0, 1), got {}",
+                s.tolerance
+            )));
         }
         if s.max_iterations == 0 {
             return Err(Option("max iterations must be at least 1".into()));

@@ -33,13 +33,22 @@ pub enum Error {
 
 impl Error {
     pub fn invalid(path: impl Into<PathBuf>, message: impl Into<String>) -> Self {
-        Error::Invalid { path: path.into(), message: message.into() }
+        Error::Invalid {
+            path: path.into(),
+            message: message.into(),
+        }
     }
     pub fn unsupported(path: impl Into<PathBuf>, message: impl Into<String>) -> Self {
-        Error::Unsupported { path: path.into(), message: message.into() }
+        Error::Unsupported {
+            path: path.into(),
+            message: message.into(),
+        }
     }
     pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
-        Error::Io { path: path.into(), source }
+        Error::Io {
+            path: path.into(),
+            source,
+        }
     }
 }
 

@@ -52,7 +52,7 @@ pub mod testing;
 
 mod bake;
 
-pub use bake::{bake, compute, write, BakeReport, Baked, StageTime};
+pub use bake::{BakeReport, Baked, StageTime, bake, compute, write};
 pub use config::BakeConfig;
 pub use error::{Error, Result};
 pub use progress::{NoProgress, Progress};

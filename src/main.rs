@@ -14,7 +14,11 @@ use lightbake::config::{Solver, UvMode};
 use lightbake::{BakeConfig, Progress};
 
 #[derive(Parser)]
-#[command(name = "lightbake", version, about = "Bake radiosity lightmaps for glTF scenes")]
+#[command(
+    name = "lightbake",
+    version,
+    about = "Bake radiosity lightmaps for glTF scenes"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -116,7 +120,11 @@ struct BakeArgs {
 
 fn parse_rgb(s: &str) -> Result<Vec3, String> {
     let parts: Vec<&str> = s.split(',').collect();
-    let v: Vec<f32> = parts.iter().map(|p| p.trim().parse::<f32>()).collect::<Result<_, _>>().map_err(|e| format!("{s:?}: {e}"))?;
+    let v: Vec<f32> = parts
+        .iter()
+        .map(|p| p.trim().parse::<f32>())
+        .collect::<Result<_, _>>()
+        .map_err(|e| format!("{s:?}: {e}"))?;
     match v[..] {
         [x] => Ok(Vec3::splat(x)),
         [r, g, b] => Ok(Vec3::new(r, g, b)),
@@ -205,7 +213,10 @@ impl Progress for Bars {
 
 fn bake(args: &BakeArgs) -> Result<()> {
     let config = args.config();
-    let bars = Bars { enabled: !args.quiet && std::io::stderr().is_terminal(), bar: Mutex::new(None) };
+    let bars = Bars {
+        enabled: !args.quiet && std::io::stderr().is_terminal(),
+        bar: Mutex::new(None),
+    };
     let report = lightbake::bake(&args.scene, &args.output, &config, &bars)
         .with_context(|| format!("baking {} failed", args.scene.display()))?;
     if !args.quiet {
@@ -221,11 +232,13 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match &cli.command {
         Command::Bake(args) => {
-            if let Some(n) = args.threads {
-                if let Err(e) = rayon::ThreadPoolBuilder::new().num_threads(n.max(1)).build_global() {
-                    eprintln!("error: cannot start {n} threads: {e}");
-                    return ExitCode::FAILURE;
-                }
+            if let Some(n) = args.threads
+                && let Err(e) = rayon::ThreadPoolBuilder::new()
+                    .num_threads(n.max(1))
+                    .build_global()
+            {
+                eprintln!("error: cannot start {n} threads: {e}");
+                return ExitCode::FAILURE;
             }
             bake(args)
         }

@@ -31,7 +31,10 @@ struct Padded(Triangle, f32);
 impl Boundable for Padded {
     fn aabb(&self) -> Aabb {
         let b = self.0.aabb();
-        Aabb { min: b.min - Vec3A::splat(self.1), max: b.max + Vec3A::splat(self.1) }
+        Aabb {
+            min: b.min - Vec3A::splat(self.1),
+            max: b.max + Vec3A::splat(self.1),
+        }
     }
 }
 
@@ -90,24 +93,59 @@ impl Tracer {
         let tri = |t: u32| {
             let [a, b, c] = scene.triangles[t as usize];
             let p = |v: u32| Vec3A::from(scene.positions[v as usize]);
-            Triangle { v0: p(a), v1: p(b), v2: p(c) }
+            Triangle {
+                v0: p(a),
+                v1: p(b),
+                v2: p(c),
+            }
         };
         let tris: Vec<Triangle> = ids.iter().map(|&t| tri(t)).collect();
 
-        let (lo, hi) = scene.positions.iter().fold((Vec3::MAX, Vec3::MIN), |(lo, hi), &p| (lo.min(p), hi.max(p)));
-        let extent = if scene.positions.is_empty() { 1.0 } else { (hi - lo).max_element().max(hi.abs().max(lo.abs()).max_element()) };
+        let (lo, hi) = scene
+            .positions
+            .iter()
+            .fold((Vec3::MAX, Vec3::MIN), |(lo, hi), &p| {
+                (lo.min(p), hi.max(p))
+            });
+        let extent = if scene.positions.is_empty() {
+            1.0
+        } else {
+            (hi - lo)
+                .max_element()
+                .max(hi.abs().max(lo.abs()).max_element())
+        };
         // 1e-5 of the scene size, but never within 4x of obvhs' fixed 1e-4 clamp.
         let epsilon = (extent * 1e-5).max(4e-4);
 
         if tris.is_empty() {
-            return Tracer { bvh: CwBvh::default(), triangles: vec![], scene_triangle: vec![], back_copy, epsilon };
+            return Tracer {
+                bvh: CwBvh::default(),
+                triangles: vec![],
+                scene_triangle: vec![],
+                back_copy,
+                epsilon,
+            };
         }
         let mut build_time = Duration::ZERO;
         let padded: Vec<Padded> = tris.iter().map(|t| Padded(*t, epsilon)).collect();
         let bvh = build_cwbvh(&padded, BvhBuildParams::medium_build(), &mut build_time);
-        let triangles = bvh.primitive_indices.iter().map(|&i| RtTriangle::from(&tris[i as usize])).collect();
-        let scene_triangle = bvh.primitive_indices.iter().map(|&i| ids[i as usize]).collect();
-        Tracer { bvh, triangles, scene_triangle, back_copy, epsilon }
+        let triangles = bvh
+            .primitive_indices
+            .iter()
+            .map(|&i| RtTriangle::from(&tris[i as usize]))
+            .collect();
+        let scene_triangle = bvh
+            .primitive_indices
+            .iter()
+            .map(|&i| ids[i as usize])
+            .collect();
+        Tracer {
+            bvh,
+            triangles,
+            scene_triangle,
+            back_copy,
+            epsilon,
+        }
     }
 
     /// Number of triangles in the BVH.
@@ -126,7 +164,9 @@ impl Tracer {
         }
         let ray = make_ray(origin, dir, tmax);
         let mut hit = RayHit::none();
-        let found = self.bvh.ray_traverse(ray, &mut hit, |ray, id| self.triangles[id].intersect(ray));
+        let found = self
+            .bvh
+            .ray_traverse(ray, &mut hit, |ray, id| self.triangles[id].intersect(ray));
         if !found {
             return None;
         }
@@ -143,7 +183,12 @@ impl Tracer {
                 front_seen = true;
             }
         }
-        Some(Hit { triangle, t: hit.t, bary, front: front_seen })
+        Some(Hit {
+            triangle,
+            t: hit.t,
+            bary,
+            front: front_seen,
+        })
     }
 
     /// True when something blocks the open segment from `a` to `b` (both already offset by the
@@ -159,7 +204,9 @@ impl Tracer {
             return false;
         }
         let ray = make_ray(a, d / len, len - self.epsilon);
-        !self.bvh.ray_traverse_miss(ray, |ray, id| self.triangles[id].intersect(ray))
+        !self
+            .bvh
+            .ray_traverse_miss(ray, |ray, id| self.triangles[id].intersect(ray))
     }
 
     /// True when the ray from `origin` along unit `dir` hits nothing (escapes to the sky).
@@ -169,7 +216,8 @@ impl Tracer {
             return true;
         }
         let ray = make_ray(origin, dir, tmax);
-        self.bvh.ray_traverse_miss(ray, |ray, id| self.triangles[id].intersect(ray))
+        self.bvh
+            .ray_traverse_miss(ray, |ray, id| self.triangles[id].intersect(ray))
     }
 }
 
@@ -180,7 +228,11 @@ mod tests {
 
     /// One triangle in the z = 0 plane facing +z; optionally double-sided (with a back copy).
     fn scene(double_sided: bool) -> Scene {
-        let p = [Vec3::new(0.0, 0.0, 0.0), Vec3::new(1.0, 0.0, 0.0), Vec3::new(0.0, 1.0, 0.0)];
+        let p = [
+            Vec3::new(0.0, 0.0, 0.0),
+            Vec3::new(1.0, 0.0, 0.0),
+            Vec3::new(0.0, 1.0, 0.0),
+        ];
         let mut s = Scene::default();
         let mut add = |normal: Vec3, tri: [u32; 3], back_of: Option<u32>| {
             let base = s.positions.len() as u32;
@@ -217,22 +269,32 @@ mod tests {
     fn barycentrics_reconstruct_the_hit_point() {
         let s = scene(false);
         let tracer = Tracer::new(&s);
-        let hit = tracer.closest(Vec3::new(0.2, 0.3, 1.0), -Vec3::Z, f32::INFINITY).unwrap();
+        let hit = tracer
+            .closest(Vec3::new(0.2, 0.3, 1.0), -Vec3::Z, f32::INFINITY)
+            .unwrap();
         assert!((hit.t - 1.0).abs() < 1e-5);
         // p = (1−u−v)·p0 + u·p1 + v·p2 with p1 = +x, p2 = +y.
-        assert!((hit.bary - Vec2::new(0.2, 0.3)).length() < 1e-5, "{}", hit.bary);
+        assert!(
+            (hit.bary - Vec2::new(0.2, 0.3)).length() < 1e-5,
+            "{}",
+            hit.bary
+        );
         assert!(hit.front && hit.triangle == 0);
     }
 
     #[test]
     fn back_hits_map_to_the_back_copy_or_report_the_back() {
         let single = Tracer::new(&scene(false));
-        let hit = single.closest(Vec3::new(0.2, 0.3, -1.0), Vec3::Z, f32::INFINITY).unwrap();
+        let hit = single
+            .closest(Vec3::new(0.2, 0.3, -1.0), Vec3::Z, f32::INFINITY)
+            .unwrap();
         assert!(!hit.front && hit.triangle == 0);
 
         let double = Tracer::new(&scene(true));
         assert_eq!(double.len(), 1, "the back copy must not be traced twice");
-        let hit = double.closest(Vec3::new(0.2, 0.3, -1.0), Vec3::Z, f32::INFINITY).unwrap();
+        let hit = double
+            .closest(Vec3::new(0.2, 0.3, -1.0), Vec3::Z, f32::INFINITY)
+            .unwrap();
         assert!(hit.front && hit.triangle == 1);
     }
 
@@ -249,7 +311,11 @@ mod tests {
     fn axis_aligned_rays_hit() {
         let tracer = Tracer::new(&scene(false));
         for dir in [-Vec3::Z, Vec3::new(-0.0, -0.0, -1.0)] {
-            assert!(tracer.closest(Vec3::new(0.2, 0.3, 1.0), dir, f32::INFINITY).is_some());
+            assert!(
+                tracer
+                    .closest(Vec3::new(0.2, 0.3, 1.0), dir, f32::INFINITY)
+                    .is_some()
+            );
         }
     }
 

@@ -20,7 +20,10 @@ fn furnace(name: &str, rho: f32, tolerance: f32) {
         }
     }
     assert!(baked.solution.converged);
-    assert!(worst < tolerance, "{name}: worst relative error {worst} (expected {expected})");
+    assert!(
+        worst < tolerance,
+        "{name}: worst relative error {worst} (expected {expected})"
+    );
 }
 
 #[test]
@@ -55,7 +58,10 @@ fn point_light_cos_cubed() {
         let expected = intensity * cos / (PI * r * r);
         let got = baked.lightmap[i];
         for c in got.to_array() {
-            assert!((c - expected).abs() / expected < 0.01, "at {p}: got {c}, expected {expected}");
+            assert!(
+                (c - expected).abs() / expected < 0.01,
+                "at {p}: got {c}, expected {expected}"
+            );
         }
         checked += 1;
     }

@@ -7,14 +7,24 @@ use std::process::{Command, Output};
 use crate::util::{fixture, list_files, scratch};
 
 fn lightbake(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_lightbake")).args(args).output().expect("run lightbake")
+    Command::new(env!("CARGO_BIN_EXE_lightbake"))
+        .args(args)
+        .output()
+        .expect("run lightbake")
 }
 
 fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()
 }
 
-const FAST: [&str; 6] = ["--texels-per-unit", "6", "--rays", "32", "--light-samples", "8"];
+const FAST: [&str; 6] = [
+    "--texels-per-unit",
+    "6",
+    "--rays",
+    "32",
+    "--light-samples",
+    "8",
+];
 
 fn bake(scene: &Path, out: &Path, extra: &[&str]) -> Output {
     let mut args = vec!["bake", scene.to_str().unwrap(), "-o", out.to_str().unwrap()];
@@ -33,18 +43,33 @@ fn bakes_cornell_box_and_prints_summary() {
     let o = bake(&fixture("cornell_box.gltf"), &out, &[]);
     assert!(o.status.success(), "{}", stderr(&o));
     let stdout = String::from_utf8_lossy(&o.stdout);
-    assert!(stdout.contains("texels") && stdout.contains("iterations") && stdout.contains("residual"), "{stdout}");
+    assert!(
+        stdout.contains("texels") && stdout.contains("iterations") && stdout.contains("residual"),
+        "{stdout}"
+    );
     let files = list_files(&out);
-    for f in ["cornell_box.gltf", "cornell_box.bin", "cornell_box_lightmap0.exr", "cornell_box_lightmap0.png"] {
+    for f in [
+        "cornell_box.gltf",
+        "cornell_box.bin",
+        "cornell_box_lightmap0.exr",
+        "cornell_box_lightmap0.png",
+    ] {
         assert!(files.contains(&f.to_string()), "{f} missing from {files:?}");
     }
-    assert!(!files.iter().any(|f| f.contains("lightbake-tmp")), "{files:?}");
+    assert!(
+        !files.iter().any(|f| f.contains("lightbake-tmp")),
+        "{files:?}"
+    );
 }
 
 #[test]
 fn quiet_prints_nothing() {
     let dir = scratch();
-    let o = bake(&fixture("point_light.gltf"), &dir.path().join("o"), &["--quiet"]);
+    let o = bake(
+        &fixture("point_light.gltf"),
+        &dir.path().join("o"),
+        &["--quiet"],
+    );
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(o.stdout.is_empty());
 }
@@ -53,7 +78,17 @@ fn quiet_prints_nothing() {
 fn help_explains_every_option() {
     let o = lightbake(&["bake", "--help"]);
     let help = String::from_utf8_lossy(&o.stdout);
-    for flag in ["--texels-per-unit", "--max-page-size", "--uv", "--rays", "--sky", "--float", "--quiet", "--tolerance", "--solver"] {
+    for flag in [
+        "--texels-per-unit",
+        "--max-page-size",
+        "--uv",
+        "--rays",
+        "--sky",
+        "--float",
+        "--quiet",
+        "--tolerance",
+        "--solver",
+    ] {
         assert!(help.contains(flag), "{flag} missing from help");
     }
     assert!(help.contains("default"), "defaults not shown");
@@ -64,11 +99,22 @@ fn fails(scene: &Path, extra: &[&str], needle: &str) {
     let dir = scratch();
     let out = dir.path().join("out");
     let o = bake(scene, &out, extra);
-    assert!(!o.status.success(), "expected failure for {}", scene.display());
+    assert!(
+        !o.status.success(),
+        "expected failure for {}",
+        scene.display()
+    );
     let err = stderr(&o);
-    assert!(err.contains(needle), "stderr {err:?} should mention {needle:?}");
+    assert!(
+        err.contains(needle),
+        "stderr {err:?} should mention {needle:?}"
+    );
     if out.exists() {
-        assert!(list_files(&out).is_empty(), "left behind: {:?}", list_files(&out));
+        assert!(
+            list_files(&out).is_empty(),
+            "left behind: {:?}",
+            list_files(&out)
+        );
     }
 }
 
@@ -86,7 +132,11 @@ fn missing_file_is_named() {
 #[test]
 fn malformed_json_is_named() {
     let dir = scratch();
-    let p = write(dir.path(), "broken.gltf", "{ \"asset\": { \"version\": \"2.0\" ");
+    let p = write(
+        dir.path(),
+        "broken.gltf",
+        "{ \"asset\": { \"version\": \"2.0\" ",
+    );
     fails(&p, &[], "broken.gltf");
 }
 
@@ -112,9 +162,21 @@ fn unsupported_required_extension_is_named() {
 
 #[test]
 fn absurd_options_are_refused() {
-    fails(&fixture("cornell_box.gltf"), &["--texels-per-unit", "0"], "texels per unit");
-    fails(&fixture("cornell_box.gltf"), &["--texels-per-unit", "90000"], "texels");
-    fails(&fixture("cornell_box.gltf"), &["--max-page-size", "0"], "page size");
+    fails(
+        &fixture("cornell_box.gltf"),
+        &["--texels-per-unit", "0"],
+        "texels per unit",
+    );
+    fails(
+        &fixture("cornell_box.gltf"),
+        &["--texels-per-unit", "90000"],
+        "texels",
+    );
+    fails(
+        &fixture("cornell_box.gltf"),
+        &["--max-page-size", "0"],
+        "page size",
+    );
 }
 
 #[test]

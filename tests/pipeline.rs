@@ -14,11 +14,15 @@ fn exr_pages_read_back_to_the_computed_values() {
     let report = write(baked, &input, dir.path(), &config, &NoProgress).unwrap();
     assert_eq!(report.pages, pages.pages.len());
     for (k, page) in pages.pages.iter().enumerate() {
-        let back = output::read_exr(&dir.path().join(format!("cornell_box_lightmap{k}.exr"))).unwrap();
+        let back =
+            output::read_exr(&dir.path().join(format!("cornell_box_lightmap{k}.exr"))).unwrap();
         assert_eq!((back.width, back.height), (page.width, page.height));
         for (a, b) in page.rgb.iter().zip(&back.rgb) {
             // Half floats keep 11 significant bits.
-            assert!((*a - *b).abs().max_element() <= a.abs().max_element() * 1e-3 + 1e-6, "{a} vs {b}");
+            assert!(
+                (*a - *b).abs().max_element() <= a.abs().max_element() * 1e-3 + 1e-6,
+                "{a} vs {b}"
+            );
         }
     }
 }
@@ -38,7 +42,13 @@ fn float_pages_are_exact() {
 
 #[test]
 fn written_gltf_references_its_lightmaps() {
-    for name in ["cornell_box.gltf", "cornell_box.glb", "instanced.gltf", "textured.gltf", "spot_and_directional.gltf"] {
+    for name in [
+        "cornell_box.gltf",
+        "cornell_box.glb",
+        "instanced.gltf",
+        "textured.gltf",
+        "spot_and_directional.gltf",
+    ] {
         let dir = scratch();
         let input = fixture(name);
         let report = lightbake::bake(&input, dir.path(), &quick(), &NoProgress).unwrap();
@@ -53,19 +63,36 @@ fn written_gltf_references_its_lightmaps() {
         let mut baked_primitives = 0;
         for mesh in doc.meshes() {
             for prim in mesh.primitives() {
-                let Some(extras) = prim.extras() else { continue };
+                let Some(extras) = prim.extras() else {
+                    continue;
+                };
                 let extras: serde_json::Value = serde_json::from_str(extras.get()).unwrap();
-                let Some(lightmap) = extras.get("lightmap") else { continue };
+                let Some(lightmap) = extras.get("lightmap") else {
+                    continue;
+                };
                 baked_primitives += 1;
                 let exr = lightmap["exr"].as_str().unwrap();
                 assert!(dir.path().join(exr).exists(), "{name}: {exr} missing");
                 let reader = prim.reader(|b| Some(&buffers[b.index()]));
-                let uvs: Vec<[f32; 2]> = reader.read_tex_coords(1).expect("TEXCOORD_1").into_f32().collect();
+                let uvs: Vec<[f32; 2]> = reader
+                    .read_tex_coords(1)
+                    .expect("TEXCOORD_1")
+                    .into_f32()
+                    .collect();
                 assert!(!uvs.is_empty());
-                assert!(uvs.iter().flatten().all(|&c| (0.0..=1.0).contains(&c)), "{name}: uv out of range");
-                let material = prim.material().index().expect("baked primitives have a material");
+                assert!(
+                    uvs.iter().flatten().all(|&c| (0.0..=1.0).contains(&c)),
+                    "{name}: uv out of range"
+                );
+                let material = prim
+                    .material()
+                    .index()
+                    .expect("baked primitives have a material");
                 let ext = &json["materials"][material]["extensions"]["FB_materials_lightmap"];
-                assert_eq!(ext["lightmapTexture"]["texCoord"], 1, "{name}: material {material} without FB_materials_lightmap");
+                assert_eq!(
+                    ext["lightmapTexture"]["texCoord"], 1,
+                    "{name}: material {material} without FB_materials_lightmap"
+                );
             }
         }
         assert!(baked_primitives > 0, "{name}: no baked primitive");
@@ -99,10 +126,17 @@ fn output_is_identical_across_thread_counts() {
     let input = fixture("cornell_box.gltf");
     let run = |threads: usize| {
         let dir = scratch();
-        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
-        pool.install(|| lightbake::bake(&input, dir.path(), &quick(), &NoProgress)).unwrap();
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        pool.install(|| lightbake::bake(&input, dir.path(), &quick(), &NoProgress))
+            .unwrap();
         let files = list_files(dir.path());
-        let bytes: Vec<Vec<u8>> = files.iter().map(|f| std::fs::read(dir.path().join(f)).unwrap()).collect();
+        let bytes: Vec<Vec<u8>> = files
+            .iter()
+            .map(|f| std::fs::read(dir.path().join(f)).unwrap())
+            .collect();
         (files, bytes)
     };
     let (files1, bytes1) = run(1);
@@ -130,7 +164,12 @@ fn a_failed_bake_leaves_nothing_behind() {
             self.0.load(std::sync::atomic::Ordering::Relaxed)
         }
     }
-    let r = lightbake::bake(&fixture("cornell_box.gltf"), &out, &quick(), &Cancel(false.into()));
+    let r = lightbake::bake(
+        &fixture("cornell_box.gltf"),
+        &out,
+        &quick(),
+        &Cancel(false.into()),
+    );
     assert!(matches!(r, Err(lightbake::Error::Aborted)), "{r:?}");
     assert!(list_files(&out).is_empty());
 }

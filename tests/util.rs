@@ -5,7 +5,9 @@ use std::path::PathBuf;
 use lightbake::BakeConfig;
 
 pub fn fixture(name: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("fixtures").join(name)
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("fixtures")
+        .join(name)
 }
 
 /// A small, fast configuration for tests (accuracy tests raise what they need).

@@ -9,9 +9,9 @@ mod xatlas;
 
 use glam::Vec2;
 
+use crate::Result;
 use crate::config::{AtlasParams, UvMode};
 use crate::scene::{Scene, Source};
-use crate::Result;
 
 /// Size of one lightmap page in texels.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -54,7 +54,14 @@ impl Atlas {
         let inst = &self.instances[i as usize];
         let local = (t - scene.instances[i as usize].triangles.start) as usize;
         let tri = inst.triangles[local];
-        ([inst.uv[tri[0] as usize], inst.uv[tri[1] as usize], inst.uv[tri[2] as usize]], inst.triangle_page[local])
+        (
+            [
+                inst.uv[tri[0] as usize],
+                inst.uv[tri[1] as usize],
+                inst.uv[tri[2] as usize],
+            ],
+            inst.triangle_page[local],
+        )
     }
 
     /// Debug-build consistency check.
@@ -66,16 +73,33 @@ impl Atlas {
             assert_eq!(inst.triangle_page.len(), si.triangles.len());
             let nv = si.vertices.end - si.vertices.start;
             assert!(inst.xref.iter().all(|&x| x < nv));
-            assert!(inst.uv.iter().all(|uv| uv.is_finite() && uv.min_element() >= 0.0 && uv.max_element() <= 1.0));
-            assert!(inst.triangle_page.iter().all(|&p| (p as usize) < self.pages.len()));
-            assert!(inst.triangles.iter().flatten().all(|&a| (a as usize) < inst.xref.len()));
+            assert!(
+                inst.uv
+                    .iter()
+                    .all(|uv| uv.is_finite() && uv.min_element() >= 0.0 && uv.max_element() <= 1.0)
+            );
+            assert!(
+                inst.triangle_page
+                    .iter()
+                    .all(|&p| (p as usize) < self.pages.len())
+            );
+            assert!(
+                inst.triangles
+                    .iter()
+                    .flatten()
+                    .all(|&a| (a as usize) < inst.xref.len())
+            );
         }
     }
 }
 
 /// Smallest page side that holds `texels` texels: a multiple of 4, within [16, `max`].
 pub(crate) fn page_side(texels: f32, max: u32) -> u32 {
-    let side = if texels.is_finite() { texels.max(0.0).min(max as f32).ceil() as u32 } else { max };
+    let side = if texels.is_finite() {
+        texels.max(0.0).min(max as f32).ceil() as u32
+    } else {
+        max
+    };
     side.next_multiple_of(4).clamp(16.min(max), max)
 }
 

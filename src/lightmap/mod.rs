@@ -48,7 +48,11 @@ impl LightmapPages {
             let page = &mut pages[texels.page[i] as usize];
             let [x, y] = texels.xy[i];
             let k = (y * page.width + x) as usize;
-            page.rgb[k] = if v.is_finite() { v.max(Vec3::ZERO) } else { Vec3::ZERO };
+            page.rgb[k] = if v.is_finite() {
+                v.max(Vec3::ZERO)
+            } else {
+                Vec3::ZERO
+            };
             page.valid[k] = true;
         }
         LightmapPages { pages }

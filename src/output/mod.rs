@@ -8,5 +8,5 @@ mod gltf_out_accessor;
 mod staging;
 
 pub use exr::{read_exr, write_exr, write_png_preview};
-pub use gltf_out::{write_gltf, PageFiles};
+pub use gltf_out::{PageFiles, write_gltf};
 pub use staging::Staging;

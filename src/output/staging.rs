@@ -28,8 +28,17 @@ impl Staging {
             fs::remove_dir_all(&tmp).map_err(|e| Error::io(&tmp, e))?;
         }
         fs::create_dir(&tmp).map_err(|e| Error::io(&tmp, e))?;
-        let protected = protected.iter().filter_map(|p| p.canonicalize().ok()).collect();
-        Ok(Staging { dir, tmp, names: Vec::new(), protected, committed: false })
+        let protected = protected
+            .iter()
+            .filter_map(|p| p.canonicalize().ok())
+            .collect();
+        Ok(Staging {
+            dir,
+            tmp,
+            names: Vec::new(),
+            protected,
+            committed: false,
+        })
     }
 
     /// The final directory.
@@ -40,14 +49,16 @@ impl Staging {
     /// Stages `bytes` as `name` (a relative path with `/` separators, no `..`).
     pub fn write(&mut self, name: &str, bytes: &[u8]) -> Result<()> {
         let final_path = self.final_path(name)?;
-        if self.protected.iter().any(|p| *p == final_path) {
+        if self.protected.contains(&final_path) {
             return Err(Error::Option(format!(
                 "refusing to overwrite the input file {} (choose another output directory)",
                 final_path.display()
             )));
         }
         if self.names.iter().any(|n| n == name) {
-            return Err(Error::Option(format!("output file {name} would be written twice")));
+            return Err(Error::Option(format!(
+                "output file {name} would be written twice"
+            )));
         }
         let path = self.tmp.join(name);
         if let Some(parent) = path.parent() {
@@ -60,8 +71,14 @@ impl Staging {
 
     fn final_path(&self, name: &str) -> Result<PathBuf> {
         let rel = Path::new(name);
-        if rel.is_absolute() || rel.components().any(|c| !matches!(c, std::path::Component::Normal(_))) {
-            return Err(Error::Option(format!("output file name {name:?} must be a plain relative path")));
+        if rel.is_absolute()
+            || rel
+                .components()
+                .any(|c| !matches!(c, std::path::Component::Normal(_)))
+        {
+            return Err(Error::Option(format!(
+                "output file name {name:?} must be a plain relative path"
+            )));
         }
         Ok(self.dir.join(rel))
     }

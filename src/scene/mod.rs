@@ -170,7 +170,10 @@ pub struct Light {
 pub enum LightKind {
     Point,
     /// Cone angles in radians, as in KHR_lights_punctual.
-    Spot { inner_cone_angle: f32, outer_cone_angle: f32 },
+    Spot {
+        inner_cone_angle: f32,
+        outer_cone_angle: f32,
+    },
     Directional,
 }
 
@@ -199,7 +202,10 @@ impl Scene {
     /// Emission is anywhere in the scene (an emissive material or a light).
     pub fn has_light_sources(&self) -> bool {
         !self.lights.is_empty()
-            || self.materials.iter().any(|m| m.emission.max_element() > 0.0)
+            || self
+                .materials
+                .iter()
+                .any(|m| m.emission.max_element() > 0.0)
     }
 
     /// Debug-build consistency check, run at the end of the loader.

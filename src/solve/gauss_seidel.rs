@@ -11,7 +11,9 @@ use crate::transport::Transport;
 pub fn sweep(t: &Transport, albedo: &[Vec3], h: &mut [Vec3]) -> (f64, f64) {
     let (mut change, mut total) = (0.0f64, 0.0f64);
     for i in 0..h.len() {
-        let gathered = t.row(i).fold(Vec3::ZERO, |acc, (j, f)| acc + h[j as usize] * albedo[j as usize] * f);
+        let gathered = t.row(i).fold(Vec3::ZERO, |acc, (j, f)| {
+            acc + h[j as usize] * albedo[j as usize] * f
+        });
         let new = t.direct[i] + gathered;
         change += (new - h[i]).abs().element_sum() as f64;
         total += new.element_sum() as f64;

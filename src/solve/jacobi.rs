@@ -15,7 +15,9 @@ pub fn sweep(t: &Transport, albedo: &[Vec3], h: &mut [Vec3]) -> (f64, f64) {
         .enumerate()
         .with_min_len(1024)
         .map(|(i, hi)| {
-            let gathered = t.row(i).fold(Vec3::ZERO, |acc, (j, f)| acc + reflected[j as usize] * f);
+            let gathered = t
+                .row(i)
+                .fold(Vec3::ZERO, |acc, (j, f)| acc + reflected[j as usize] * f);
             let new = t.direct[i] + gathered;
             let change = (new - *hi).abs().element_sum() as f64;
             *hi = new;

@@ -50,7 +50,12 @@ impl Solution {
 }
 
 /// Iterates the system with the solver `params` names.
-pub fn solve(transport: &Transport, texels: &Texels, params: &SolveParams, progress: &dyn Progress) -> Result<Solution> {
+pub fn solve(
+    transport: &Transport,
+    texels: &Texels,
+    params: &SolveParams,
+    progress: &dyn Progress,
+) -> Result<Solution> {
     let n = transport.len();
     let mut h = transport.direct.clone();
     let mut solution = Solution::default();
@@ -65,7 +70,11 @@ pub fn solve(transport: &Transport, texels: &Texels, params: &SolveParams, progr
             Solver::Jacobi => jacobi::sweep(transport, &texels.albedo, &mut h),
             Solver::GaussSeidel => gauss_seidel::sweep(transport, &texels.albedo, &mut h),
         };
-        let residual = if total > 0.0 { (change / total) as f32 } else { 0.0 };
+        let residual = if total > 0.0 {
+            (change / total) as f32
+        } else {
+            0.0
+        };
         let ratio = if previous_residual.is_finite() && previous_residual > 0.0 {
             (residual / previous_residual).min(0.999)
         } else {
@@ -73,10 +82,17 @@ pub fn solve(transport: &Transport, texels: &Texels, params: &SolveParams, progr
         };
         previous_residual = residual;
         let error_estimate = residual * ratio / (1.0 - ratio);
-        solution.history.push(Iteration { residual, error_estimate, seconds: start.elapsed().as_secs_f64() });
+        solution.history.push(Iteration {
+            residual,
+            error_estimate,
+            seconds: start.elapsed().as_secs_f64(),
+        });
         progress.advance(1);
         if !residual.is_finite() {
-            return Err(Error::Option(format!("the solver diverged (residual {residual}) after {} sweeps", solution.history.len())));
+            return Err(Error::Option(format!(
+                "the solver diverged (residual {residual}) after {} sweeps",
+                solution.history.len()
+            )));
         }
         if error_estimate < params.tolerance && solution.history.len() >= 2 || residual == 0.0 {
             solution.converged = true;

@@ -70,13 +70,23 @@ impl Texels {
         let x = (p.x.max(0.0) as u32).min(size.width - 1);
         let y = (p.y.max(0.0) as u32).min(size.height - 1);
         let id = self.index[page][(y * size.width + x) as usize];
-        if id != NO_TEXEL { id } else { self.triangle_texel[t as usize] }
+        if id != NO_TEXEL {
+            id
+        } else {
+            self.triangle_texel[t as usize]
+        }
     }
 
     /// Debug-build consistency check: finite values, areas positive, index consistent.
     pub fn validate(&self) {
         let n = self.len();
-        for v in [&self.normal, &self.albedo, &self.emission, &self.du, &self.dv] {
+        for v in [
+            &self.normal,
+            &self.albedo,
+            &self.emission,
+            &self.du,
+            &self.dv,
+        ] {
             assert_eq!(v.len(), n);
         }
         assert_eq!(self.area.len(), n);
@@ -86,11 +96,15 @@ impl Texels {
         for i in 0..n {
             assert!(self.position[i].is_finite() && self.normal[i].is_finite());
             assert!(self.area[i] > 0.0 && self.area[i].is_finite());
-            assert!(self.albedo[i].min_element() >= 0.0 && self.albedo[i].max_element() <= MAX_ALBEDO);
+            assert!(
+                self.albedo[i].min_element() >= 0.0 && self.albedo[i].max_element() <= MAX_ALBEDO
+            );
             let [x, y] = self.xy[i];
             let p = self.page[i] as usize;
-            assert_eq!(self.index[p][(y * self.pages[p].width + x) as usize], i as u32);
+            assert_eq!(
+                self.index[p][(y * self.pages[p].width + x) as usize],
+                i as u32
+            );
         }
     }
 }
-

@@ -33,9 +33,14 @@ pub fn punctual_irradiance(light: &Light, p: Vec3, n: Vec3, tracer: &Tracer) -> 
                 return Vec3::ZERO;
             }
             // KHR_lights_punctual range falloff: smooth window to zero at `range`.
-            let window = light.range.map_or(1.0, |r| (1.0 - (d / r).powi(4)).clamp(0.0, 1.0));
+            let window = light
+                .range
+                .map_or(1.0, |r| (1.0 - (d / r).powi(4)).clamp(0.0, 1.0));
             let cone = match light.kind {
-                LightKind::Spot { inner_cone_angle, outer_cone_angle } => {
+                LightKind::Spot {
+                    inner_cone_angle,
+                    outer_cone_angle,
+                } => {
                     let scale = 1.0 / (inner_cone_angle.cos() - outer_cone_angle.cos()).max(1e-3);
                     let offset = -outer_cone_angle.cos() * scale;
                     let a = (light.direction.dot(-l) * scale + offset).clamp(0.0, 1.0);
@@ -76,7 +81,8 @@ impl Emitters {
         let mut total_area = 0.0f64;
         for (t, tri) in scene.triangles.iter().enumerate() {
             let a = triangle_area(scene, tri) as f64;
-            material_area[scene.instances[scene.triangle_instance[t] as usize].material as usize] += a;
+            material_area
+                [scene.instances[scene.triangle_instance[t] as usize].material as usize] += a;
             total_area += a;
         }
         let large = |m: usize| material_area[m] > LARGE_EMITTER_FRACTION as f64 * total_area;
@@ -90,7 +96,11 @@ impl Emitters {
             }
             let area = triangle_area(scene, tri);
             // Emissive textures vary over the triangle: weigh by the texel it mostly covers.
-            let le = texels.emission.get(texels.triangle_texel[t] as usize).copied().unwrap_or(m.emission);
+            let le = texels
+                .emission
+                .get(texels.triangle_texel[t] as usize)
+                .copied()
+                .unwrap_or(m.emission);
             let weight = area * (le.x + le.y + le.z).max(1e-6 * m.emission.max_element());
             if area > 0.0 && weight.is_finite() && weight > 0.0 {
                 triangles.push(t as u32);
@@ -104,9 +114,14 @@ impl Emitters {
         for (&t, &p) in triangles.iter().zip(&power) {
             acc += p as f64;
             cdf.push((acc / total) as f32);
-            pdf_area[t as usize] = (p as f64 / total) as f32 / triangle_area(scene, &scene.triangles[t as usize]);
+            pdf_area[t as usize] =
+                (p as f64 / total) as f32 / triangle_area(scene, &scene.triangles[t as usize]);
         }
-        Emitters { triangles, cdf, pdf_area }
+        Emitters {
+            triangles,
+            cdf,
+            pdf_area,
+        }
     }
 
     pub fn is_empty(&self) -> bool {
@@ -129,7 +144,11 @@ pub fn triangle_area(scene: &Scene, tri: &[u32; 3]) -> f32 {
 #[inline]
 pub fn triangle_point(scene: &Scene, t: u32, b: Vec2) -> (Vec3, Vec3) {
     let [i0, i1, i2] = scene.triangles[t as usize];
-    let (p0, p1, p2) = (scene.positions[i0 as usize], scene.positions[i1 as usize], scene.positions[i2 as usize]);
+    let (p0, p1, p2) = (
+        scene.positions[i0 as usize],
+        scene.positions[i1 as usize],
+        scene.positions[i2 as usize],
+    );
     let p = p0 * (1.0 - b.x - b.y) + p1 * b.x + p2 * b.y;
     (p, (p1 - p0).cross(p2 - p0).normalize_or_zero())
 }

@@ -48,7 +48,10 @@ impl Transport {
     #[inline]
     pub fn row(&self, i: usize) -> impl Iterator<Item = (u32, f32)> + '_ {
         let r = self.row_start[i] as usize..self.row_start[i + 1] as usize;
-        self.col[r.clone()].iter().copied().zip(self.f[r].iter().copied())
+        self.col[r.clone()]
+            .iter()
+            .copied()
+            .zip(self.f[r].iter().copied())
     }
 
     pub fn len(&self) -> usize {
@@ -62,7 +65,11 @@ impl Transport {
     pub fn validate(&self) {
         assert_eq!(self.row_start.len(), self.direct.len() + 1);
         assert_eq!(self.col.len(), self.f.len());
-        assert!(self.direct.iter().all(|d| d.is_finite() && d.min_element() >= 0.0));
+        assert!(
+            self.direct
+                .iter()
+                .all(|d| d.is_finite() && d.min_element() >= 0.0)
+        );
         for i in 0..self.len() {
             let sum: f32 = self.row(i).map(|(_, f)| f).sum::<f32>() + self.escape[i];
             assert!(sum <= 1.0 + 1e-3, "row {i} sums to {sum}");

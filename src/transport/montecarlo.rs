@@ -26,7 +26,9 @@ use rayon::prelude::*;
 
 use super::Transport;
 use super::direct::{Emitters, punctual_irradiance, triangle_point};
-use super::sampling::{Rng, cosine_hemisphere, frame, hammersley, triangle_point as sample_triangle};
+use super::sampling::{
+    Rng, cosine_hemisphere, frame, hammersley, triangle_point as sample_triangle,
+};
 use crate::config::TransportParams;
 use crate::scene::Scene;
 use crate::texels::{NO_TEXEL, Texels};
@@ -58,7 +60,13 @@ pub fn build(
 ) -> Result<Transport> {
     let n = texels.len();
     let emitters = Emitters::new(scene, texels);
-    let ctx = Context { scene, texels, tracer, params, emitters: &emitters };
+    let ctx = Context {
+        scene,
+        texels,
+        tracer,
+        params,
+        emitters: &emitters,
+    };
     let aborted = AtomicBool::new(false);
     progress.begin("transport", n as u64);
     let chunks: Vec<ChunkRows> = (0..n.div_ceil(CHUNK))
@@ -137,7 +145,11 @@ impl Context<'_> {
         let t = self.texels;
         let (du, dv) = (t.du[i], t.dv[i]);
         let full = du.cross(dv).length();
-        let cover = if full > 0.0 { (t.area[i] / full).clamp(0.0, 1.0) } else { 0.0 };
+        let cover = if full > 0.0 {
+            (t.area[i] / full).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
         let scale = if cover > 0.99 { 1.0 } else { cover };
         let o = (u - Vec2::splat(0.5)) * scale;
         t.position[i] + du * o.x + dv * o.y + t.normal[i] * self.tracer.epsilon
@@ -149,7 +161,11 @@ impl Context<'_> {
         let n = texels.normal[i];
         let (tx, ty) = frame(n);
         let k = self.params.gather_rays;
-        let l = if self.emitters.is_empty() { 0 } else { self.params.light_samples };
+        let l = if self.emitters.is_empty() {
+            0
+        } else {
+            self.params.light_samples
+        };
         let (kf, lf) = (k as f32, l as f32);
         let mut rng = Rng::new(self.params.seed, i as u64, 0);
         let shift = rng.next_vec2();
@@ -180,7 +196,11 @@ impl Context<'_> {
                 let pdf_area = self.emitters.pdf_area[hit.triangle as usize];
                 let (_, n_l) = triangle_point(self.scene, hit.triangle, hit.bary);
                 let cos_l = -n_l.dot(dir);
-                let p_light = if cos_l > 0.0 { pdf_area * hit.t * hit.t / cos_l } else { 0.0 };
+                let p_light = if cos_l > 0.0 {
+                    pdf_area * hit.t * hit.t / cos_l
+                } else {
+                    0.0
+                };
                 emitted += le * (local.z * power_weight(kf * p_gather, lf * p_light));
             }
         }
@@ -237,7 +257,11 @@ impl Context<'_> {
         }
         out.row_len.push((out.col.len() - before) as u32);
         out.escape.push(escape);
-        out.direct.push(if direct.is_finite() { direct } else { Vec3::ZERO });
+        out.direct.push(if direct.is_finite() {
+            direct
+        } else {
+            Vec3::ZERO
+        });
         out.rays += k as u64 + l as u64 + shadow_rays;
     }
 }

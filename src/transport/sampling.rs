@@ -18,7 +18,10 @@ impl Rng {
     /// A stream for `(seed, index, purpose)`.
     #[inline]
     pub fn new(seed: u64, index: u64, purpose: u64) -> Rng {
-        let mut rng = Rng { state: 0, inc: (splitmix(purpose ^ seed.rotate_left(17)) << 1) | 1 };
+        let mut rng = Rng {
+            state: 0,
+            inc: (splitmix(purpose ^ seed.rotate_left(17)) << 1) | 1,
+        };
         rng.next_u32();
         rng.state = rng.state.wrapping_add(splitmix(seed ^ splitmix(index)));
         rng.next_u32();
@@ -100,7 +103,10 @@ pub fn frame(n: Vec3) -> (Vec3, Vec3) {
     let sign = 1.0f32.copysign(n.z);
     let a = -1.0 / (sign + n.z);
     let b = n.x * n.y * a;
-    (Vec3::new(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x), Vec3::new(b, sign + n.y * n.y * a, -n.y))
+    (
+        Vec3::new(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x),
+        Vec3::new(b, sign + n.y * n.y * a, -n.y),
+    )
 }
 
 /// Searches a cumulative distribution (last entry = total) for `u ∈ [0,1)`.
@@ -108,7 +114,8 @@ pub fn frame(n: Vec3) -> (Vec3, Vec3) {
 pub fn sample_cdf(cdf: &[f32], u: f32) -> usize {
     let total = *cdf.last().unwrap_or(&0.0);
     let target = u * total;
-    cdf.partition_point(|&c| c <= target).min(cdf.len().saturating_sub(1))
+    cdf.partition_point(|&c| c <= target)
+        .min(cdf.len().saturating_sub(1))
 }
 
 #[cfg(test)]
@@ -117,9 +124,18 @@ mod tests {
 
     #[test]
     fn streams_are_reproducible_and_distinct() {
-        let a: Vec<u32> = (0..4).map(|_| 0).scan(Rng::new(1, 2, 3), |r, _: u32| Some(r.next_u32())).collect();
-        let b: Vec<u32> = (0..4).map(|_| 0).scan(Rng::new(1, 2, 3), |r, _: u32| Some(r.next_u32())).collect();
-        let c: Vec<u32> = (0..4).map(|_| 0).scan(Rng::new(1, 3, 3), |r, _: u32| Some(r.next_u32())).collect();
+        let a: Vec<u32> = (0..4)
+            .map(|_| 0)
+            .scan(Rng::new(1, 2, 3), |r, _: u32| Some(r.next_u32()))
+            .collect();
+        let b: Vec<u32> = (0..4)
+            .map(|_| 0)
+            .scan(Rng::new(1, 2, 3), |r, _: u32| Some(r.next_u32()))
+            .collect();
+        let c: Vec<u32> = (0..4)
+            .map(|_| 0)
+            .scan(Rng::new(1, 3, 3), |r, _: u32| Some(r.next_u32()))
+            .collect();
         assert_eq!(a, b);
         assert_ne!(a, c);
     }
@@ -128,7 +144,10 @@ mod tests {
     fn cosine_samples_have_the_right_mean() {
         // E[cos θ] under the cosine density is 2/3.
         let n = 4096;
-        let mean: f32 = (0..n).map(|k| cosine_hemisphere(hammersley(k, n, Vec2::ZERO)).z).sum::<f32>() / n as f32;
+        let mean: f32 = (0..n)
+            .map(|k| cosine_hemisphere(hammersley(k, n, Vec2::ZERO)).z)
+            .sum::<f32>()
+            / n as f32;
         assert!((mean - 2.0 / 3.0).abs() < 1e-3, "{mean}");
         for k in 0..n {
             let d = cosine_hemisphere(hammersley(k, n, Vec2::splat(0.3)));
@@ -138,7 +157,13 @@ mod tests {
 
     #[test]
     fn frame_is_orthonormal() {
-        for n in [Vec3::X, Vec3::Y, Vec3::Z, -Vec3::Z, Vec3::new(0.3, -0.5, 0.8).normalize()] {
+        for n in [
+            Vec3::X,
+            Vec3::Y,
+            Vec3::Z,
+            -Vec3::Z,
+            Vec3::new(0.3, -0.5, 0.8).normalize(),
+        ] {
             let (t, b) = frame(n);
             assert!(t.dot(b).abs() < 1e-5 && t.dot(n).abs() < 1e-5 && b.dot(n).abs() < 1e-5);
             assert!((t.cross(b) - n).length() < 1e-5);
