@@ -133,11 +133,14 @@ pub fn compute(input: &Path, config: &BakeConfig, progress: &dyn Progress) -> Re
     timed("bvh", t);
 
     let t = Instant::now();
-    let transport = transport::build(&scene, &texels, &tracer, &config.transport, progress)?;
-    timed("transport", t);
-
-    let t = Instant::now();
-    let solution = solve::solve(&transport, &texels, &config.solve, progress)?;
+    let (transport, solution) = solve::run(
+        &scene,
+        &texels,
+        &tracer,
+        &config.transport,
+        &config.solve,
+        progress,
+    )?;
     if !solution.converged {
         progress.warn(&format!(
             "the solver stopped on the iteration cap ({}) at residual {:.2e}, above the tolerance {:.1e}",
@@ -146,7 +149,7 @@ pub fn compute(input: &Path, config: &BakeConfig, progress: &dyn Progress) -> Re
             config.solve.tolerance
         ));
     }
-    timed("solve", t);
+    timed("transport+solve", t);
 
     let t = Instant::now();
     // A texel stores H/π; indirect-only leaves out light that arrived without a bounce.

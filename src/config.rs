@@ -28,9 +28,26 @@ pub struct AtlasParams {
     pub padding: u32,
 }
 
+/// How texel-to-texel form factors are computed (see the `transport` module of each).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Method {
+    /// Cosine-distributed gathering rays per texel (sparse rows, ≤ K entries). The default.
+    MonteCarlo,
+    /// Differential point-to-point kernel with one visibility ray per pair (all pairs: small
+    /// scenes only; unbounded as r → 0 — kept as a baseline).
+    Point,
+    /// Lambert's point-to-polygon contour integral over the source texel, visibility from
+    /// shadow rays to points on the source (all pairs: small scenes only).
+    Polygon,
+    /// Hierarchical radiosity with clustering: links between texel blocks refined where the
+    /// transfer error is large.
+    Hierarchical,
+}
+
 /// How light is transported between texels.
 #[derive(Clone, Debug)]
 pub struct TransportParams {
+    pub method: Method,
     /// Cosine-distributed gathering rays per texel for the texel-to-texel form factors.
     /// More rays = less noise in indirect light, linearly more time and row storage.
     pub gather_rays: u32,
@@ -52,6 +69,10 @@ pub enum Solver {
     Jacobi,
     /// Texels updated in place in order; about twice the convergence per sweep, serial.
     GaussSeidel,
+    /// Southwell progressive refinement: shoot the texel with the most unshot power.
+    Southwell,
+    /// Matrix-free: no stored rows; gathering rays are cast again every bounce.
+    Gather,
 }
 
 /// How the radiosity system is iterated.
@@ -98,6 +119,7 @@ impl BakeConfig {
                 padding: 2,
             },
             transport: TransportParams {
+                method: Method::MonteCarlo,
                 gather_rays,
                 light_samples,
                 sky: Vec3::ZERO,

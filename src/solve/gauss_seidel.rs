@@ -7,12 +7,14 @@ use glam::Vec3;
 
 use crate::transport::Transport;
 
-/// One sweep; returns (Σ|ΔH|, Σ|H|) over all texels and channels.
-pub fn sweep(t: &Transport, albedo: &[Vec3], h: &mut [Vec3]) -> (f64, f64) {
+/// One sweep; returns (Σ|ΔH|, Σ|H|) over all texels and channels. `emitted` is `π·Le` per
+/// texel when the rows carry emission, else empty.
+pub fn sweep(t: &Transport, albedo: &[Vec3], emitted: &[Vec3], h: &mut [Vec3]) -> (f64, f64) {
     let (mut change, mut total) = (0.0f64, 0.0f64);
     for i in 0..h.len() {
         let gathered = t.row(i).fold(Vec3::ZERO, |acc, (j, f)| {
-            acc + h[j as usize] * albedo[j as usize] * f
+            let j = j as usize;
+            acc + (h[j] * albedo[j] + emitted.get(j).copied().unwrap_or(Vec3::ZERO)) * f
         });
         let new = t.direct[i] + gathered;
         change += (new - h[i]).abs().element_sum() as f64;

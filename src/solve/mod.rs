@@ -9,16 +9,20 @@
 //! relative to `‖H‖`, is below the tolerance — which matters as ρ → 1, where a small update still
 //! hides a large remaining error (ρ = 0.99 needs about 100× the last update).
 
+mod gather;
 mod gauss_seidel;
 mod jacobi;
+mod southwell;
 
 use std::time::Instant;
 
 use glam::Vec3;
 
-use crate::config::{SolveParams, Solver};
+use crate::config::{Method, SolveParams, Solver, TransportParams};
+use crate::scene::Scene;
 use crate::texels::Texels;
-use crate::transport::Transport;
+use crate::trace::Tracer;
+use crate::transport::{self, Transport};
 use crate::{Error, Progress, Result};
 
 /// One sweep of a solver.
@@ -49,14 +53,67 @@ impl Solution {
     }
 }
 
-/// Iterates the system with the solver `params` names.
+/// Light transport and solution together: the hierarchical method and the matrix-free
+/// gathering solver do not store texel rows, the others build [`Transport`] and iterate it.
+pub fn run(
+    scene: &Scene,
+    texels: &Texels,
+    tracer: &Tracer,
+    transport_params: &TransportParams,
+    params: &SolveParams,
+    progress: &dyn Progress,
+) -> Result<(Transport, Solution)> {
+    match (transport_params.method, params.solver) {
+        (Method::Hierarchical, _) => transport::hierarchical::solve(
+            scene,
+            texels,
+            tracer,
+            transport_params,
+            params,
+            progress,
+        ),
+        (_, Solver::Gather) => {
+            gather::solve(scene, texels, tracer, transport_params, params, progress)
+        }
+        _ => {
+            let t = transport::build(scene, texels, tracer, transport_params, progress)?;
+            let s = solve(&t, texels, params, progress)?;
+            Ok((t, s))
+        }
+    }
+}
+
+/// Emitted radiosity `π·Le` per texel when the rows carry emission, else nothing.
+fn row_emission(transport: &Transport, texels: &Texels) -> Vec<Vec3> {
+    if transport.rows_carry_emission {
+        texels
+            .emission
+            .iter()
+            .map(|le| *le * std::f32::consts::PI)
+            .collect()
+    } else {
+        Vec::new()
+    }
+}
+
+/// Iterates the stored system with the solver `params` names.
 pub fn solve(
     transport: &Transport,
     texels: &Texels,
     params: &SolveParams,
     progress: &dyn Progress,
 ) -> Result<Solution> {
+    match params.solver {
+        Solver::Southwell => return southwell::solve(transport, texels, params, progress),
+        Solver::Gather => {
+            return Err(Error::Option(
+                "the gather solver re-casts rays: call solve::run".into(),
+            ));
+        }
+        Solver::Jacobi | Solver::GaussSeidel => {}
+    }
     let n = transport.len();
+    let emitted = row_emission(transport, texels);
     let mut h = transport.direct.clone();
     let mut solution = Solution::default();
     let start = Instant::now();
@@ -67,8 +124,8 @@ pub fn solve(
             return Err(Error::Aborted);
         }
         let (change, total) = match params.solver {
-            Solver::Jacobi => jacobi::sweep(transport, &texels.albedo, &mut h),
-            Solver::GaussSeidel => gauss_seidel::sweep(transport, &texels.albedo, &mut h),
+            Solver::GaussSeidel => gauss_seidel::sweep(transport, &texels.albedo, &emitted, &mut h),
+            _ => jacobi::sweep(transport, &texels.albedo, &emitted, &mut h),
         };
         let residual = if total > 0.0 {
             (change / total) as f32

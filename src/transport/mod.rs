@@ -14,13 +14,16 @@
 //! through `H_direct`, where it is estimated with explicit light sampling (small bright emitters
 //! are otherwise missed) combined with the gathering rays by multiple importance sampling.
 
-mod direct;
+pub mod direct;
+pub mod hierarchical;
 mod montecarlo;
+mod point;
+mod polygon;
 pub mod sampling;
 
 use glam::Vec3;
 
-use crate::config::TransportParams;
+use crate::config::{Method, TransportParams};
 use crate::scene::Scene;
 use crate::texels::Texels;
 use crate::trace::Tracer;
@@ -41,6 +44,10 @@ pub struct Transport {
     pub direct: Vec<Vec3>,
     /// Rays cast building this.
     pub rays: u64,
+    /// True when emitters are not in `direct` but are gathered through the rows like any other
+    /// radiosity (`B_j = π·Le_j + ρ_j H_j`); false when `direct` already holds them (Monte Carlo
+    /// with explicit light sampling), so rows carry only reflected radiosity `ρ_j H_j`.
+    pub rows_carry_emission: bool,
 }
 
 impl Transport {
@@ -77,7 +84,7 @@ impl Transport {
     }
 }
 
-/// Computes form factors (Monte Carlo hemisphere gathering) and direct light for every texel.
+/// Computes form factors with the method `params` names, and direct light, for every texel.
 pub fn build(
     scene: &Scene,
     texels: &Texels,
@@ -85,7 +92,16 @@ pub fn build(
     params: &TransportParams,
     progress: &dyn Progress,
 ) -> Result<Transport> {
-    let transport = montecarlo::build(scene, texels, tracer, params, progress)?;
+    let transport = match params.method {
+        Method::MonteCarlo => montecarlo::build(scene, texels, tracer, params, progress)?,
+        Method::Point => point::build(scene, texels, tracer, params, progress)?,
+        Method::Polygon => polygon::build(scene, texels, tracer, params, progress)?,
+        Method::Hierarchical => {
+            return Err(crate::Error::Option(
+                "the hierarchical method solves its own system: call transport::hierarchical::solve".into(),
+            ));
+        }
+    };
     #[cfg(debug_assertions)]
     transport.validate();
     Ok(transport)

@@ -99,6 +99,7 @@ pub fn build(
         escape: Vec::with_capacity(n),
         direct: Vec::with_capacity(n),
         rays: 0,
+        rows_carry_emission: false,
     };
     t.row_start.push(0);
     for c in chunks {

@@ -1,17 +1,18 @@
 //! The `lightbake` command line: flags → [`BakeConfig`], progress bars, one-line summary.
 
-use std::io::IsTerminal;
+mod progress;
+mod reference;
+mod render;
+
 use std::path::PathBuf;
 use std::process::ExitCode;
-use std::sync::Mutex;
-use std::time::Duration;
 
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand, ValueEnum};
 use glam::Vec3;
-use indicatif::{ProgressBar, ProgressStyle};
-use lightbake::config::{Solver, UvMode};
-use lightbake::{BakeConfig, Progress};
+use lightbake::BakeConfig;
+use lightbake::config::{Method, Solver, UvMode};
+use progress::Bars;
 
 #[derive(Parser)]
 #[command(
@@ -28,6 +29,10 @@ struct Cli {
 enum Command {
     /// Bake lightmaps: writes <stem>.gltf + .bin (or .glb), and per page an EXR and a PNG preview.
     Bake(BakeArgs),
+    /// Render a camera view of a baked scene (lightmap × albedo, optional specular layer).
+    Render(render::Args),
+    /// Path-trace reference lightmaps at the same texels as a bake (the accuracy yardstick).
+    Reference(reference::Args),
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -51,11 +56,27 @@ enum UvArg {
 }
 
 #[derive(Clone, Copy, ValueEnum)]
+enum MethodArg {
+    /// Monte Carlo hemisphere gathering with explicit light sampling: the general default.
+    Montecarlo,
+    /// Point-to-point differential form factors, all pairs: a baseline for small scenes.
+    Point,
+    /// Point-to-polygon (Lambert contour) form factors, all pairs: accurate at short range.
+    Polygon,
+    /// Hierarchical radiosity with clustering: large scenes, error-driven links.
+    Hierarchical,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
 enum SolverArg {
     /// Parallel sweeps from the previous iterate.
     Jacobi,
     /// Serial in-place sweeps; fewer iterations.
     GaussSeidel,
+    /// Progressive refinement: shoot the texel with the most unshot power first.
+    Southwell,
+    /// Matrix-free: re-cast gathering rays every bounce, store no rows.
+    Gather,
 }
 
 #[derive(clap::Args)]
@@ -89,6 +110,9 @@ struct BakeArgs {
     /// Uniform sky radiance R,G,B (W/sr/m²) for rays leaving the scene.
     #[arg(long, value_parser = parse_rgb, default_value = "0,0,0")]
     sky: Vec3,
+    /// How form factors between texels are computed.
+    #[arg(long, value_enum, default_value = "montecarlo")]
+    method: MethodArg,
     /// Solver for the radiosity system.
     #[arg(long, value_enum, default_value = "jacobi")]
     solver: SolverArg,
@@ -158,9 +182,17 @@ impl BakeArgs {
         c.transport.sky = self.sky;
         c.transport.indirect_only = self.indirect_only;
         c.transport.seed = self.seed;
+        c.transport.method = match self.method {
+            MethodArg::Montecarlo => Method::MonteCarlo,
+            MethodArg::Point => Method::Point,
+            MethodArg::Polygon => Method::Polygon,
+            MethodArg::Hierarchical => Method::Hierarchical,
+        };
         c.solve.solver = match self.solver {
             SolverArg::Jacobi => Solver::Jacobi,
             SolverArg::GaussSeidel => Solver::GaussSeidel,
+            SolverArg::Southwell => Solver::Southwell,
+            SolverArg::Gather => Solver::Gather,
         };
         if let Some(t) = self.tolerance {
             c.solve.tolerance = t;
@@ -172,51 +204,9 @@ impl BakeArgs {
     }
 }
 
-/// Progress bars on a terminal (one per stage, with rate and ETA); nothing otherwise.
-struct Bars {
-    enabled: bool,
-    bar: Mutex<Option<ProgressBar>>,
-}
-
-impl Progress for Bars {
-    fn begin(&self, stage: &str, total: u64) {
-        if !self.enabled {
-            return;
-        }
-        let bar = ProgressBar::new(total);
-        bar.set_style(
-            ProgressStyle::with_template("{prefix:>10} [{bar:30}] {pos}/{len} {per_sec} ETA {eta}")
-                .unwrap()
-                .progress_chars("=> "),
-        );
-        bar.set_prefix(stage.to_string());
-        bar.enable_steady_tick(Duration::from_millis(200));
-        *self.bar.lock().unwrap() = Some(bar);
-    }
-    fn advance(&self, n: u64) {
-        if let Some(bar) = &*self.bar.lock().unwrap() {
-            bar.inc(n);
-        }
-    }
-    fn end(&self) {
-        if let Some(bar) = self.bar.lock().unwrap().take() {
-            bar.finish_and_clear();
-        }
-    }
-    fn warn(&self, message: &str) {
-        match &*self.bar.lock().unwrap() {
-            Some(bar) => bar.suspend(|| eprintln!("warning: {message}")),
-            None => eprintln!("warning: {message}"),
-        }
-    }
-}
-
 fn bake(args: &BakeArgs) -> Result<()> {
     let config = args.config();
-    let bars = Bars {
-        enabled: !args.quiet && std::io::stderr().is_terminal(),
-        bar: Mutex::new(None),
-    };
+    let bars = Bars::new(args.quiet);
     let report = lightbake::bake(&args.scene, &args.output, &config, &bars)
         .with_context(|| format!("baking {} failed", args.scene.display()))?;
     if !args.quiet {
@@ -231,6 +221,8 @@ fn bake(args: &BakeArgs) -> Result<()> {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match &cli.command {
+        Command::Render(args) => render::run(args),
+        Command::Reference(args) => reference::run(args),
         Command::Bake(args) => {
             if let Some(n) = args.threads
                 && let Err(e) = rayon::ThreadPoolBuilder::new()

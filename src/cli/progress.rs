@@ -1,0 +1,57 @@
+//! Terminal progress for the library's [`Progress`] callbacks.
+
+use std::sync::Mutex;
+use std::time::Duration;
+
+use indicatif::{ProgressBar, ProgressStyle};
+use lightbake::Progress;
+
+/// Progress bars on a terminal (one per stage, with rate and ETA); nothing otherwise.
+pub struct Bars {
+    pub enabled: bool,
+    pub bar: Mutex<Option<ProgressBar>>,
+}
+
+impl Progress for Bars {
+    fn begin(&self, stage: &str, total: u64) {
+        if !self.enabled {
+            return;
+        }
+        let bar = ProgressBar::new(total);
+        bar.set_style(
+            ProgressStyle::with_template("{prefix:>10} [{bar:30}] {pos}/{len} {per_sec} ETA {eta}")
+                .unwrap()
+                .progress_chars("=> "),
+        );
+        bar.set_prefix(stage.to_string());
+        bar.enable_steady_tick(Duration::from_millis(200));
+        *self.bar.lock().unwrap() = Some(bar);
+    }
+    fn advance(&self, n: u64) {
+        if let Some(bar) = &*self.bar.lock().unwrap() {
+            bar.inc(n);
+        }
+    }
+    fn end(&self) {
+        if let Some(bar) = self.bar.lock().unwrap().take() {
+            bar.finish_and_clear();
+        }
+    }
+    fn warn(&self, message: &str) {
+        match &*self.bar.lock().unwrap() {
+            Some(bar) => bar.suspend(|| eprintln!("warning: {message}")),
+            None => eprintln!("warning: {message}"),
+        }
+    }
+}
+
+impl Bars {
+    /// Bars only when asked for and stderr is a terminal.
+    pub fn new(quiet: bool) -> Bars {
+        use std::io::IsTerminal;
+        Bars {
+            enabled: !quiet && std::io::stderr().is_terminal(),
+            bar: Mutex::new(None),
+        }
+    }
+}

@@ -1,0 +1,20 @@
+//! Point-to-point differential form factors (being written).
+use super::Transport;
+use crate::config::TransportParams;
+use crate::scene::Scene;
+use crate::texels::Texels;
+use crate::trace::Tracer;
+use crate::{Error, Progress, Result};
+
+pub fn build(
+    scene: &Scene,
+    texels: &Texels,
+    tracer: &Tracer,
+    params: &TransportParams,
+    progress: &dyn Progress,
+) -> Result<Transport> {
+    let _ = (scene, texels, tracer, params, progress);
+    Err(Error::Option(
+        "the point method is not available yet".into(),
+    ))
+}
