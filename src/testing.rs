@@ -1277,6 +1277,55 @@ fn floor(size: f32, n: u32) -> Geometry {
     )
 }
 
+/// A 100k-triangle hall for speed measurements (not a committed fixture: it is generated on
+/// demand). A 24 × 24 m room, 6 m high, finely tessellated floor and ceiling (as a scanned or
+/// sculpted asset would be), a 6 × 6 grid of pillars, eight emissive ceiling panels
+/// (Le = 20), and a sun through nothing (the hall is closed): all light is from the panels.
+pub fn large_hall() -> GltfBuilder {
+    let mut gltf = GltfBuilder::new("large_hall");
+    let floor_m = gltf.add_material(Material::grey("floor", 0.5));
+    let walls_m = gltf.add_material(Material::diffuse("walls", [0.7, 0.65, 0.55]));
+    let pillar_m = gltf.add_material(Material::diffuse("pillars", [0.3, 0.4, 0.6]));
+    let panel_m = gltf.add_material(Material::grey("panel", 0.8).emitting([1.0; 3], 20.0));
+    let (half, height) = (12.0f32, 6.0f32);
+
+    // Floor and ceiling: 160 × 160 quads each (51 200 triangles each).
+    let floor = Geometry::grid(Vec3::new(-half, 0.0, half), Vec3::X * 2.0 * half, -Vec3::Z * 2.0 * half, 160, 160);
+    let ceiling = Geometry::grid(Vec3::new(-half, height, -half), Vec3::X * 2.0 * half, Vec3::Z * 2.0 * half, 160, 160);
+    let shell = gltf.add_mesh("floor", floor, floor_m);
+    gltf.add_primitive(shell, ceiling, walls_m);
+    let (min, max) = (Vec3::new(-half, 0.0, -half), Vec3::new(half, height, half));
+    let mut walls = Geometry::box_face(min, max, Face::PosX, 24, 6).flipped();
+    for face in [Face::NegX, Face::PosZ, Face::NegZ] {
+        walls.append(&Geometry::box_face(min, max, face, 24, 6).flipped());
+    }
+    gltf.add_primitive(shell, walls, walls_m);
+    gltf.add_mesh_node("hall", shell);
+
+    // Pillars: one mesh, 36 nodes.
+    let pillar = Geometry::box_faces(Vec3::new(-0.4, 0.0, -0.4), Vec3::new(0.4, height, 0.4), &Face::NO_BOTTOM, 6);
+    let pillar_mesh = gltf.add_mesh("pillar", pillar, pillar_m);
+    for i in 0..6 {
+        for j in 0..6 {
+            let at = Vec3::new(-8.75 + 3.5 * i as f32, 0.0, -8.75 + 3.5 * j as f32);
+            gltf.add_node(Node::new(&format!("pillar_{i}_{j}")).at(at).with_mesh(pillar_mesh));
+        }
+    }
+
+    // Eight ceiling panels facing down, just below the ceiling.
+    let panel = Geometry::grid(Vec3::new(-1.0, height - 0.01, -0.5), Vec3::X * 2.0, Vec3::Z * 1.0, 1, 1);
+    let panel_mesh = gltf.add_mesh("panel", panel, panel_m);
+    for i in 0..4 {
+        for j in 0..2 {
+            let at = Vec3::new(-7.0 + 4.67 * i as f32, 0.0, -4.0 + 8.0 * j as f32);
+            gltf.add_node(Node::new(&format!("panel_{i}_{j}")).at(at).with_mesh(panel_mesh));
+        }
+    }
+    let camera = Camera::perspective("camera", 60f32.to_radians(), Some(16.0 / 9.0));
+    gltf.add_camera_node(camera, Vec3::new(-10.0, 2.0, 10.0), Vec3::new(2.0, 1.5, -2.0));
+    gltf
+}
+
 /// Every committed fixture: file name in `fixtures/` and its bytes.
 pub fn fixture_files() -> Vec<(&'static str, Vec<u8>)> {
     vec![
@@ -1303,6 +1352,20 @@ mod tests {
     use std::collections::BTreeMap;
 
     use gltf::khr_lights_punctual::Kind;
+
+    #[test]
+    fn large_hall_has_over_100k_placed_triangles() {
+        let hall = large_hall();
+        let (json, _) = hall.to_gltf_json();
+        let doc = gltf::Gltf::from_slice(&hall.to_glb_bytes()).expect("valid glTF");
+        let placed: usize = doc
+            .nodes()
+            .filter_map(|n| n.mesh())
+            .map(|m| m.primitives().map(|p| p.indices().unwrap().count() / 3).sum::<usize>())
+            .sum();
+        assert!(placed > 100_000, "{placed} triangles");
+        assert_eq!(json["nodes"].as_array().unwrap().len(), 1 + 36 + 8 + 1);
+    }
 
     use super::*;
 
