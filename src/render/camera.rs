@@ -1,0 +1,237 @@
+//! Pinhole cameras: from a glTF camera node, from eye/target/field of view, or framing a box.
+//!
+//! A camera looks along its −Z axis with +Y up (the glTF convention). `yfov` is the vertical
+//! field of view; the horizontal one follows from the image aspect ratio (glTF says the
+//! viewport's aspect wins over the camera's `aspectRatio`, which only suggests an image size).
+
+use glam::{Mat4, Quat, Vec2, Vec3};
+use serde_json::Value;
+
+use crate::{Error, Result};
+
+/// A pinhole camera in world space.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Camera {
+    pub eye: Vec3,
+    /// Unit viewing direction (the camera's −Z).
+    pub forward: Vec3,
+    /// Unit image-right and image-up directions, orthogonal to `forward`.
+    pub right: Vec3,
+    pub up: Vec3,
+    /// Vertical field of view (radians).
+    pub yfov: f32,
+    /// The glTF camera's `aspectRatio` (width / height) when it has one.
+    pub aspect_ratio: Option<f32>,
+}
+
+impl Camera {
+    /// At `eye` looking at `target`, world +Y up (+Z when looking straight up or down).
+    pub fn look_at(eye: Vec3, target: Vec3, yfov: f32) -> Camera {
+        let forward = (target - eye).normalize_or(-Vec3::Z);
+        let world_up = if forward.cross(Vec3::Y).length_squared() < 1e-8 {
+            Vec3::Z
+        } else {
+            Vec3::Y
+        };
+        let right = forward.cross(world_up).normalize();
+        Camera {
+            eye,
+            forward,
+            right,
+            up: right.cross(forward),
+            yfov,
+            aspect_ratio: None,
+        }
+    }
+
+    /// From a node's world matrix (scale is ignored: only position and orientation count).
+    pub fn from_world(world: Mat4, yfov: f32, aspect_ratio: Option<f32>) -> Camera {
+        let (_, rotation, eye) = world.to_scale_rotation_translation();
+        Camera {
+            eye,
+            forward: rotation * -Vec3::Z,
+            right: rotation * Vec3::X,
+            up: rotation * Vec3::Y,
+            yfov,
+            aspect_ratio,
+        }
+    }
+
+    /// Sees the whole box `[lo, hi]` from the front-right and above (a three-quarter view),
+    /// for scenes without a camera.
+    pub fn framing(lo: Vec3, hi: Vec3, yfov: f32, aspect: f32) -> Camera {
+        let center = 0.5 * (lo + hi);
+        let radius = (0.5 * (hi - lo).length()).max(1e-3);
+        // The bounding sphere must fit the narrower of the two fields of view.
+        let half_fov = (0.5 * yfov).min((aspect * (0.5 * yfov).tan()).atan());
+        let distance = radius / half_fov.sin();
+        let direction = Vec3::new(0.45, 0.35, 1.0).normalize();
+        Camera::look_at(center + direction * distance, center, yfov)
+    }
+
+    /// Unit direction through the image point `ndc` ∈ [−1, 1]² (x right, y up) for an image of
+    /// `aspect` = width / height.
+    #[inline]
+    pub fn direction(&self, ndc: Vec2, aspect: f32) -> Vec3 {
+        let tan_y = (0.5 * self.yfov).tan();
+        (self.forward + self.right * (ndc.x * tan_y * aspect) + self.up * (ndc.y * tan_y))
+            .normalize()
+    }
+}
+
+/// A perspective camera of the glTF document, placed by its node.
+#[derive(Clone, Debug)]
+pub struct GltfCamera {
+    /// The camera's name, else its node's name.
+    pub name: Option<String>,
+    /// Index into the document's `cameras`.
+    pub index: usize,
+    pub camera: Camera,
+}
+
+/// Every perspective camera placed by a node of the default scene, in node traversal order.
+/// Orthographic cameras are skipped (a pinhole renderer cannot show them).
+pub fn gltf_cameras(json: &Value) -> Vec<GltfCamera> {
+    let mut out = Vec::new();
+    let nodes = json["nodes"].as_array().map(Vec::as_slice).unwrap_or(&[]);
+    let scene = json["scene"].as_u64().unwrap_or(0) as usize;
+    let roots: Vec<usize> = json["scenes"][scene]["nodes"]
+        .as_array()
+        .map(|r| r.iter().filter_map(|n| n.as_u64()).map(|n| n as usize))
+        .into_iter()
+        .flatten()
+        .collect();
+    let mut stack: Vec<(usize, Mat4, u32)> = roots
+        .iter()
+        .rev()
+        .map(|&n| (n, Mat4::IDENTITY, 0))
+        .collect();
+    while let Some((n, parent, depth)) = stack.pop() {
+        let Some(node) = nodes.get(n) else { continue };
+        // A cycle in a malformed file must not hang the renderer.
+        if depth > 256 {
+            continue;
+        }
+        let world = parent * local_matrix(node);
+        if let Some(c) = node["camera"].as_u64() {
+            let camera = &json["cameras"][c as usize];
+            let p = &camera["perspective"];
+            if let Some(yfov) = p["yfov"].as_f64() {
+                let name = camera["name"].as_str().or(node["name"].as_str());
+                out.push(GltfCamera {
+                    name: name.map(str::to_owned),
+                    index: c as usize,
+                    camera: Camera::from_world(
+                        world,
+                        yfov as f32,
+                        p["aspectRatio"].as_f64().map(|a| a as f32),
+                    ),
+                });
+            }
+        }
+        let children = node["children"]
+            .as_array()
+            .map(Vec::as_slice)
+            .unwrap_or(&[]);
+        for child in children.iter().rev().filter_map(Value::as_u64) {
+            stack.push((child as usize, world, depth + 1));
+        }
+    }
+    out
+}
+
+/// Picks a camera by name (camera or node name) or by index into the document's `cameras`.
+pub fn select<'a>(cameras: &'a [GltfCamera], selector: &str) -> Result<&'a GltfCamera> {
+    let by_name = cameras.iter().find(|c| c.name.as_deref() == Some(selector));
+    let by_index = || {
+        let i: usize = selector.parse().ok()?;
+        cameras.iter().find(|c| c.index == i)
+    };
+    by_name.or_else(by_index).ok_or_else(|| {
+        let names: Vec<String> = cameras
+            .iter()
+            .map(|c| format!("{} ({:?})", c.index, c.name.as_deref().unwrap_or("")))
+            .collect();
+        Error::Option(format!(
+            "no perspective camera {selector:?} in the scene; it has: {}",
+            if names.is_empty() {
+                "none".to_owned()
+            } else {
+                names.join(", ")
+            }
+        ))
+    })
+}
+
+fn local_matrix(node: &Value) -> Mat4 {
+    let floats = |key: &str| -> Option<Vec<f32>> {
+        let a = node[key].as_array()?;
+        a.iter().map(|x| x.as_f64().map(|x| x as f32)).collect()
+    };
+    if let Some(m) = floats("matrix").filter(|m| m.len() == 16) {
+        return Mat4::from_cols_slice(&m);
+    }
+    let t = floats("translation")
+        .filter(|t| t.len() == 3)
+        .map_or(Vec3::ZERO, |t| Vec3::from_slice(&t));
+    let r = floats("rotation")
+        .filter(|r| r.len() == 4)
+        .map_or(Quat::IDENTITY, |r| Quat::from_slice(&r).normalize());
+    let s = floats("scale")
+        .filter(|s| s.len() == 3)
+        .map_or(Vec3::ONE, |s| Vec3::from_slice(&s));
+    Mat4::from_scale_rotation_translation(s, r, t)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use serde_json::json;
+
+    #[test]
+    fn node_transforms_place_cameras() {
+        let json = json!({
+            "scene": 0,
+            "scenes": [{ "nodes": [0] }],
+            "nodes": [
+                { "translation": [1.0, 0.0, 0.0], "children": [1] },
+                { "name": "cam", "translation": [0.0, 2.0, 0.0], "camera": 0 }
+            ],
+            "cameras": [{ "type": "perspective", "perspective": { "yfov": 0.5, "znear": 0.1 } }]
+        });
+        let cameras = gltf_cameras(&json);
+        assert_eq!(cameras.len(), 1);
+        let c = &select(&cameras, "cam").unwrap().camera;
+        assert!((c.eye - Vec3::new(1.0, 2.0, 0.0)).length() < 1e-6);
+        assert!((c.forward + Vec3::Z).length() < 1e-6);
+        assert!(select(&cameras, "0").is_ok() && select(&cameras, "7").is_err());
+    }
+
+    #[test]
+    fn directions_span_the_field_of_view() {
+        let c = Camera::look_at(Vec3::ZERO, -Vec3::Z, 90f32.to_radians());
+        let top = c.direction(Vec2::new(0.0, 1.0), 2.0);
+        assert!((top - Vec3::new(0.0, 1.0, -1.0).normalize()).length() < 1e-6);
+        let right = c.direction(Vec2::new(1.0, 0.0), 2.0);
+        assert!((right - Vec3::new(2.0, 0.0, -1.0).normalize()).length() < 1e-6);
+    }
+
+    #[test]
+    fn framing_sees_the_whole_box() {
+        let (lo, hi) = (Vec3::splat(-1.0), Vec3::splat(1.0));
+        let c = Camera::framing(lo, hi, 0.8, 1.5);
+        let tan_y = (0.4f32).tan();
+        for corner in 0..8 {
+            let p = Vec3::new(
+                if corner & 1 == 0 { lo.x } else { hi.x },
+                if corner & 2 == 0 { lo.y } else { hi.y },
+                if corner & 4 == 0 { lo.z } else { hi.z },
+            );
+            let d = p - c.eye;
+            let z = d.dot(c.forward);
+            assert!(z > 0.0);
+            assert!((d.dot(c.up) / z).abs() <= tan_y);
+            assert!((d.dot(c.right) / z).abs() <= tan_y * 1.5);
+        }
+    }
+}

@@ -1,0 +1,354 @@
+//! Stage 9 — `Render`: a camera view of a baked scene, with an optional ray-traced specular
+//! layer (the classic two-pass method: radiosity for diffuse interreflection, ray tracing for
+//! the view-dependent part).
+//!
+//! Diffuse shading at a visible point `x` (TEXCOORD_0 → `uv0`, TEXCOORD_1 → `uv1`):
+//!
+//! ```text
+//!   L_d(x) = baseColor(uv0) · lightmap(uv1) + Le(uv0)         lightmap = H/π (bilinear)
+//! ```
+//!
+//! With `specular` on, surfaces with `roughness ≤ GLOSSY_MAX_ROUGHNESS` become nodes of a
+//! Whitted ray tree ([`shade`] documents the model: Schlick Fresnel, GGX glossy lobe,
+//! refraction with absorption, energy-conserving composite). Leaves of the tree (depth limit,
+//! rough surfaces) take `L_d` from the lightmap, so indirect diffuse light is never re-traced.
+//!
+//! | Parameter (`RenderOptions`) | Default | Meaning |
+//! |---|---|---|
+//! | `width`, `height` | 512 × 512 | image size in pixels |
+//! | `spp` | 16 | jittered samples per pixel (stratified in a √spp grid) |
+//! | `specular` | false | build the ray tree at specular surfaces |
+//! | `max_depth` | 6 | tree depth; hits at this depth are leaves (`L_d`) |
+//! | `glossy_samples` | 8 | GGX rays at a glossy primary hit (1 deeper in the tree) |
+//! | `background` | 0 | radiance of rays that leave the scene |
+//! | `seed` | 0 | random streams are seeded by (seed, pixel) |
+//!
+//! Input: a glTF written by `lightbake bake`: every baked primitive has `TEXCOORD_1` and
+//! `extras.lightmap = {"exr", "page"}`; the EXR pages hold `H/π`. Scenes without any lightmap are
+//! refused. Limits: no alpha, no texture transforms, punctual lights are invisible (their light
+//! is in the lightmap), and the baker treated glass and mirrors as Lambertian (ρ = baseColor),
+//! so shadows behind glass are as dark as behind any opaque object of that colour.
+
+mod camera;
+mod shade;
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+
+use glam::{Vec2, Vec3};
+use rayon::prelude::*;
+
+pub use camera::{Camera, GltfCamera, gltf_cameras, select};
+pub use shade::{GLOSSY_MAX_ROUGHNESS, MIRROR_ROUGHNESS, Surface};
+
+use crate::lightmap::Page;
+use crate::scene::{self, Scene, Source};
+use crate::trace::Tracer;
+use crate::transport::sampling::Rng;
+use crate::{Error, Result, output};
+
+/// What to render and how.
+#[derive(Clone, Debug)]
+pub struct RenderOptions {
+    pub width: u32,
+    pub height: u32,
+    pub spp: u32,
+    pub specular: bool,
+    pub max_depth: u32,
+    pub glossy_samples: u32,
+    pub background: Vec3,
+    pub seed: u64,
+}
+
+impl Default for RenderOptions {
+    fn default() -> Self {
+        RenderOptions {
+            width: 512,
+            height: 512,
+            spp: 16,
+            specular: false,
+            max_depth: 6,
+            glossy_samples: 8,
+            background: Vec3::ZERO,
+            seed: 0,
+        }
+    }
+}
+
+/// A baked scene ready to render: geometry, BVH, lightmap pages and specular parameters.
+pub struct RenderScene {
+    pub path: PathBuf,
+    pub scene: Scene,
+    pub source: Source,
+    pub tracer: Tracer,
+    /// Decoded EXR pages (one per distinct `extras.lightmap` file and page).
+    pub pages: Vec<Page>,
+    /// Page of each scene instance (`None`: the primitive has no lightmap and shades black
+    /// apart from its emission).
+    pub instance_page: Vec<Option<u32>>,
+    /// Specular parameters of each scene material.
+    pub surfaces: Vec<Surface>,
+    pub cameras: Vec<GltfCamera>,
+    /// World bounding box of all triangles.
+    pub bounds: (Vec3, Vec3),
+}
+
+/// A rendered image: linear RGB radiance, row 0 at the top.
+#[derive(Clone, Debug)]
+pub struct Image {
+    pub width: u32,
+    pub height: u32,
+    pub rgb: Vec<Vec3>,
+    /// Samples that came out NaN or infinite and were replaced by black (should be 0).
+    pub nonfinite: u64,
+    /// Rays traced (primary and secondary).
+    pub rays: u64,
+}
+
+impl RenderScene {
+    /// Loads a baked glTF/GLB and the EXR pages its primitives reference.
+    pub fn load(path: &Path) -> Result<RenderScene> {
+        let (scene, source) = scene::load(path)?;
+        let dir = path.parent().unwrap_or(Path::new(""));
+        let mut pages = Vec::new();
+        let mut page_of_file: HashMap<String, u32> = HashMap::new();
+        let mut instance_page = Vec::with_capacity(scene.instances.len());
+        for inst in &scene.instances {
+            let prim =
+                &source.json["meshes"][inst.mesh as usize]["primitives"][inst.primitive as usize];
+            let uri = prim["extras"]["lightmap"]["exr"].as_str();
+            let page = match uri {
+                Some(uri) if inst.has_uv1 => Some(match page_of_file.get(uri) {
+                    Some(&k) => k,
+                    None => {
+                        pages.push(output::read_exr(&dir.join(uri))?);
+                        let k = pages.len() as u32 - 1;
+                        page_of_file.insert(uri.to_owned(), k);
+                        k
+                    }
+                }),
+                _ => None,
+            };
+            instance_page.push(page);
+        }
+        if instance_page.iter().all(Option::is_none) {
+            return Err(Error::invalid(
+                path,
+                "no lightmaps: no primitive has TEXCOORD_1 and extras.lightmap; \
+                 bake the scene first with `lightbake bake`",
+            ));
+        }
+        let surfaces = scene
+            .materials
+            .iter()
+            .map(|m| Surface::from_json(m, &source.json))
+            .collect();
+        let bounds = scene
+            .positions
+            .iter()
+            .fold((Vec3::MAX, Vec3::MIN), |(lo, hi), &p| {
+                (lo.min(p), hi.max(p))
+            });
+        let tracer = Tracer::new(&scene);
+        let cameras = gltf_cameras(&source.json);
+        Ok(RenderScene {
+            path: path.to_owned(),
+            scene,
+            source,
+            tracer,
+            pages,
+            instance_page,
+            surfaces,
+            cameras,
+            bounds,
+        })
+    }
+
+    /// Instances that have no lightmap (they render black apart from emission).
+    pub fn unlit_instances(&self) -> usize {
+        self.instance_page.iter().filter(|p| p.is_none()).count()
+    }
+
+    /// The camera named or numbered `selector`; without one the document's first camera, or a
+    /// view framing the scene when it has none.
+    pub fn camera(&self, selector: Option<&str>, aspect: f32) -> Result<Camera> {
+        match selector {
+            Some(s) => Ok(select(&self.cameras, s)?.camera),
+            None => Ok(self.cameras.first().map_or_else(
+                || Camera::framing(self.bounds.0, self.bounds.1, 45f32.to_radians(), aspect),
+                |c| c.camera,
+            )),
+        }
+    }
+
+    /// Radiance arriving at `origin` from direction `-dir` (`dir` unit): the value a pixel
+    /// sample sees. `rng` drives glossy sampling only.
+    pub fn radiance(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        options: &RenderOptions,
+        rng: &mut Rng,
+    ) -> Vec3 {
+        let mut rays = 0;
+        shade::Shader::new(self, options).radiance(origin, dir, 0, rng, &mut rays)
+    }
+
+    /// Renders the view of `camera`: rows in parallel, each pixel's samples from its own
+    /// random stream, so the image does not depend on the thread count.
+    pub fn render(&self, camera: &Camera, options: &RenderOptions) -> Result<Image> {
+        let (w, h) = (options.width, options.height);
+        if w == 0 || h == 0 || options.spp == 0 {
+            return Err(Error::Option(format!(
+                "image size {w}×{h} and samples per pixel {} must be positive",
+                options.spp
+            )));
+        }
+        let shader = shade::Shader::new(self, options);
+        let aspect = w as f32 / h as f32;
+        // Stratify the spp samples over a grid about √spp on a side; leftovers are pure jitter.
+        let grid = (options.spp as f32).sqrt().floor().max(1.0) as u32;
+        let rows: Vec<(Vec<Vec3>, u64, u64)> = (0..h)
+            .into_par_iter()
+            .map(|y| {
+                let mut row = Vec::with_capacity(w as usize);
+                let (mut nonfinite, mut rays) = (0u64, 0u64);
+                for x in 0..w {
+                    let pixel = y as u64 * w as u64 + x as u64;
+                    let mut rng = Rng::new(options.seed, pixel, PIXEL_STREAM);
+                    let mut sum = Vec3::ZERO;
+                    for s in 0..options.spp {
+                        let jitter = rng.next_vec2();
+                        let cell = if s < grid * grid {
+                            (Vec2::new((s % grid) as f32, (s / grid) as f32) + jitter) / grid as f32
+                        } else {
+                            jitter
+                        };
+                        let ndc = Vec2::new(
+                            2.0 * (x as f32 + cell.x) / w as f32 - 1.0,
+                            1.0 - 2.0 * (y as f32 + cell.y) / h as f32,
+                        );
+                        let dir = camera.direction(ndc, aspect);
+                        let l = shader.radiance(camera.eye, dir, 0, &mut rng, &mut rays);
+                        if l.is_finite() {
+                            sum += l;
+                        } else {
+                            nonfinite += 1;
+                        }
+                    }
+                    row.push(sum / options.spp as f32);
+                }
+                (row, nonfinite, rays)
+            })
+            .collect();
+        let mut image = Image {
+            width: w,
+            height: h,
+            rgb: Vec::with_capacity((w * h) as usize),
+            nonfinite: 0,
+            rays: 0,
+        };
+        for (row, nonfinite, rays) in rows {
+            image.rgb.extend(row);
+            image.nonfinite += nonfinite;
+            image.rays += rays;
+        }
+        Ok(image)
+    }
+}
+
+/// Purpose tag of the per-pixel random streams.
+const PIXEL_STREAM: u64 = 0x7265_6e64; // "rend"
+
+impl Image {
+    /// 8-bit sRGB PNG. Tone mapping: scale by `2^exposure`, then a soft shoulder that is the
+    /// identity below [`SHOULDER`] and rolls off exponentially towards 1 above it (continuous
+    /// with slope 1, so mid-tones stay true and highlights keep some detail instead of
+    /// clipping), then the sRGB transfer function.
+    pub fn to_png(&self, exposure: f32) -> Result<Vec<u8>> {
+        let scale = exposure.exp2();
+        let bytes: Vec<u8> = self
+            .rgb
+            .iter()
+            .flat_map(|v| (*v * scale).to_array().map(|c| encode_srgb(tone_map(c))))
+            .collect();
+        let mut png = Vec::new();
+        use image::ImageEncoder;
+        image::codecs::png::PngEncoder::new(&mut png)
+            .write_image(
+                &bytes,
+                self.width,
+                self.height,
+                image::ExtendedColorType::Rgb8,
+            )
+            .map_err(|e| Error::io("<png>", std::io::Error::other(e.to_string())))?;
+        Ok(png)
+    }
+
+    /// Writes `path` as a linear 32-bit float OpenEXR (`.exr`) or a tone-mapped PNG (any other
+    /// extension must be `.png`).
+    pub fn save(&self, path: &Path, exposure: f32) -> Result<()> {
+        let ext = path
+            .extension()
+            .and_then(|e| e.to_str())
+            .map(str::to_ascii_lowercase);
+        match ext.as_deref() {
+            Some("png") => {
+                let png = self.to_png(exposure)?;
+                std::fs::write(path, png).map_err(|e| Error::io(path, e))
+            }
+            Some("exr") => {
+                let w = self.width as usize;
+                exr::prelude::write_rgb_file(path, w, self.height as usize, |x, y| {
+                    let v = self.rgb[y * w + x];
+                    (v.x, v.y, v.z)
+                })
+                .map_err(|e| Error::io(path, std::io::Error::other(e.to_string())))
+            }
+            _ => Err(Error::Option(format!(
+                "{}: the image must end in .png or .exr",
+                path.display()
+            ))),
+        }
+    }
+}
+
+/// Where the tone curve leaves the identity.
+pub const SHOULDER: f32 = 0.8;
+
+/// Identity up to [`SHOULDER`], then `k + (1−k)(1 − e^{−(x−k)/(1−k)})` → 1 (C¹ at `k`).
+pub fn tone_map(x: f32) -> f32 {
+    if x.is_nan() || x <= 0.0 {
+        0.0
+    } else if x <= SHOULDER {
+        x
+    } else {
+        let k = SHOULDER;
+        k + (1.0 - k) * (1.0 - (-(x - k) / (1.0 - k)).exp())
+    }
+}
+
+fn encode_srgb(linear: f32) -> u8 {
+    let x = linear.clamp(0.0, 1.0);
+    let s = if x <= 0.003_130_8 {
+        12.92 * x
+    } else {
+        1.055 * x.powf(1.0 / 2.4) - 0.055
+    };
+    (s * 255.0 + 0.5) as u8
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn tone_curve_is_identity_then_smooth_and_bounded() {
+        assert_eq!(tone_map(0.5), 0.5);
+        assert_eq!(tone_map(f32::NAN), 0.0);
+        let k = SHOULDER;
+        assert!((tone_map(k + 1e-4) - (k + 1e-4)).abs() < 1e-6);
+        assert!(tone_map(100.0) <= 1.0 && tone_map(100.0) > 0.99);
+        assert!(tone_map(2.0) > tone_map(1.5));
+    }
+}

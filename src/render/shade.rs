@@ -1,0 +1,423 @@
+//! Shading: the lightmap lookup, and the Whitted ray tree of the specular layer.
+//!
+//! At a hit seen from direction `v` with shading normal `n` (cos θ = n·v):
+//!
+//! ```text
+//!   L_d   = baseColor · lightmap(uv1)                       diffuse, from the bake (H/π)
+//!   L     = L_d + Le                                        leaves, rough surfaces, no --specular
+//!
+//!   L     = m · F_m · L_r                                   metal part
+//!         + (1−m) · [ F_d · L_r + (1−F_d) · (τ · c · L_t + (1−τ) · L_d) ]   dielectric part
+//!         + Le
+//!   F_m   = Schlick(F0 = baseColor, cos θ)
+//!   F_d   = s · Schlick(F0 = min(((η−1)/(η+1))² · s_c, 1), cos θ)   (cos θ_t when leaving glass;
+//!           1 under total internal reflection)
+//!   L_r   = radiance along the mirror direction (roughness ≤ MIRROR_ROUGHNESS), or the mean
+//!           over GGX-sampled directions weighted by min(1, G₂·(v·h)/((n·v)(n·h)))
+//!   L_t   = radiance along the refracted direction; on the way out of a volume the result is
+//!           attenuated by exp(−σ·t) (Beer–Lambert over the path inside)
+//! ```
+//!
+//! with `m` metallic, `τ` transmission, `η` ior, `s`/`s_c` KHR_materials_specular's factor and
+//! colour, `c` = baseColor tinting light that enters a transmissive surface, `σ` from
+//! KHR_materials_volume (`−ln(attenuationColor)/attenuationDistance`). Every term is a convex
+//! combination of children (Fresnel ≤ 1, glossy weights clamped to 1, baseColor ≤ 1), so a
+//! pixel never exceeds the brightest `L_d + Le` in the scene plus `Le` of the specular surface
+//! itself: energy is conserved whatever the depth.
+//!
+//! | Constant | Value | Meaning |
+//! |---|---|---|
+//! | [`MIRROR_ROUGHNESS`] | 0.02 | at or below: one perfect mirror ray |
+//! | [`GLOSSY_MAX_ROUGHNESS`] | 0.5 | above: no specular layer (lightmap only) |
+//! | `MAX_BACK_FACE_SKIPS` | 8 | single-sided faces seen from behind are skipped (culled) |
+//!
+//! Limits: Schlick's Fresnel is applied once per node with the macro-normal angle (not per
+//! microfacet); a single-sided transmissive surface is taken to bound a volume (hitting it from
+//! behind means leaving the glass); diffuse light through glass comes from the bake, which
+//! treated glass as an opaque Lambertian surface.
+
+use glam::{Vec2, Vec3};
+use serde_json::Value;
+
+use super::{RenderOptions, RenderScene};
+use crate::scene::Material;
+use crate::trace::Hit;
+use crate::transport::sampling::{Rng, frame, hammersley};
+
+/// Roughness at or below which reflection is one perfect mirror ray.
+pub const MIRROR_ROUGHNESS: f32 = 0.02;
+/// Roughness above which a surface has no specular layer: it is shaded from the lightmap alone.
+pub const GLOSSY_MAX_ROUGHNESS: f32 = 0.5;
+/// Single-sided opaque faces hit from behind are skipped, as a rasteriser culls them.
+const MAX_BACK_FACE_SKIPS: u32 = 8;
+
+/// The specular parameters of a material (glTF metallic-roughness and extensions).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Surface {
+    pub metallic: f32,
+    pub roughness: f32,
+    /// KHR_materials_transmission `transmissionFactor`.
+    pub transmission: f32,
+    /// KHR_materials_ior (1.5 by default).
+    pub ior: f32,
+    /// KHR_materials_specular `specularFactor` and `specularColorFactor`.
+    pub specular: f32,
+    pub specular_color: Vec3,
+    /// Absorption coefficient σ per world unit (KHR_materials_volume), zero when clear.
+    pub attenuation: Vec3,
+}
+
+impl Default for Surface {
+    /// glTF's defaults: metallic 1, roughness 1 (fully rough, so no specular layer).
+    fn default() -> Self {
+        Surface {
+            metallic: 1.0,
+            roughness: 1.0,
+            transmission: 0.0,
+            ior: 1.5,
+            specular: 1.0,
+            specular_color: Vec3::ONE,
+            attenuation: Vec3::ZERO,
+        }
+    }
+}
+
+impl Surface {
+    /// Reads material `material.source` of the glTF JSON (defaults where absent). Textures of
+    /// these factors (metallicRoughnessTexture, …) are not sampled.
+    pub fn from_json(material: &Material, json: &Value) -> Surface {
+        let mut s = Surface::default();
+        let Some(index) = material.source else {
+            return s;
+        };
+        let m = &json["materials"][index as usize];
+        let f = |v: &Value, default: f32| v.as_f64().map_or(default, |x| x as f32);
+        let rgb = |v: &Value, default: Vec3| {
+            let a = v.as_array().filter(|a| a.len() >= 3);
+            a.map_or(default, |a| {
+                Vec3::new(f(&a[0], 0.0), f(&a[1], 0.0), f(&a[2], 0.0))
+            })
+        };
+        let pbr = &m["pbrMetallicRoughness"];
+        s.metallic = f(&pbr["metallicFactor"], 1.0).clamp(0.0, 1.0);
+        s.roughness = f(&pbr["roughnessFactor"], 1.0).clamp(0.0, 1.0);
+        let ext = &m["extensions"];
+        s.transmission = f(
+            &ext["KHR_materials_transmission"]["transmissionFactor"],
+            0.0,
+        )
+        .clamp(0.0, 1.0);
+        s.ior = f(&ext["KHR_materials_ior"]["ior"], 1.5).max(1.0);
+        let spec = &ext["KHR_materials_specular"];
+        s.specular = f(&spec["specularFactor"], 1.0).clamp(0.0, 1.0);
+        s.specular_color = rgb(&spec["specularColorFactor"], Vec3::ONE).max(Vec3::ZERO);
+        let volume = &ext["KHR_materials_volume"];
+        let distance = f(&volume["attenuationDistance"], f32::INFINITY);
+        let color = rgb(&volume["attenuationColor"], Vec3::ONE).clamp(Vec3::splat(1e-6), Vec3::ONE);
+        if distance.is_finite() && distance > 0.0 {
+            s.attenuation = -Vec3::new(color.x.ln(), color.y.ln(), color.z.ln()) / distance;
+        }
+        s
+    }
+
+    /// Has a specular layer worth tracing.
+    pub fn is_specular(&self) -> bool {
+        self.roughness <= GLOSSY_MAX_ROUGHNESS
+    }
+}
+
+/// Where a ray hit, resolved to shading inputs.
+struct SurfacePoint {
+    p: Vec3,
+    /// Unit geometric normal of the face that was hit (its front side).
+    n_geo: Vec3,
+    /// Unit interpolated vertex normal, on the same side as `n_geo`.
+    n: Vec3,
+    uv0: Vec2,
+    uv1: Vec2,
+    instance: u32,
+    material: u32,
+}
+
+pub(super) struct Shader<'a> {
+    scene: &'a RenderScene,
+    options: &'a RenderOptions,
+    epsilon: f32,
+}
+
+impl<'a> Shader<'a> {
+    pub(super) fn new(scene: &'a RenderScene, options: &'a RenderOptions) -> Self {
+        Shader {
+            scene,
+            options,
+            epsilon: scene.tracer.epsilon,
+        }
+    }
+
+    /// Radiance arriving at `origin` along `-dir`; `depth` is this ray's level in the tree.
+    pub(super) fn radiance(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        depth: u32,
+        rng: &mut Rng,
+        rays: &mut u64,
+    ) -> Vec3 {
+        let Some(hit) = self.intersect(origin, dir, rays) else {
+            return self.options.background;
+        };
+        let sp = self.surface_point(&hit);
+        let material = &self.scene.scene.materials[sp.material as usize];
+        let surface = &self.scene.surfaces[sp.material as usize];
+        let base = self.base_color(material, sp.uv0);
+        let emission = if hit.front {
+            self.emission(material, sp.uv0)
+        } else {
+            Vec3::ZERO
+        };
+        let l_d = base * self.lightmap(sp.instance, sp.uv1);
+        let tree = self.options.specular && depth < self.options.max_depth;
+        if !tree || !surface.is_specular() {
+            return l_d + emission;
+        }
+
+        let v = -dir;
+        let entering = hit.front;
+        let (n, n_geo) = if entering {
+            (sp.n, sp.n_geo)
+        } else {
+            (-sp.n, -sp.n_geo)
+        };
+        // A shading normal facing away from the viewer would reflect into the surface.
+        let n = if n.dot(v) > 1e-4 { n } else { n_geo };
+        let cos_i = n.dot(v).clamp(1e-4, 1.0);
+        let above = sp.p + n_geo * self.epsilon;
+        let below = sp.p - n_geo * self.epsilon;
+
+        let l_r = self.reflection(above, n_geo, n, v, surface.roughness, depth, rng, rays);
+        let mut l = emission;
+        if surface.metallic > 0.0 {
+            l += surface.metallic * schlick(base, cos_i) * l_r;
+        }
+        let dielectric = 1.0 - surface.metallic;
+        if dielectric > 0.0 {
+            let eta = if entering {
+                1.0 / surface.ior
+            } else {
+                surface.ior
+            };
+            let sin2_t = eta * eta * (1.0 - cos_i * cos_i);
+            let tir = sin2_t >= 1.0;
+            let f0 = (((surface.ior - 1.0) / (surface.ior + 1.0)).powi(2) * surface.specular_color)
+                .min(Vec3::ONE);
+            // Leaving a denser medium, Schlick needs the angle on the thinner side.
+            let cos_f = if eta > 1.0 {
+                (1.0 - sin2_t).max(0.0).sqrt()
+            } else {
+                cos_i
+            };
+            let f_d = if tir {
+                Vec3::ONE
+            } else {
+                surface.specular * schlick(f0, cos_f)
+            };
+            let mut body = Vec3::ZERO;
+            if surface.transmission > 0.0 && !tir {
+                let cos_t = (1.0 - sin2_t).sqrt();
+                let t_dir = (-v * eta + n * (eta * cos_i - cos_t)).normalize();
+                let tint = if entering { base } else { Vec3::ONE };
+                let l_t = self.radiance(below, t_dir, depth + 1, rng, rays);
+                body += surface.transmission * tint * l_t;
+            }
+            if entering {
+                body += (1.0 - surface.transmission) * l_d;
+            }
+            l += dielectric * (f_d * l_r + (Vec3::ONE - f_d) * body);
+        }
+        if !entering {
+            // The ray travelled hit.t inside the volume.
+            l *= (-surface.attenuation * hit.t).exp();
+        }
+        l
+    }
+
+    /// Mirror ray, or the GGX-weighted mean over sampled reflection directions.
+    #[allow(clippy::too_many_arguments)]
+    fn reflection(
+        &self,
+        origin: Vec3,
+        n_geo: Vec3,
+        n: Vec3,
+        v: Vec3,
+        roughness: f32,
+        depth: u32,
+        rng: &mut Rng,
+        rays: &mut u64,
+    ) -> Vec3 {
+        if roughness <= MIRROR_ROUGHNESS {
+            let mut r = 2.0 * n.dot(v) * n - v;
+            if r.dot(n_geo) <= 0.0 {
+                r = 2.0 * n_geo.dot(v) * n_geo - v;
+            }
+            return self.radiance(origin, r.normalize(), depth + 1, rng, rays);
+        }
+        let alpha = roughness * roughness;
+        let k = if depth == 0 {
+            self.options.glossy_samples.max(1)
+        } else {
+            1
+        };
+        let (t, b) = frame(n);
+        let n_v = n.dot(v).max(1e-4);
+        let shift = rng.next_vec2();
+        let mut sum = Vec3::ZERO;
+        for i in 0..k {
+            let u = hammersley(i, k, shift);
+            // GGX normal distribution sampling: tan²θ_h = α² u / (1 − u).
+            let tan2 = alpha * alpha * u.x / (1.0 - u.x).max(1e-6);
+            let cos_h = 1.0 / (1.0 + tan2).sqrt();
+            let sin_h = (1.0 - cos_h * cos_h).max(0.0).sqrt();
+            let phi = std::f32::consts::TAU * u.y;
+            let h = t * (sin_h * phi.cos()) + b * (sin_h * phi.sin()) + n * cos_h;
+            let v_h = v.dot(h);
+            if v_h <= 0.0 {
+                continue;
+            }
+            let l = (2.0 * v_h * h - v).normalize();
+            let n_l = n.dot(l);
+            if n_l <= 0.0 || l.dot(n_geo) <= 0.0 {
+                continue;
+            }
+            let g2 = smith_g1(n_v, alpha) * smith_g1(n_l, alpha);
+            let w = (g2 * v_h / (n_v * cos_h)).min(1.0);
+            sum += w * self.radiance(origin, l, depth + 1, rng, rays);
+        }
+        sum / k as f32
+    }
+
+    /// Closest hit that is visible: front faces, and any face of a transmissive material.
+    fn intersect(&self, origin: Vec3, dir: Vec3, rays: &mut u64) -> Option<Hit> {
+        let mut o = origin;
+        let mut travelled = 0.0;
+        for _ in 0..MAX_BACK_FACE_SKIPS {
+            *rays += 1;
+            let mut hit = self.scene.tracer.closest(o, dir, f32::INFINITY)?;
+            let instance = self.scene.scene.triangle_instance[hit.triangle as usize];
+            let material = self.scene.scene.instances[instance as usize].material;
+            if hit.front || self.scene.surfaces[material as usize].transmission > 0.0 {
+                hit.t += travelled;
+                return Some(hit);
+            }
+            let step = hit.t + self.epsilon;
+            o += dir * step;
+            travelled += step;
+        }
+        None
+    }
+
+    fn surface_point(&self, hit: &Hit) -> SurfacePoint {
+        let s = &self.scene.scene;
+        let [a, b, c] = s.triangles[hit.triangle as usize].map(|v| v as usize);
+        let w = Vec3::new(1.0 - hit.bary.x - hit.bary.y, hit.bary.x, hit.bary.y);
+        let p = s.positions[a] * w.x + s.positions[b] * w.y + s.positions[c] * w.z;
+        let n_geo = (s.positions[b] - s.positions[a])
+            .cross(s.positions[c] - s.positions[a])
+            .normalize_or_zero();
+        let n = (s.normals[a] * w.x + s.normals[b] * w.y + s.normals[c] * w.z).normalize_or_zero();
+        let n = if n.dot(n_geo) > 0.0 { n } else { n_geo };
+        let instance = s.triangle_instance[hit.triangle as usize];
+        SurfacePoint {
+            p,
+            n_geo,
+            n,
+            uv0: s.uv0[a] * w.x + s.uv0[b] * w.y + s.uv0[c] * w.z,
+            uv1: s.uv1[a] * w.x + s.uv1[b] * w.y + s.uv1[c] * w.z,
+            instance,
+            material: s.instances[instance as usize].material,
+        }
+    }
+
+    fn base_color(&self, m: &Material, uv0: Vec2) -> Vec3 {
+        match m.base_color_texture {
+            Some(t) => m.base_color * self.scene.scene.textures[t as usize].sample(uv0),
+            None => m.base_color,
+        }
+    }
+
+    fn emission(&self, m: &Material, uv0: Vec2) -> Vec3 {
+        match m.emissive_texture {
+            Some(t) => m.emission * self.scene.scene.textures[t as usize].sample(uv0),
+            None => m.emission,
+        }
+    }
+
+    /// Bilinear lookup of `H/π` at `uv1`, clamped to the page (dilation filled the gutters).
+    fn lightmap(&self, instance: u32, uv: Vec2) -> Vec3 {
+        let Some(page) = self.scene.instance_page[instance as usize] else {
+            return Vec3::ZERO;
+        };
+        let page = &self.scene.pages[page as usize];
+        let (w, h) = (page.width as i64, page.height as i64);
+        let x = uv.x * w as f32 - 0.5;
+        let y = uv.y * h as f32 - 0.5;
+        let (x0, y0) = (x.floor(), y.floor());
+        let (fx, fy) = (x - x0, y - y0);
+        let fetch =
+            |xi: i64, yi: i64| page.rgb[(yi.clamp(0, h - 1) * w + xi.clamp(0, w - 1)) as usize];
+        let (x0, y0) = (x0 as i64, y0 as i64);
+        let top = fetch(x0, y0).lerp(fetch(x0 + 1, y0), fx);
+        let bottom = fetch(x0, y0 + 1).lerp(fetch(x0 + 1, y0 + 1), fx);
+        top.lerp(bottom, fy)
+    }
+}
+
+/// Schlick's Fresnel approximation `F0 + (1 − F0)(1 − cos θ)⁵`.
+#[inline]
+fn schlick(f0: Vec3, cos: f32) -> Vec3 {
+    f0 + (Vec3::ONE - f0) * (1.0 - cos).clamp(0.0, 1.0).powi(5)
+}
+
+/// Smith's masking term for GGX, `2 cos / (cos + √(α² + (1 − α²) cos²))`.
+#[inline]
+fn smith_g1(cos: f32, alpha: f32) -> f32 {
+    let a2 = alpha * alpha;
+    2.0 * cos / (cos + (a2 + (1.0 - a2) * cos * cos).sqrt())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use serde_json::json;
+
+    #[test]
+    fn schlick_goes_from_f0_to_one() {
+        let f0 = Vec3::splat(0.04);
+        assert!((schlick(f0, 1.0) - f0).length() < 1e-7);
+        assert!((schlick(f0, 0.0) - Vec3::ONE).length() < 1e-7);
+    }
+
+    #[test]
+    fn surfaces_read_the_extensions() {
+        let json = json!({ "materials": [{
+            "pbrMetallicRoughness": { "metallicFactor": 0.0, "roughnessFactor": 0.1 },
+            "extensions": {
+                "KHR_materials_transmission": { "transmissionFactor": 0.9 },
+                "KHR_materials_ior": { "ior": 1.33 },
+                "KHR_materials_volume": { "attenuationColor": [0.5, 1.0, 1.0], "attenuationDistance": 2.0 }
+            }
+        }]});
+        let m = Material {
+            source: Some(0),
+            ..Material::default()
+        };
+        let s = Surface::from_json(&m, &json);
+        assert_eq!((s.metallic, s.roughness, s.transmission), (0.0, 0.1, 0.9));
+        assert!((s.ior - 1.33).abs() < 1e-6);
+        assert!((s.attenuation.x - 0.5f32.ln().abs() / 2.0).abs() < 1e-6);
+        assert_eq!(s.attenuation.y, 0.0);
+        assert_eq!(
+            Surface::from_json(&Material::default(), &json),
+            Surface::default()
+        );
+    }
+}
