@@ -16,7 +16,7 @@
 
 pub mod direct;
 pub mod hierarchical;
-mod montecarlo;
+pub(crate) mod montecarlo;
 mod point;
 mod polygon;
 pub mod sampling;

@@ -42,13 +42,13 @@ const PUNCTUAL_GRID: u32 = 2;
 
 /// Rows of one chunk of texels, concatenated in order afterwards.
 #[derive(Default)]
-struct ChunkRows {
-    row_len: Vec<u32>,
-    col: Vec<u32>,
-    f: Vec<f32>,
-    escape: Vec<f32>,
-    direct: Vec<Vec3>,
-    rays: u64,
+pub(crate) struct ChunkRows {
+    pub(crate) row_len: Vec<u32>,
+    pub(crate) col: Vec<u32>,
+    pub(crate) f: Vec<f32>,
+    pub(crate) escape: Vec<f32>,
+    pub(crate) direct: Vec<Vec3>,
+    pub(crate) rays: u64,
 }
 
 pub fn build(
@@ -127,12 +127,12 @@ fn power_weight(this: f32, other: f32) -> f32 {
     if d > 0.0 { this / d } else { 0.0 }
 }
 
-struct Context<'a> {
-    scene: &'a Scene,
-    texels: &'a Texels,
-    tracer: &'a Tracer,
-    params: &'a TransportParams,
-    emitters: &'a Emitters,
+pub(crate) struct Context<'a> {
+    pub(crate) scene: &'a Scene,
+    pub(crate) texels: &'a Texels,
+    pub(crate) tracer: &'a Tracer,
+    pub(crate) params: &'a TransportParams,
+    pub(crate) emitters: &'a Emitters,
 }
 
 impl Context<'_> {
@@ -142,7 +142,7 @@ impl Context<'_> {
     /// strip half a texel wide, and jittering over the whole texel started rays beyond the edge
     /// of the surface (outside a closed box, measured as a 28% furnace error).
     #[inline]
-    fn footprint_point(&self, i: usize, u: Vec2) -> Vec3 {
+    pub(crate) fn footprint_point(&self, i: usize, u: Vec2) -> Vec3 {
         let t = self.texels;
         let (du, dv) = (t.du[i], t.dv[i]);
         let full = du.cross(dv).length();
@@ -157,7 +157,7 @@ impl Context<'_> {
     }
 
     /// Gathers row `i` into `out` (`hits` is scratch space).
-    fn texel_row(&self, i: usize, hits: &mut Vec<u32>, out: &mut ChunkRows) {
+    pub(crate) fn texel_row(&self, i: usize, hits: &mut Vec<u32>, out: &mut ChunkRows) {
         let texels = self.texels;
         let n = texels.normal[i];
         let (tx, ty) = frame(n);
