@@ -29,6 +29,8 @@ pub struct BakeReport {
     pub residual: f32,
     /// False when the solver stopped on the iteration cap.
     pub converged: bool,
+    /// Texel sample points moved out of geometry, and texels with none outside it.
+    pub validity: texels::validity::ValidityReport,
     pub stages: Vec<StageTime>,
     /// The files written, the glTF first.
     pub files: Vec<PathBuf>,
@@ -44,8 +46,10 @@ impl BakeReport {
             .collect();
         let total: f64 = self.stages.iter().map(|s| s.seconds).sum();
         format!(
-            "{} texels on {} page(s), {} triangles, {:.2} M rays, {} iterations, residual {:.1e}{}; {} (total {:.2}s)",
+            "{} texels ({} moved out of geometry, {} invalid) on {} page(s), {} triangles, {:.2} M rays, {} iterations, residual {:.1e}{}; {} (total {:.2}s)",
             self.texels,
+            self.validity.moved,
+            self.validity.invalid,
             self.pages,
             self.triangles,
             self.rays as f64 * 1e-6,
@@ -74,11 +78,13 @@ pub struct Baked {
     /// `H/π` per texel (what the pages hold before dilation).
     pub lightmap: Vec<Vec3>,
     pub pages: LightmapPages,
+    pub validity: texels::validity::ValidityReport,
     pub stages: Vec<StageTime>,
 }
 
 /// Bakes `input` (.gltf or .glb) into `out_dir`: `<stem>.gltf` + `<stem>.bin` (or `<stem>.glb`),
-/// and per page `<stem>_lightmap<k>.exr` and a tone-mapped `<stem>_lightmap<k>.png`.
+/// and per page `<stem>_lightmap<k>.exr` and a tone-mapped `<stem>_lightmap<k>.png`
+/// (and `<stem>_lightmap<k>_rgbm.png` with `config.output.rgbm`).
 pub fn bake(
     input: &Path,
     out_dir: &Path,
@@ -124,13 +130,25 @@ pub fn compute(input: &Path, config: &BakeConfig, progress: &dyn Progress) -> Re
     check_aborted(progress)?;
 
     let t = Instant::now();
-    let texels = texels::build(&scene, &atlas)?;
+    let mut texels = texels::build(&scene, &atlas)?;
     timed("texels", t);
     check_aborted(progress)?;
 
     let t = Instant::now();
     let tracer = Tracer::new(&scene);
     timed("bvh", t);
+
+    let t = Instant::now();
+    let validity = if config.transport.validity {
+        let params = texels::validity::ValidityParams {
+            seed: config.transport.seed,
+            ..Default::default()
+        };
+        texels::validity::fix(&mut texels, &tracer, &params)
+    } else {
+        Default::default()
+    };
+    timed("validity", t);
 
     let t = Instant::now();
     let (transport, solution) = solve::run(
@@ -153,12 +171,13 @@ pub fn compute(input: &Path, config: &BakeConfig, progress: &dyn Progress) -> Re
 
     let t = Instant::now();
     // A texel stores H/π; indirect-only leaves out light that arrived without a bounce.
-    let lightmap: Vec<Vec3> = solution
+    let mut lightmap: Vec<Vec3> = solution
         .irradiance
         .iter()
         .zip(&transport.direct)
         .map(|(h, d)| if config.transport.indirect_only { (*h - *d).max(Vec3::ZERO) } else { *h } / std::f32::consts::PI)
         .collect();
+    texels::validity::fill_invalid(&texels, &mut lightmap);
     let mut pages = LightmapPages::from_texels(&texels, &lightmap);
     lightmap::dilate(&mut pages, config.atlas.padding.max(2) * 2);
     timed("dilate", t);
@@ -172,6 +191,7 @@ pub fn compute(input: &Path, config: &BakeConfig, progress: &dyn Progress) -> Re
         solution,
         lightmap,
         pages,
+        validity,
         stages,
     })
 }
@@ -192,6 +212,7 @@ pub fn write(
         transport,
         solution,
         pages,
+        validity,
         mut stages,
         ..
     } = baked;
@@ -216,6 +237,10 @@ pub fn write(
             &files.png,
             &output::write_png_preview(page, config.output.preview_exposure)?,
         )?;
+        if config.output.rgbm {
+            let png = lightmap::rgbm::write_png(page, lightmap::rgbm::DEFAULT_RANGE)?;
+            staging.write(&format!("{stem}_lightmap{k}_rgbm.png"), &png)?;
+        }
         page_files.push(files);
     }
     output::write_gltf(&scene, &source, &atlas, &page_files, &mut staging, &stem)?;
@@ -236,6 +261,7 @@ pub fn write(
         iterations: solution.history.len(),
         residual: solution.residual(),
         converged: solution.converged,
+        validity,
         stages,
         files,
     })

@@ -60,6 +60,9 @@ pub struct TransportParams {
     pub indirect_only: bool,
     /// Base seed of the per-texel random streams; output depends on it, never on thread count.
     pub seed: u64,
+    /// Move texel sample points out of geometry and fill texels buried in it from their
+    /// neighbours (`texels::validity`; 16 probe rays per texel). Off only to measure leaks.
+    pub validity: bool,
 }
 
 /// Iterative method for the stored radiosity system.
@@ -93,6 +96,8 @@ pub struct OutputParams {
     pub float: bool,
     /// Exposure (in stops) of the tone-mapped PNG previews.
     pub preview_exposure: f32,
+    /// Also write each page as an 8-bit RGBM PNG (`lightmap::rgbm`, range 8).
+    pub rgbm: bool,
 }
 
 /// All options of a bake.
@@ -125,6 +130,7 @@ impl BakeConfig {
                 sky: Vec3::ZERO,
                 indirect_only: false,
                 seed: 0,
+                validity: true,
             },
             solve: SolveParams {
                 solver: Solver::Jacobi,
@@ -134,6 +140,7 @@ impl BakeConfig {
             output: OutputParams {
                 float: false,
                 preview_exposure: 0.0,
+                rgbm: false,
             },
         }
     }

@@ -5,3 +5,8 @@ mod util;
 mod analytic;
 mod cli;
 mod pipeline;
+mod quality;
+mod reference;
+mod render;
+mod solvers;
+mod form_factors;

@@ -128,6 +128,13 @@ struct BakeArgs {
     /// Write 32-bit float EXR pages instead of half floats.
     #[arg(long)]
     float: bool,
+    /// Also write each page as an 8-bit RGBM PNG <stem>_lightmap<k>_rgbm.png (linear;
+    /// decode rgb = RGB/255 · A/255 · 8).
+    #[arg(long)]
+    rgbm: bool,
+    /// Keep texel sample points where they are even inside geometry (to measure leaks).
+    #[arg(long)]
+    no_validity: bool,
     /// Exposure of the PNG previews, in stops.
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     exposure: f32,
@@ -200,6 +207,8 @@ impl BakeArgs {
         c.solve.max_iterations = self.max_iterations;
         c.output.float = self.float;
         c.output.preview_exposure = self.exposure;
+        c.output.rgbm = self.rgbm;
+        c.transport.validity = !self.no_validity;
         c
     }
 }

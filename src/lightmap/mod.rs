@@ -4,6 +4,7 @@
 //! reflect, so a renderer shades with `baseColor × lightmap + emission`.
 
 mod dilate;
+pub mod rgbm;
 
 use glam::Vec3;
 

@@ -5,6 +5,7 @@
 //! albedo and emission, and the world area actually covered.
 
 mod raster;
+pub mod validity;
 
 use glam::{Vec2, Vec3};
 
@@ -49,6 +50,9 @@ pub struct Texels {
     /// Triangle lightmap UVs in texel units of its page, per scene triangle (for hit lookups).
     pub triangle_uv: Vec<[Vec2; 3]>,
     pub triangle_page: Vec<u32>,
+    /// Texels whose footprint has no point outside geometry (ascending ids; see
+    /// [`validity`]): solved, but their lightmap value is filled from valid neighbours.
+    pub invalid: Vec<u32>,
 }
 
 impl Texels {

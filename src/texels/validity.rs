@@ -1,0 +1,221 @@
+//! Texel validity and sample placement: keeps sample points out of geometry.
+//!
+//! A texel's sample point is the centroid of its covered footprint. Where geometry intersects or
+//! rests on a surface (a box standing on the floor, a wall piercing a floor) the centroid can lie
+//! inside a closed, single-sided solid; gathering rays from there hit back faces (absorbed) and
+//! the texel turns black, and bilinear filtering spreads that black along the contact line.
+//!
+//! For each texel, `R` short cosine-distributed rays leave the sample point (lifted by the ray
+//! epsilon) and count back-face hits within `reach = REACH·s`, `s = √|du × dv|` the texel's world
+//! side:
+//!
+//! ```text
+//!   b(p) = #{ k < R : ray(p, ω_k) hits a back face at t ≤ reach }
+//! ```
+//!
+//! If `b(centroid) > 0`, a `G × G` grid of candidate points over the footprint
+//! (`centroid + s·du + t·dv`, `s, t ∈ {(a + ½)/G − ½}`, scaled by the covered fraction for
+//! partly covered texels, as the gathering rays are) is tested with the same directions, and
+//! the texel moves to the candidate with the fewest back hits (the nearest to the centroid on
+//! ties) when it has fewer than the centroid. If even that has more than `MAX_BACK·R` back hits,
+//! the texel is **invalid**: it is still solved (it absorbs light, so energy stays correct), but
+//! its value is replaced by [`fill_invalid`] with the mean of valid neighbours on its page
+//! (same chart, normals within 60°), ring by ring, before dilation. An invalid texel with no
+//! valid texel in reach keeps its solved (dark) value.
+//!
+//! | parameter  | default | meaning                                                          |
+//! |------------|---------|------------------------------------------------------------------|
+//! | `rays` R   | 16      | probe rays per point (same directions for every candidate)        |
+//! | `MAX_BACK` | 0.25    | more than this fraction of back hits ⇒ inside geometry (as Unity's backface tolerance, Bakery) |
+//! | `REACH`    | 8       | probe length in texel sides: finds the inside of solids up to ~8 texels across |
+//! | `grid` G   | 4       | candidate points per side of the footprint                        |
+//!
+//! When to use: always (it costs `R` rays per texel, `R·(1 + G²)` for texels near back faces).
+//! Limits: only single-sided solids are detected — a zero-thickness double-sided wall has no
+//! back side, so a floor texel straddling it still mixes both rooms; a moved texel's gathering
+//! rays are still jittered over a full footprint around its new point; solids deeper than `REACH`
+//! texels leave their inner texels black but valid (never visible).
+
+use glam::{Vec2, Vec3};
+use rayon::prelude::*;
+
+use super::{NO_TEXEL, Texels};
+use crate::trace::Tracer;
+use crate::transport::sampling::{Rng, cosine_hemisphere, frame, hammersley};
+
+/// Random-stream purpose of the probe directions (distinct from the transport's streams).
+const PURPOSE: u64 = 0x7a11_d17e;
+/// More than this fraction of probe rays on back faces ⇒ the point is inside geometry.
+pub const MAX_BACK: f32 = 0.25;
+/// Probe length in texel sides.
+pub const REACH: f32 = 8.0;
+/// Neighbours whose normals differ by more than this (cosine of 60°) do not fill each other.
+const FILL_COS: f32 = 0.5;
+
+/// Probe settings (see the module docs).
+#[derive(Clone, Debug)]
+pub struct ValidityParams {
+    pub rays: u32,
+    pub grid: u32,
+    pub seed: u64,
+}
+
+impl Default for ValidityParams {
+    fn default() -> Self {
+        ValidityParams {
+            rays: 16,
+            grid: 4,
+            seed: 0,
+        }
+    }
+}
+
+/// What [`fix`] changed.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct ValidityReport {
+    /// Texels whose sample point moved within the footprint.
+    pub moved: usize,
+    /// Texels with no valid point (listed in [`Texels::invalid`]).
+    pub invalid: usize,
+}
+
+/// Moves sample points out of geometry and records invalid texels in `texels.invalid`.
+pub fn fix(texels: &mut Texels, tracer: &Tracer, params: &ValidityParams) -> ValidityReport {
+    let rays = params.rays.max(1);
+    let grid = params.grid.max(1);
+    let limit = (MAX_BACK * rays as f32) as u32;
+    let texels_ref = &*texels;
+    let outcome: Vec<(Option<Vec3>, bool)> = (0..texels.len())
+        .into_par_iter()
+        .map(|i| probe_texel(texels_ref, tracer, i, rays, grid, limit, params.seed))
+        .collect();
+    let mut report = ValidityReport::default();
+    texels.invalid.clear();
+    for (i, (moved, invalid)) in outcome.into_iter().enumerate() {
+        if let Some(p) = moved {
+            texels.position[i] = p;
+            report.moved += 1;
+        }
+        if invalid {
+            texels.invalid.push(i as u32);
+        }
+    }
+    report.invalid = texels.invalid.len();
+    report
+}
+
+/// (new position if moved, invalid) for texel `i`.
+fn probe_texel(
+    texels: &Texels,
+    tracer: &Tracer,
+    i: usize,
+    rays: u32,
+    grid: u32,
+    limit: u32,
+    seed: u64,
+) -> (Option<Vec3>, bool) {
+    let n = texels.normal[i];
+    let (du, dv) = (texels.du[i], texels.dv[i]);
+    let full = du.cross(dv).length();
+    let reach = (REACH * full.sqrt()).max(8.0 * tracer.epsilon);
+    let (tx, ty) = frame(n);
+    let shift = Rng::new(seed, i as u64, PURPOSE).next_vec2();
+    let back_hits = |p: Vec3| -> u32 {
+        let origin = p + n * tracer.epsilon;
+        (0..rays)
+            .filter(|&k| {
+                let local = cosine_hemisphere(hammersley(k, rays, shift));
+                let dir = tx * local.x + ty * local.y + n * local.z;
+                tracer
+                    .closest(origin, dir, reach)
+                    .is_some_and(|hit| !hit.front && hit.t <= reach)
+            })
+            .count() as u32
+    };
+
+    let centroid = texels.position[i];
+    let at_centroid = back_hits(centroid);
+    if at_centroid == 0 {
+        return (None, false);
+    }
+    // Candidates over the covered footprint, as the gathering rays sample it.
+    let cover = if full > 0.0 {
+        (texels.area[i] / full).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    let scale = if cover > 0.99 { 1.0 } else { cover };
+    let mut best = (at_centroid, 0.0f32, centroid);
+    for a in 0..grid {
+        for b in 0..grid {
+            let o = (Vec2::new(a as f32 + 0.5, b as f32 + 0.5) / grid as f32 - 0.5) * scale;
+            let distance = o.length();
+            if (best.0, best.1) <= (0, distance) {
+                continue; // cannot beat the best
+            }
+            let p = centroid + du * o.x + dv * o.y;
+            let b = back_hits(p);
+            if (b, distance) < (best.0, best.1) {
+                best = (b, distance, p);
+            }
+        }
+    }
+    let moved = (best.0 < at_centroid).then_some(best.2);
+    (moved, best.0 > limit)
+}
+
+/// Replaces the values of invalid texels by the mean of their valid page neighbours (8-connected,
+/// normals within 60°), ring by ring from the valid ones inwards; each ring reads only values
+/// known before it, so the result does not depend on order. Filled texels count as valid for the
+/// next ring. Invalid texels no valid texel reaches keep their value.
+pub fn fill_invalid(texels: &Texels, values: &mut [Vec3]) {
+    if texels.invalid.is_empty() {
+        return;
+    }
+    let mut known = vec![true; texels.len()];
+    for &i in &texels.invalid {
+        known[i as usize] = false;
+    }
+    let mut pending: Vec<u32> = texels.invalid.clone();
+    let mut ring: Vec<(u32, Vec3)> = Vec::with_capacity(pending.len());
+    loop {
+        ring.clear();
+        for &i in &pending {
+            let i = i as usize;
+            let (sum, count) = neighbours(texels, i)
+                .filter(|&j| known[j] && texels.normal[j].dot(texels.normal[i]) >= FILL_COS)
+                .fold((Vec3::ZERO, 0u32), |(s, c), j| (s + values[j], c + 1));
+            if count > 0 {
+                let mean = sum / count as f32;
+                ring.push((i as u32, if mean.is_finite() { mean } else { Vec3::ZERO }));
+            }
+        }
+        if ring.is_empty() {
+            break;
+        }
+        for &(i, v) in &ring {
+            values[i as usize] = v;
+            known[i as usize] = true;
+        }
+        pending.retain(|&i| !known[i as usize]);
+    }
+}
+
+/// Texel ids of the (up to 8) page neighbours of texel `i`.
+fn neighbours(texels: &Texels, i: usize) -> impl Iterator<Item = usize> + '_ {
+    let page = texels.page[i] as usize;
+    let size = texels.pages[page];
+    let [x, y] = texels.xy[i];
+    (-1..=1i64)
+        .flat_map(move |dy| (-1..=1i64).map(move |dx| (x as i64 + dx, y as i64 + dy)))
+        .filter(move |&(nx, ny)| {
+            (nx, ny) != (x as i64, y as i64)
+                && nx >= 0
+                && ny >= 0
+                && nx < size.width as i64
+                && ny < size.height as i64
+        })
+        .map(move |(nx, ny)| texels.index[page][(ny as u32 * size.width + nx as u32) as usize])
+        .filter(|&j| j != NO_TEXEL)
+        .map(|j| j as usize)
+}

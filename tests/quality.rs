@@ -1,0 +1,221 @@
+//! Lightmap quality: light leaks through walls, texels buried in geometry (validity), RGBM pages.
+//!
+//! Run with `--nocapture` to see the measured means each test prints.
+
+use std::path::Path;
+
+use glam::{Quat, Vec3};
+use lightbake::testing::{self, Face, Geometry, GltfBuilder, Material};
+use lightbake::{BakeConfig, Baked, NoProgress, compute, lightmap::rgbm, write};
+
+use crate::util::{fixture, scratch};
+
+/// Moderate Monte Carlo settings: 16 texels/m, 128 rays, 32 light samples.
+fn moderate(validity: bool) -> BakeConfig {
+    let mut c = BakeConfig::draft();
+    c.atlas.texels_per_unit = 16.0;
+    c.transport.gather_rays = 128;
+    c.transport.light_samples = 32;
+    c.transport.validity = validity;
+    c
+}
+
+fn bake(input: &Path, config: &BakeConfig) -> Baked {
+    compute(input, config, &NoProgress).unwrap()
+}
+
+/// Mean lightmap (grey level, mean of channels) of the floor texels (facing up at y ≈ 0) whose
+/// position satisfies `select`, and how many there were.
+fn floor_mean(baked: &Baked, select: impl Fn(Vec3) -> bool) -> (f32, usize) {
+    let t = &baked.texels;
+    let (sum, n) = (0..t.len())
+        .filter(|&i| t.normal[i].y > 0.9 && t.position[i].y.abs() < 0.01 && select(t.position[i]))
+        .fold((0.0, 0), |(s, n), i| {
+            (s + baked.lightmap[i].element_sum() / 3.0, n + 1)
+        });
+    (sum / n.max(1) as f32, n)
+}
+
+/// Side of one texel (m).
+fn texel_side(config: &BakeConfig) -> f32 {
+    1.0 / config.atlas.texels_per_unit
+}
+
+/// The two rooms of `fixtures/two_rooms.gltf`, with the partition replaced by a solid wall of
+/// `thickness` (single-sided, outward: a closed solid) reaching from `bottom` (below the floor:
+/// it pierces it) to the ceiling, with the same doorway z ∈ [−0.4, 0.4], y ∈ [0, 1.6].
+fn two_rooms_with_solid_wall(thickness: f32, bottom: f32) -> GltfBuilder {
+    let mut gltf = GltfBuilder::new("two_rooms_solid_wall");
+    let shell = gltf.add_material(Material::grey("shell", 0.7));
+    let floor_material = gltf.add_material(Material::grey("floor", 0.5));
+    let wall_material = gltf.add_material(Material::grey("wall", 0.7));
+    let panel_material = gltf.add_material(
+        Material::grey("panel", 0.8).emitting([1.0; 3], testing::TWO_ROOMS_PANEL_RADIANCE),
+    );
+    let (min, max) = (Vec3::new(-2.0, 0.0, -1.0), Vec3::new(2.0, 2.0, 1.0));
+    let floor = Geometry::box_face(min, max, Face::NegY, 7, 3).flipped();
+    let floor_mesh = gltf.add_mesh("floor", floor.without_uv0(), floor_material);
+    gltf.add_mesh_node("floor", floor_mesh);
+    let mut walls = Geometry::box_face(min, max, Face::PosY, 7, 3).flipped();
+    for (face, n) in [
+        (Face::NegX, 4),
+        (Face::PosX, 4),
+        (Face::NegZ, 8),
+        (Face::PosZ, 8),
+    ] {
+        walls.append(&Geometry::box_face(min, max, face, n, 4).flipped());
+    }
+    let shell_mesh = gltf.add_mesh("shell", walls.without_uv0(), shell);
+    gltf.add_mesh_node("shell", shell_mesh);
+
+    let h = thickness / 2.0;
+    let block = |z0: f32, z1: f32, y0: f32| {
+        Geometry::box_faces(Vec3::new(-h, y0, z0), Vec3::new(h, 2.0, z1), &Face::ALL, 2)
+    };
+    let mut wall = block(-1.0, -0.4, bottom);
+    wall.append(&block(0.4, 1.0, bottom));
+    wall.append(&block(-0.4, 0.4, 1.6));
+    let wall_mesh = gltf.add_mesh("wall", wall.without_uv0(), wall_material);
+    gltf.add_mesh_node("wall", wall_mesh);
+
+    let panel = Geometry::grid(Vec3::new(-1.5, 1.99, -0.4), Vec3::X, Vec3::Z * 0.8, 1, 1);
+    let panel_mesh = gltf.add_mesh("panel", panel.without_uv0(), panel_material);
+    gltf.add_mesh_node("panel", panel_mesh);
+    gltf
+}
+
+/// Room B's floor away from the doorway against its mirror image in room A, and the floor
+/// texels along the wall (away from the doorway) on either side and straddling it.
+struct Leak {
+    far_a: f32,
+    far_b: f32,
+    along_a: f32,
+    along_b: f32,
+    straddling: f32,
+    straddling_count: usize,
+}
+
+fn leak(baked: &Baked, s: f32, half_wall: f32) -> Leak {
+    let away = |p: Vec3| p.z.abs() > 0.6;
+    let edge = half_wall + s; // farther than this from x = 0: one side only
+    Leak {
+        far_a: floor_mean(baked, |p| p.x < -0.5 && away(p)).0,
+        far_b: floor_mean(baked, |p| p.x > 0.5 && away(p)).0,
+        along_a: floor_mean(baked, |p| (-edge - s..-edge).contains(&p.x) && away(p)).0,
+        along_b: floor_mean(baked, |p| (edge..edge + s).contains(&p.x) && away(p)).0,
+        straddling: floor_mean(baked, |p| p.x.abs() < edge && away(p)).0,
+        straddling_count: floor_mean(baked, |p| p.x.abs() < edge && away(p)).1,
+    }
+}
+
+fn print_leak(name: &str, l: &Leak) {
+    eprintln!(
+        "{name}: far A {:.4}, far B {:.4} (B/A {:.3}); along the wall A {:.4}, B {:.4}; \
+         straddling {:.4} ({} texels)",
+        l.far_a,
+        l.far_b,
+        l.far_b / l.far_a,
+        l.along_a,
+        l.along_b,
+        l.straddling,
+        l.straddling_count
+    );
+}
+
+#[test]
+fn two_rooms_measure() {
+    let config = moderate(true);
+    let baked = bake(&fixture("two_rooms.gltf"), &config);
+    let s = texel_side(&config);
+    let l = leak(&baked, s, 0.0);
+    print_leak("two_rooms", &l);
+
+    let dir = scratch();
+    for (name, thickness, bottom) in [("pierced thin", 0.03, -0.3), ("pierced thick", 0.1, -0.3)] {
+        let path = dir.path().join("solid.gltf");
+        two_rooms_with_solid_wall(thickness, bottom)
+            .write_gltf(&path)
+            .unwrap();
+        for validity in [true, false] {
+            let config = moderate(validity);
+            let baked = bake(&path, &config);
+            let l = leak(&baked, s, thickness / 2.0);
+            print_leak(
+                &format!("{name} validity {validity} {:?}", baked.validity),
+                &l,
+            );
+            let under = floor_mean(&baked, |p| p.x.abs() < thickness / 2.0 && p.z.abs() > 0.6);
+            eprintln!("   under the wall: {:.4} ({} texels)", under.0, under.1);
+        }
+    }
+}
+
+/// Is `p` (on the floor) within `inset` of the inside of a Cornell box block's footprint?
+fn in_block(p: Vec3, inset: f32) -> bool {
+    [
+        (Vec3::new(0.2, 0.0, 0.15), -18.0f32),
+        (Vec3::new(-0.17, 0.0, -0.15), 17.0),
+    ]
+    .iter()
+    .any(|&(centre, degrees)| {
+        let q = Quat::from_rotation_y(degrees.to_radians()).inverse() * (p - centre);
+        q.x.abs() < 0.15 - inset && q.z.abs() < 0.15 - inset
+    })
+}
+
+#[test]
+fn cornell_measure() {
+    for validity in [true, false] {
+        let config = moderate(validity);
+        let s = texel_side(&config);
+        let baked = bake(&fixture("cornell_box.gltf"), &config);
+        let inside = floor_mean(&baked, |p| in_block(p, s * 0.75));
+        let ring = floor_mean(&baked, |p| !in_block(p, -1.5 * s) && in_block(p, -3.0 * s));
+        let open = floor_mean(&baked, |p| !in_block(p, -3.0 * s));
+        let t = &baked.texels;
+        let invalid_inside = t
+            .invalid
+            .iter()
+            .filter(|&&i| {
+                t.normal[i as usize].y > 0.9 && in_block(t.position[i as usize], s * 0.75)
+            })
+            .count();
+        eprintln!(
+            "cornell validity {validity} {:?}: under blocks {:.4} ({} texels, {invalid_inside} invalid), ring outside {:.4} ({}), open floor {:.4} ({})",
+            baked.validity, inside.0, inside.1, ring.0, ring.1, open.0, open.1
+        );
+    }
+}
+
+#[test]
+fn rgbm_pages_are_written_and_decode_to_the_lightmap() {
+    let dir = scratch();
+    let input = fixture("cornell_box.gltf");
+    let mut config = crate::util::quick();
+    config.output.rgbm = true;
+    let baked = bake(&input, &config);
+    let pages = baked.pages.clone();
+    let report = write(baked, &input, dir.path(), &config, &NoProgress).unwrap();
+    assert!(report.summary().contains("moved out of geometry"));
+    for (k, page) in pages.pages.iter().enumerate() {
+        let path = dir.path().join(format!("cornell_box_lightmap{k}_rgbm.png"));
+        assert!(report.files.contains(&path), "{}", path.display());
+        let image = image::open(&path).unwrap().to_rgba8();
+        let back = rgbm::decode(
+            image.as_raw(),
+            image.width(),
+            image.height(),
+            rgbm::DEFAULT_RANGE,
+        );
+        assert_eq!((back.width, back.height), (page.width, page.height));
+        for (k, (v, d)) in page.rgb.iter().zip(&back.rgb).enumerate() {
+            let v = if page.valid[k] {
+                v.min(Vec3::splat(rgbm::DEFAULT_RANGE))
+            } else {
+                Vec3::ZERO
+            };
+            let bound = (v.max_element() + rgbm::DEFAULT_RANGE / 255.0) / 510.0;
+            assert!((*d - v).abs().max_element() <= bound * 1.0001, "{v} → {d}");
+        }
+    }
+}
