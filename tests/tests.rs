@@ -6,3 +6,7 @@ mod analytic;
 mod cli;
 mod pipeline;
 mod quality;
+mod reference;
+mod render;
+mod solvers;
+mod form_factors;
