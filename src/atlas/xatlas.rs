@@ -137,13 +137,86 @@ struct MeshOutput {
     indices: Vec<u32>,
 }
 
+/// Triangles per xatlas mesh. xatlas 2019 grows a chart with a priority update over all its
+/// candidate faces at every step — quadratic in the chart's face count: the 51k-triangle floor
+/// of `testing::large_hall` ran for over ten minutes in `AtlasBuilder::updatePriorities`.
+/// Instances above this are cut into spatially coherent blocks (triangles in Morton order of
+/// their centroids); charts then end at block borders (a few more seams) and unwrapping stays
+/// roughly linear in the triangle count.
+const MAX_FACES_PER_XATLAS_MESH: usize = 1024;
+
+/// A part of an instance given to xatlas as one mesh.
+struct Block {
+    /// Instance-local triangle indices, in block order.
+    triangles: Vec<u32>,
+    /// Instance-local vertex of each block vertex.
+    vertices: Vec<u32>,
+}
+
+/// Cuts an instance into blocks of at most [`MAX_FACES_PER_XATLAS_MESH`] triangles.
+fn blocks(scene: &Scene, inst: &Instance) -> Vec<Block> {
+    let tris = &scene.triangles[inst.triangles.start as usize..inst.triangles.end as usize];
+    let mut order: Vec<u32> = (0..tris.len() as u32).collect();
+    if tris.len() > MAX_FACES_PER_XATLAS_MESH {
+        let centroid =
+            |t: &[u32; 3]| t.iter().map(|&v| scene.positions[v as usize]).sum::<Vec3>() / 3.0;
+        let (lo, hi) = tris
+            .iter()
+            .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), t| {
+                let c = centroid(t);
+                (lo.min(c), hi.max(c))
+            });
+        let scale = 1023.0 / (hi - lo).max(Vec3::splat(1e-12));
+        let key = |t: &[u32; 3]| {
+            morton(
+                ((centroid(t) - lo) * scale)
+                    .as_uvec3()
+                    .min(glam::UVec3::splat(1023)),
+            )
+        };
+        order.sort_by_key(|&t| (key(&tris[t as usize]), t));
+    }
+    order
+        .chunks(MAX_FACES_PER_XATLAS_MESH)
+        .map(|chunk| {
+            let mut vertices: Vec<u32> = chunk
+                .iter()
+                .flat_map(|&t| tris[t as usize])
+                .map(|v| v - inst.vertices.start)
+                .collect();
+            vertices.sort_unstable();
+            vertices.dedup();
+            Block {
+                triangles: chunk.to_vec(),
+                vertices,
+            }
+        })
+        .collect()
+}
+
+/// Interleaves the low 10 bits of x, y, z.
+fn morton(p: glam::UVec3) -> u32 {
+    let spread = |mut v: u32| {
+        v &= 0x3ff;
+        v = (v | (v << 16)) & 0x030000ff;
+        v = (v | (v << 8)) & 0x0300f00f;
+        v = (v | (v << 4)) & 0x030c30c3;
+        (v | (v << 2)) & 0x09249249
+    };
+    spread(p.x) | (spread(p.y) << 1) | (spread(p.z) << 2)
+}
+
 fn run_xatlas(scene: &Scene, tpu: f32, resolution: u32, padding: u32) -> XatlasOutput {
     let atlas = ffi::Handle::create();
-    let mut given = Vec::with_capacity(scene.instances.len());
+    let mut given: Vec<Vec<Block>> = Vec::with_capacity(scene.instances.len());
     for inst in &scene.instances {
-        let has_triangles = !inst.triangles.is_empty();
-        if has_triangles {
-            let (positions, normals, indices) = mesh_input(scene, inst, tpu);
+        let inst_blocks = if inst.triangles.is_empty() {
+            Vec::new()
+        } else {
+            blocks(scene, inst)
+        };
+        for block in &inst_blocks {
+            let (positions, normals, indices) = mesh_input(scene, inst, block, tpu);
             let decl = ffi::MeshDecl {
                 vertex_count: positions.len() as u32,
                 vertex_position_data: positions.as_ptr().cast(),
@@ -162,7 +235,7 @@ fn run_xatlas(scene: &Scene, tpu: f32, resolution: u32, padding: u32) -> XatlasO
             let status = atlas.add_mesh(&decl);
             debug_assert_eq!(status, 0, "xatlas AddMesh failed");
         }
-        given.push(has_triangles);
+        given.push(inst_blocks);
     }
 
     // Big charts are split while growing (`max_chart_area`) and, as a last resort, scaled down
@@ -183,18 +256,41 @@ fn run_xatlas(scene: &Scene, tpu: f32, resolution: u32, padding: u32) -> XatlasO
     };
     atlas.generate(chart_options, pack_options);
 
+    // Reassemble each instance's blocks into one mesh in the instance's triangle order, with
+    // `xref` local to the instance.
     let raw = atlas.output();
     let mut meshes = Vec::with_capacity(given.len());
     let mut next = 0;
-    for has_triangles in given {
-        meshes.push(has_triangles.then(|| {
+    for inst_blocks in given {
+        if inst_blocks.is_empty() {
+            meshes.push(None);
+            continue;
+        }
+        let triangle_count: usize = inst_blocks.iter().map(|b| b.triangles.len()).sum();
+        let mut vertices = Vec::new();
+        let mut indices = vec![0u32; 3 * triangle_count];
+        for block in &inst_blocks {
             let mesh = &raw.meshes[next];
             next += 1;
-            MeshOutput {
-                vertices: mesh.vertices.to_vec(),
-                indices: mesh.indices.to_vec(),
+            let base = vertices.len() as u32;
+            vertices.extend(mesh.vertices.iter().map(|v| {
+                ffi::Vertex {
+                    xref: block
+                        .vertices
+                        .get(v.xref as usize)
+                        .copied()
+                        .unwrap_or(u32::MAX),
+                    ..*v
+                }
+            }));
+            for (k, &t) in block.triangles.iter().enumerate() {
+                for c in 0..3 {
+                    indices[3 * t as usize + c] =
+                        mesh.indices.get(3 * k + c).map_or(u32::MAX, |i| i + base);
+                }
             }
-        }));
+        }
+        meshes.push(Some(MeshOutput { vertices, indices }));
     }
     XatlasOutput {
         page_count: raw.page_count,
@@ -202,24 +298,39 @@ fn run_xatlas(scene: &Scene, tpu: f32, resolution: u32, padding: u32) -> XatlasO
     }
 }
 
-/// Positions in texel units relative to the instance's bounding box, normals, local indices.
+/// Positions in texel units relative to the instance's bounding box, normals, and indices into
+/// the block's vertices.
 fn mesh_input(
     scene: &Scene,
     inst: &Instance,
+    block: &Block,
     tpu: f32,
 ) -> (Vec<[f32; 3]>, Vec<[f32; 3]>, Vec<u32>) {
     let range = inst.vertices.start as usize..inst.vertices.end as usize;
-    let origin = scene.positions[range.clone()]
+    let origin = scene.positions[range]
         .iter()
         .fold(Vec3::INFINITY, |m, p| m.min(*p));
-    let positions = scene.positions[range.clone()]
+    let global = |local: u32| (inst.vertices.start + local) as usize;
+    let positions = block
+        .vertices
         .iter()
-        .map(|p| ((*p - origin) * tpu).to_array())
+        .map(|&v| ((scene.positions[global(v)] - origin) * tpu).to_array())
         .collect();
-    let normals = scene.normals[range].iter().map(|n| n.to_array()).collect();
-    let indices = scene.triangles[inst.triangles.start as usize..inst.triangles.end as usize]
+    let normals = block
+        .vertices
         .iter()
-        .flat_map(|t| t.map(|v| v - inst.vertices.start))
+        .map(|&v| scene.normals[global(v)].to_array())
+        .collect();
+    let indices = block
+        .triangles
+        .iter()
+        .flat_map(|&t| scene.triangles[(inst.triangles.start + t) as usize])
+        .map(|v| {
+            block
+                .vertices
+                .binary_search(&(v - inst.vertices.start))
+                .expect("vertex in block") as u32
+        })
         .collect();
     (positions, normals, indices)
 }
@@ -817,6 +928,27 @@ pub(super) mod tests {
         let ratio = texel_area_ratio(&scene, &atlas);
         assert!(
             (0.7..1.6).contains(&ratio),
+            "texel area / expected = {ratio}"
+        );
+    }
+
+    #[test]
+    fn large_instances_are_unwrapped_in_blocks_without_overlaps() {
+        // 3072 triangles: three blocks of at most MAX_FACES_PER_XATLAS_MESH.
+        let scene = scene_of(&[cube(1.0, 16)], &[]);
+        assert!(scene.triangles.len() > 2 * MAX_FACES_PER_XATLAS_MESH);
+        let atlas = unwrap_ok(&scene, &params(32.0, 1024));
+        let overlaps = Overlaps::find(
+            atlas.pages[0],
+            page_triangles(&scene, &atlas, 0).into_iter(),
+        );
+        assert_eq!(atlas.pages.len(), 1);
+        assert_eq!(overlaps.overlapping, 0, "{overlaps:?}");
+        // 6 m² at 32 texels per unit: 6144 texels, less the centres on chart borders.
+        assert!(overlaps.covered > 5500, "{overlaps:?}");
+        let ratio = texel_area_ratio(&scene, &atlas);
+        assert!(
+            (0.9..1.3).contains(&ratio),
             "texel area / expected = {ratio}"
         );
     }
