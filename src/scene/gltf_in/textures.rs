@@ -7,6 +7,7 @@ use glam::Vec3;
 use super::{Files, warn};
 use crate::Result;
 use crate::scene::{Material, Scene, Texture, Wrap};
+use crate::texels::MAX_ALBEDO;
 
 /// Appends one [`Material`] per glTF material, in document order, plus glTF's default material
 /// when some instance has none. Only materials that instances use get their textures decoded.
@@ -31,6 +32,13 @@ pub(super) fn add_materials(
         let index = material.index().unwrap_or_default();
         let pbr = material.pbr_metallic_roughness();
         let [r, g, b, _] = pbr.base_color_factor();
+        if [r, g, b].iter().any(|c| !(0.0..=1.0).contains(c)) {
+            // Reflectance outside [0, 1] is not physical (above 1 the radiosity series diverges).
+            let message = format!(
+                "material {index}: baseColorFactor ({r}, {g}, {b}) is outside [0, 1]; reflectance clamped to [0, {MAX_ALBEDO}]"
+            );
+            warn(scene, message);
+        }
         let strength = material.emissive_strength().unwrap_or(1.0);
         let mut converted = Material {
             name: material.name().map(str::to_string),
