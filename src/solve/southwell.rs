@@ -18,8 +18,8 @@
 //! pushed again only when its power has grown past [`REQUEUE_GROWTH`] times the key it is queued
 //! under, and an entry whose key is not the texel's latest is skipped when popped. So each pick
 //! is within a factor 2 of the largest unshot power (a relaxed Southwell), while heap traffic
-//! drops from one push per form factor touched to a few per texel shot: with a push per touched
-//! entry the heap cost 5–10× the shooting itself on the furnace. The heap is rebuilt when it
+//! drops from one push per form factor touched to a few per texel shot (a push per touched entry
+//! made the whole solve about 4× slower on the ρ = 0.99 furnace). The heap is rebuilt when it
 //! holds more than a few entries per texel. Ties go to the lower texel id: deterministic, serial.
 //!
 //! Stopping: unshot power `U` (per channel, `Σ A_j ΔB_j`) is what the solution still lacks.
@@ -39,8 +39,11 @@
 //!
 //! When to use it: the first shots give a usable picture soonest (with [`ambient`] for display),
 //! and it needs fewer sweep-equivalents than Gauss–Seidel when light is concentrated (a small
-//! emitter). Limits: serial; the transpose doubles row memory; heap pushes cost `log n` per
-//! form factor touched, so a uniformly lit scene (the furnace) is slower than Gauss–Seidel.
+//! emitter). Limits: serial; the transpose doubles row memory; scattered f64 updates and the
+//! heap make a sweep-equivalent about 10× a Gauss–Seidel sweep (486-texel furnace, K = 128:
+//! ρ = 0.9 in 56 batches, 0.1 s, against 52 sweeps, 0.005 s), so when light is spread evenly
+//! Gauss–Seidel wins. Its error estimate is the more honest one: at ρ = 0.99 and tolerance 1e-5
+//! it stopped 0.001% from the answer, Jacobi and Gauss–Seidel 0.02–0.04%.
 
 use std::cmp::Reverse;
 use std::collections::BinaryHeap;
