@@ -219,3 +219,60 @@ fn neighbours(texels: &Texels, i: usize) -> impl Iterator<Item = usize> + '_ {
         .filter(|&j| j != NO_TEXEL)
         .map(|j| j as usize)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::atlas::PageSize;
+
+    /// A 5 × 1 strip of texels on one page, facing up, the middle three invalid.
+    fn strip() -> Texels {
+        let n = 5;
+        Texels {
+            pages: vec![PageSize {
+                width: 5,
+                height: 1,
+            }],
+            normal: vec![Vec3::Y; n],
+            page: vec![0; n],
+            xy: (0..n as u32).map(|x| [x, 0]).collect(),
+            index: vec![(0..n as u32).collect()],
+            position: vec![Vec3::ZERO; n],
+            invalid: vec![1, 2, 3],
+            ..Texels::default()
+        }
+    }
+
+    #[test]
+    fn invalid_texels_fill_ring_by_ring_from_valid_neighbours() {
+        let texels = strip();
+        let (a, b) = (Vec3::splat(1.0), Vec3::splat(3.0));
+        let mut values = vec![a, Vec3::ZERO, Vec3::ZERO, Vec3::ZERO, b];
+        fill_invalid(&texels, &mut values);
+        assert_eq!(values, [a, a, (a + b) / 2.0, b, b]);
+    }
+
+    #[test]
+    fn texels_facing_away_or_unreached_keep_their_value() {
+        let mut texels = strip();
+        texels.normal[0] = -Vec3::Y; // a fold: not the same surface
+        texels.invalid = vec![1];
+        let mut values = vec![
+            Vec3::ONE,
+            Vec3::splat(0.5),
+            Vec3::splat(2.0),
+            Vec3::ZERO,
+            Vec3::ZERO,
+        ];
+        fill_invalid(&texels, &mut values);
+        assert_eq!(
+            values[1],
+            Vec3::splat(2.0),
+            "only the neighbour facing the same way"
+        );
+        texels.invalid = vec![0, 1, 2, 3, 4];
+        let before = values.clone();
+        fill_invalid(&texels, &mut values);
+        assert_eq!(values, before, "nothing valid to fill from");
+    }
+}
