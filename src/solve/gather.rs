@@ -29,6 +29,9 @@
 //! memory is O(N) (a few vectors per texel). Limits: every bounce costs `N·K` rays, so a scene
 //! needing many bounces (ρ → 1) costs that many times a stored-row bake; the returned
 //! [`Transport`] has empty rows (`row_start` all zeros), only `direct`, `escape` and `rays`.
+//! Measured (486-texel furnace, K = 128): ρ = 0.9 took 109 bounces, 6.8 M rays, 2.5 s; ρ = 0.99
+//! took 1145 bounces, 71 M rays, 18 s — the stored-row solvers needed 0.06 M rays for the same.
+//! On the Cornell box it matches Jacobi on the stored rows within 3% (L1; means within 0.6%).
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
