@@ -14,8 +14,10 @@
 //! through `H_direct`, where it is estimated with explicit light sampling (small bright emitters
 //! are otherwise missed) combined with the gathering rays by multiple importance sampling.
 
+mod all_pairs;
 pub mod direct;
 pub mod hierarchical;
+pub mod kernel;
 pub(crate) mod montecarlo;
 mod point;
 mod polygon;
