@@ -1,0 +1,431 @@
+//! Link refinement: which node pairs exchange light, and their form factors.
+//!
+//! A candidate link (receiver `p` ← source `q`) is accepted when its transfer estimate
+//! `F_pq · B_q · A_p` (W, the BF oracle) is at most `ε`, or when neither node can be split;
+//! otherwise the larger node is split and its children are linked instead. Pairs whose bounding
+//! spheres overlap (near field, and a node with itself) are always split while possible.
+//!
+//! `F_pq` averages, over `SAMPLES` area-stratified receiver points `x`, the form factor from
+//! `x` to `q`: Lambert's exact contour integral over the source texel's parallelogram when `q`
+//! is a texel, else the point-to-disk kernel `A_q cosθ_x cosθ_y / (π r² + A_q/S)` towards an
+//! area-stratified point `y` of `q`, with the normals of the texels the points lie on (so
+//! clusters of non-coplanar texels need no average normal). Each sample is weighted by one
+//! shadow ray from `x` to a point of `q`. The oracle uses the unoccluded estimate, and for
+//! clusters the cosine-free bound `A_q / (π d_min² + A_q)`; shadow rays are cast only for
+//! accepted links.
+
+use std::f32::consts::PI;
+
+use glam::{Vec2, Vec3};
+use rayon::prelude::*;
+
+use super::tree::Tree;
+use crate::scene::Scene;
+use crate::texels::Texels;
+use crate::trace::Tracer;
+use crate::transport::sampling::Rng;
+
+/// Kernel samples per link (no rays: cheap), on a 4×4 grid of a texel or area strata of a node.
+pub const KERNEL_SAMPLES: u32 = 16;
+/// Shadow rays per accepted link.
+pub const SAMPLES: u32 = 4;
+/// Pairs closer than this many times the sum of their radii are near field: split while
+/// possible (the kernel then varies little over either node, so few samples suffice).
+pub const NEAR: f32 = 2.0;
+/// Pairs per parallel work item.
+const CHUNK: usize = 256;
+/// Random-stream purpose of link sampling.
+const PURPOSE: u64 = 0x4852_4c4b;
+
+/// Links in compressed rows by receiver node: row `p` is `source[start[p]..start[p+1]]`.
+#[derive(Default)]
+pub struct Links {
+    pub start: Vec<u32>,
+    pub source: Vec<u32>,
+    pub f: Vec<f32>,
+    /// Shadow rays cast.
+    pub rays: u64,
+}
+
+impl Links {
+    pub fn len(&self) -> usize {
+        self.source.len()
+    }
+}
+
+/// What refinement reads.
+pub struct Refiner<'a> {
+    pub texels: &'a Texels,
+    pub tracer: &'a Tracer,
+    pub tree: &'a Tree,
+    pub footprints: &'a [Footprint],
+    /// Radiosity of each node used by the oracle (W/m², largest channel).
+    pub b: &'a [f32],
+    /// Oracle threshold ε (W).
+    pub epsilon: f32,
+    pub seed: u64,
+}
+
+/// Output of one chunk of candidate pairs.
+#[derive(Default)]
+struct Chunk {
+    links: Vec<(u32, u32, f32)>,
+    next: Vec<(u32, u32)>,
+    rays: u64,
+}
+
+impl Refiner<'_> {
+    /// Refines from every pair of page roots down, breadth first (each round in parallel,
+    /// collected in order, so the links do not depend on the thread count).
+    pub fn refine(&self, aborted: &dyn Fn() -> bool) -> Option<Links> {
+        let roots = &self.tree.roots;
+        let mut frontier: Vec<(u32, u32)> = roots
+            .iter()
+            .flat_map(|&p| roots.iter().map(move |&q| (p, q)))
+            .collect();
+        let mut accepted: Vec<(u32, u32, f32)> = Vec::new();
+        let mut rays = 0;
+        while !frontier.is_empty() {
+            if aborted() {
+                return None;
+            }
+            let chunks: Vec<Chunk> = frontier
+                .par_chunks(CHUNK)
+                .map(|pairs| {
+                    let mut out = Chunk::default();
+                    for &(p, q) in pairs {
+                        self.visit(p, q, &mut out);
+                    }
+                    out
+                })
+                .collect();
+            frontier = Vec::with_capacity(chunks.iter().map(|c| c.next.len()).sum());
+            for c in chunks {
+                accepted.extend(c.links);
+                frontier.extend(c.next);
+                rays += c.rays;
+            }
+        }
+        accepted.par_sort_unstable_by_key(|&(p, q, _)| (p, q));
+        let mut links = Links {
+            start: vec![0; self.tree.len() + 1],
+            source: accepted.iter().map(|l| l.1).collect(),
+            f: accepted.iter().map(|l| l.2).collect(),
+            rays,
+        };
+        for &(p, _, _) in &accepted {
+            links.start[p as usize + 1] += 1;
+        }
+        for k in 0..self.tree.len() {
+            links.start[k + 1] += links.start[k];
+        }
+        Some(links)
+    }
+
+    /// Accepts the link p ← q, splits it, or drops it (no light can pass).
+    fn visit(&self, p: u32, q: u32, out: &mut Chunk) {
+        let t = self.tree;
+        let (pi, qi) = (p as usize, q as usize);
+        if p == q && t.is_leaf(p) {
+            return; // a texel does not see itself
+        }
+        let d = t.centroid[qi] - t.centroid[pi];
+        let dist = d.length();
+        let reach = t.radius[pi] + t.radius[qi];
+        if t.is_planar(p) && t.is_planar(q) && p != q {
+            // Every point of q behind p's plane, or p behind q's front: no exchange.
+            if t.normal[pi].dot(d) + reach <= 0.0 || t.normal[qi].dot(-d) + reach <= 0.0 {
+                return;
+            }
+        }
+        let (split_p, split_q) = (!t.is_leaf(p), !t.is_leaf(q));
+        let near = p == q || dist < NEAR * reach;
+        let mut rng = Rng::new(self.seed, ((p as u64) << 32) | q as u64, PURPOSE);
+        let mut x = [Vec3::ZERO; KERNEL_SAMPLES as usize];
+        let mut y = [Vec3::ZERO; KERNEL_SAMPLES as usize];
+        let mut f = [0.0f32; KERNEL_SAMPLES as usize];
+        if !(near && (split_p || split_q)) {
+            self.estimate(p, q, &mut rng, &mut x, &mut y, &mut f);
+            let f_est = f.iter().sum::<f32>() / KERNEL_SAMPLES as f32;
+            let f_oracle = if t.is_planar(p) && t.is_planar(q) {
+                f_est
+            } else {
+                let d_min = (dist - reach).max(0.0);
+                let a_q = t.area[qi];
+                f_est.max(a_q / (PI * d_min * d_min + a_q))
+            };
+            let error = f_oracle * self.b[qi] * t.area[pi];
+            if error <= self.epsilon || !(split_p || split_q) {
+                if f_est <= 0.0 {
+                    return;
+                }
+                // Visibility from SAMPLES shadow rays, spread over the strata (5 is coprime
+                // to 16, so the order visits every row and column of a 4×4 grid early).
+                let (mut seen, mut total, mut cast) = (0.0f32, 0.0f32, 0);
+                for k in 0..KERNEL_SAMPLES as usize {
+                    let s = k * 5 % KERNEL_SAMPLES as usize;
+                    if f[s] <= 0.0 {
+                        continue;
+                    }
+                    total += f[s];
+                    if !self.tracer.occluded(x[s], y[s]) {
+                        seen += f[s];
+                    }
+                    cast += 1;
+                    if cast == SAMPLES {
+                        break;
+                    }
+                }
+                out.rays += cast as u64;
+                if seen > 0.0 {
+                    out.links.push((p, q, (f_est * seen / total).min(1.0)));
+                }
+                return;
+            }
+        }
+        // Split: a node linked with itself pairs up its children; else the larger node.
+        if p == q {
+            for &a in t.children(p) {
+                for &b in t.children(p) {
+                    out.next.push((a, b));
+                }
+            }
+        } else if split_p && (!split_q || t.area[pi] >= t.area[qi]) {
+            out.next.extend(t.children(p).iter().map(|&a| (a, q)));
+        } else {
+            out.next.extend(t.children(q).iter().map(|&b| (p, b)));
+        }
+    }
+
+    /// Unoccluded per-sample form factors `f[s]` from receiver points `x[s]` of p, with source
+    /// points `y[s]` of q for the shadow rays.
+    fn estimate(
+        &self,
+        p: u32,
+        q: u32,
+        rng: &mut Rng,
+        x: &mut [Vec3],
+        y: &mut [Vec3],
+        f: &mut [f32],
+    ) {
+        let (t, texels) = (self.tree, self.texels);
+        let m = KERNEL_SAMPLES as f32;
+        let a_q = t.area[q as usize];
+        for s in 0..KERNEL_SAMPLES as usize {
+            let stratum = (s as f32 + rng.next_f32()) / m;
+            let cell = Vec2::new((s % 4) as f32, (s / 4) as f32);
+            let (i, u) = if t.is_leaf(p) {
+                (p, (cell + rng.next_vec2()) * 0.25) // 4×4 strata of the receiver texel
+            } else {
+                (t.pick_texel(p, stratum), rng.next_vec2())
+            };
+            let n_x = texels.normal[i as usize];
+            x[s] = footprint_point(texels, self.tracer, i as usize, u);
+            if t.is_leaf(q) {
+                // Cell midpoints, not the jittered ray origins: the kernel to an adjacent
+                // texel is singular at the shared edge, and jitter left ±10% noise.
+                let x_mid = if t.is_leaf(p) {
+                    footprint_point(texels, self.tracer, i as usize, (cell + 0.5) * 0.25)
+                } else {
+                    x[s]
+                };
+                f[s] =
+                    texel_form_factor(texels, &self.footprints[q as usize], x_mid, n_x, q as usize);
+                y[s] = footprint_point(texels, self.tracer, q as usize, rng.next_vec2());
+            } else {
+                let j = t.pick_texel(q, (s as f32 + rng.next_f32()) / m) as usize;
+                y[s] = footprint_point(texels, self.tracer, j, rng.next_vec2());
+                let d = y[s] - x[s];
+                let r2 = d.length_squared();
+                let r = r2.sqrt();
+                let cos_x = n_x.dot(d) / r;
+                let cos_y = -texels.normal[j].dot(d) / r;
+                f[s] = if r > 0.0 && cos_x > 0.0 && cos_y > 0.0 {
+                    a_q * cos_x * cos_y / (PI * r2 + a_q / m)
+                } else {
+                    0.0
+                };
+            }
+        }
+    }
+}
+
+/// A point of texel `i`'s footprint for `u ∈ [0,1)²`, lifted off the surface by the ray
+/// epsilon; a partly covered texel is shrunk around its covered centroid so points stay on
+/// the surface (as in the Monte Carlo method).
+#[inline]
+pub fn footprint_point(t: &Texels, tracer: &Tracer, i: usize, u: Vec2) -> Vec3 {
+    let o = (u - Vec2::splat(0.5)) * cover_scale(t, i);
+    t.position[i] + t.du[i] * o.x + t.dv[i] * o.y + t.normal[i] * tracer.epsilon
+}
+
+/// Footprint scale of a partly covered texel: the covered fraction, which keeps a half-covered
+/// border texel's square inside its strip of the surface.
+#[inline]
+fn cover_scale(t: &Texels, i: usize) -> f32 {
+    let full = t.du[i].cross(t.dv[i]).length();
+    let cover = if full > 0.0 {
+        (t.area[i] / full).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    if cover > 0.99 { 1.0 } else { cover }
+}
+
+/// A texel's footprint polygon (world space): the texel square, cut for a partly covered
+/// border texel by a line perpendicular to the offset of its covered centroid, placed so the
+/// polygon has the covered area (exact for the common strip along a chart edge).
+#[derive(Clone, Copy, Default)]
+pub struct Footprint {
+    v: [Vec3; 5],
+    len: u8,
+}
+
+/// The footprint of every texel.
+pub fn footprints(scene: &Scene, t: &Texels) -> Vec<Footprint> {
+    (0..t.len())
+        .into_par_iter()
+        .with_min_len(1024)
+        .map(|i| footprint(scene, t, i))
+        .collect()
+}
+
+fn footprint(scene: &Scene, t: &Texels, i: usize) -> Footprint {
+    let (du, dv) = (t.du[i], t.dv[i]);
+    let full = du.cross(dv).length();
+    let cover = if full > 0.0 { t.area[i] / full } else { 1.0 };
+    let square = |c: Vec3, s: f32| {
+        let (a, b) = (du * (0.5 * s), dv * (0.5 * s));
+        Footprint {
+            v: [c - a - b, c + a - b, c + a + b, c - a + b, Vec3::ZERO],
+            len: 4,
+        }
+    };
+    if cover > 0.99 {
+        return square(t.position[i], 1.0);
+    }
+    // The texel centre on the plane of its main triangle, from the triangle's lightmap UVs.
+    let tri = t.triangle[i] as usize;
+    let [u0, u1, u2] = t.triangle_uv[tri];
+    let [x, y] = t.xy[i];
+    let centre_uv = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
+    let (e1, e2, e) = (u1 - u0, u2 - u0, centre_uv - u0);
+    let det = e1.perp_dot(e2);
+    let fallback = square(t.position[i], cover.sqrt());
+    if det.abs() < 1e-12 {
+        return fallback;
+    }
+    let (b1, b2) = (e.perp_dot(e2) / det, e1.perp_dot(e) / det);
+    let [i0, i1, i2] = scene.triangles[tri];
+    let p = |k: u32| scene.positions[k as usize];
+    let c0 = p(i0) * (1.0 - b1 - b2) + p(i1) * b1 + p(i2) * b2;
+    let offset = t.position[i] - c0;
+    let dir = (offset - t.normal[i] * t.normal[i].dot(offset)).normalize_or_zero();
+    if dir == Vec3::ZERO || !c0.is_finite() {
+        return fallback;
+    }
+    let whole = square(c0, 1.0);
+    // Bisect the cut (y − c0)·dir ≥ h for the covered area.
+    let extent = 0.5 * (du.dot(dir).abs() + dv.dot(dir).abs());
+    let (mut lo, mut hi) = (-extent, extent);
+    let mut cut = whole;
+    for _ in 0..24 {
+        let h = 0.5 * (lo + hi);
+        cut = clip(&whole, dir, c0 + dir * h);
+        if polygon_area(&cut) > t.area[i] {
+            lo = h;
+        } else {
+            hi = h;
+        }
+    }
+    if cut.len < 3 { fallback } else { cut }
+}
+
+/// The part of `poly` where `n·(y − o) ≥ 0` (Sutherland–Hodgman; a quad gains at most one
+/// vertex).
+#[inline]
+fn clip(poly: &Footprint, n: Vec3, o: Vec3) -> Footprint {
+    let mut out = Footprint::default();
+    let len = poly.len as usize;
+    for k in 0..len {
+        let (p0, p1) = (poly.v[k], poly.v[(k + 1) % len]);
+        let (h0, h1) = (n.dot(p0 - o), n.dot(p1 - o));
+        if h0 >= 0.0 && (out.len as usize) < 5 {
+            out.v[out.len as usize] = p0;
+            out.len += 1;
+        }
+        if (h0 >= 0.0) != (h1 >= 0.0) && (out.len as usize) < 5 {
+            out.v[out.len as usize] = p0 + (p1 - p0) * (h0 / (h0 - h1));
+            out.len += 1;
+        }
+    }
+    out
+}
+
+fn polygon_area(poly: &Footprint) -> f32 {
+    let len = poly.len as usize;
+    let mut sum = Vec3::ZERO;
+    for k in 1..len.saturating_sub(1) {
+        sum += (poly.v[k] - poly.v[0]).cross(poly.v[k + 1] - poly.v[0]);
+    }
+    0.5 * sum.length()
+}
+
+/// Form factor from the point `x` (unit normal `n`) to texel `j`'s footprint polygon:
+/// Lambert's contour integral `F = (1/2π) Σ_k γ_k n·(v_k × v_{k+1})/|v_k × v_{k+1}|` over
+/// the part of the polygon above `x`'s tangent plane.
+pub fn texel_form_factor(t: &Texels, footprint: &Footprint, x: Vec3, n: Vec3, j: usize) -> f32 {
+    if t.normal[j].dot(x - t.position[j]) <= 0.0 {
+        return 0.0; // x is behind the source's front
+    }
+    let poly = clip(footprint, n, x);
+    let len = poly.len as usize;
+    if len < 3 {
+        return 0.0;
+    }
+    let mut sum = 0.0f32;
+    for k in 0..len {
+        let v0 = (poly.v[k] - x).normalize_or_zero();
+        let v1 = (poly.v[(k + 1) % len] - x).normalize_or_zero();
+        let cross = v0.cross(v1);
+        let sin = cross.length();
+        if sin > 1e-12 {
+            sum += sin.atan2(v0.dot(v1)) * n.dot(cross) / sin;
+        }
+    }
+    (sum.abs() / (2.0 * PI)).min(1.0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::BakeConfig;
+
+    /// In a closed box the exact form factors from any point to all texels sum to 1: checks
+    /// the footprints of partly covered border texels and the contour integral together.
+    #[test]
+    fn texel_form_factors_sum_to_one_in_a_closed_box() {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/fixtures/furnace.gltf");
+        let (scene, source) = crate::scene::load(std::path::Path::new(path)).unwrap();
+        let atlas = crate::atlas::build(&scene, &source, &BakeConfig::draft().atlas).unwrap();
+        let t = crate::texels::build(&scene, &atlas).unwrap();
+        let feet = footprints(&scene, &t);
+        for (i, foot) in feet.iter().enumerate() {
+            let area = polygon_area(foot);
+            assert!(
+                (area - t.area[i]).abs() < 1e-3 * t.area[i] + 1e-7,
+                "texel {i}: {area}"
+            );
+        }
+        let mut worst = 0.0f32;
+        for i in 0..t.len() {
+            let x = t.position[i] + t.normal[i] * 1e-4;
+            let sum: f32 = (0..t.len())
+                .filter(|&j| j != i)
+                .map(|j| texel_form_factor(&t, &feet[j], x, t.normal[i], j))
+                .sum();
+            worst = worst.max((sum - 1.0).abs());
+        }
+        assert!(worst < 0.05, "worst row sum error {worst}");
+    }
+}
