@@ -41,6 +41,7 @@ pub mod error;
 pub mod lightmap;
 pub mod output;
 pub mod progress;
+pub mod reference;
 pub mod render;
 pub mod scene;
 pub mod solve;

@@ -1,11 +1,169 @@
-//! `lightbake reference` (being written).
+//! `lightbake reference`: path-traced reference lightmaps at a bake's texels.
 
-use anyhow::{Result, bail};
+use std::path::PathBuf;
+use std::time::Duration;
 
+use anyhow::{Context, Result, bail};
+use glam::Vec3;
+use lightbake::config::UvMode;
+use lightbake::lightmap::{self, LightmapPages};
+use lightbake::output::{self, Staging};
+use lightbake::reference::{self, ReferenceParams};
+use lightbake::{BakeConfig, Progress, texels};
+
+use super::progress::Bars;
+use super::{Quality, UvArg, parse_rgb};
+
+/// Writes `<stem>_reference<k>.exr` (mean `H/π`, dilated like bake pages) and
+/// `<stem>_reference<k>_stderr.exr` (its per-texel standard error) for every page.
+///
+/// The texels are those of `lightbake bake` with the same scene and the same atlas options
+/// (--quality, --texels-per-unit, --max-page-size, --padding, --uv): unwrapping is
+/// deterministic, so the reference and the bake's pages line up texel for texel.
 #[derive(clap::Args)]
-pub struct Args {}
+pub struct Args {
+    /// Input scene (.gltf or .glb): the one the bake was made from.
+    scene: PathBuf,
+    /// Output directory (created if missing).
+    #[arg(short, long)]
+    output: PathBuf,
+    /// Preset whose texel density the reference uses (match the bake's).
+    #[arg(long, value_enum, default_value = "medium")]
+    quality: Quality,
+    /// Lightmap texels per world unit [default: from --quality: 8 / 16 / 32].
+    #[arg(long)]
+    texels_per_unit: Option<f32>,
+    /// Largest page side in texels.
+    #[arg(long, default_value_t = 1024)]
+    max_page_size: u32,
+    /// Empty texels between charts.
+    #[arg(long, default_value_t = 2)]
+    padding: u32,
+    /// Where lightmap UVs come from.
+    #[arg(long, value_enum, default_value = "auto")]
+    uv: UvArg,
+    /// Paths per texel at most (standard error shrinks like 1/√N).
+    #[arg(long, default_value_t = 1024)]
+    spp: u32,
+    /// Paths per texel between stopping checks.
+    #[arg(long, default_value_t = 16)]
+    pass: u32,
+    /// Stop when the relative RMS standard error √(Σσ²/Σμ²) over texels is at most this (e.g. 0.02).
+    #[arg(long)]
+    target_error: Option<f32>,
+    /// Stop after the pass that crosses this many seconds.
+    #[arg(long)]
+    time: Option<f64>,
+    /// Bounces per path at most (Russian roulette ends most paths long before).
+    #[arg(long, default_value_t = 1024)]
+    max_depth: u32,
+    /// Uniform sky radiance R,G,B (W/sr/m²) for rays leaving the scene (match the bake's).
+    #[arg(long, value_parser = parse_rgb, default_value = "0,0,0")]
+    sky: Vec3,
+    /// Keep texel sample points where they are even inside geometry (match a bake's --no-validity).
+    #[arg(long)]
+    no_validity: bool,
+    /// Leave out light that arrives without a bounce (match a bake made with --indirect-only).
+    #[arg(long)]
+    indirect_only: bool,
+    /// Write 32-bit float EXR pages instead of half floats.
+    #[arg(long)]
+    float: bool,
+    /// Seed of the random paths (output depends on it, never on --threads).
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Worker threads [default: all cores].
+    #[arg(long)]
+    threads: Option<usize>,
+    /// No progress bars and no summary; warnings and errors still go to stderr.
+    #[arg(short, long)]
+    quiet: bool,
+}
+
+impl Args {
+    fn config(&self) -> BakeConfig {
+        let mut c = match self.quality {
+            Quality::Draft => BakeConfig::draft(),
+            Quality::Medium => BakeConfig::medium(),
+            Quality::High => BakeConfig::high(),
+        };
+        if let Some(t) = self.texels_per_unit {
+            c.atlas.texels_per_unit = t;
+        }
+        c.atlas.max_page_size = self.max_page_size;
+        c.atlas.padding = self.padding;
+        c.atlas.uv = match self.uv {
+            UvArg::Auto => UvMode::Auto,
+            UvArg::Unwrap => UvMode::Unwrap,
+            UvArg::Existing => UvMode::Existing,
+        };
+        c.transport.sky = self.sky;
+        c.transport.indirect_only = self.indirect_only;
+        c.transport.validity = !self.no_validity;
+        c.transport.seed = self.seed;
+        c.output.float = self.float;
+        c
+    }
+
+    fn params(&self, config: &BakeConfig) -> Result<ReferenceParams> {
+        let time_limit = match self.time {
+            Some(s) if s.is_finite() && s > 0.0 => Some(Duration::from_secs_f64(s)),
+            Some(s) => bail!("--time must be a positive number of seconds, got {s}"),
+            None => None,
+        };
+        Ok(ReferenceParams {
+            samples_per_pass: self.pass,
+            max_samples: self.spp,
+            target_rel_error: self.target_error,
+            time_limit,
+            max_depth: self.max_depth,
+            ..ReferenceParams::like(config)
+        })
+    }
+}
 
 pub fn run(args: &Args) -> Result<()> {
-    let _ = args;
-    bail!("`lightbake reference` is not available yet")
+    if let Some(n) = args.threads {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(n.max(1))
+            .build_global()
+            .with_context(|| format!("cannot start {n} threads"))?;
+    }
+    let config = args.config();
+    let params = args.params(&config)?;
+    let bars = Bars::new(args.quiet);
+    let computed = reference::compute(&args.scene, &config, &params, &bars)
+        .with_context(|| format!("tracing a reference for {} failed", args.scene.display()))?;
+    let (texels, r) = (&computed.texels, &computed.reference);
+
+    let stem = args
+        .scene
+        .file_stem()
+        .and_then(|s| s.to_str())
+        .unwrap_or("scene");
+    let radius = config.atlas.padding.max(2) * 2;
+    let dilated = |values: &[Vec3]| {
+        // Buried texels take their neighbours' values, as in a bake's pages.
+        let mut values = values.to_vec();
+        texels::validity::fill_invalid(texels, &mut values);
+        let mut pages = LightmapPages::from_texels(texels, &values);
+        lightmap::dilate(&mut pages, radius);
+        pages
+    };
+    let (mean, std_error) = (dilated(&r.mean), dilated(&r.std_error));
+    let mut staging = Staging::new(&args.output, std::slice::from_ref(&args.scene))?;
+    for (k, (m, se)) in mean.pages.iter().zip(&std_error.pages).enumerate() {
+        let exr = |page| output::write_exr(page, config.output.float, &args.scene);
+        staging.write(&format!("{stem}_reference{k}.exr"), &exr(m)?)?;
+        staging.write(&format!("{stem}_reference{k}_stderr.exr"), &exr(se)?)?;
+    }
+    if bars.aborted() {
+        bail!("aborted");
+    }
+    let files = staging.commit()?;
+    if !args.quiet {
+        println!("{}", r.summary());
+        println!("wrote {} file(s) to {}", files.len(), args.output.display());
+    }
+    Ok(())
 }

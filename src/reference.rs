@@ -1,0 +1,561 @@
+//! The reference: an independent Monte Carlo path tracer that estimates `H_i/π` at the same
+//! texels as a bake, with a per-texel standard error. It is the yardstick every form-factor
+//! method and solver is measured against, so it shares the scene, atlas, texels and tracer with
+//! the bake but none of the radiosity code (no form factors, no solver).
+//!
+//! For texel `i` with footprint `A_i` it estimates the radiance a white Lambertian surface there
+//! would reflect:
+//!
+//! ```text
+//!   H_i/π = (1/A_i) ∫_{A_i} ∫_Ω L_in(x, ω) cosθ/π dω dx
+//! ```
+//!
+//! Each sample is one path: `x₀` uniform over the footprint (as the bake's gathering jitters it),
+//! then cosine-sampled directions (pdf `cosθ/π`, so a bounce multiplies the throughput `β` by
+//! `ρ`). At every vertex punctual lights are added by a shadow ray, and small emissive triangles
+//! by next-event estimation combined with the cosine-sampled ray that hits them by multiple
+//! importance sampling (power heuristic, one sample of each; emitters that `Emitters` leaves out
+//! as large are found by the cosine rays alone), so emission counts exactly once. Rays that
+//! leave the scene see the sky; rays that hit the back of a single-sided surface are absorbed.
+//! After [`ROULETTE_DEPTH`] bounces a path survives each bounce with probability `q = max_c ρ_c`
+//! and carries `β/q` (Russian roulette: unbiased; ends paths in a ρ → 1 furnace). Survival by
+//! albedo rather than by throughput `max(β)` keeps the weights of survivors bounded: with
+//! `q = max(β)` the ρ = 0.5 furnace had 5% noise at 64 paths, since the whole tail after the
+//! third bounce rode on a few paths with weights ~16.
+//!
+//! Albedo and emission at a hit are the hit *texel's* `ρ` and `Le` — the same discretised
+//! materials the bake solves with — so the difference between a bake and the reference is the
+//! error of transport and solve, not of texture resolution. Geometry is exact: secondary vertices
+//! lie on the hit triangle with its geometric normal; the first vertex uses the texel's normal.
+//!
+//! | parameter           | default  | effect                                                        |
+//! |---------------------|----------|---------------------------------------------------------------|
+//! | `samples_per_pass`  | 16       | paths per texel between stopping checks                       |
+//! | `max_samples`       | 1024     | paths per texel at most; standard error ∝ 1/√samples          |
+//! | `target_rel_error`  | none     | stop when the relative RMS standard error ≤ this ([`rms_rel_error`]) |
+//! | `time_limit`        | none     | stop after the pass that crosses it                           |
+//! | `seed`              | 0        | output depends on it, never on the thread count               |
+//! | `max_depth`         | 1024     | bounces per path at most (0.99^1024 ≈ 3e-5: no visible bias)   |
+//! | `sky`               | 0        | uniform radiance of rays that leave the scene                 |
+//! | `indirect_only`     | false    | leave out light reaching `x₀` without a bounce, like the bake |
+//!
+//! When to use: to measure a bake's error, in tests and benchmarks. Limits: slow (every texel
+//! needs hundreds of paths for 1–2 % noise); the standard error is itself estimated, and heavy-
+//! tailed paths (a small emitter reached only by a lucky bounce) can understate it at low sample
+//! counts, so the target is checked only after [`MIN_SAMPLES_FOR_TARGET`] paths.
+
+use std::f32::consts::PI;
+use std::path::Path;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use glam::{Vec2, Vec3};
+use rayon::prelude::*;
+
+use crate::config::BakeConfig;
+use crate::texels::{NO_TEXEL, Texels};
+use crate::trace::Tracer;
+use crate::transport::direct::{Emitters, punctual_irradiance, triangle_point};
+use crate::transport::sampling::{
+    Rng, cosine_hemisphere, frame, triangle_point as sample_triangle,
+};
+use crate::{Error, Progress, Result, atlas, scene, texels};
+
+/// Texels per parallel work item (one progress tick each).
+const CHUNK: usize = 64;
+/// Bounces before Russian roulette may end a path.
+pub const ROULETTE_DEPTH: u32 = 4;
+/// Paths per texel before the standard error is trusted for the stopping test.
+pub const MIN_SAMPLES_FOR_TARGET: u32 = 32;
+/// Mixed into the seed so the reference's random streams never coincide with a bake's.
+const SEED_SALT: u64 = 0x5245_4645_5245_4e43; // "REFERENC"
+
+/// How long and how the reference traces.
+#[derive(Clone, Debug)]
+pub struct ReferenceParams {
+    pub samples_per_pass: u32,
+    pub max_samples: u32,
+    pub target_rel_error: Option<f32>,
+    pub time_limit: Option<Duration>,
+    pub seed: u64,
+    pub max_depth: u32,
+    pub sky: Vec3,
+    pub indirect_only: bool,
+}
+
+impl Default for ReferenceParams {
+    fn default() -> Self {
+        ReferenceParams {
+            samples_per_pass: 16,
+            max_samples: 1024,
+            target_rel_error: None,
+            time_limit: None,
+            seed: 0,
+            max_depth: 1024,
+            sky: Vec3::ZERO,
+            indirect_only: false,
+        }
+    }
+}
+
+impl ReferenceParams {
+    /// Defaults with the sky, seed and indirect-only choice of a bake configuration, so the
+    /// reference estimates what that bake estimates.
+    pub fn like(config: &BakeConfig) -> Self {
+        ReferenceParams {
+            seed: config.transport.seed,
+            sky: config.transport.sky,
+            indirect_only: config.transport.indirect_only,
+            ..Self::default()
+        }
+    }
+
+    pub fn validate(&self) -> Result<()> {
+        let bad = |m: String| Err(Error::Option(m));
+        if self.samples_per_pass < 2 {
+            return bad(format!(
+                "reference samples per pass must be at least 2 (for a standard error), got {}",
+                self.samples_per_pass
+            ));
+        }
+        if self.max_samples < 2 {
+            return bad(format!(
+                "reference samples per texel must be at least 2, got {}",
+                self.max_samples
+            ));
+        }
+        if self.max_depth == 0 {
+            return bad("reference path depth must be at least 1".into());
+        }
+        if let Some(t) = self.target_rel_error
+            && !(t.is_finite() && t > 0.0)
+        {
+            return bad(format!("target error must be a positive number, got {t}"));
+        }
+        if !(self.sky.is_finite() && self.sky.min_element() >= 0.0) {
+            return bad(format!(
+                "sky radiance must be finite and non-negative, got {}",
+                self.sky
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Why tracing stopped.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Stop {
+    MaxSamples,
+    TargetError,
+    TimeLimit,
+}
+
+/// Reference estimate per texel (indexed like [`Texels`]).
+#[derive(Clone, Debug)]
+pub struct Reference {
+    /// Estimated `H/π`.
+    pub mean: Vec<Vec3>,
+    /// Standard error of `mean`, per channel.
+    pub std_error: Vec<Vec3>,
+    /// Paths per texel (the same for every texel).
+    pub samples: u32,
+    /// Rays cast (closest hits and shadow rays).
+    pub rays: u64,
+    pub seconds: f64,
+    /// Relative RMS standard error over texels (see [`rms_rel_error`]).
+    pub rms_rel_error: f32,
+    pub stop: Stop,
+}
+
+impl Reference {
+    /// One line: samples, rays, speed, error, time.
+    pub fn summary(&self) -> String {
+        let why = match self.stop {
+            Stop::MaxSamples => "sample cap",
+            Stop::TargetError => "target error reached",
+            Stop::TimeLimit => "time limit",
+        };
+        format!(
+            "{} texels, {} samples per texel, {:.2} M rays ({:.2} M rays/s), relative RMS standard error {:.2}% ({why}), {:.2}s",
+            self.mean.len(),
+            self.samples,
+            self.rays as f64 * 1e-6,
+            self.rays as f64 * 1e-6 / self.seconds.max(1e-9),
+            self.rms_rel_error * 100.0,
+            self.seconds
+        )
+    }
+}
+
+/// A texel's footprint point for `u ∈ [0,1)²`, on the surface (not lifted off it). Partly
+/// covered texels are sampled around the centroid of their covered part with the footprint
+/// scaled by the covered fraction — the same rule as the bake's gathering, which keeps paths
+/// from starting beyond the edge of a surface.
+#[inline]
+pub fn footprint_point(texels: &Texels, i: usize, u: Vec2) -> Vec3 {
+    let (du, dv) = (texels.du[i], texels.dv[i]);
+    let full = du.cross(dv).length();
+    let cover = if full > 0.0 {
+        (texels.area[i] / full).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    let scale = if cover > 0.99 { 1.0 } else { cover };
+    let o = (u - Vec2::splat(0.5)) * scale;
+    texels.position[i] + du * o.x + dv * o.y
+}
+
+/// Running sums of one texel's path estimates (f64, so millions of samples lose nothing).
+#[derive(Clone, Copy, Default)]
+struct Sums {
+    sum: [f64; 3],
+    sq: [f64; 3],
+}
+
+impl Sums {
+    #[inline]
+    fn add(&mut self, v: Vec3) {
+        for (c, x) in v.to_array().into_iter().enumerate() {
+            let x = x as f64;
+            self.sum[c] += x;
+            self.sq[c] += x * x;
+        }
+    }
+
+    /// Mean and standard error of the mean after `n ≥ 2` samples.
+    fn mean_and_error(&self, n: u32) -> (Vec3, Vec3) {
+        let n = n as f64;
+        let mut mean = [0.0f32; 3];
+        let mut se = [0.0f32; 3];
+        for c in 0..3 {
+            let m = self.sum[c] / n;
+            let var = ((self.sq[c] - self.sum[c] * m) / (n - 1.0)).max(0.0);
+            mean[c] = m as f32;
+            se[c] = (var / n).sqrt() as f32;
+        }
+        (Vec3::from(mean), Vec3::from(se))
+    }
+}
+
+/// Relative RMS standard error `√(Σ_i ‖σ_i‖² / Σ_i ‖μ_i‖²)` over texels (μ the estimate, σ its
+/// standard error, both RGB): the noise the reference adds to a relative RMS difference
+/// between a bake and the reference. A mean of per-texel ratios `σ_i/μ_i` was tried first and
+/// is useless as a stopping rule: texels buried under the Cornell box's blocks or above its
+/// light (μ ≈ 1e-4 of the room's) had ratios near 1 and set the RMS alone. 0 for a black scene.
+pub fn rms_rel_error(mean: &[Vec3], std_error: &[Vec3]) -> f32 {
+    let noise: f64 = std_error.iter().map(|s| s.length_squared() as f64).sum();
+    let signal: f64 = mean.iter().map(|m| m.length_squared() as f64).sum();
+    if signal > 0.0 {
+        (noise / signal).sqrt() as f32
+    } else {
+        0.0
+    }
+}
+
+/// Traces reference paths at every texel until a stopping rule of `params` holds.
+pub fn trace(
+    scene: &scene::Scene,
+    texels: &Texels,
+    tracer: &Tracer,
+    params: &ReferenceParams,
+    progress: &dyn Progress,
+) -> Result<Reference> {
+    params.validate()?;
+    let start = Instant::now();
+    let n = texels.len();
+    let emitters = Emitters::new(scene, texels);
+    let paths = Paths {
+        scene,
+        texels,
+        tracer,
+        emitters: &emitters,
+        params,
+    };
+    let mut sums = vec![Sums::default(); n];
+    let (mut samples, mut rays) = (0u32, 0u64);
+    let mut stop = Stop::MaxSamples;
+    let aborted = AtomicBool::new(false);
+    progress.begin("reference", n as u64 * params.max_samples as u64);
+    while samples < params.max_samples {
+        let first = samples;
+        let pass = params.samples_per_pass.min(params.max_samples - samples);
+        rays += sums
+            .par_chunks_mut(CHUNK)
+            .enumerate()
+            .map(|(c, chunk)| {
+                if aborted.load(Ordering::Relaxed) || progress.aborted() {
+                    aborted.store(true, Ordering::Relaxed);
+                    return 0;
+                }
+                let mut rays = 0u64;
+                for (k, s) in chunk.iter_mut().enumerate() {
+                    for sample in first..first + pass {
+                        s.add(paths.sample(c * CHUNK + k, sample, &mut rays));
+                    }
+                }
+                progress.advance(chunk.len() as u64 * pass as u64);
+                rays
+            })
+            .sum::<u64>();
+        if aborted.load(Ordering::Relaxed) {
+            progress.end();
+            return Err(Error::Aborted);
+        }
+        samples += pass;
+        if samples >= params.max_samples {
+            break;
+        }
+        if let Some(target) = params.target_rel_error
+            && samples >= MIN_SAMPLES_FOR_TARGET
+        {
+            let (mean, se): (Vec<Vec3>, Vec<Vec3>) =
+                sums.iter().map(|s| s.mean_and_error(samples)).unzip();
+            if rms_rel_error(&mean, &se) <= target {
+                stop = Stop::TargetError;
+                break;
+            }
+        }
+        if params.time_limit.is_some_and(|t| start.elapsed() >= t) {
+            stop = Stop::TimeLimit;
+            break;
+        }
+    }
+    progress.end();
+    let (mean, std_error): (Vec<Vec3>, Vec<Vec3>) =
+        sums.iter().map(|s| s.mean_and_error(samples)).unzip();
+    let rms = rms_rel_error(&mean, &std_error);
+    if stop == Stop::MaxSamples && params.target_rel_error.is_some_and(|t| rms <= t) {
+        stop = Stop::TargetError;
+    }
+    Ok(Reference {
+        rms_rel_error: rms,
+        mean,
+        std_error,
+        samples,
+        rays,
+        seconds: start.elapsed().as_secs_f64(),
+        stop,
+    })
+}
+
+/// The stages a reference needs, and the reference itself.
+#[derive(Clone, Debug)]
+pub struct Computed {
+    pub scene: scene::Scene,
+    pub source: scene::Source,
+    pub atlas: atlas::Atlas,
+    pub texels: Texels,
+    pub reference: Reference,
+}
+
+/// Loads `input` and builds atlas and texels exactly as [`crate::compute`] does with `config`
+/// (unwrapping is deterministic, and sample points are moved out of geometry by the same
+/// validity pass, so the texels are a bake's texels), then traces the reference. The estimates
+/// are raw: a bake replaces its `texels.invalid` (buried) texels by their neighbours'
+/// values, so compare on the others or apply [`texels::validity::fill_invalid`] too.
+pub fn compute(
+    input: &Path,
+    config: &BakeConfig,
+    params: &ReferenceParams,
+    progress: &dyn Progress,
+) -> Result<Computed> {
+    config.validate()?;
+    params.validate()?;
+    let (scene, source) = scene::load(input)?;
+    for w in &scene.stats.warnings {
+        progress.warn(w);
+    }
+    if scene.triangles.is_empty() {
+        return Err(Error::invalid(input, "the scene has no triangles to trace"));
+    }
+    let atlas = atlas::build(&scene, &source, &config.atlas)?;
+    let mut texels = texels::build(&scene, &atlas)?;
+    if progress.aborted() {
+        return Err(Error::Aborted);
+    }
+    let tracer = Tracer::new(&scene);
+    if config.transport.validity {
+        // Sample points moved out of geometry, as the bake moves them.
+        let params = texels::validity::ValidityParams {
+            seed: config.transport.seed,
+            ..Default::default()
+        };
+        texels::validity::fix(&mut texels, &tracer, &params);
+    }
+    let reference = trace(&scene, &texels, &tracer, params, progress)?;
+    Ok(Computed {
+        scene,
+        source,
+        atlas,
+        texels,
+        reference,
+    })
+}
+
+/// Power heuristic (β = 2), one sample of each strategy: weight / p = this / (this² + other²).
+#[inline]
+fn power_weight(this: f32, other: f32) -> f32 {
+    let d = this * this + other * other;
+    if d > 0.0 { this / d } else { 0.0 }
+}
+
+struct Paths<'a> {
+    scene: &'a scene::Scene,
+    texels: &'a Texels,
+    tracer: &'a Tracer,
+    emitters: &'a Emitters,
+    params: &'a ReferenceParams,
+}
+
+impl Paths<'_> {
+    /// One path estimate of texel `i`'s `H/π`; its random stream depends only on
+    /// (seed, texel, sample), never on the thread that runs it.
+    fn sample(&self, i: usize, sample: u32, rays: &mut u64) -> Vec3 {
+        let (t, eps) = (self.texels, self.tracer.epsilon);
+        let mut rng = Rng::new(self.params.seed ^ SEED_SALT, i as u64, sample as u64);
+        let mut n = t.normal[i];
+        let mut x = footprint_point(t, i, rng.next_vec2()) + n * eps;
+        // The receiver is a white Lambertian surface: H/π is the radiance it reflects.
+        let mut rho = Vec3::ONE;
+        let mut beta = Vec3::ONE;
+        let mut l = Vec3::ZERO;
+        for depth in 0..self.params.max_depth {
+            // Light that reaches x₀ without a bounce is direct light.
+            let counts = depth > 0 || !self.params.indirect_only;
+            if counts {
+                l += beta * rho * self.next_event(x, n, &mut rng, rays) / PI;
+            }
+
+            let (tx, ty) = frame(n);
+            let local = cosine_hemisphere(rng.next_vec2());
+            let dir = tx * local.x + ty * local.y + n * local.z;
+            beta *= rho;
+            *rays += 1;
+            let Some(hit) = self.tracer.closest(x, dir, f32::INFINITY) else {
+                if counts {
+                    l += beta * self.params.sky;
+                }
+                break;
+            };
+            if !hit.front {
+                break; // the back of a single-sided surface absorbs
+            }
+            let j = t.texel_at(hit.triangle, hit.bary);
+            if j == NO_TEXEL {
+                break;
+            }
+            let (p, n_hit) = triangle_point(self.scene, hit.triangle, hit.bary);
+            let le = t.emission[j as usize];
+            if counts && le.max_element() > 0.0 {
+                // MIS weight of the cosine-sampled hit against light sampling of this point.
+                let p_bsdf = local.z / PI;
+                let pdf_area = self.emitters.pdf_area[hit.triangle as usize];
+                let cos_l = -n_hit.dot(dir);
+                let p_light = if pdf_area > 0.0 && cos_l > 0.0 {
+                    pdf_area * hit.t * hit.t / cos_l
+                } else {
+                    0.0
+                };
+                let w = if p_light > 0.0 {
+                    p_bsdf * power_weight(p_bsdf, p_light)
+                } else {
+                    1.0
+                };
+                l += beta * le * w;
+            }
+            rho = t.albedo[j as usize];
+            if rho.max_element() <= 0.0 || n_hit == Vec3::ZERO {
+                break;
+            }
+            n = n_hit;
+            x = p + n * eps;
+            if depth + 1 >= ROULETTE_DEPTH {
+                let q = rho.max_element().min(1.0);
+                if rng.next_f32() >= q {
+                    break;
+                }
+                beta /= q;
+            }
+        }
+        if l.is_finite() { l } else { Vec3::ZERO }
+    }
+
+    /// Irradiance estimate at `x` (offset, normal `n`) from punctual lights and one
+    /// MIS-weighted sample of the small emitters.
+    #[inline]
+    fn next_event(&self, x: Vec3, n: Vec3, rng: &mut Rng, rays: &mut u64) -> Vec3 {
+        let mut e = Vec3::ZERO;
+        for light in &self.scene.lights {
+            e += punctual_irradiance(light, x, n, self.tracer);
+        }
+        *rays += self.scene.lights.len() as u64;
+        if self.emitters.is_empty() {
+            return e;
+        }
+        let tri = self.emitters.pick(rng.next_f32());
+        let bary = sample_triangle(rng.next_vec2());
+        let (y, n_l) = triangle_point(self.scene, tri, bary);
+        let to = y - x;
+        let r2 = to.length_squared();
+        if r2 <= 0.0 {
+            return e;
+        }
+        let dir = to / r2.sqrt();
+        let (cos_i, cos_l) = (n.dot(dir), -n_l.dot(dir));
+        if cos_i <= 0.0 || cos_l <= 0.0 {
+            return e;
+        }
+        let j = self.texels.texel_at(tri, bary);
+        if j == NO_TEXEL {
+            return e;
+        }
+        *rays += 1;
+        if self.tracer.occluded(x, y) {
+            return e;
+        }
+        let p_light = self.emitters.pdf_area[tri as usize] * r2 / cos_l;
+        let p_bsdf = cos_i / PI;
+        e + self.texels.emission[j as usize] * (cos_i * power_weight(p_light, p_bsdf))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sums_give_mean_and_standard_error() {
+        let mut s = Sums::default();
+        for v in [1.0f32, 2.0, 3.0, 4.0] {
+            s.add(Vec3::splat(v));
+        }
+        let (m, se) = s.mean_and_error(4);
+        assert!((m.x - 2.5).abs() < 1e-6);
+        // Sample variance 5/3, standard error sqrt(5/12).
+        assert!((se.y - (5.0f32 / 12.0).sqrt()).abs() < 1e-6, "{se}");
+    }
+
+    #[test]
+    fn relative_error_is_noise_over_signal() {
+        // A near-black texel with a large ratio σ/μ barely moves it.
+        let mean = [Vec3::splat(2.0), Vec3::splat(1e-4)];
+        let se = [Vec3::splat(0.1), Vec3::splat(1e-4)];
+        assert!((rms_rel_error(&mean, &se) - 0.05).abs() < 1e-5);
+        assert_eq!(rms_rel_error(&[Vec3::ZERO], &[Vec3::ZERO]), 0.0);
+    }
+
+    #[test]
+    fn params_are_checked() {
+        assert!(ReferenceParams::default().validate().is_ok());
+        let p = ReferenceParams {
+            samples_per_pass: 1,
+            ..Default::default()
+        };
+        assert!(p.validate().is_err());
+        let p = ReferenceParams {
+            target_rel_error: Some(0.0),
+            ..Default::default()
+        };
+        assert!(p.validate().is_err());
+    }
+}
