@@ -10,3 +10,4 @@ mod reference;
 mod render;
 mod solvers;
 mod form_factors;
+mod hierarchical;

@@ -51,6 +51,9 @@ impl Links {
     pub fn len(&self) -> usize {
         self.source.len()
     }
+    pub fn is_empty(&self) -> bool {
+        self.source.is_empty()
+    }
 }
 
 /// What refinement reads.

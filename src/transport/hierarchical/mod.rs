@@ -262,11 +262,11 @@ impl<'a> State<'a> {
                 pushed[k] = above + gathered[k];
             }
             let (mut change, mut total) = (0.0f64, 0.0f64);
-            for i in 0..n {
+            for (i, h) in self.h.iter_mut().enumerate() {
                 let new = self.direct[i] + pushed[i];
-                change += (new - self.h[i]).abs().element_sum() as f64;
+                change += (new - *h).abs().element_sum() as f64;
                 total += new.element_sum() as f64;
-                self.h[i] = new;
+                *h = new;
             }
             self.pull(tree);
             let residual = if total > 0.0 {

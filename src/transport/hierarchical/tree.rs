@@ -45,6 +45,9 @@ impl Tree {
     pub fn len(&self) -> usize {
         self.area.len()
     }
+    pub fn is_empty(&self) -> bool {
+        self.area.is_empty()
+    }
 
     pub fn is_leaf(&self, k: u32) -> bool {
         self.child_start[k as usize] == self.child_start[k as usize + 1]
