@@ -225,7 +225,6 @@ impl<'a> State<'a> {
         solution: &mut Solution,
         progress: &dyn Progress,
     ) -> Result<bool> {
-        let n = self.h.len();
         let mut gathered = vec![Vec3::ZERO; tree.len()];
         let mut pushed = vec![Vec3::ZERO; tree.len()];
         let mut previous_residual = f32::INFINITY;
