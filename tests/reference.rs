@@ -190,7 +190,7 @@ fn stops_on_target_error_and_time_limit() {
         .reference;
     assert_eq!(r.stop, Stop::TargetError);
     assert!(r.rms_rel_error <= 0.08 && r.samples >= reference::MIN_SAMPLES_FOR_TARGET);
-    assert!(r.samples < 100_000 && r.samples % 16 == 0, "{}", r.samples);
+    assert!(r.samples < 100_000 && r.samples.is_multiple_of(16), "{}", r.samples);
     // One pass fewer would not have reached the target (same seed: the same first paths).
     let fewer = params(r.samples - 16);
     let before = reference::compute(&input, &quick(), &fewer, &NoProgress)
@@ -348,4 +348,16 @@ fn cornell_direct_light_matches_lambert_form_factor() {
             t.position[i]
         );
     }
+}
+
+#[test]
+fn abort_stops_tracing() {
+    struct Abort;
+    impl lightbake::Progress for Abort {
+        fn aborted(&self) -> bool {
+            true
+        }
+    }
+    let c = reference::compute(&fixture("furnace.gltf"), &quick(), &params(64), &Abort);
+    assert!(matches!(c, Err(lightbake::Error::Aborted)));
 }

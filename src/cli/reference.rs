@@ -21,6 +21,7 @@ use super::{Quality, UvArg, parse_rgb};
 /// (--quality, --texels-per-unit, --max-page-size, --padding, --uv): unwrapping is
 /// deterministic, so the reference and the bake's pages line up texel for texel.
 #[derive(clap::Args)]
+#[command(after_help = AFTER_HELP)]
 pub struct Args {
     /// Input scene (.gltf or .glb): the one the bake was made from.
     scene: PathBuf,
@@ -79,6 +80,14 @@ pub struct Args {
     #[arg(short, long)]
     quiet: bool,
 }
+
+const AFTER_HELP: &str = "\
+Writes <stem>_reference<k>.exr (H/π per texel, dilated like bake pages) and
+<stem>_reference<k>_stderr.exr (its standard error) per page. The texels are a bake's when the
+scene and the atlas options (--quality, --texels-per-unit, --max-page-size, --padding, --uv,
+--no-validity) are the same; give --sky and --indirect-only as the bake did. Tracing stops at
+--spp paths per texel, at --target-error (relative RMS standard error √(Σσ²/Σμ²)), or after
+--time seconds, whichever comes first.";
 
 impl Args {
     fn config(&self) -> BakeConfig {
