@@ -46,6 +46,35 @@ fn make_ray(origin: Vec3, dir: Vec3, tmax: f32) -> Ray {
     Ray::new(origin.into(), Vec3A::from(dir) + Vec3A::ZERO, 0.0, tmax)
 }
 
+/// Barycentric slack of [`intersect`]: a ray through an edge shared by two triangles must hit
+/// one of them.
+const EDGE_SLACK: f32 = 1e-6;
+
+/// Ray–triangle distance (Möller–Trumbore in obvhs' `RtTriangle` layout), or infinity.
+/// obvhs' own test rejects −0.0 barycentrics by their sign bit, so a ray through the exact
+/// shared edge of two triangles (a floor grid hit at a grid line) missed both: light leaked
+/// through seams (`tests::rays_through_shared_edges_hit`). Here edges get a little slack.
+#[inline(always)]
+fn intersect(tri: &RtTriangle, ray: &Ray) -> f32 {
+    let c = tri.v0 - ray.origin;
+    let r = ray.direction.cross(c);
+    let det = tri.ng.dot(ray.direction);
+    if det == 0.0 {
+        return f32::INFINITY;
+    }
+    let inv_det = 1.0 / det;
+    let u = r.dot(tri.e2) * inv_det;
+    let v = r.dot(tri.e1) * inv_det;
+    let w = 1.0 - u - v;
+    if u >= -EDGE_SLACK && v >= -EDGE_SLACK && w >= -EDGE_SLACK {
+        let t = tri.ng.dot(c) * inv_det;
+        if t >= ray.tmin && t <= ray.tmax {
+            return t;
+        }
+    }
+    f32::INFINITY
+}
+
 /// A ray hit on a scene triangle.
 #[derive(Clone, Copy, Debug)]
 pub struct Hit {
@@ -166,7 +195,7 @@ impl Tracer {
         let mut hit = RayHit::none();
         let found = self
             .bvh
-            .ray_traverse(ray, &mut hit, |ray, id| self.triangles[id].intersect(ray));
+            .ray_traverse(ray, &mut hit, |ray, id| intersect(&self.triangles[id], ray));
         if !found {
             return None;
         }
@@ -206,7 +235,7 @@ impl Tracer {
         let ray = make_ray(a, d / len, len - self.epsilon);
         !self
             .bvh
-            .ray_traverse_miss(ray, |ray, id| self.triangles[id].intersect(ray))
+            .ray_traverse_miss(ray, |ray, id| intersect(&self.triangles[id], ray))
     }
 
     /// True when the ray from `origin` along unit `dir` hits nothing (escapes to the sky).
@@ -217,7 +246,7 @@ impl Tracer {
         }
         let ray = make_ray(origin, dir, tmax);
         self.bvh
-            .ray_traverse_miss(ray, |ray, id| self.triangles[id].intersect(ray))
+            .ray_traverse_miss(ray, |ray, id| intersect(&self.triangles[id], ray))
     }
 }
 
@@ -305,6 +334,70 @@ mod tests {
         assert!(!tracer.occluded(Vec3::new(2.0, 2.0, 1.0), Vec3::new(2.0, 2.0, -1.0)));
         assert!(!tracer.escapes(Vec3::new(0.2, 0.2, 1.0), -Vec3::Z, f32::INFINITY));
         assert!(tracer.escapes(Vec3::new(0.2, 0.2, 1.0), Vec3::Z, f32::INFINITY));
+    }
+
+    #[test]
+    fn rays_through_shared_edges_hit() {
+        // A 2 × 2 grid of quads (8 triangles) on z = 0; rays straight down onto every grid
+        // line and vertex, and onto the diagonals.
+        let mut s = Scene::default();
+        for i in 0..3 {
+            for j in 0..3 {
+                s.positions
+                    .push(Vec3::new(i as f32 * 0.5, j as f32 * 0.5, 0.0));
+            }
+        }
+        let n = s.positions.len() as u32;
+        s.normals = vec![Vec3::Z; n as usize];
+        s.uv0 = vec![Vec2::ZERO; n as usize];
+        s.uv1 = vec![Vec2::ZERO; n as usize];
+        for i in 0..2u32 {
+            for j in 0..2u32 {
+                let v = |a: u32, b: u32| (i + a) * 3 + j + b;
+                s.triangles.push([v(0, 0), v(1, 0), v(1, 1)]);
+                s.triangles.push([v(0, 0), v(1, 1), v(0, 1)]);
+            }
+        }
+        s.triangle_instance = vec![0; 8];
+        s.instances.push(Instance {
+            node: 0,
+            mesh: 0,
+            primitive: 0,
+            material: 0,
+            vertices: 0..n,
+            triangles: 0..8,
+            source_triangle: (0..8).collect(),
+            back_of: None,
+            back: None,
+            has_uv1: false,
+        });
+        s.materials.push(Material::default());
+        let tracer = Tracer::new(&s);
+        let mut missed = Vec::new();
+        for eye in [
+            Vec3::new(0.5, 0.5, 1.0),
+            Vec3::new(-0.7, 0.3, 1.3),
+            Vec3::new(1.9, -0.4, 0.6),
+        ] {
+            // Interior points only: the outer border is an edge of a single triangle.
+            for k in 1..16 {
+                for l in 1..16 {
+                    let target = Vec3::new(k as f32 / 16.0, l as f32 / 16.0, 0.0);
+                    let dir = (target - eye).normalize();
+                    if tracer.closest(eye, dir, f32::INFINITY).is_none()
+                        || !tracer.occluded(eye, target + dir)
+                    {
+                        missed.push(target);
+                    }
+                }
+            }
+        }
+        assert!(
+            missed.is_empty(),
+            "{} rays got through, first at {:?}",
+            missed.len(),
+            missed.first()
+        );
     }
 
     #[test]
