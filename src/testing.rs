@@ -1290,8 +1290,20 @@ pub fn large_hall() -> GltfBuilder {
     let (half, height) = (12.0f32, 6.0f32);
 
     // Floor and ceiling: 160 × 160 quads each (51 200 triangles each).
-    let floor = Geometry::grid(Vec3::new(-half, 0.0, half), Vec3::X * 2.0 * half, -Vec3::Z * 2.0 * half, 160, 160);
-    let ceiling = Geometry::grid(Vec3::new(-half, height, -half), Vec3::X * 2.0 * half, Vec3::Z * 2.0 * half, 160, 160);
+    let floor = Geometry::grid(
+        Vec3::new(-half, 0.0, half),
+        Vec3::X * 2.0 * half,
+        -Vec3::Z * 2.0 * half,
+        160,
+        160,
+    );
+    let ceiling = Geometry::grid(
+        Vec3::new(-half, height, -half),
+        Vec3::X * 2.0 * half,
+        Vec3::Z * 2.0 * half,
+        160,
+        160,
+    );
     let shell = gltf.add_mesh("floor", floor, floor_m);
     gltf.add_primitive(shell, ceiling, walls_m);
     let (min, max) = (Vec3::new(-half, 0.0, -half), Vec3::new(half, height, half));
@@ -1303,26 +1315,49 @@ pub fn large_hall() -> GltfBuilder {
     gltf.add_mesh_node("hall", shell);
 
     // Pillars: one mesh, 36 nodes.
-    let pillar = Geometry::box_faces(Vec3::new(-0.4, 0.0, -0.4), Vec3::new(0.4, height, 0.4), &Face::NO_BOTTOM, 6);
+    let pillar = Geometry::box_faces(
+        Vec3::new(-0.4, 0.0, -0.4),
+        Vec3::new(0.4, height, 0.4),
+        &Face::NO_BOTTOM,
+        6,
+    );
     let pillar_mesh = gltf.add_mesh("pillar", pillar, pillar_m);
     for i in 0..6 {
         for j in 0..6 {
             let at = Vec3::new(-8.75 + 3.5 * i as f32, 0.0, -8.75 + 3.5 * j as f32);
-            gltf.add_node(Node::new(&format!("pillar_{i}_{j}")).at(at).with_mesh(pillar_mesh));
+            gltf.add_node(
+                Node::new(&format!("pillar_{i}_{j}"))
+                    .at(at)
+                    .with_mesh(pillar_mesh),
+            );
         }
     }
 
     // Eight ceiling panels facing down, just below the ceiling.
-    let panel = Geometry::grid(Vec3::new(-1.0, height - 0.01, -0.5), Vec3::X * 2.0, Vec3::Z * 1.0, 1, 1);
+    let panel = Geometry::grid(
+        Vec3::new(-1.0, height - 0.01, -0.5),
+        Vec3::X * 2.0,
+        Vec3::Z * 1.0,
+        1,
+        1,
+    );
     let panel_mesh = gltf.add_mesh("panel", panel, panel_m);
     for i in 0..4 {
         for j in 0..2 {
             let at = Vec3::new(-7.0 + 4.67 * i as f32, 0.0, -4.0 + 8.0 * j as f32);
-            gltf.add_node(Node::new(&format!("panel_{i}_{j}")).at(at).with_mesh(panel_mesh));
+            gltf.add_node(
+                Node::new(&format!("panel_{i}_{j}"))
+                    .at(at)
+                    .with_mesh(panel_mesh),
+            );
         }
     }
     let camera = Camera::perspective("camera", 60f32.to_radians(), Some(16.0 / 9.0));
-    gltf.add_camera_node(camera, Vec3::new(-10.0, 2.0, 10.0), Vec3::new(2.0, 1.5, -2.0));
+    gltf.add_camera_node(
+        camera,
+        Vec3::new(-10.0, 2.0, 10.0),
+        Vec3::new(2.0, 1.5, -2.0),
+    );
     gltf
 }
 
@@ -1361,7 +1396,11 @@ mod tests {
         let placed: usize = doc
             .nodes()
             .filter_map(|n| n.mesh())
-            .map(|m| m.primitives().map(|p| p.indices().unwrap().count() / 3).sum::<usize>())
+            .map(|m| {
+                m.primitives()
+                    .map(|p| p.indices().unwrap().count() / 3)
+                    .sum::<usize>()
+            })
             .sum();
         assert!(placed > 100_000, "{placed} triangles");
         assert_eq!(json["nodes"].as_array().unwrap().len(), 1 + 36 + 8 + 1);

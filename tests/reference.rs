@@ -190,7 +190,11 @@ fn stops_on_target_error_and_time_limit() {
         .reference;
     assert_eq!(r.stop, Stop::TargetError);
     assert!(r.rms_rel_error <= 0.08 && r.samples >= reference::MIN_SAMPLES_FOR_TARGET);
-    assert!(r.samples < 100_000 && r.samples.is_multiple_of(16), "{}", r.samples);
+    assert!(
+        r.samples < 100_000 && r.samples.is_multiple_of(16),
+        "{}",
+        r.samples
+    );
     // One pass fewer would not have reached the target (same seed: the same first paths).
     let fewer = params(r.samples - 16);
     let before = reference::compute(&input, &quick(), &fewer, &NoProgress)

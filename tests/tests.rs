@@ -4,10 +4,10 @@ mod util;
 
 mod analytic;
 mod cli;
+mod form_factors;
+mod hierarchical;
 mod pipeline;
 mod quality;
 mod reference;
 mod render;
 mod solvers;
-mod form_factors;
-mod hierarchical;

@@ -128,6 +128,22 @@ impl Emitters {
         self.triangles.is_empty()
     }
 
+    /// Picks an emissive triangle for `u ∈ [0,1)` and returns `u` rescaled to [0,1) within the
+    /// picked triangle's share of the distribution, so one stratified 2D sample stratifies both
+    /// the pick and the point on the triangle.
+    #[inline]
+    pub fn pick_stratified(&self, u: f32) -> (u32, f32) {
+        let k = sample_cdf(&self.cdf, u);
+        let lo = if k == 0 { 0.0 } else { self.cdf[k - 1] };
+        let hi = self.cdf[k];
+        let rescaled = if hi > lo {
+            ((u - lo) / (hi - lo)).clamp(0.0, 0.999_999_94)
+        } else {
+            0.5
+        };
+        (self.triangles[k], rescaled)
+    }
+
     /// Picks an emissive triangle for `u ∈ [0,1)`.
     #[inline]
     pub fn pick(&self, u: f32) -> u32 {

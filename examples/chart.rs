@@ -1,0 +1,783 @@
+//! Speed against accuracy: every form-factor method and solver at several settings on the
+//! fixture scenes, measured against the built-in path-traced reference.
+//!
+//! ```sh
+//! cargo run --release --example chart               # full run (about 10 minutes on 2 cores)
+//! cargo run --release --example chart -- --quick    # fewer settings, smaller reference
+//! cargo run --release --example chart -- --scene cornell_box --scene furnace
+//! ```
+//!
+//! Writes `examples/gallery/bench.csv`, `bench.md` and the charts `error_vs_time_<scene>.png`
+//! and `residual_vs_iteration.png`. Each bake runs in a child process (this program run with
+//! `--child`), so its peak memory (VmHWM) is its own.
+//!
+//! Error metrics over all texels and channels, against the reference `r` (`x` = bake):
+//! - relative RMSE `sqrt(mean((x−r)²)) / mean(r)`;
+//! - p95 and max of `|x−r| / (r + 0.05·mean(r))` (the floor keeps dark texels from dominating).
+//!
+//! The reference's own noise (its RMS standard error, relative to `mean(r)`) is drawn as a
+//! dashed line: errors below it cannot be told apart from zero.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::{Duration, Instant};
+
+use glam::Vec3;
+use lightbake::config::{Method, Solver};
+use lightbake::{BakeConfig, NoProgress};
+use plotters::prelude::*;
+
+/// One bake configuration of the sweep.
+#[derive(Clone, Debug)]
+struct Setting {
+    method: Method,
+    solver: Solver,
+    rays: u32,
+    light_samples: u32,
+    tolerance: f32,
+}
+
+impl Setting {
+    fn label(&self) -> String {
+        format!("{}/{}", method_name(self.method), solver_name(self.solver))
+    }
+}
+
+/// What a child process reports about one bake.
+#[derive(Clone, Debug, Default)]
+struct Measured {
+    seconds: f64,
+    stages: String,
+    rays: u64,
+    iterations: usize,
+    residual: f32,
+    converged: bool,
+    peak_mib: f64,
+    history: Vec<f32>,
+    error: Option<String>,
+}
+
+/// One row of the results table.
+#[derive(Clone, Debug)]
+struct Row {
+    scene: String,
+    setting: Setting,
+    measured: Measured,
+    rmse: f32,
+    p95: f32,
+    max: f32,
+}
+
+fn method_name(m: Method) -> &'static str {
+    match m {
+        Method::MonteCarlo => "montecarlo",
+        Method::Point => "point",
+        Method::Polygon => "polygon",
+        Method::Hierarchical => "hierarchical",
+    }
+}
+
+fn solver_name(s: Solver) -> &'static str {
+    match s {
+        Solver::Jacobi => "jacobi",
+        Solver::GaussSeidel => "gauss-seidel",
+        Solver::Southwell => "southwell",
+        Solver::Gather => "gather",
+    }
+}
+
+fn parse_method(s: &str) -> Method {
+    match s {
+        "point" => Method::Point,
+        "polygon" => Method::Polygon,
+        "hierarchical" => Method::Hierarchical,
+        _ => Method::MonteCarlo,
+    }
+}
+
+fn parse_solver(s: &str) -> Solver {
+    match s {
+        "gauss-seidel" => Solver::GaussSeidel,
+        "southwell" => Solver::Southwell,
+        "gather" => Solver::Gather,
+        _ => Solver::Jacobi,
+    }
+}
+
+/// A fixture scene and the texel density it is measured at (fixed per scene, so every run and
+/// the reference share the same texels).
+struct Scene {
+    name: &'static str,
+    path: PathBuf,
+    texels_per_unit: f32,
+    /// All-pairs methods are only run where the texel count allows.
+    all_pairs: bool,
+}
+
+fn scenes(out: &Path, quick: bool) -> Vec<Scene> {
+    let fixture = |f: &str| {
+        PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+            .join("fixtures")
+            .join(f)
+    };
+    let large = out.join("large_hall.glb");
+    if !large.exists() {
+        std::fs::write(&large, lightbake::testing::large_hall().to_glb_bytes())
+            .expect("write large_hall.glb");
+    }
+    vec![
+        Scene {
+            name: "cornell_box",
+            path: fixture("cornell_box.gltf"),
+            texels_per_unit: 32.0,
+            all_pairs: true,
+        },
+        Scene {
+            name: "furnace",
+            path: fixture("furnace_09.gltf"),
+            texels_per_unit: 16.0,
+            all_pairs: true,
+        },
+        Scene {
+            name: "two_rooms",
+            path: fixture("two_rooms.gltf"),
+            texels_per_unit: 8.0,
+            all_pairs: true,
+        },
+        Scene {
+            name: "large_hall",
+            path: large,
+            texels_per_unit: if quick { 2.0 } else { 3.0 },
+            all_pairs: false,
+        },
+    ]
+}
+
+fn settings(scene: &Scene, quick: bool) -> Vec<Setting> {
+    let mut out = Vec::new();
+    let rays: &[u32] = if quick {
+        &[32, 128, 512]
+    } else {
+        &[16, 64, 256, 1024]
+    };
+    let s = |method, solver, rays: u32| Setting {
+        method,
+        solver,
+        rays,
+        light_samples: (rays / 4).max(4),
+        tolerance: 1e-4,
+    };
+    for &k in rays {
+        out.push(s(Method::MonteCarlo, Solver::Jacobi, k));
+    }
+    for solver in [Solver::GaussSeidel, Solver::Southwell] {
+        out.push(s(Method::MonteCarlo, solver, 256));
+    }
+    for &k in &rays[..rays.len() - 1] {
+        out.push(s(Method::MonteCarlo, Solver::Gather, k));
+    }
+    for &k in rays {
+        out.push(s(Method::Hierarchical, Solver::Jacobi, k));
+    }
+    if scene.all_pairs {
+        for &k in &rays[..2] {
+            out.push(s(Method::Polygon, Solver::Jacobi, k));
+        }
+        out.push(s(Method::Point, Solver::Jacobi, 64));
+    }
+    out
+}
+
+fn config(scene_tpu: f32, setting: &Setting) -> BakeConfig {
+    let mut c = BakeConfig::medium();
+    c.atlas.texels_per_unit = scene_tpu;
+    c.transport.method = setting.method;
+    c.transport.gather_rays = setting.rays;
+    c.transport.light_samples = setting.light_samples;
+    c.solve.solver = setting.solver;
+    c.solve.tolerance = setting.tolerance;
+    c
+}
+
+/// Peak resident memory of this process (Linux), MiB.
+fn peak_mib() -> f64 {
+    let status = std::fs::read_to_string("/proc/self/status").unwrap_or_default();
+    status
+        .lines()
+        .find_map(|l| l.strip_prefix("VmHWM:"))
+        .and_then(|v| v.trim().trim_end_matches("kB").trim().parse::<f64>().ok())
+        .map_or(0.0, |kb| kb / 1024.0)
+}
+
+/// Child mode: bake once, write the lightmap values as raw f32 to `values`, print one line.
+fn child(args: &[String]) {
+    let [scene, tpu, method, solver, rays, light, tol, values] = args else {
+        panic!("child arguments: {args:?}")
+    };
+    let setting = Setting {
+        method: parse_method(method),
+        solver: parse_solver(solver),
+        rays: rays.parse().unwrap(),
+        light_samples: light.parse().unwrap(),
+        tolerance: tol.parse().unwrap(),
+    };
+    let config = config(tpu.parse().unwrap(), &setting);
+    let start = Instant::now();
+    match lightbake::compute(Path::new(scene), &config, &NoProgress) {
+        Ok(baked) => {
+            let seconds = start.elapsed().as_secs_f64();
+            let bytes: Vec<u8> = baked
+                .lightmap
+                .iter()
+                .flat_map(|v| v.to_array())
+                .flat_map(f32::to_le_bytes)
+                .collect();
+            std::fs::write(values, bytes).unwrap();
+            let stages: Vec<String> = baked
+                .stages
+                .iter()
+                .map(|s| format!("{}={:.3}", s.stage, s.seconds))
+                .collect();
+            let history: Vec<String> = baked
+                .solution
+                .history
+                .iter()
+                .map(|i| format!("{:e}", i.residual))
+                .collect();
+            println!(
+                "ok\t{seconds}\t{}\t{}\t{}\t{}\t{}\t{}\t{}",
+                stages.join(" "),
+                baked.transport.rays,
+                baked.solution.history.len(),
+                baked.solution.residual(),
+                baked.solution.converged,
+                peak_mib(),
+                history.join(",")
+            );
+        }
+        Err(e) => println!("error\t{e}"),
+    }
+}
+
+fn run_child(scene: &Scene, setting: &Setting, values: &Path) -> Measured {
+    let output = Command::new(std::env::current_exe().unwrap())
+        .arg("--child")
+        .args([
+            scene.path.to_str().unwrap(),
+            &scene.texels_per_unit.to_string(),
+            method_name(setting.method),
+            solver_name(setting.solver),
+            &setting.rays.to_string(),
+            &setting.light_samples.to_string(),
+            &setting.tolerance.to_string(),
+            values.to_str().unwrap(),
+        ])
+        .output()
+        .expect("run child");
+    let text = String::from_utf8_lossy(&output.stdout);
+    let line = text.lines().last().unwrap_or("error\tno output");
+    let f: Vec<&str> = line.split('\t').collect();
+    if f[0] != "ok" || f.len() < 9 {
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        let message = f.get(1).map_or_else(
+            || stderr.lines().last().unwrap_or("crashed").to_string(),
+            |m| m.to_string(),
+        );
+        return Measured {
+            error: Some(message),
+            ..Default::default()
+        };
+    }
+    Measured {
+        seconds: f[1].parse().unwrap(),
+        stages: f[2].to_string(),
+        rays: f[3].parse().unwrap(),
+        iterations: f[4].parse().unwrap(),
+        residual: f[5].parse().unwrap(),
+        converged: f[6] == "true",
+        peak_mib: f[7].parse().unwrap(),
+        history: f[8].split(',').filter_map(|r| r.parse().ok()).collect(),
+        error: None,
+    }
+}
+
+fn read_values(path: &Path) -> Vec<Vec3> {
+    std::fs::read(path)
+        .unwrap()
+        .chunks_exact(12)
+        .map(|c| {
+            let f = |k: usize| f32::from_le_bytes(c[k..k + 4].try_into().unwrap());
+            Vec3::new(f(0), f(4), f(8))
+        })
+        .collect()
+}
+
+/// (relative RMSE, p95, max) of `x` against `r` over the texels not flagged in `skip` (texels
+/// buried in geometry, which a bake fills from neighbours); see the module docs.
+fn errors(x: &[Vec3], r: &[Vec3], skip: &[bool]) -> (f32, f32, f32) {
+    assert_eq!(x.len(), r.len(), "bake and reference must share texels");
+    let (x, r): (Vec<Vec3>, Vec<Vec3>) = x
+        .iter()
+        .zip(r)
+        .zip(skip)
+        .filter(|(_, s)| !**s)
+        .map(|((a, b), _)| (*a, *b))
+        .unzip();
+    let n = (r.len() * 3) as f64;
+    let mean_r = r.iter().map(|v| v.element_sum() as f64).sum::<f64>() / n;
+    let mse = x
+        .iter()
+        .zip(&r)
+        .map(|(a, b)| (*a - *b).length_squared() as f64)
+        .sum::<f64>()
+        / n;
+    let floor = 0.05 * mean_r as f32;
+    let mut rel: Vec<f32> = x
+        .iter()
+        .zip(&r)
+        .flat_map(|(a, b)| (0..3).map(move |c| (a[c] - b[c]).abs() / (b[c] + floor)))
+        .collect();
+    rel.sort_by(f32::total_cmp);
+    let p95 = rel[((rel.len() as f32 * 0.95) as usize).min(rel.len() - 1)];
+    ((mse.sqrt() / mean_r) as f32, p95, *rel.last().unwrap())
+}
+
+/// The path-traced reference at the scene's texels: mean, relative RMS standard error,
+/// seconds, samples per texel, and which texels to skip (buried in geometry).
+struct Ref {
+    mean: Vec<Vec3>,
+    noise: f32,
+    seconds: f64,
+    samples: u32,
+    skip: Vec<bool>,
+}
+
+fn reference(scene: &Scene, quick: bool) -> Ref {
+    let mut config = BakeConfig::medium();
+    config.atlas.texels_per_unit = scene.texels_per_unit;
+    let params = lightbake::reference::ReferenceParams {
+        samples_per_pass: 32,
+        max_samples: if quick { 1024 } else { 4096 },
+        target_rel_error: Some(if quick { 0.01 } else { 0.004 }),
+        time_limit: Some(Duration::from_secs(if quick { 60 } else { 240 })),
+        ..Default::default()
+    };
+    let start = Instant::now();
+    let computed = lightbake::reference::compute(&scene.path, &config, &params, &NoProgress)
+        .expect("reference");
+    let reference = computed.reference;
+    let mut skip = vec![false; reference.mean.len()];
+    for &i in &computed.texels.invalid {
+        skip[i as usize] = true;
+    }
+    Ref {
+        noise: reference.rms_rel_error,
+        seconds: start.elapsed().as_secs_f64(),
+        samples: reference.samples,
+        mean: reference.mean,
+        skip,
+    }
+}
+
+/// The path tracer itself at increasing sample counts, for the "same error, how much faster"
+/// comparison: (seconds, relative RMSE against the reference) per sample count.
+fn path_tracer_curve(scene: &Scene, reference: &Ref, quick: bool) -> Vec<(u32, f64, f32)> {
+    let mut config = BakeConfig::medium();
+    config.atlas.texels_per_unit = scene.texels_per_unit;
+    let counts: &[u32] = if quick {
+        &[16, 64, 256]
+    } else {
+        &[16, 64, 256, 1024]
+    };
+    counts
+        .iter()
+        .map(|&spp| {
+            let params = lightbake::reference::ReferenceParams {
+                max_samples: spp,
+                samples_per_pass: spp.min(64),
+                seed: 7, // independent of the reference's own samples
+                ..Default::default()
+            };
+            let start = Instant::now();
+            let pt = lightbake::reference::compute(&scene.path, &config, &params, &NoProgress)
+                .expect("path tracer");
+            let seconds = start.elapsed().as_secs_f64();
+            (
+                spp,
+                seconds,
+                errors(&pt.reference.mean, &reference.mean, &reference.skip).0,
+            )
+        })
+        .collect()
+}
+
+fn font() {
+    // plotters' ab_glyph backend needs a font registered by name; DejaVu ships with Debian.
+    for path in [
+        "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf",
+        "/usr/share/fonts/TTF/DejaVuSans.ttf",
+    ] {
+        if let Ok(bytes) = std::fs::read(path) {
+            let bytes: &'static [u8] = Box::leak(bytes.into_boxed_slice());
+            let _ = plotters::style::register_font("sans-serif", FontStyle::Normal, bytes);
+            return;
+        }
+    }
+    eprintln!("warning: no DejaVuSans.ttf found; chart text will be missing");
+}
+
+const COLORS: [RGBColor; 8] = [
+    RGBColor(31, 119, 180),
+    RGBColor(255, 127, 14),
+    RGBColor(44, 160, 44),
+    RGBColor(214, 39, 40),
+    RGBColor(148, 103, 189),
+    RGBColor(140, 86, 75),
+    RGBColor(227, 119, 194),
+    RGBColor(23, 190, 207),
+];
+
+fn chart_error_vs_time(
+    path: &Path,
+    scene: &str,
+    rows: &[&Row],
+    noise: f32,
+    pt: &[(u32, f64, f32)],
+) -> Result<(), Box<dyn std::error::Error>> {
+    let ok: Vec<&&Row> = rows
+        .iter()
+        .filter(|r| r.measured.error.is_none() && r.rmse.is_finite())
+        .collect();
+    let times = ok
+        .iter()
+        .map(|r| r.measured.seconds)
+        .chain(pt.iter().map(|p| p.1));
+    let errs = ok
+        .iter()
+        .map(|r| r.rmse as f64)
+        .chain(pt.iter().map(|p| p.2 as f64))
+        .chain([noise as f64]);
+    let (t0, t1) = times.fold((f64::MAX, f64::MIN), |(a, b), t| (a.min(t), b.max(t)));
+    let (e0, e1) = errs.fold((f64::MAX, f64::MIN), |(a, b), e| {
+        (a.min(e.max(1e-5)), b.max(e))
+    });
+    let root = BitMapBackend::new(path, (900, 600)).into_drawing_area();
+    root.fill(&WHITE)?;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(
+            format!("{scene}: error against the path-traced reference vs bake time"),
+            ("sans-serif", 22),
+        )
+        .margin(12)
+        .x_label_area_size(45)
+        .y_label_area_size(70)
+        .build_cartesian_2d(
+            (t0 * 0.7..t1 * 1.4).log_scale(),
+            (e0 * 0.7..e1 * 1.4).log_scale(),
+        )?;
+    chart
+        .configure_mesh()
+        .x_desc("wall time (s)")
+        .y_desc("relative RMSE")
+        .y_label_formatter(&|v| format!("{:.1}%", v * 100.0))
+        .draw()?;
+    let mut labels: Vec<String> = ok.iter().map(|r| r.setting.label()).collect();
+    labels.dedup();
+    labels.sort();
+    labels.dedup();
+    for (k, label) in labels.iter().enumerate() {
+        let color = COLORS[k % COLORS.len()];
+        let mut pts: Vec<(f64, f64)> = ok
+            .iter()
+            .filter(|r| &r.setting.label() == label)
+            .map(|r| (r.measured.seconds, r.rmse as f64))
+            .collect();
+        pts.sort_by(|a, b| a.0.total_cmp(&b.0));
+        chart
+            .draw_series(LineSeries::new(pts.clone(), color.stroke_width(2)))?
+            .label(label.as_str())
+            .legend(move |(x, y)| PathElement::new([(x, y), (x + 18, y)], color.stroke_width(2)));
+        chart.draw_series(pts.iter().map(|&p| Circle::new(p, 4, color.filled())))?;
+    }
+    if !pt.is_empty() {
+        let pts: Vec<(f64, f64)> = pt.iter().map(|p| (p.1, p.2 as f64)).collect();
+        chart
+            .draw_series(LineSeries::new(pts.clone(), BLACK.stroke_width(2)))?
+            .label("path tracer (reference code)")
+            .legend(|(x, y)| PathElement::new([(x, y), (x + 18, y)], BLACK.stroke_width(2)));
+        chart.draw_series(pts.iter().map(|&p| Cross::new(p, 5, BLACK)))?;
+    }
+    let dash: Vec<(f64, f64)> = vec![(t0 * 0.7, noise as f64), (t1 * 1.4, noise as f64)];
+    chart
+        .draw_series(DashedLineSeries::new(
+            dash,
+            6,
+            4,
+            RGBColor(120, 120, 120).stroke_width(1),
+        ))?
+        .label("reference noise")
+        .legend(|(x, y)| PathElement::new([(x, y), (x + 18, y)], RGBColor(120, 120, 120)));
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .draw()?;
+    root.present()?;
+    Ok(())
+}
+
+fn chart_residuals(path: &Path, rows: &[&Row]) -> Result<(), Box<dyn std::error::Error>> {
+    let root = BitMapBackend::new(path, (900, 600)).into_drawing_area();
+    root.fill(&WHITE)?;
+    let max_it = rows
+        .iter()
+        .map(|r| r.measured.history.len())
+        .max()
+        .unwrap_or(1)
+        .max(2);
+    let mut chart = ChartBuilder::on(&root)
+        .caption(
+            "Solver residual vs iteration (Cornell box and ρ = 0.9 furnace, 256 rays)",
+            ("sans-serif", 22),
+        )
+        .margin(12)
+        .x_label_area_size(45)
+        .y_label_area_size(70)
+        .build_cartesian_2d(1..max_it, (1e-7f64..1.0).log_scale())?;
+    chart
+        .configure_mesh()
+        .x_desc("iteration")
+        .y_desc("relative update")
+        .draw()?;
+    for (k, row) in rows.iter().enumerate() {
+        let color = COLORS[k % COLORS.len()];
+        let pts: Vec<(usize, f64)> = row
+            .measured
+            .history
+            .iter()
+            .enumerate()
+            .map(|(i, r)| (i + 1, (*r as f64).max(1e-7)))
+            .collect();
+        chart
+            .draw_series(LineSeries::new(pts, color.stroke_width(2)))?
+            .label(format!("{} {}", row.scene, solver_name(row.setting.solver)))
+            .legend(move |(x, y)| PathElement::new([(x, y), (x + 18, y)], color.stroke_width(2)));
+    }
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .draw()?;
+    root.present()?;
+    Ok(())
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    if args.first().map(String::as_str) == Some("--child") {
+        child(&args[1..]);
+        return;
+    }
+    let quick = args.iter().any(|a| a == "--quick");
+    let only: Vec<&str> = args
+        .windows(2)
+        .filter(|w| w[0] == "--scene")
+        .map(|w| w[1].as_str())
+        .collect();
+    let gallery = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("examples/gallery");
+    let work = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("target/chart");
+    std::fs::create_dir_all(&work).unwrap();
+    std::fs::create_dir_all(&gallery).unwrap();
+    font();
+
+    let mut rows: Vec<Row> = Vec::new();
+    let mut md = String::new();
+    let mut headline = String::new();
+    for scene in scenes(&work, quick) {
+        if !only.is_empty() && !only.contains(&scene.name) {
+            continue;
+        }
+        eprintln!("== {}: reference", scene.name);
+        let reference = reference(&scene, quick);
+        let noise = reference.noise;
+        eprintln!(
+            "   {} texels, {} spp, noise {:.2}%, {:.1}s",
+            reference.mean.len(),
+            reference.samples,
+            noise * 100.0,
+            reference.seconds
+        );
+        let pt = path_tracer_curve(&scene, &reference, quick);
+        let mut scene_rows = Vec::new();
+        for setting in settings(&scene, quick) {
+            let values = work.join("values.bin");
+            let _ = std::fs::remove_file(&values);
+            let measured = run_child(&scene, &setting, &values);
+            let (rmse, p95, max) = if measured.error.is_none() {
+                errors(&read_values(&values), &reference.mean, &reference.skip)
+            } else {
+                (f32::NAN, f32::NAN, f32::NAN)
+            };
+            eprintln!(
+                "   {:<26} K={:<5} {:>8.2}s  rmse {:>6.2}%  {}",
+                setting.label(),
+                setting.rays,
+                measured.seconds,
+                rmse * 100.0,
+                measured.error.as_deref().unwrap_or("")
+            );
+            scene_rows.push(Row {
+                scene: scene.name.to_string(),
+                setting,
+                measured,
+                rmse,
+                p95,
+                max,
+            });
+        }
+        let refs: Vec<&Row> = scene_rows.iter().collect();
+        let chart = gallery.join(format!("error_vs_time_{}.png", scene.name));
+        if let Err(e) = chart_error_vs_time(&chart, scene.name, &refs, noise, &pt) {
+            eprintln!("chart {}: {e}", chart.display());
+        }
+        // Headline: time for the best bake to reach each error level vs the path tracer.
+        let _ = writeln!(
+            headline,
+            "| {} | {} | {:.2}% |{}",
+            scene.name,
+            reference.mean.len(),
+            noise * 100.0,
+            {
+                let mut cells = String::new();
+                for target in [0.05f32, 0.02, 0.01] {
+                    let bake = scene_rows
+                        .iter()
+                        .filter(|r| r.measured.error.is_none() && r.rmse <= target)
+                        .map(|r| r.measured.seconds)
+                        .fold(f64::INFINITY, f64::min);
+                    // The path tracer's error falls like 1/√spp: interpolate its time to `target`.
+                    let pt_time = pt
+                        .iter()
+                        .map(|&(_, s, e)| s * (e as f64 / target as f64).powi(2))
+                        .fold(f64::INFINITY, f64::min);
+                    let cell = if bake.is_finite() {
+                        format!(
+                            " {:.2}s vs {:.1}s ({:.0}×) |",
+                            bake,
+                            pt_time,
+                            pt_time / bake
+                        )
+                    } else {
+                        format!(" not reached vs {pt_time:.1}s |")
+                    };
+                    cells.push_str(&cell);
+                }
+                cells
+            }
+        );
+        rows.extend(scene_rows);
+    }
+
+    // Residual chart: every solver on the Cornell box and the furnace at 256 rays.
+    let residual_rows: Vec<&Row> = rows
+        .iter()
+        .filter(|r| {
+            r.setting.method == Method::MonteCarlo
+                && r.setting.rays == 256
+                && r.measured.error.is_none()
+        })
+        .filter(|r| r.scene == "cornell_box" || r.scene == "furnace")
+        .collect();
+    if let Err(e) = chart_residuals(&gallery.join("residual_vs_iteration.png"), &residual_rows) {
+        eprintln!("residual chart: {e}");
+    }
+
+    // CSV and Markdown.
+    let mut csv = String::from(
+        "scene,method,solver,rays_per_texel,light_samples,seconds,stages,rays,mrays_per_s,peak_mib,iterations,residual,converged,rel_rmse,p95_rel,max_rel,error\n",
+    );
+    let _ = writeln!(
+        md,
+        "| scene | method | solver | K | time (s) | rays (M) | Mrays/s | peak MiB | iterations | rel. RMSE | p95 | max |"
+    );
+    let _ = writeln!(
+        md,
+        "|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
+    );
+    for r in &rows {
+        let m = &r.measured;
+        let mrays = m.rays as f64 * 1e-6;
+        let rate = if m.seconds > 0.0 {
+            mrays / m.seconds
+        } else {
+            0.0
+        };
+        let _ = writeln!(
+            csv,
+            "{},{},{},{},{},{:.4},{},{},{:.3},{:.1},{},{:e},{},{:.5},{:.5},{:.5},{}",
+            r.scene,
+            method_name(r.setting.method),
+            solver_name(r.setting.solver),
+            r.setting.rays,
+            r.setting.light_samples,
+            m.seconds,
+            m.stages,
+            m.rays,
+            rate,
+            m.peak_mib,
+            m.iterations,
+            m.residual,
+            m.converged,
+            r.rmse,
+            r.p95,
+            r.max,
+            m.error.as_deref().unwrap_or("").replace(',', ";")
+        );
+        if let Some(e) = &m.error {
+            let _ = writeln!(
+                md,
+                "| {} | {} | {} | {} | — | — | — | — | — | refused: {} | | |",
+                r.scene,
+                method_name(r.setting.method),
+                solver_name(r.setting.solver),
+                r.setting.rays,
+                e.chars().take(60).collect::<String>()
+            );
+        } else {
+            let _ = writeln!(
+                md,
+                "| {} | {} | {} | {} | {:.2} | {:.1} | {:.1} | {:.0} | {}{} | {:.2}% | {:.1}% | {:.0}% |",
+                r.scene,
+                method_name(r.setting.method),
+                solver_name(r.setting.solver),
+                r.setting.rays,
+                m.seconds,
+                mrays,
+                rate,
+                m.peak_mib,
+                m.iterations,
+                if m.converged { "" } else { " (cap)" },
+                r.rmse * 100.0,
+                r.p95 * 100.0,
+                r.max * 100.0
+            );
+        }
+    }
+    let mut report = String::new();
+    let _ = writeln!(
+        report,
+        "Time to reach a relative RMSE, best bake vs the built-in path tracer (same texels, same run):\n"
+    );
+    let _ = writeln!(
+        report,
+        "| scene | texels | reference noise | 5% | 2% | 1% |\n|---|---:|---:|---|---|---|"
+    );
+    report.push_str(&headline);
+    let _ = writeln!(report, "\nEvery run:\n");
+    report.push_str(&md);
+    std::fs::write(gallery.join("bench.csv"), csv).unwrap();
+    std::fs::write(gallery.join("bench.md"), &report).unwrap();
+    println!("{report}");
+    println!("wrote {}/bench.csv, bench.md and charts", gallery.display());
+}
