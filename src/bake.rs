@@ -177,6 +177,11 @@ pub fn compute(input: &Path, config: &BakeConfig, progress: &dyn Progress) -> Re
         .zip(&transport.direct)
         .map(|(h, d)| if config.transport.indirect_only { (*h - *d).max(Vec3::ZERO) } else { *h } / std::f32::consts::PI)
         .collect();
+    if config.transport.denoise && config.transport.method == crate::config::Method::MonteCarlo {
+        lightmap::denoise::denoise_bake(&texels, &transport, &mut lightmap, &config.transport);
+    }
+    timed("denoise", t);
+    let t = Instant::now();
     texels::validity::fill_invalid(&texels, &mut lightmap);
     let mut pages = LightmapPages::from_texels(&texels, &lightmap);
     lightmap::dilate(&mut pages, config.atlas.padding.max(2) * 2);

@@ -63,6 +63,10 @@ pub struct TransportParams {
     /// Move texel sample points out of geometry and fill texels buried in it from their
     /// neighbours (`texels::validity`; 16 probe rays per texel). Off only to measure leaks.
     pub validity: bool,
+    /// Edge-aware denoising of the lightmap (`lightmap::denoise`). Applies to the Monte Carlo
+    /// method only (any solver, Gather included); point, polygon and hierarchical form factors
+    /// are deterministic, so their errors are not the white noise it removes and it is skipped.
+    pub denoise: bool,
 }
 
 /// Iterative method for the stored radiosity system.
@@ -131,6 +135,7 @@ impl BakeConfig {
                 indirect_only: false,
                 seed: 0,
                 validity: true,
+                denoise: true,
             },
             solve: SolveParams {
                 solver: Solver::Jacobi,

@@ -4,6 +4,7 @@ mod util;
 
 mod analytic;
 mod cli;
+mod denoise;
 mod form_factors;
 mod hierarchical;
 mod pipeline;

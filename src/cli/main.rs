@@ -135,6 +135,9 @@ struct BakeArgs {
     /// Keep texel sample points where they are even inside geometry (to measure leaks).
     #[arg(long)]
     no_validity: bool,
+    /// Skip the edge-aware denoiser (Monte Carlo method only; see lightmap::denoise).
+    #[arg(long)]
+    no_denoise: bool,
     /// Exposure of the PNG previews, in stops.
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     exposure: f32,
@@ -209,6 +212,7 @@ impl BakeArgs {
         c.output.preview_exposure = self.exposure;
         c.output.rgbm = self.rgbm;
         c.transport.validity = !self.no_validity;
+        c.transport.denoise = !self.no_denoise;
         c
     }
 }
