@@ -27,6 +27,7 @@ use std::time::{Duration, Instant};
 
 use glam::Vec3;
 use lightbake::config::{Method, Solver};
+use lightbake::plan::{AutoParams, Keep};
 use lightbake::{BakeConfig, NoProgress};
 use plotters::prelude::*;
 
@@ -38,11 +39,17 @@ struct Setting {
     rays: u32,
     light_samples: u32,
     tolerance: f32,
+    /// Automatic choice (`lightbake::plan`) for this target error; the fields above are then
+    /// what it chose (filled in from the child's report).
+    auto: Option<f32>,
 }
 
 impl Setting {
     fn label(&self) -> String {
-        format!("{}/{}", method_name(self.method), solver_name(self.solver))
+        match self.auto {
+            Some(_) => "automatic choice".into(),
+            None => format!("{}/{}", method_name(self.method), solver_name(self.solver)),
+        }
     }
 }
 
@@ -57,6 +64,8 @@ struct Measured {
     converged: bool,
     peak_mib: f64,
     history: Vec<f32>,
+    /// For automatic runs: method, solver, rays and light samples chosen.
+    chosen: Option<(Method, Solver, u32, u32)>,
     error: Option<String>,
 }
 
@@ -169,6 +178,7 @@ fn settings(scene: &Scene, quick: bool) -> Vec<Setting> {
         rays,
         light_samples: (rays / 4).max(4),
         tolerance: 1e-4,
+        auto: None,
     };
     for &k in rays {
         out.push(s(Method::MonteCarlo, Solver::Jacobi, k));
@@ -188,6 +198,13 @@ fn settings(scene: &Scene, quick: bool) -> Vec<Setting> {
         }
         out.push(s(Method::Point, Solver::Jacobi, 64));
     }
+    // The automatic choice at the presets' targets (draft 8%, medium 4%, high 2%).
+    for target in [0.08, 0.04, 0.02] {
+        out.push(Setting {
+            auto: Some(target),
+            ..s(Method::MonteCarlo, Solver::Jacobi, 0)
+        });
+    }
     out
 }
 
@@ -199,6 +216,16 @@ fn config(scene_tpu: f32, setting: &Setting) -> BakeConfig {
     c.transport.light_samples = setting.light_samples;
     c.solve.solver = setting.solver;
     c.solve.tolerance = setting.tolerance;
+    if let Some(target_error) = setting.auto {
+        // The density stays the scene's, so the reference shares the texels.
+        c.auto = Some(AutoParams {
+            target_error,
+            keep: Keep {
+                texels_per_unit: true,
+                ..Keep::default()
+            },
+        });
+    }
     c
 }
 
@@ -217,12 +244,18 @@ fn child(args: &[String]) {
     let [scene, tpu, method, solver, rays, light, tol, values] = args else {
         panic!("child arguments: {args:?}")
     };
+    let auto = method == "auto";
     let setting = Setting {
-        method: parse_method(method),
+        method: if auto {
+            Method::MonteCarlo
+        } else {
+            parse_method(method)
+        },
         solver: parse_solver(solver),
         rays: rays.parse().unwrap(),
         light_samples: light.parse().unwrap(),
-        tolerance: tol.parse().unwrap(),
+        tolerance: if auto { 1e-4 } else { tol.parse().unwrap() },
+        auto: auto.then(|| tol.parse().unwrap()),
     };
     let config = config(tpu.parse().unwrap(), &setting);
     let start = Instant::now();
@@ -247,15 +280,20 @@ fn child(args: &[String]) {
                 .iter()
                 .map(|i| format!("{:e}", i.residual))
                 .collect();
+            let c = &baked.config;
             println!(
-                "ok\t{seconds}\t{}\t{}\t{}\t{}\t{}\t{}\t{}",
+                "ok\t{seconds}\t{}\t{}\t{}\t{}\t{}\t{}\t{}\t{} {} {} {}",
                 stages.join(" "),
                 baked.transport.rays,
                 baked.solution.history.len(),
                 baked.solution.residual(),
                 baked.solution.converged,
                 peak_mib(),
-                history.join(",")
+                history.join(","),
+                method_name(c.transport.method),
+                solver_name(c.solve.solver),
+                c.transport.gather_rays,
+                c.transport.light_samples
             );
         }
         Err(e) => println!("error\t{e}"),
@@ -268,11 +306,15 @@ fn run_child(scene: &Scene, setting: &Setting, values: &Path) -> Measured {
         .args([
             scene.path.to_str().unwrap(),
             &scene.texels_per_unit.to_string(),
-            method_name(setting.method),
+            if setting.auto.is_some() {
+                "auto"
+            } else {
+                method_name(setting.method)
+            },
             solver_name(setting.solver),
             &setting.rays.to_string(),
             &setting.light_samples.to_string(),
-            &setting.tolerance.to_string(),
+            &setting.auto.unwrap_or(setting.tolerance).to_string(),
             values.to_str().unwrap(),
         ])
         .output()
@@ -300,6 +342,15 @@ fn run_child(scene: &Scene, setting: &Setting, values: &Path) -> Measured {
         converged: f[6] == "true",
         peak_mib: f[7].parse().unwrap(),
         history: f[8].split(',').filter_map(|r| r.parse().ok()).collect(),
+        chosen: f.get(9).and_then(|c| {
+            let c: Vec<&str> = c.split(' ').collect();
+            Some((
+                parse_method(c.first()?),
+                parse_solver(c.get(1)?),
+                c.get(2)?.parse().ok()?,
+                c.get(3)?.parse().ok()?,
+            ))
+        }),
         error: None,
     }
 }
@@ -500,7 +551,14 @@ fn chart_error_vs_time(
             .draw_series(LineSeries::new(pts.clone(), color.stroke_width(2)))?
             .label(label.as_str())
             .legend(move |(x, y)| PathElement::new([(x, y), (x + 18, y)], color.stroke_width(2)));
-        chart.draw_series(pts.iter().map(|&p| Circle::new(p, 4, color.filled())))?;
+        if label.starts_with("automatic") {
+            chart.draw_series(
+                pts.iter()
+                    .map(|&p| TriangleMarker::new(p, 8, BLACK.filled())),
+            )?;
+        } else {
+            chart.draw_series(pts.iter().map(|&p| Circle::new(p, 4, color.filled())))?;
+        }
     }
     if !pt.is_empty() {
         let pts: Vec<(f64, f64)> = pt.iter().map(|p| (p.1, p.2 as f64)).collect();
@@ -576,6 +634,71 @@ fn chart_residuals(path: &Path, rows: &[&Row]) -> Result<(), Box<dyn std::error:
     Ok(())
 }
 
+/// Markdown rows comparing each automatic run with the fixed runs of the same scene: is any
+/// fixed run both faster and more accurate (then the choice is off the front), and how long the
+/// fastest fixed run at or below its error took.
+fn pareto_rows(rows: &[Row], noise: f32) -> String {
+    let ok = |r: &&Row| r.measured.error.is_none() && r.rmse.is_finite();
+    let fixed: Vec<&Row> = rows
+        .iter()
+        .filter(ok)
+        .filter(|r| r.setting.auto.is_none())
+        .collect();
+    let mut out = String::new();
+    for a in rows.iter().filter(ok).filter(|r| r.setting.auto.is_some()) {
+        let target = a.setting.auto.unwrap();
+        let (t, e) = (a.measured.seconds, a.rmse);
+        let corrected = (e * e - noise * noise).max(0.0).sqrt();
+        let dominated = fixed
+            .iter()
+            .filter(|f| f.measured.seconds < t && f.rmse < e)
+            .min_by(|x, y| x.measured.seconds.total_cmp(&y.measured.seconds));
+        let front = fixed
+            .iter()
+            .filter(|f| f.rmse <= e)
+            .min_by(|x, y| x.measured.seconds.total_cmp(&y.measured.seconds));
+        let front_cell = front.map_or("none".to_string(), |f| {
+            format!(
+                "{} K={}: {:.2}s ({:.2}%)",
+                f.setting.label(),
+                f.setting.rays,
+                f.measured.seconds,
+                f.rmse * 100.0
+            )
+        });
+        let verdict = match dominated {
+            None => "on the front".to_string(),
+            Some(d) => format!(
+                "{:.1}× the time of {} K={} ({:.2}%)",
+                t / d.measured.seconds,
+                d.setting.label(),
+                d.setting.rays,
+                d.rmse * 100.0
+            ),
+        };
+        let _ = writeln!(
+            out,
+            "| {} | {:.0}% | {} K={} L={} | {:.2} | {:.2}% ({:.2}%) | {} | {} | {} |",
+            a.scene,
+            target * 100.0,
+            format_args!(
+                "{}/{}",
+                method_name(a.setting.method),
+                solver_name(a.setting.solver)
+            ),
+            a.setting.rays,
+            a.setting.light_samples,
+            t,
+            e * 100.0,
+            corrected * 100.0,
+            if corrected <= target { "yes" } else { "no" },
+            front_cell,
+            verdict
+        );
+    }
+    out
+}
+
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     if args.first().map(String::as_str) == Some("--child") {
@@ -597,6 +720,7 @@ fn main() {
     let mut rows: Vec<Row> = Vec::new();
     let mut md = String::new();
     let mut headline = String::new();
+    let mut pareto = String::new();
     for scene in scenes(&work, quick) {
         if !only.is_empty() && !only.contains(&scene.name) {
             continue;
@@ -617,6 +741,12 @@ fn main() {
             let values = work.join("values.bin");
             let _ = std::fs::remove_file(&values);
             let measured = run_child(&scene, &setting, &values);
+            let mut setting = setting;
+            if let (Some(_), Some((method, solver, rays, light))) = (setting.auto, measured.chosen)
+            {
+                (setting.method, setting.solver, setting.rays) = (method, solver, rays);
+                setting.light_samples = light;
+            }
             let (rmse, p95, max) = if measured.error.is_none() {
                 errors(&read_values(&values), &reference.mean, &reference.skip)
             } else {
@@ -639,6 +769,7 @@ fn main() {
                 max,
             });
         }
+        pareto.push_str(&pareto_rows(&scene_rows, noise));
         let refs: Vec<&Row> = scene_rows.iter().collect();
         let chart = gallery.join(format!("error_vs_time_{}.png", scene.name));
         if let Err(e) = chart_error_vs_time(&chart, scene.name, &refs, noise, &pt) {
@@ -688,6 +819,7 @@ fn main() {
         .iter()
         .filter(|r| {
             r.setting.method == Method::MonteCarlo
+                && r.setting.auto.is_none()
                 && r.setting.rays == 256
                 && r.measured.error.is_none()
         })
@@ -717,11 +849,15 @@ fn main() {
         } else {
             0.0
         };
+        let method = match r.setting.auto {
+            Some(t) => format!("auto {:.0}% → {}", t * 100.0, method_name(r.setting.method)),
+            None => method_name(r.setting.method).to_string(),
+        };
         let _ = writeln!(
             csv,
             "{},{},{},{},{},{:.4},{},{},{:.3},{:.1},{},{:e},{},{:.5},{:.5},{:.5},{}",
             r.scene,
-            method_name(r.setting.method),
+            method,
             solver_name(r.setting.solver),
             r.setting.rays,
             r.setting.light_samples,
@@ -743,7 +879,7 @@ fn main() {
                 md,
                 "| {} | {} | {} | {} | — | — | — | — | — | refused: {} | | |",
                 r.scene,
-                method_name(r.setting.method),
+                method,
                 solver_name(r.setting.solver),
                 r.setting.rays,
                 e.chars().take(60).collect::<String>()
@@ -753,7 +889,7 @@ fn main() {
                 md,
                 "| {} | {} | {} | {} | {:.2} | {:.1} | {:.1} | {:.0} | {}{} | {:.2}% | {:.1}% | {:.0}% |",
                 r.scene,
-                method_name(r.setting.method),
+                method,
                 solver_name(r.setting.solver),
                 r.setting.rays,
                 m.seconds,
@@ -778,6 +914,15 @@ fn main() {
         "| scene | texels | reference noise | 5% | 2% | 1% |\n|---|---:|---:|---|---|---|"
     );
     report.push_str(&headline);
+    let _ = writeln!(
+        report,
+        "\nThe automatic choice (`--quality draft/medium/high`: 8%, 4%, 2% targets; pilot included in its time) against the Pareto front of the fixed settings:\n"
+    );
+    let _ = writeln!(
+        report,
+        "| scene | target | chosen | time (s) | error (corrected) | target met | fastest fixed run at ≤ that error | verdict |\n|---|---:|---|---:|---:|---|---|---|"
+    );
+    report.push_str(&pareto);
     let _ = writeln!(report, "\nEvery run:\n");
     report.push_str(&md);
     std::fs::write(gallery.join("bench.csv"), csv).unwrap();

@@ -8,6 +8,7 @@ use glam::Vec3;
 use crate::config::BakeConfig;
 use crate::lightmap::{self, LightmapPages};
 use crate::output::{self, PageFiles, Staging};
+use crate::plan::{self, Plan};
 use crate::trace::Tracer;
 use crate::{Error, Progress, Result, atlas, scene, solve, texels, transport};
 
@@ -31,6 +32,8 @@ pub struct BakeReport {
     pub converged: bool,
     /// Texel sample points moved out of geometry, and texels with none outside it.
     pub validity: texels::validity::ValidityReport,
+    /// The automatic choice of settings and its reasons (`config.auto`).
+    pub plan: Option<Plan>,
     pub stages: Vec<StageTime>,
     /// The files written, the glTF first.
     pub files: Vec<PathBuf>,
@@ -45,8 +48,12 @@ impl BakeReport {
             .map(|s| format!("{} {:.2}s", s.stage, s.seconds))
             .collect();
         let total: f64 = self.stages.iter().map(|s| s.seconds).sum();
+        let plan = self
+            .plan
+            .as_ref()
+            .map_or(String::new(), |p| format!("; {}", p.brief));
         format!(
-            "{} texels ({} moved out of geometry, {} invalid) on {} page(s), {} triangles, {:.2} M rays, {} iterations, residual {:.1e}{}; {} (total {:.2}s)",
+            "{} texels ({} moved out of geometry, {} invalid) on {} page(s), {} triangles, {:.2} M rays, {} iterations, residual {:.1e}{}{plan}; {} (total {:.2}s)",
             self.texels,
             self.validity.moved,
             self.validity.invalid,
@@ -79,6 +86,9 @@ pub struct Baked {
     pub lightmap: Vec<Vec3>,
     pub pages: LightmapPages,
     pub validity: texels::validity::ValidityReport,
+    /// The settings the bake ran with: `config` with the automatic choices applied.
+    pub config: BakeConfig,
+    pub plan: Option<Plan>,
     pub stages: Vec<StageTime>,
 }
 
@@ -99,6 +109,11 @@ pub fn bake(
 /// Runs every stage up to the dilated pages, in memory.
 pub fn compute(input: &Path, config: &BakeConfig, progress: &dyn Progress) -> Result<Baked> {
     config.validate()?;
+    let mut config = config.clone();
+    let mut plan = config.auto.map(|a| Plan {
+        target_error: a.target_error,
+        ..Default::default()
+    });
     let mut stages = Vec::new();
     let mut timed = |stage: &'static str, start: Instant| {
         stages.push(StageTime {
@@ -123,7 +138,10 @@ pub fn compute(input: &Path, config: &BakeConfig, progress: &dyn Progress) -> Re
     }
     timed("load", t);
 
-    check_memory(&scene, input, config)?;
+    if let (Some(plan), Some(auto)) = (&mut plan, config.auto) {
+        plan::choose_density(&scene, &mut config, plan, &auto.keep);
+    }
+    check_memory(&scene, input, &config)?;
     let t = Instant::now();
     let atlas = atlas::build(&scene, &source, &config.atlas)?;
     timed("atlas", t);
@@ -149,6 +167,21 @@ pub fn compute(input: &Path, config: &BakeConfig, progress: &dyn Progress) -> Re
         Default::default()
     };
     timed("validity", t);
+
+    if let (Some(plan), Some(auto)) = (&mut plan, config.auto) {
+        let t = Instant::now();
+        plan::choose_transport(
+            &scene,
+            &texels,
+            &tracer,
+            &mut config,
+            plan,
+            &auto.keep,
+            progress,
+        )?;
+        config.validate()?;
+        timed("plan", t);
+    }
 
     let t = Instant::now();
     let (transport, solution) = solve::run(
@@ -197,6 +230,8 @@ pub fn compute(input: &Path, config: &BakeConfig, progress: &dyn Progress) -> Re
         lightmap,
         pages,
         validity,
+        config,
+        plan,
         stages,
     })
 }
@@ -218,6 +253,7 @@ pub fn write(
         solution,
         pages,
         validity,
+        plan,
         mut stages,
         ..
     } = baked;
@@ -267,6 +303,7 @@ pub fn write(
         residual: solution.residual(),
         converged: solution.converged,
         validity,
+        plan,
         stages,
         files,
     })
@@ -296,14 +333,7 @@ fn refuse_overwriting_input(input: &Path, out_dir: &Path) -> Result<()> {
 /// Texel budget: about 200 bytes per texel in the pipeline plus 8 bytes per gathering ray of
 /// form-factor row; refuse densities that would not fit before allocating anything.
 fn check_memory(scene: &scene::Scene, input: &Path, config: &BakeConfig) -> Result<()> {
-    let area: f64 = scene
-        .triangles
-        .iter()
-        .map(|t| {
-            let p = |i: usize| scene.positions[t[i] as usize].as_dvec3();
-            0.5 * (p(1) - p(0)).cross(p(2) - p(0)).length()
-        })
-        .sum();
+    let area = plan::surface_area(scene);
     let tpu = config.atlas.texels_per_unit as f64;
     let texels = area * tpu * tpu;
     let bytes = texels * (200.0 + 8.0 * config.transport.gather_rays as f64);

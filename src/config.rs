@@ -111,6 +111,9 @@ pub struct BakeConfig {
     pub transport: TransportParams,
     pub solve: SolveParams,
     pub output: OutputParams,
+    /// Choose density, method, rays and tolerance from the scene for a target error
+    /// ([`crate::plan`]); `None` uses the settings above as they are.
+    pub auto: Option<crate::plan::AutoParams>,
 }
 
 impl BakeConfig {
@@ -147,6 +150,7 @@ impl BakeConfig {
                 preview_exposure: 0.0,
                 rgbm: false,
             },
+            auto: None,
         }
     }
     /// Fast look at the lighting: coarse texels, few rays.
@@ -224,6 +228,16 @@ impl BakeConfig {
         }
         if s.max_iterations == 0 {
             return Err(Option("max iterations must be at least 1".into()));
+        }
+        if let Some(auto) = &self.auto
+            && !(auto.target_error.is_finite()
+                && auto.target_error > 0.0
+                && auto.target_error < 1.0)
+        {
+            return Err(Option(format!(
+                "target error must be within (0, 1), e.g. 0.02 for 2%, got {}",
+                auto.target_error
+            )));
         }
         if !self.output.preview_exposure.is_finite() {
             return Err(Option("preview exposure must be finite".into()));

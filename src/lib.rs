@@ -40,6 +40,7 @@ pub mod config;
 pub mod error;
 pub mod lightmap;
 pub mod output;
+pub mod plan;
 pub mod progress;
 pub mod reference;
 pub mod render;

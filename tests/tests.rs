@@ -8,6 +8,7 @@ mod denoise;
 mod form_factors;
 mod hierarchical;
 mod pipeline;
+mod plan;
 mod quality;
 mod reference;
 mod render;

@@ -12,6 +12,7 @@ use clap::{Parser, Subcommand, ValueEnum};
 use glam::Vec3;
 use lightbake::BakeConfig;
 use lightbake::config::{Method, Solver, UvMode};
+use lightbake::plan::{AutoParams, Keep};
 use progress::Bars;
 
 #[derive(Parser)]
@@ -37,11 +38,11 @@ enum Command {
 
 #[derive(Clone, Copy, ValueEnum)]
 enum Quality {
-    /// 8 texels/m, 64 rays, 16 light samples, tolerance 1e-3: a quick look.
+    /// 8 texels/m, aims at 8% error (--no-auto: 64 rays, 16 light samples, tolerance 1e-3).
     Draft,
-    /// 16 texels/m, 256 rays, 64 light samples, tolerance 1e-4.
+    /// 16 texels/m, aims at 4% error (--no-auto: 256 rays, 64 light samples, tolerance 1e-4).
     Medium,
-    /// 32 texels/m, 1024 rays, 256 light samples, tolerance 1e-5: final quality.
+    /// 32 texels/m, aims at 2% error (--no-auto: 1024 rays, 256 light samples, tolerance 1e-5).
     High,
 }
 
@@ -86,10 +87,22 @@ struct BakeArgs {
     /// Output directory (created if missing; must not hold the input's own files).
     #[arg(short, long)]
     output: PathBuf,
-    /// Preset for density, rays and tolerance; the options below override it.
+    /// Quality preset: the texel density, and the error the automatic choice aims at
+    /// (draft 8%, medium 4%, high 2%). Options given below override it.
     #[arg(long, value_enum, default_value = "medium")]
     quality: Quality,
-    /// Lightmap texels per world unit (metre) [default: from --quality: 8 / 16 / 32].
+    /// Aim at this relative RMSE of the lightmap (0.02 = 2%) instead of the preset's: a pilot
+    /// bake measures the scene's noise and the rays per texel are chosen to reach it.
+    #[arg(long, value_name = "E")]
+    target_error: Option<f32>,
+    /// Print the automatic choices and the measurements behind them.
+    #[arg(long)]
+    explain: bool,
+    /// Use the preset's settings as they are: no pilot, no automatic choice.
+    #[arg(long, conflicts_with_all = ["target_error", "explain"])]
+    no_auto: bool,
+    /// Lightmap texels per world unit (metre) [default: from --quality: 8 / 16 / 32, adjusted
+    /// to keep the texel count within the preset's budget for the scene's surface area].
     #[arg(long)]
     texels_per_unit: Option<f32>,
     /// Largest page side in texels; more pages are made when charts do not fit.
@@ -101,22 +114,26 @@ struct BakeArgs {
     /// Where lightmap UVs come from.
     #[arg(long, value_enum, default_value = "auto")]
     uv: UvArg,
-    /// Gathering rays per texel (form factors) [default: from --quality: 64 / 256 / 1024].
+    /// Gathering rays per texel (form factors) [default: chosen by a pilot bake for the target
+    /// error; with --no-auto from --quality: 64 / 256 / 1024].
     #[arg(long)]
     rays: Option<u32>,
-    /// Shadow rays per texel towards emissive surfaces [default: from --quality: 16 / 64 / 256].
+    /// Shadow rays per texel towards emissive surfaces [default: a quarter of the rays; with
+    /// --no-auto from --quality: 16 / 64 / 256].
     #[arg(long)]
     light_samples: Option<u32>,
     /// Uniform sky radiance R,G,B (W/sr/m²) for rays leaving the scene.
     #[arg(long, value_parser = parse_rgb, default_value = "0,0,0")]
     sky: Vec3,
-    /// How form factors between texels are computed.
-    #[arg(long, value_enum, default_value = "montecarlo")]
-    method: MethodArg,
-    /// Solver for the radiosity system.
-    #[arg(long, value_enum, default_value = "jacobi")]
-    solver: SolverArg,
-    /// Relative error at which the solver stops [default: from --quality: 1e-3 / 1e-4 / 1e-5].
+    /// How form factors between texels are computed [default: chosen; montecarlo].
+    #[arg(long, value_enum)]
+    method: Option<MethodArg>,
+    /// Solver for the radiosity system [default: chosen; jacobi, or gauss-seidel on one
+    /// thread, or gather when the rows would not fit in memory].
+    #[arg(long, value_enum)]
+    solver: Option<SolverArg>,
+    /// Relative error at which the solver stops [default: a tenth of the target error; with
+    /// --no-auto from --quality: 1e-3 / 1e-4 / 1e-5].
     #[arg(long)]
     tolerance: Option<f32>,
     /// Iteration cap of the solver (a warning says when it stops here).
@@ -192,18 +209,22 @@ impl BakeArgs {
         c.transport.sky = self.sky;
         c.transport.indirect_only = self.indirect_only;
         c.transport.seed = self.seed;
-        c.transport.method = match self.method {
-            MethodArg::Montecarlo => Method::MonteCarlo,
-            MethodArg::Point => Method::Point,
-            MethodArg::Polygon => Method::Polygon,
-            MethodArg::Hierarchical => Method::Hierarchical,
-        };
-        c.solve.solver = match self.solver {
-            SolverArg::Jacobi => Solver::Jacobi,
-            SolverArg::GaussSeidel => Solver::GaussSeidel,
-            SolverArg::Southwell => Solver::Southwell,
-            SolverArg::Gather => Solver::Gather,
-        };
+        if let Some(m) = self.method {
+            c.transport.method = match m {
+                MethodArg::Montecarlo => Method::MonteCarlo,
+                MethodArg::Point => Method::Point,
+                MethodArg::Polygon => Method::Polygon,
+                MethodArg::Hierarchical => Method::Hierarchical,
+            };
+        }
+        if let Some(s) = self.solver {
+            c.solve.solver = match s {
+                SolverArg::Jacobi => Solver::Jacobi,
+                SolverArg::GaussSeidel => Solver::GaussSeidel,
+                SolverArg::Southwell => Solver::Southwell,
+                SolverArg::Gather => Solver::Gather,
+            };
+        }
         if let Some(t) = self.tolerance {
             c.solve.tolerance = t;
         }
@@ -213,6 +234,27 @@ impl BakeArgs {
         c.output.rgbm = self.rgbm;
         c.transport.validity = !self.no_validity;
         c.transport.denoise = !self.no_denoise;
+        if !self.no_auto {
+            let preset = match self.quality {
+                Quality::Draft => "draft",
+                Quality::Medium => "medium",
+                Quality::High => "high",
+            };
+            c.auto = Some(AutoParams {
+                target_error: self
+                    .target_error
+                    .or(AutoParams::for_preset(preset))
+                    .unwrap_or(0.04),
+                keep: Keep {
+                    texels_per_unit: self.texels_per_unit.is_some(),
+                    method: self.method.is_some(),
+                    solver: self.solver.is_some(),
+                    rays: self.rays.is_some(),
+                    light_samples: self.light_samples.is_some(),
+                    tolerance: self.tolerance.is_some(),
+                },
+            });
+        }
         c
     }
 }
@@ -222,6 +264,17 @@ fn bake(args: &BakeArgs) -> Result<()> {
     let bars = Bars::new(args.quiet);
     let report = lightbake::bake(&args.scene, &args.output, &config, &bars)
         .with_context(|| format!("baking {} failed", args.scene.display()))?;
+    if args.explain
+        && let Some(plan) = &report.plan
+    {
+        println!(
+            "automatic choice for a {:.1}% target:",
+            plan.target_error * 100.0
+        );
+        for reason in &plan.reasons {
+            println!("  - {reason}");
+        }
+    }
     if !args.quiet {
         println!("{}", report.summary());
         if let Some(gltf) = report.files.first() {
