@@ -187,3 +187,24 @@ fn cli_explains_its_choice() {
     assert!(!o.status.success());
     assert!(String::from_utf8_lossy(&o.stderr).contains("--target-error"));
 }
+
+/// The pilot and the choice it makes do not depend on the thread count: same bytes out.
+#[test]
+fn cli_automatic_bake_is_identical_on_one_and_two_threads() {
+    let out = scratch();
+    let exr = |threads: &str| {
+        let dir = out.path().join(threads);
+        let o = Command::new(env!("CARGO_BIN_EXE_lightbake"))
+            .args(["bake", fixture("two_rooms.gltf").to_str().unwrap(), "-o"])
+            .arg(&dir)
+            .args(["--quality", "draft", "--threads", threads, "--quiet"])
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        std::fs::read(dir.join("two_rooms_lightmap0.exr")).unwrap()
+    };
+    assert!(
+        exr("1") == exr("2"),
+        "EXR pages differ between 1 and 2 threads"
+    );
+}

@@ -128,8 +128,8 @@ struct BakeArgs {
     /// How form factors between texels are computed [default: chosen; montecarlo].
     #[arg(long, value_enum)]
     method: Option<MethodArg>,
-    /// Solver for the radiosity system [default: chosen; jacobi, or gauss-seidel on one
-    /// thread, or gather when the rows would not fit in memory].
+    /// Solver for the radiosity system [default: chosen; jacobi, or gather when the stored
+    /// rows would exceed 4 GiB].
     #[arg(long, value_enum)]
     solver: Option<SolverArg>,
     /// Relative error at which the solver stops [default: a tenth of the target error; with

@@ -31,6 +31,8 @@ use lightbake::plan::{AutoParams, Keep};
 use lightbake::{BakeConfig, NoProgress};
 use plotters::prelude::*;
 
+mod stability;
+
 /// One bake configuration of the sweep.
 #[derive(Clone, Debug)]
 struct Setting {
@@ -404,6 +406,8 @@ struct Ref {
     seconds: f64,
     samples: u32,
     skip: Vec<bool>,
+    /// Where each texel's sample is (for region errors in the stability table).
+    position: Vec<Vec3>,
 }
 
 fn reference(scene: &Scene, quick: bool) -> Ref {
@@ -430,6 +434,7 @@ fn reference(scene: &Scene, quick: bool) -> Ref {
         samples: reference.samples,
         mean: reference.mean,
         skip,
+        position: computed.texels.position,
     }
 }
 
@@ -721,6 +726,8 @@ fn main() {
     let mut md = String::new();
     let mut headline = String::new();
     let mut pareto = String::new();
+    // References the stability table reuses: (scene name, path, density, reference).
+    let mut kept: Vec<(&'static str, PathBuf, f32, Ref)> = Vec::new();
     for scene in scenes(&work, quick) {
         if !only.is_empty() && !only.contains(&scene.name) {
             continue;
@@ -812,7 +819,34 @@ fn main() {
             }
         );
         rows.extend(scene_rows);
+        if scene.name == "cornell_box" || scene.name == "two_rooms" {
+            kept.push((
+                scene.name,
+                scene.path.clone(),
+                scene.texels_per_unit,
+                reference,
+            ));
+        }
     }
+
+    eprintln!("== stability cases");
+    let known = |name: &str| {
+        kept.iter()
+            .find(|k| k.0 == name)
+            .map(|(_, path, tpu, r)| stability::Known {
+                path,
+                texels_per_unit: *tpu,
+                mean: &r.mean,
+                skip: &r.skip,
+                noise: r.noise,
+                position: &r.position,
+            })
+    };
+    let stability_md = stability::table(
+        &work,
+        known("cornell_box").as_ref(),
+        known("two_rooms").as_ref(),
+    );
 
     // Residual chart: every solver on the Cornell box and the furnace at 256 rays.
     let residual_rows: Vec<&Row> = rows
@@ -923,6 +957,11 @@ fn main() {
         "| scene | target | chosen | time (s) | error (corrected) | target met | fastest fixed run at ≤ that error | verdict |\n|---|---:|---|---:|---:|---|---|---|"
     );
     report.push_str(&pareto);
+    let _ = writeln!(
+        report,
+        "\nStability: where methods fail, what lightbake does, measured in the same run:\n"
+    );
+    report.push_str(&stability_md);
     let _ = writeln!(report, "\nEvery run:\n");
     report.push_str(&md);
     std::fs::write(gallery.join("bench.csv"), csv).unwrap();
