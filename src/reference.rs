@@ -39,6 +39,11 @@
 //! | `sky`               | 0        | uniform radiance of rays that leave the scene                 |
 //! | `indirect_only`     | false    | leave out light reaching `x₀` without a bounce, like the bake |
 //!
+//! Camera mode ([`trace_view`], `lightbake reference --view`; see `reference/camera.rs`): the
+//! same estimator of `H/π` (`Paths::reflected`) started at the first hit of jittered primary
+//! rays through the renderer's pinhole camera gives `baseColor·H/π + Le` per pixel with a
+//! standard error — the image `lightbake render` approximates with the lightmap.
+//!
 //! When to use: to measure a bake's error, in tests and benchmarks. Limits: slow (every texel
 //! needs hundreds of paths for 1–2 % noise); the standard error is itself estimated, and heavy-
 //! tailed paths (a small emitter reached only by a lucky bounce) can understate it at low sample
