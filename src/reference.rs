@@ -39,6 +39,11 @@
 //! | `sky`               | 0        | uniform radiance of rays that leave the scene                 |
 //! | `indirect_only`     | false    | leave out light reaching `x₀` without a bounce, like the bake |
 //!
+//! Camera mode ([`trace_view`], `lightbake reference --view`; see `reference/camera.rs`): the
+//! same estimator of `H/π` (`Paths::reflected`) started at the first hit of jittered primary
+//! rays through the renderer's pinhole camera gives `baseColor·H/π + Le` per pixel with a
+//! standard error — the image `lightbake render` approximates with the lightmap.
+//!
 //! When to use: to measure a bake's error, in tests and benchmarks. Limits: slow (every texel
 //! needs hundreds of paths for 1–2 % noise); the standard error is itself estimated, and heavy-
 //! tailed paths (a small emitter reached only by a lucky bounce) can understate it at low sample
@@ -60,6 +65,10 @@ use crate::transport::sampling::{
     Rng, cosine_hemisphere, frame, triangle_point as sample_triangle,
 };
 use crate::{Error, Progress, Result, atlas, scene, texels};
+
+mod camera;
+
+pub use camera::{View, trace_view};
 
 /// Texels per parallel work item (one progress tick each).
 const CHUNK: usize = 64;
@@ -262,7 +271,6 @@ pub fn trace(
 ) -> Result<Reference> {
     params.validate()?;
     let start = Instant::now();
-    let n = texels.len();
     let emitters = Emitters::new(scene, texels);
     let paths = Paths {
         scene,
@@ -271,11 +279,51 @@ pub fn trace(
         emitters: &emitters,
         params,
     };
+    let run = run_passes(
+        texels.len(),
+        params,
+        progress,
+        "reference",
+        &|i, sample, rays| paths.sample(i, sample, rays),
+    )?;
+    Ok(Reference {
+        rms_rel_error: run.rms_rel_error,
+        mean: run.mean,
+        std_error: run.std_error,
+        samples: run.samples,
+        rays: run.rays,
+        seconds: start.elapsed().as_secs_f64(),
+        stop: run.stop,
+    })
+}
+
+/// What [`run_passes`] gives back.
+pub(crate) struct Run {
+    pub mean: Vec<Vec3>,
+    pub std_error: Vec<Vec3>,
+    pub samples: u32,
+    pub rays: u64,
+    pub rms_rel_error: f32,
+    pub stop: Stop,
+}
+
+/// Adds `sample(item, k, &mut rays)` for `k = 0, 1, …` to the running sums of every one of `n`
+/// items (texels or pixels), a pass of `params.samples_per_pass` at a time, until a stopping
+/// rule of `params` holds. Items are split into fixed chunks and every sample draws its own
+/// random stream, so the sums do not depend on the thread count.
+pub(crate) fn run_passes(
+    n: usize,
+    params: &ReferenceParams,
+    progress: &dyn Progress,
+    stage: &str,
+    sample: &(dyn Fn(usize, u32, &mut u64) -> Vec3 + Sync),
+) -> Result<Run> {
+    let start = Instant::now();
     let mut sums = vec![Sums::default(); n];
     let (mut samples, mut rays) = (0u32, 0u64);
     let mut stop = Stop::MaxSamples;
     let aborted = AtomicBool::new(false);
-    progress.begin("reference", n as u64 * params.max_samples as u64);
+    progress.begin(stage, n as u64 * params.max_samples as u64);
     while samples < params.max_samples {
         let first = samples;
         let pass = params.samples_per_pass.min(params.max_samples - samples);
@@ -289,8 +337,8 @@ pub fn trace(
                 }
                 let mut rays = 0u64;
                 for (k, s) in chunk.iter_mut().enumerate() {
-                    for sample in first..first + pass {
-                        s.add(paths.sample(c * CHUNK + k, sample, &mut rays));
+                    for k_sample in first..first + pass {
+                        s.add(sample(c * CHUNK + k, k_sample, &mut rays));
                     }
                 }
                 progress.advance(chunk.len() as u64 * pass as u64);
@@ -327,13 +375,12 @@ pub fn trace(
     if stop == Stop::MaxSamples && params.target_rel_error.is_some_and(|t| rms <= t) {
         stop = Stop::TargetError;
     }
-    Ok(Reference {
-        rms_rel_error: rms,
+    Ok(Run {
         mean,
         std_error,
         samples,
         rays,
-        seconds: start.elapsed().as_secs_f64(),
+        rms_rel_error: rms,
         stop,
     })
 }
@@ -348,19 +395,20 @@ pub struct Computed {
     pub reference: Reference,
 }
 
+/// The stages a reference traces in: a bake's scene, atlas, texels and tracer.
+pub struct Prepared {
+    pub scene: scene::Scene,
+    pub source: scene::Source,
+    pub atlas: atlas::Atlas,
+    pub texels: Texels,
+    pub tracer: Tracer,
+}
+
 /// Loads `input` and builds atlas and texels exactly as [`crate::compute`] does with `config`
 /// (unwrapping is deterministic, and sample points are moved out of geometry by the same
-/// validity pass, so the texels are a bake's texels), then traces the reference. The estimates
-/// are raw: a bake replaces its `texels.invalid` (buried) texels by their neighbours'
-/// values, so compare on the others or apply [`texels::validity::fill_invalid`] too.
-pub fn compute(
-    input: &Path,
-    config: &BakeConfig,
-    params: &ReferenceParams,
-    progress: &dyn Progress,
-) -> Result<Computed> {
+/// validity pass, so the texels are a bake's texels), and the tracer.
+pub fn prepare(input: &Path, config: &BakeConfig, progress: &dyn Progress) -> Result<Prepared> {
     config.validate()?;
-    params.validate()?;
     let (scene, source) = scene::load(input)?;
     for w in &scene.stats.warnings {
         progress.warn(w);
@@ -382,12 +430,32 @@ pub fn compute(
         };
         texels::validity::fix(&mut texels, &tracer, &params);
     }
-    let reference = trace(&scene, &texels, &tracer, params, progress)?;
-    Ok(Computed {
+    Ok(Prepared {
         scene,
         source,
         atlas,
         texels,
+        tracer,
+    })
+}
+
+/// [`prepare`], then [`trace`]. The estimates are raw: a bake replaces its `texels.invalid`
+/// (buried) texels by their neighbours' values, so compare on the others or apply
+/// [`texels::validity::fill_invalid`] too.
+pub fn compute(
+    input: &Path,
+    config: &BakeConfig,
+    params: &ReferenceParams,
+    progress: &dyn Progress,
+) -> Result<Computed> {
+    params.validate()?;
+    let p = prepare(input, config, progress)?;
+    let reference = trace(&p.scene, &p.texels, &p.tracer, params, progress)?;
+    Ok(Computed {
+        scene: p.scene,
+        source: p.source,
+        atlas: p.atlas,
+        texels: p.texels,
         reference,
     })
 }
@@ -399,22 +467,31 @@ fn power_weight(this: f32, other: f32) -> f32 {
     if d > 0.0 { this / d } else { 0.0 }
 }
 
-struct Paths<'a> {
-    scene: &'a scene::Scene,
-    texels: &'a Texels,
-    tracer: &'a Tracer,
-    emitters: &'a Emitters,
-    params: &'a ReferenceParams,
+pub(crate) struct Paths<'a> {
+    pub scene: &'a scene::Scene,
+    pub texels: &'a Texels,
+    pub tracer: &'a Tracer,
+    pub emitters: &'a Emitters,
+    pub params: &'a ReferenceParams,
 }
 
 impl Paths<'_> {
     /// One path estimate of texel `i`'s `H/π`; its random stream depends only on
     /// (seed, texel, sample), never on the thread that runs it.
     fn sample(&self, i: usize, sample: u32, rays: &mut u64) -> Vec3 {
-        let (t, eps) = (self.texels, self.tracer.epsilon);
+        let t = self.texels;
         let mut rng = Rng::new(self.params.seed ^ SEED_SALT, i as u64, sample as u64);
-        let mut n = t.normal[i];
-        let mut x = footprint_point(t, i, rng.next_vec2()) + n * eps;
+        let n = t.normal[i];
+        let x = footprint_point(t, i, rng.next_vec2()) + n * self.tracer.epsilon;
+        self.reflected(x, n, &mut rng, rays)
+    }
+
+    /// One path estimate of `H(x)/π` at the surface point `x` (already lifted off the surface
+    /// by the ray offset) with unit normal `n`: the radiance a white Lambertian surface there
+    /// reflects. Shared by the texel and the camera modes. Non-finite estimates count as 0.
+    pub(crate) fn reflected(&self, x: Vec3, n: Vec3, rng: &mut Rng, rays: &mut u64) -> Vec3 {
+        let (t, eps) = (self.texels, self.tracer.epsilon);
+        let (mut x, mut n) = (x, n);
         // The receiver is a white Lambertian surface: H/π is the radiance it reflects.
         let mut rho = Vec3::ONE;
         let mut beta = Vec3::ONE;
@@ -423,9 +500,8 @@ impl Paths<'_> {
             // Light that reaches x₀ without a bounce is direct light.
             let counts = depth > 0 || !self.params.indirect_only;
             if counts {
-                l += beta * rho * self.next_event(x, n, &mut rng, rays) / PI;
+                l += beta * rho * self.next_event(x, n, rng, rays) / PI;
             }
-
             let (tx, ty) = frame(n);
             let local = cosine_hemisphere(rng.next_vec2());
             let dir = tx * local.x + ty * local.y + n * local.z;

@@ -206,3 +206,55 @@ fn scene_without_light_warns() {
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(stderr(&o).contains("black"), "{}", stderr(&o));
 }
+
+#[test]
+fn reference_view_writes_an_image_and_its_standard_error() {
+    let dir = scratch();
+    let image = dir.path().join("view.exr");
+    let scene = fixture("cornell_box.gltf");
+    let args = [
+        "reference",
+        scene.to_str().unwrap(),
+        "--view",
+        "--texels-per-unit",
+        "6",
+        "--size",
+        "12x8",
+        "--spp",
+        "4",
+        "--pass",
+        "2",
+        "-q",
+        "-o",
+        image.to_str().unwrap(),
+    ];
+    let o = lightbake(&args);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(list_files(dir.path()), ["view.exr", "view_stderr.exr"]);
+    let mean = lightbake::output::read_exr(&image).unwrap();
+    assert_eq!((mean.width, mean.height), (12, 8));
+    assert!(mean.rgb.iter().any(|v| v.max_element() > 0.0));
+
+    // Camera options belong to --view; the help names them.
+    let o = lightbake(&[
+        "reference",
+        scene.to_str().unwrap(),
+        "--size",
+        "8x8",
+        "-o",
+        "x",
+    ]);
+    assert!(!o.status.success() && stderr(&o).contains("need --view"));
+    let help = lightbake(&["reference", "--help"]);
+    let help = String::from_utf8_lossy(&help.stdout);
+    for flag in [
+        "--view",
+        "--camera",
+        "--eye",
+        "--fov",
+        "--size",
+        "--exposure",
+    ] {
+        assert!(help.contains(flag), "{flag} missing from help");
+    }
+}

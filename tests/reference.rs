@@ -177,6 +177,83 @@ fn deterministic_across_thread_counts() {
     assert_ne!(a.mean, c.mean);
 }
 
+/// The camera mode: the same image on one and two threads, another with another seed, and
+/// the light seen from below is its `Le` plus the little light its ρ = 0.78 reflects.
+#[test]
+fn camera_view_is_deterministic_across_thread_counts() {
+    let p = reference::prepare(&fixture("cornell_box.gltf"), &quick(), &NoProgress).unwrap();
+    let camera =
+        lightbake::render::Camera::look_at(Vec3::new(0.0, 0.5, 1.9), Vec3::new(0.0, 0.5, 0.0), 0.7);
+    let run = |threads: usize, seed: u64| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        let params = ReferenceParams {
+            samples_per_pass: 4,
+            seed,
+            ..params(8)
+        };
+        pool.install(|| {
+            reference::trace_view(
+                &p.scene,
+                &p.texels,
+                &p.tracer,
+                &camera,
+                20,
+                16,
+                &params,
+                &NoProgress,
+            )
+            .unwrap()
+        })
+    };
+    let (a, b) = (run(1, 0), run(2, 0));
+    assert_eq!((a.width, a.height, a.mean.len()), (20, 16, 320));
+    assert_eq!(a.mean, b.mean);
+    assert_eq!(a.std_error, b.std_error);
+    assert_eq!(a.rays, b.rays);
+    assert_ne!(a.mean, run(2, 1).mean);
+    assert!(
+        a.mean
+            .iter()
+            .all(|v| v.is_finite() && v.min_element() >= 0.0)
+    );
+    assert!(a.rms_rel_error > 0.0 && a.samples == 8);
+
+    // Looking straight up at the light from below.
+    let up = lightbake::render::Camera::look_at(
+        Vec3::new(0.0, 0.3, 0.0),
+        Vec3::new(0.0, 1.0, 0.0),
+        0.05,
+    );
+    let v = reference::trace_view(
+        &p.scene,
+        &p.texels,
+        &p.tracer,
+        &up,
+        2,
+        2,
+        &params(4),
+        &NoProgress,
+    )
+    .unwrap();
+    let le = p
+        .scene
+        .materials
+        .iter()
+        .map(|m| m.emission)
+        .fold(Vec3::ZERO, Vec3::max);
+    for (m, se) in v.mean.iter().zip(&v.std_error) {
+        let reflected = *m - le;
+        assert!(
+            reflected.min_element() >= -4.0 * se.max_element()
+                && reflected.max_element() <= 0.05 * le.max_element(),
+            "{m} vs Le {le}"
+        );
+    }
+}
+
 #[test]
 fn stops_on_target_error_and_time_limit() {
     let input = fixture("cornell_box.gltf");

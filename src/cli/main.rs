@@ -32,7 +32,8 @@ enum Command {
     Bake(BakeArgs),
     /// Render a camera view of a baked scene (lightmap × albedo, optional specular layer).
     Render(render::Args),
-    /// Path-trace reference lightmaps at the same texels as a bake (the accuracy yardstick).
+    /// Path-trace reference lightmaps at the same texels as a bake (the accuracy yardstick), or
+    /// with --view a reference image of a camera view.
     Reference(reference::Args),
 }
 

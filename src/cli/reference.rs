@@ -1,4 +1,5 @@
-//! `lightbake reference`: path-traced reference lightmaps at a bake's texels.
+//! `lightbake reference`: path-traced reference lightmaps at a bake's texels, or with `--view`
+//! a path-traced reference image of the view `lightbake render` draws.
 
 use std::path::PathBuf;
 use std::time::Duration;
@@ -9,13 +10,16 @@ use lightbake::config::UvMode;
 use lightbake::lightmap::{self, LightmapPages};
 use lightbake::output::{self, Staging};
 use lightbake::reference::{self, ReferenceParams};
+use lightbake::render::{Image, gltf_cameras};
 use lightbake::{BakeConfig, Progress, texels};
 
 use super::progress::Bars;
+use super::render::{ViewArgs, check_image_path};
 use super::{Quality, UvArg, parse_rgb};
 
 /// Writes `<stem>_reference<k>.exr` (mean `H/π`, dilated like bake pages) and
-/// `<stem>_reference<k>_stderr.exr` (its per-texel standard error) for every page.
+/// `<stem>_reference<k>_stderr.exr` (its per-texel standard error) for every page; with
+/// `--view`, the image `-o` (mean radiance per pixel) and `<image stem>_stderr.<ext>`.
 ///
 /// The texels are those of `lightbake bake` with the same scene and the same atlas options
 /// (--quality, --texels-per-unit, --max-page-size, --padding, --uv): unwrapping is
@@ -25,9 +29,18 @@ use super::{Quality, UvArg, parse_rgb};
 pub struct Args {
     /// Input scene (.gltf or .glb): the one the bake was made from.
     scene: PathBuf,
-    /// Output directory (created if missing).
+    /// Output directory (created if missing); with --view the image (.exr linear, .png tone-mapped).
     #[arg(short, long)]
     output: PathBuf,
+    /// Path-trace a camera view (the one `lightbake render` draws with the same camera options)
+    /// instead of the texels.
+    #[arg(long)]
+    view: bool,
+    #[command(flatten)]
+    camera: ViewArgs,
+    /// Exposure of a --view PNG in stops (ignored for EXR).
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    exposure: f32,
     /// Preset whose texel density the reference uses (match the bake's).
     #[arg(long, value_enum, default_value = "medium")]
     quality: Quality,
@@ -43,13 +56,13 @@ pub struct Args {
     /// Where lightmap UVs come from.
     #[arg(long, value_enum, default_value = "auto")]
     uv: UvArg,
-    /// Paths per texel at most (standard error shrinks like 1/√N).
+    /// Paths per texel (per pixel with --view) at most; standard error shrinks like 1/√N.
     #[arg(long, default_value_t = 1024)]
     spp: u32,
     /// Paths per texel between stopping checks.
     #[arg(long, default_value_t = 16)]
     pass: u32,
-    /// Stop when the relative RMS standard error √(Σσ²/Σμ²) over texels is at most this (e.g. 0.02).
+    /// Stop when the relative RMS standard error √(Σσ²/Σμ²) over texels (pixels) is at most this.
     #[arg(long)]
     target_error: Option<f32>,
     /// Stop after the pass that crosses this many seconds.
@@ -87,7 +100,15 @@ Writes <stem>_reference<k>.exr (H/π per texel, dilated like bake pages) and
 scene and the atlas options (--quality, --texels-per-unit, --max-page-size, --padding, --uv,
 --no-validity) are the same; give --sky and --indirect-only as the bake did. Tracing stops at
 --spp paths per texel, at --target-error (relative RMS standard error √(Σσ²/Σμ²)), or after
---time seconds, whichever comes first.";
+--time seconds, whichever comes first.
+
+With --view, -o is an image: the camera view that `lightbake render` draws with the same
+--camera/--eye/--target/--fov/--size, path-traced: at the first hit of each jittered primary ray,
+baseColor × (path-traced H/π) + emission, --spp paths per pixel. Writes the image (.exr linear
+radiance, .png tone-mapped like render) and <image stem>_stderr.<ext>, its per-pixel standard
+error. Compare it with `lightbake render` without --specular: the difference is the lightmap's
+error. Rays that leave the scene see --sky (give render the same --background).
+  lightbake reference scene.gltf --view --camera NAME --size 256x256 --spp 1024 -o ref.exr";
 
 impl Args {
     fn config(&self) -> BakeConfig {
@@ -140,6 +161,12 @@ pub fn run(args: &Args) -> Result<()> {
     }
     let config = args.config();
     let params = args.params(&config)?;
+    if args.view {
+        return view(args, &config, &params);
+    }
+    if args.camera.any() {
+        bail!("--camera, --eye, --target, --fov and --size need --view");
+    }
     let bars = Bars::new(args.quiet);
     let computed = reference::compute(&args.scene, &config, &params, &bars)
         .with_context(|| format!("tracing a reference for {} failed", args.scene.display()))?;
@@ -173,6 +200,69 @@ pub fn run(args: &Args) -> Result<()> {
     if !args.quiet {
         println!("{}", r.summary());
         println!("wrote {} file(s) to {}", files.len(), args.output.display());
+    }
+    Ok(())
+}
+
+/// `--view`: a path-traced image and its standard error.
+fn view(args: &Args, config: &BakeConfig, params: &ReferenceParams) -> Result<()> {
+    check_image_path(&args.output)?;
+    let bars = Bars::new(args.quiet);
+    let p = reference::prepare(&args.scene, config, &bars)
+        .with_context(|| format!("loading {} failed", args.scene.display()))?;
+    let cameras = gltf_cameras(&p.source.json);
+    let bounds = p
+        .scene
+        .positions
+        .iter()
+        .fold((Vec3::MAX, Vec3::MIN), |(lo, hi), &x| {
+            (lo.min(x), hi.max(x))
+        });
+    let (camera, width, height) = args.camera.resolve(&cameras, bounds)?;
+    let v = reference::trace_view(
+        &p.scene, &p.texels, &p.tracer, &camera, width, height, params, &bars,
+    )
+    .with_context(|| {
+        format!(
+            "tracing a reference view of {} failed",
+            args.scene.display()
+        )
+    })?;
+    if bars.aborted() {
+        bail!("aborted");
+    }
+    let stderr_path = {
+        let stem = args
+            .output
+            .file_stem()
+            .and_then(|s| s.to_str())
+            .unwrap_or("view");
+        let ext = args
+            .output
+            .extension()
+            .and_then(|e| e.to_str())
+            .unwrap_or("exr");
+        args.output.with_file_name(format!("{stem}_stderr.{ext}"))
+    };
+    for (path, rgb) in [(&args.output, &v.mean), (&stderr_path, &v.std_error)] {
+        let image = Image {
+            width,
+            height,
+            rgb: rgb.clone(),
+            nonfinite: 0,
+            rays: v.rays,
+        };
+        image
+            .save(path, args.exposure)
+            .with_context(|| format!("writing {} failed", path.display()))?;
+    }
+    if !args.quiet {
+        println!("{}", v.summary());
+        println!(
+            "wrote {} and {}",
+            args.output.display(),
+            stderr_path.display()
+        );
     }
     Ok(())
 }

@@ -1,12 +1,12 @@
 //! `lightbake render`: a camera view of a baked scene (lightmap × base colour + emission, and
 //! with `--specular` a ray-traced reflection/refraction layer), written as PNG or EXR.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use glam::Vec3;
-use lightbake::render::{Camera, RenderOptions, RenderScene};
+use lightbake::render::{Camera, GltfCamera, RenderOptions, RenderScene, select};
 
 use crate::parse_rgb;
 
@@ -17,21 +17,8 @@ pub struct Args {
     /// Output image: .png (tone-mapped sRGB) or .exr (linear radiance).
     #[arg(short, long)]
     output: PathBuf,
-    /// glTF camera by name or index [default: the first camera, else a view of the whole scene].
-    #[arg(long, conflicts_with_all = ["eye", "target"])]
-    camera: Option<String>,
-    /// Eye position X,Y,Z (with --target) instead of a glTF camera.
-    #[arg(long, value_parser = parse_vec3, requires = "target")]
-    eye: Option<Vec3>,
-    /// Point the eye looks at, X,Y,Z.
-    #[arg(long, value_parser = parse_vec3, requires = "eye")]
-    target: Option<Vec3>,
-    /// Vertical field of view in degrees (with --eye, or to override the camera's).
-    #[arg(long)]
-    fov: Option<f32>,
-    /// Image size WxH [default: 512 wide, height from the camera's aspect ratio].
-    #[arg(long, value_parser = parse_size)]
-    size: Option<(u32, u32)>,
+    #[command(flatten)]
+    view: ViewArgs,
     /// Jittered samples per pixel (anti-aliasing; glossy reflections).
     #[arg(long, default_value_t = 16)]
     spp: u32,
@@ -53,6 +40,80 @@ pub struct Args {
     /// No summary line.
     #[arg(short, long)]
     quiet: bool,
+}
+
+/// Camera and image size, shared by `render` and `reference --view`.
+#[derive(clap::Args)]
+pub struct ViewArgs {
+    /// glTF camera by name or index [default: the first camera, else a view of the whole scene].
+    #[arg(long, conflicts_with_all = ["eye", "target"])]
+    pub camera: Option<String>,
+    /// Eye position X,Y,Z (with --target) instead of a glTF camera.
+    #[arg(long, value_parser = parse_vec3, requires = "target")]
+    pub eye: Option<Vec3>,
+    /// Point the eye looks at, X,Y,Z.
+    #[arg(long, value_parser = parse_vec3, requires = "eye")]
+    pub target: Option<Vec3>,
+    /// Vertical field of view in degrees (with --eye, or to override the camera's).
+    #[arg(long)]
+    pub fov: Option<f32>,
+    /// Image size WxH [default: 512 wide, height from the camera's aspect ratio].
+    #[arg(long, value_parser = parse_size)]
+    pub size: Option<(u32, u32)>,
+}
+
+impl ViewArgs {
+    /// Any camera or size option given.
+    pub fn any(&self) -> bool {
+        self.camera.is_some()
+            || self.eye.is_some()
+            || self.target.is_some()
+            || self.fov.is_some()
+            || self.size.is_some()
+    }
+
+    /// The camera and image size these options choose among the document's `cameras`; a view
+    /// framing `bounds` when there is no camera and no eye.
+    pub fn resolve(
+        &self,
+        cameras: &[GltfCamera],
+        bounds: (Vec3, Vec3),
+    ) -> Result<(Camera, u32, u32)> {
+        let fov = self.fov.map(f32::to_radians);
+        let framing = |aspect: f32| Camera::framing(bounds.0, bounds.1, 45f32.to_radians(), aspect);
+        let mut camera = match (self.eye, self.target, &self.camera) {
+            (Some(eye), Some(target), _) => Camera::look_at(eye, target, fov.unwrap_or(0.8)),
+            (_, _, Some(name)) => select(cameras, name)?.camera,
+            _ => cameras.first().map_or_else(|| framing(1.0), |c| c.camera),
+        };
+        if let Some(fov) = fov {
+            camera.yfov = fov;
+        }
+        let (width, height) = self.size.unwrap_or_else(|| {
+            let aspect = camera.aspect_ratio.unwrap_or(1.0).clamp(0.1, 10.0);
+            (512, ((512.0 / aspect).round() as u32).max(1))
+        });
+        // A framing camera depends on the aspect ratio: rebuild it for the final size.
+        if self.camera.is_none() && self.eye.is_none() && cameras.is_empty() {
+            camera = framing(width as f32 / height as f32);
+            if let Some(fov) = fov {
+                camera.yfov = fov;
+            }
+        }
+        Ok((camera, width, height))
+    }
+}
+
+/// Refuses output paths other than .png and .exr.
+pub fn check_image_path(path: &Path) -> Result<()> {
+    let ext = path.extension().and_then(|e| e.to_str());
+    if !matches!(
+        ext.map(str::to_ascii_lowercase).as_deref(),
+        Some("png" | "exr")
+    ) {
+        bail!("{}: the output must end in .png or .exr", path.display());
+    }
+    Ok(())
 }
 
 fn parse_vec3(s: &str) -> Result<Vec3, String> {
@@ -80,16 +141,7 @@ fn parse_size(s: &str) -> Result<(u32, u32), String> {
 }
 
 pub fn run(args: &Args) -> Result<()> {
-    let ext = args.output.extension().and_then(|e| e.to_str());
-    if !matches!(
-        ext.map(str::to_ascii_lowercase).as_deref(),
-        Some("png" | "exr")
-    ) {
-        bail!(
-            "{}: the output must end in .png or .exr",
-            args.output.display()
-        );
-    }
+    check_image_path(&args.output)?;
     let start = Instant::now();
     let scene = RenderScene::load(&args.scene)
         .with_context(|| format!("loading {} failed", args.scene.display()))?;
@@ -101,25 +153,7 @@ pub fn run(args: &Args) -> Result<()> {
         );
     }
 
-    let fov = args.fov.map(f32::to_radians);
-    let mut camera = match (args.eye, args.target) {
-        (Some(eye), Some(target)) => Camera::look_at(eye, target, fov.unwrap_or(0.8)),
-        _ => scene.camera(args.camera.as_deref(), 1.0)?,
-    };
-    if let Some(fov) = fov {
-        camera.yfov = fov;
-    }
-    let (width, height) = args.size.unwrap_or_else(|| {
-        let aspect = camera.aspect_ratio.unwrap_or(1.0).clamp(0.1, 10.0);
-        (512, ((512.0 / aspect).round() as u32).max(1))
-    });
-    // A framing camera depends on the aspect ratio: rebuild it for the final size.
-    if args.camera.is_none() && args.eye.is_none() && scene.cameras.is_empty() {
-        camera = scene.camera(None, width as f32 / height as f32)?;
-        if let Some(fov) = fov {
-            camera.yfov = fov;
-        }
-    }
+    let (camera, width, height) = args.view.resolve(&scene.cameras, scene.bounds)?;
     let options = RenderOptions {
         width,
         height,
