@@ -204,7 +204,7 @@ fn settings(scene: &Scene, quick: bool) -> Vec<Setting> {
     for target in [0.08, 0.04, 0.02] {
         out.push(Setting {
             auto: Some(target),
-            ..s(Method::MonteCarlo, Solver::Jacobi, 0)
+            ..s(Method::MonteCarlo, Solver::Jacobi, 256)
         });
     }
     out

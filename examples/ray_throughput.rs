@@ -1,0 +1,111 @@
+//! Ray throughput of the tracer (obvhs CWBVH + lightbake's triangle test) on this machine:
+//! closest-hit and occlusion rays, incoherent like gathering rays (random surface points,
+//! cosine-distributed directions; occlusion between two random surface points), on one thread
+//! and on all cores, with the CPU utilisation of the parallel run.
+//!
+//! ```sh
+//! cargo run --release --example ray_throughput
+//! ```
+
+use std::time::Instant;
+
+use glam::Vec3;
+use lightbake::scene::{self, Scene};
+use lightbake::trace::Tracer;
+use lightbake::transport::sampling::{Rng, cosine_hemisphere, frame, triangle_point};
+use rayon::prelude::*;
+
+const RAYS: usize = 4_000_000;
+const CHUNK: usize = 4096;
+
+/// A random point on a random triangle (uniform over triangles), lifted by `eps`, and its normal.
+fn surface_point(scene: &Scene, rng: &mut Rng, eps: f32) -> (Vec3, Vec3) {
+    let t = scene.triangles[(rng.next_u32() as usize) % scene.triangles.len()];
+    let p = |i: usize| scene.positions[t[i] as usize];
+    let b = triangle_point(rng.next_vec2());
+    let n = (p(1) - p(0)).cross(p(2) - p(0)).normalize_or_zero();
+    let x = p(0) + (p(1) - p(0)) * b.x + (p(2) - p(0)) * b.y;
+    (x + n * eps, n)
+}
+
+/// CPU seconds (user + system) of this process so far.
+fn cpu_seconds() -> f64 {
+    let stat = std::fs::read_to_string("/proc/self/stat").unwrap_or_default();
+    // Fields after the command name (which may hold spaces): utime is the 14th, stime the 15th.
+    let rest = stat.rsplit_once(')').map_or("", |r| r.1);
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    let ticks = |k: usize| f.get(k).and_then(|v| v.parse::<f64>().ok()).unwrap_or(0.0);
+    (ticks(11) + ticks(12)) / 100.0 // USER_HZ is 100 on Linux
+}
+
+/// Casts `RAYS` rays of one kind on the current rayon pool: (Mrays/s, hit fraction, CPU use).
+fn run(scene: &Scene, tracer: &Tracer, occlusion: bool) -> (f64, f64, f64) {
+    let eps = tracer.epsilon;
+    let (cpu0, start) = (cpu_seconds(), Instant::now());
+    let hits: usize = (0..RAYS / CHUNK)
+        .into_par_iter()
+        .map(|c| {
+            let mut rng = Rng::new(1, c as u64, occlusion as u64);
+            let mut hits = 0;
+            for _ in 0..CHUNK {
+                let (o, n) = surface_point(scene, &mut rng, eps);
+                if occlusion {
+                    let (p, _) = surface_point(scene, &mut rng, eps);
+                    hits += tracer.occluded(o, p) as usize;
+                } else {
+                    let (tx, ty) = frame(n);
+                    let l = cosine_hemisphere(rng.next_vec2());
+                    let d = tx * l.x + ty * l.y + n * l.z;
+                    hits += tracer.closest(o, d, f32::INFINITY).is_some() as usize;
+                }
+            }
+            hits
+        })
+        .sum();
+    let wall = start.elapsed().as_secs_f64();
+    let cpu = (cpu_seconds() - cpu0) / (wall * rayon::current_num_threads() as f64);
+    let n = (RAYS / CHUNK * CHUNK) as f64;
+    (n / wall * 1e-6, hits as f64 / n, cpu)
+}
+
+fn main() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let scenes = [
+        ("cornell_box", lightbake::testing::cornell_box()),
+        ("large_hall", lightbake::testing::large_hall()),
+    ];
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    println!("{RAYS} incoherent rays per run; {cores} cores; Mrays/s (hit or occluded fraction)\n");
+    println!(
+        "| scene | triangles | kind | 1 thread | {cores} threads | speed-up | CPU use ({cores} threads) |"
+    );
+    println!("|---|---:|---|---:|---:|---:|---:|");
+    for (name, gltf) in scenes {
+        let path = dir.path().join(format!("{name}.glb"));
+        std::fs::write(&path, gltf.to_glb_bytes()).expect("write scene");
+        let (scene, _) = scene::load(&path).expect("load");
+        let tracer = Tracer::new(&scene);
+        for occlusion in [false, true] {
+            let one = rayon::ThreadPoolBuilder::new()
+                .num_threads(1)
+                .build()
+                .unwrap()
+                .install(|| run(&scene, &tracer, occlusion));
+            let all = run(&scene, &tracer, occlusion);
+            println!(
+                "| {name} | {} | {} | {:.2} ({:.0}%) | {:.2} | {:.2}× | {:.0}% |",
+                scene.triangles.len(),
+                if occlusion {
+                    "occlusion"
+                } else {
+                    "closest hit"
+                },
+                one.0,
+                one.1 * 100.0,
+                all.0,
+                all.0 / one.0,
+                all.2 * 100.0
+            );
+        }
+    }
+}
