@@ -50,12 +50,12 @@ fn worst(b: &Baked, expected: f32) -> f32 {
 /// Relative RMSE against a reference over the texels `select` keeps (and the reference keeps).
 fn rmse(x: &[Vec3], known: &Known, select: impl Fn(Vec3) -> bool) -> f32 {
     let (mut sq, mut sum, mut n) = (0.0f64, 0.0f64, 0usize);
-    for i in 0..x.len().min(known.mean.len()) {
-        if known.skip[i] || !select(known.position[i]) {
+    for (((v, r), skip), p) in x.iter().zip(known.mean).zip(known.skip).zip(known.position) {
+        if *skip || !select(*p) {
             continue;
         }
-        sq += (x[i] - known.mean[i]).length_squared() as f64;
-        sum += known.mean[i].element_sum() as f64;
+        sq += (*v - *r).length_squared() as f64;
+        sum += r.element_sum() as f64;
         n += 3;
     }
     if n == 0 || sum <= 0.0 {
@@ -238,7 +238,7 @@ fn leak(two_rooms: &Known) -> Case {
                 b.validity.moved,
                 b.validity.invalid
             ),
-            Err(e) => format!("{e}"),
+            Err(e) => e.to_string(),
         });
     }
     Case {
