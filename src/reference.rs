@@ -202,16 +202,7 @@ impl Reference {
 /// from starting beyond the edge of a surface.
 #[inline]
 pub fn footprint_point(texels: &Texels, i: usize, u: Vec2) -> Vec3 {
-    let (du, dv) = (texels.du[i], texels.dv[i]);
-    let full = du.cross(dv).length();
-    let cover = if full > 0.0 {
-        (texels.area[i] / full).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    let scale = if cover > 0.99 { 1.0 } else { cover };
-    let o = (u - Vec2::splat(0.5)) * scale;
-    texels.position[i] + du * o.x + dv * o.y
+    texels.footprint_point(i, u)
 }
 
 /// Running sums of one texel's path estimates (f64, so millions of samples lose nothing).

@@ -140,6 +140,7 @@ fn assemble(
         triangle: Vec::with_capacity(n),
         du: Vec::with_capacity(n),
         dv: Vec::with_capacity(n),
+        jitter: vec![1.0; n],
         index: atlas
             .pages
             .iter()

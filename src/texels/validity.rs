@@ -32,9 +32,10 @@
 //!
 //! When to use: always (it costs `R` rays per texel, `R·(1 + G²)` for texels near back faces).
 //! Limits: only single-sided solids are detected — a zero-thickness double-sided wall has no
-//! back side, so a floor texel straddling it still mixes both rooms; a moved texel's gathering
-//! rays are still jittered over a full footprint around its new point; solids deeper than `REACH`
-//! texels leave their inner texels black but valid (never visible).
+//! back side, so a floor texel straddling it still mixes both rooms; solids deeper than `REACH`
+//! texels leave their inner texels black but valid (never visible). A moved texel's gathering
+//! rays jitter within the candidate cell around its new point (`Texels::jitter` = 1/G), not
+//! over the whole footprint, which would start some of them back inside the solid.
 
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
@@ -94,6 +95,9 @@ pub fn fix(texels: &mut Texels, tracer: &Tracer, params: &ValidityParams) -> Val
     for (i, (moved, invalid)) in outcome.into_iter().enumerate() {
         if let Some(p) = moved {
             texels.position[i] = p;
+            if let Some(j) = texels.jitter.get_mut(i) {
+                *j = 1.0 / grid as f32;
+            }
             report.moved += 1;
         }
         if invalid {

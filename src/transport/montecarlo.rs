@@ -136,24 +136,11 @@ pub(crate) struct Context<'a> {
 }
 
 impl Context<'_> {
-    /// A point of texel `i`'s footprint for `u ∈ [0,1)²`, lifted off the surface by the ray
-    /// epsilon. A partly covered texel (at a chart border) is sampled around the centroid of its
-    /// covered part with the footprint scaled by the covered fraction: a half-covered texel is a
-    /// strip half a texel wide, and jittering over the whole texel started rays beyond the edge
-    /// of the surface (outside a closed box, measured as a 28% furnace error).
+    /// A point of texel `i`'s footprint ([`Texels::footprint_point`]) for `u ∈ [0,1)²`,
+    /// lifted off the surface by the ray epsilon.
     #[inline]
     pub(crate) fn footprint_point(&self, i: usize, u: Vec2) -> Vec3 {
-        let t = self.texels;
-        let (du, dv) = (t.du[i], t.dv[i]);
-        let full = du.cross(dv).length();
-        let cover = if full > 0.0 {
-            (t.area[i] / full).clamp(0.0, 1.0)
-        } else {
-            0.0
-        };
-        let scale = if cover > 0.99 { 1.0 } else { cover };
-        let o = (u - Vec2::splat(0.5)) * scale;
-        t.position[i] + du * o.x + dv * o.y + t.normal[i] * self.tracer.epsilon
+        self.texels.footprint_point(i, u) + self.texels.normal[i] * self.tracer.epsilon
     }
 
     /// Gathers row `i` into `out` (`hits` is scratch space).
