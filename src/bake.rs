@@ -5,7 +5,7 @@ use std::time::Instant;
 
 use glam::Vec3;
 
-use crate::config::BakeConfig;
+use crate::config::{BakeConfig, TransportParams};
 use crate::lightmap::{self, LightmapPages};
 use crate::output::{self, PageFiles, Staging};
 use crate::plan::{self, Plan};
@@ -168,9 +168,10 @@ pub fn compute(input: &Path, config: &BakeConfig, progress: &dyn Progress) -> Re
     };
     timed("validity", t);
 
+    let mut pilot = None;
     if let (Some(plan), Some(auto)) = (&mut plan, config.auto) {
         let t = Instant::now();
-        plan::choose_transport(
+        pilot = plan::choose_transport(
             &scene,
             &texels,
             &tracer,
@@ -184,14 +185,9 @@ pub fn compute(input: &Path, config: &BakeConfig, progress: &dyn Progress) -> Re
     }
 
     let t = Instant::now();
-    let (transport, solution) = solve::run(
-        &scene,
-        &texels,
-        &tracer,
-        &config.transport,
-        &config.solve,
-        progress,
-    )?;
+    // With a plan, the pilot bakes are part of the result (a ray-weighted mean).
+    let (transport, solution, gather_rays, light_samples) =
+        plan::final_bake(&scene, &texels, &tracer, &config, pilot, progress)?;
     if !solution.converged {
         progress.warn(&format!(
             "the solver stopped on the iteration cap ({}) at residual {:.2e}, above the tolerance {:.1e}",
@@ -211,7 +207,12 @@ pub fn compute(input: &Path, config: &BakeConfig, progress: &dyn Progress) -> Re
         .map(|(h, d)| if config.transport.indirect_only { (*h - *d).max(Vec3::ZERO) } else { *h } / std::f32::consts::PI)
         .collect();
     if config.transport.denoise && config.transport.method == crate::config::Method::MonteCarlo {
-        lightmap::denoise::denoise_bake(&texels, &transport, &mut lightmap, &config.transport);
+        let noise_model = TransportParams {
+            gather_rays,
+            light_samples,
+            ..config.transport.clone()
+        };
+        lightmap::denoise::denoise_bake(&texels, &transport, &mut lightmap, &noise_model);
     }
     timed("denoise", t);
     let t = Instant::now();

@@ -19,8 +19,8 @@ fn auto(preset: BakeConfig, target_error: f32, keep: Keep) -> BakeConfig {
 }
 
 /// The draft target (8%) on the Cornell box, checked against the path-traced reference on the
-/// same texels: measured 5.0% (corrected for the reference noise of 1.6%) for a predicted 5.8%
-/// at K=80.
+/// same texels: measured 5.1% (corrected for the reference noise of 1.6%) for a predicted 5.7%
+/// at K=80 in all (the two pilot bakes at 16 and one more at 48).
 #[test]
 fn reaches_its_target_on_the_cornell_box() {
     let target = 0.08;
@@ -57,7 +57,7 @@ fn reaches_its_target_on_the_cornell_box() {
     let corrected = (rmse * rmse - ref_noise * ref_noise).max(0.0).sqrt();
     println!(
         "auto draft: K={} error {:.2}% (reference noise {:.2}%, corrected {:.2}%), predicted {:.2}%",
-        baked.config.transport.gather_rays,
+        plan.total_rays.unwrap(),
         rmse * 100.0,
         ref_noise * 100.0,
         corrected * 100.0,
@@ -80,15 +80,16 @@ fn tighter_targets_cast_more_rays_and_noiseless_scenes_few() {
         let config = auto(BakeConfig::draft(), target, keep);
         let baked = lightbake::compute(&fixture(scene), &config, &NoProgress).unwrap();
         assert_eq!(baked.config.atlas.texels_per_unit, 8.0, "density was fixed");
-        baked.config.transport.gather_rays
+        baked.plan.unwrap().total_rays.unwrap()
     };
     let (loose, tight) = (
         rays("cornell_box.gltf", 0.2),
         rays("cornell_box.gltf", 0.03),
     );
     assert!(tight >= 4 * loose, "K {loose} for 20%, {tight} for 3%");
-    // Uniform emission and albedo everywhere: the pilot sees no noise, the minimum is enough.
-    assert_eq!(rays("furnace_09.gltf", 0.01), 16);
+    // Uniform emission and albedo everywhere: the pilot sees no noise, its two bakes at the
+    // minimum K = 16 are the result.
+    assert_eq!(rays("furnace_09.gltf", 0.01), 32);
 }
 
 #[test]
