@@ -31,6 +31,8 @@ pub struct BakeReport {
     pub converged: bool,
     /// Texel sample points moved out of geometry, and texels with none outside it.
     pub validity: texels::validity::ValidityReport,
+    /// Seam discontinuity before and after stitching (`None` when stitching is off).
+    pub seams: Option<lightmap::seams::SeamReport>,
     pub stages: Vec<StageTime>,
     /// The files written, the glTF first.
     pub files: Vec<PathBuf>,
@@ -45,8 +47,15 @@ impl BakeReport {
             .map(|s| format!("{} {:.2}s", s.stage, s.seconds))
             .collect();
         let total: f64 = self.stages.iter().map(|s| s.seconds).sum();
+        let seams = match &self.seams {
+            Some(s) => format!(
+                "; seams: {} edges, max diff {:.3} → {:.3}",
+                s.before.edges, s.before.max_abs_diff, s.after.max_abs_diff
+            ),
+            None => String::new(),
+        };
         format!(
-            "{} texels ({} moved out of geometry, {} invalid) on {} page(s), {} triangles, {:.2} M rays, {} iterations, residual {:.1e}{}; {} (total {:.2}s)",
+            "{} texels ({} moved out of geometry, {} invalid) on {} page(s), {} triangles, {:.2} M rays, {} iterations, residual {:.1e}{}{}; {} (total {:.2}s)",
             self.texels,
             self.validity.moved,
             self.validity.invalid,
@@ -60,6 +69,7 @@ impl BakeReport {
             } else {
                 " (NOT converged)"
             },
+            seams,
             stages.join(", "),
             total
         )
@@ -75,10 +85,11 @@ pub struct Baked {
     pub texels: texels::Texels,
     pub transport: transport::Transport,
     pub solution: solve::Solution,
-    /// `H/π` per texel (what the pages hold before dilation).
+    /// `H/π` per texel (what the pages hold before dilation and seam stitching).
     pub lightmap: Vec<Vec3>,
     pub pages: LightmapPages,
     pub validity: texels::validity::ValidityReport,
+    pub seams: Option<lightmap::seams::SeamReport>,
     pub stages: Vec<StageTime>,
 }
 
@@ -186,6 +197,12 @@ pub fn compute(input: &Path, config: &BakeConfig, progress: &dyn Progress) -> Re
     let mut pages = LightmapPages::from_texels(&texels, &lightmap);
     lightmap::dilate(&mut pages, config.atlas.padding.max(2) * 2);
     timed("dilate", t);
+    let t = Instant::now();
+    let seams = config
+        .output
+        .seams
+        .then(|| lightmap::seams::stitch_bake(&scene, &atlas, &mut pages, &Default::default()));
+    timed("seams", t);
 
     Ok(Baked {
         scene,
@@ -197,6 +214,7 @@ pub fn compute(input: &Path, config: &BakeConfig, progress: &dyn Progress) -> Re
         lightmap,
         pages,
         validity,
+        seams,
         stages,
     })
 }
@@ -218,6 +236,7 @@ pub fn write(
         solution,
         pages,
         validity,
+        seams,
         mut stages,
         ..
     } = baked;
@@ -267,6 +286,7 @@ pub fn write(
         residual: solution.residual(),
         converged: solution.converged,
         validity,
+        seams,
         stages,
         files,
     })

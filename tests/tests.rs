@@ -11,4 +11,5 @@ mod pipeline;
 mod quality;
 mod reference;
 mod render;
+mod seams;
 mod solvers;

@@ -6,6 +6,7 @@
 pub mod denoise;
 mod dilate;
 pub mod rgbm;
+pub mod seams;
 
 use glam::Vec3;
 
