@@ -49,7 +49,7 @@ impl BakeReport {
         let total: f64 = self.stages.iter().map(|s| s.seconds).sum();
         let seams = match &self.seams {
             Some(s) => format!(
-                "; seams: {} edges, max diff {:.3} → {:.3}",
+                "; seams: {} edges, max diff {:.1e} → {:.1e}",
                 s.before.edges, s.before.max_abs_diff, s.after.max_abs_diff
             ),
             None => String::new(),

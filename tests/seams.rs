@@ -1,8 +1,9 @@
 //! Seam stitching (`lightmap::seams`): the two sides of a UV seam filter to the same value.
 //!
-//! The fixture is a smooth sphere on a floor (`testing::sphere_on_floor`): xatlas cuts the
-//! sphere into several charts, so seams run across a smooth surface. The committed fixtures
-//! are made of flat faces meeting at creases and have no seams at all.
+//! Two fixtures: a smooth sphere on a floor (`testing::sphere_on_floor`), which xatlas cuts into
+//! several charts, and the flat floor of `point_light.gltf` on pages too small to hold it whole,
+//! so xatlas splits it into charts on several pages. At the default page size the committed
+//! fixtures are flat faces meeting at creases and have no seams at all.
 
 use lightbake::lightmap::seams::{self, SeamParams};
 use lightbake::lightmap::{self, LightmapPages};
@@ -58,6 +59,36 @@ fn seams_close_on_a_chart_cut_sphere() {
                 .iter()
                 .all(|v| v.is_finite() && v.min_element() >= 0.0)
         );
+    }
+}
+
+#[test]
+fn seams_close_on_a_flat_floor_split_across_pages() {
+    // A 4 × 4 m floor at 8 texels/m is 32 × 32 texels: on 32-texel pages xatlas cuts it up.
+    let mut c = quick();
+    c.atlas.max_page_size = 32;
+    let baked = compute(&fixture("point_light.gltf"), &c, &NoProgress).unwrap();
+    assert!(baked.pages.pages.len() > 1);
+    let r = baked.seams.unwrap();
+    assert!(r.before.edges > 10, "{r:?}");
+    // Direct light only, exact: the sides differ by how each grid reconstructs the falloff.
+    // Measured at 16 texels/m: 1.3 % → 0.01 % of the mean (mean), 3.8 % → 0.1 % (max).
+    assert!(r.before.mean_abs_diff > 1e-3 * r.before.mean_value, "{r:?}");
+    assert!(
+        r.after.mean_abs_diff <= 0.1 * r.before.mean_abs_diff,
+        "{r:?}"
+    );
+    assert!(r.after.max_abs_diff <= 0.3 * r.before.max_abs_diff, "{r:?}");
+}
+
+#[test]
+fn no_seams_at_the_default_page_size_changes_nothing() {
+    let baked = compute(&fixture("cornell_box.gltf"), &quick(), &NoProgress).unwrap();
+    let r = baked.seams.unwrap();
+    assert_eq!((r.before.edges, r.texels), (0, 0));
+    let plain = dilated(&baked);
+    for (a, b) in baked.pages.pages.iter().zip(&plain.pages) {
+        assert_eq!(a.rgb, b.rgb);
     }
 }
 
@@ -145,4 +176,38 @@ fn creases_are_not_seams() {
         ..params
     };
     assert!(!seams::find(&scene, &atlas, &blind).edges.is_empty());
+}
+
+#[test]
+fn cli_reports_seams_and_no_seams_turns_them_off() {
+    let run = |extra: &[&str]| {
+        let dir = scratch();
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_lightbake"))
+            .args(["bake", fixture("point_light.gltf").to_str().unwrap(), "-o"])
+            .arg(dir.path())
+            .args([
+                "--texels-per-unit",
+                "8",
+                "--rays",
+                "16",
+                "--max-page-size",
+                "32",
+            ])
+            .args(extra)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        String::from_utf8_lossy(&out.stdout).into_owned()
+    };
+    let on = run(&[]);
+    assert!(
+        on.contains("seams: ") && on.contains(" edges, max diff "),
+        "{on}"
+    );
+    let off = run(&["--no-seams"]);
+    assert!(!off.contains("seams: "), "{off}");
 }

@@ -5,11 +5,20 @@
 //! (and denoised, and dilated) independently, so the two sides disagree and a visible line runs
 //! along every seam.
 //!
-//! Measured at the `medium` preset (16 texels/m, K = 256, xatlas charts) on
-//! `testing::sphere_on_floor` (a smooth 560-triangle sphere cut into charts): 104 seam edges,
-//! 814 samples; mean |A − B| 0.0303 → 0.0008 (12 % → 0.3 % of the mean value there), max
-//! 0.384 → 0.012; 1042 texels solved for, 149 CG iterations, 2 ms. The committed fixtures
-//! (Cornell box, two rooms, …) are flat faces meeting at creases: no seam edges, nothing changes.
+//! Measured (mean and max of |A − B| along all seams, `H/π` units; time of finding, measuring
+//! twice and stitching):
+//!
+//! | scene (preset)                                   | edges | mean before → after | max before → after | time   |
+//! |--------------------------------------------------|-------|---------------------|--------------------|--------|
+//! | `testing::sphere_on_floor` (medium)              | 104   | 0.0303 → 0.0008     | 0.384 → 0.012      | 2 ms   |
+//! | `point_light.gltf`, 32-texel pages (medium)      | 63    | 0.0062 → 0.00002    | 0.0177 → 0.0005    | 6 ms   |
+//! | `two_rooms.gltf`, 64-texel pages (medium)        | 43    | 0.0092 → 0.0003     | 0.278 → 0.014      | 3 ms   |
+//! | `testing::large_hall`, 116k triangles (draft)    | 5995  | 0.0211 → 0.0002     | 0.479 → 0.011      | 0.29 s |
+//!
+//! (mean values along the seams 0.25, 0.46, 0.55, 0.29: the mean discontinuity drops from
+//! 1–12 % to 0.01–0.3 % of the value; the large hall's stitching is 0.8 % of its 36 s bake).
+//! At the default page size the committed fixtures (Cornell box, two rooms, …) are flat faces
+//! meeting at creases: no seam edges, nothing changes.
 //!
 //! ## What a seam is
 //!
@@ -508,6 +517,46 @@ mod tests {
                 let v = if x < 4 { 1.0 } else { 3.0 };
                 assert_eq!(p.rgb[(y * 8 + x) as usize], Vec3::splat(v));
             }
+        }
+    }
+
+    #[test]
+    fn stitched_values_stay_finite_and_non_negative() {
+        let edge = SeamEdge {
+            triangles: [0, 1],
+            page: [0, 0],
+            uv: [
+                [Vec2::new(1.0, 0.0), Vec2::new(1.0, 8.0)],
+                [Vec2::new(7.0, 0.0), Vec2::new(7.0, 8.0)],
+            ],
+        };
+        let mut seams = Seams::default();
+        push_samples(&mut seams.samples, &edge, 3.0);
+        seams.edges.push(edge);
+        // A bright stripe next to black on one side, a checker on the other; then values so
+        // large their squares overflow f32.
+        let stripes = |x: u32, y: u32| match x {
+            0 => Vec3::ZERO,
+            1 => Vec3::new(100.0, 0.0, 5.0),
+            _ if (x + y) % 2 == 0 => Vec3::splat(50.0),
+            _ => Vec3::ZERO,
+        };
+        for (scale, lambda) in [(1.0, 1e-6), (1.0, 0.01), (1e30, 0.01)] {
+            let mut pages = LightmapPages {
+                pages: vec![page(9, 8, |x, y| stripes(x, y) * scale)],
+            };
+            let params = SeamParams {
+                lambda,
+                ..SeamParams::default()
+            };
+            stitch(&seams, &mut pages, &params);
+            let p = &pages.pages[0];
+            assert!(
+                p.rgb
+                    .iter()
+                    .all(|v| v.is_finite() && v.min_element() >= 0.0),
+                "scale {scale} lambda {lambda}"
+            );
         }
     }
 
