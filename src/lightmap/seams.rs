@@ -538,7 +538,7 @@ mod tests {
         let stripes = |x: u32, y: u32| match x {
             0 => Vec3::ZERO,
             1 => Vec3::new(100.0, 0.0, 5.0),
-            _ if (x + y) % 2 == 0 => Vec3::splat(50.0),
+            _ if (x + y).is_multiple_of(2) => Vec3::splat(50.0),
             _ => Vec3::ZERO,
         };
         for (scale, lambda) in [(1.0, 1e-6), (1.0, 0.01), (1e30, 0.01)] {
