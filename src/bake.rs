@@ -34,6 +34,8 @@ pub struct BakeReport {
     pub validity: texels::validity::ValidityReport,
     /// The automatic choice of settings and its reasons (`config.auto`).
     pub plan: Option<Plan>,
+    /// Seam discontinuity before and after stitching (`None` when stitching is off).
+    pub seams: Option<lightmap::seams::SeamReport>,
     pub stages: Vec<StageTime>,
     /// The files written, the glTF first.
     pub files: Vec<PathBuf>,
@@ -52,8 +54,15 @@ impl BakeReport {
             .plan
             .as_ref()
             .map_or(String::new(), |p| format!("; {}", p.brief));
+        let seams = match &self.seams {
+            Some(s) => format!(
+                "; seams: {} edges, max diff {:.1e} → {:.1e}",
+                s.before.edges, s.before.max_abs_diff, s.after.max_abs_diff
+            ),
+            None => String::new(),
+        };
         format!(
-            "{} texels ({} moved out of geometry, {} invalid) on {} page(s), {} triangles, {:.2} M rays, {} iterations, residual {:.1e}{}{plan}; {} (total {:.2}s)",
+            "{} texels ({} moved out of geometry, {} invalid) on {} page(s), {} triangles, {:.2} M rays, {} iterations, residual {:.1e}{}{}{plan}; {} (total {:.2}s)",
             self.texels,
             self.validity.moved,
             self.validity.invalid,
@@ -67,6 +76,7 @@ impl BakeReport {
             } else {
                 " (NOT converged)"
             },
+            seams,
             stages.join(", "),
             total
         )
@@ -82,13 +92,14 @@ pub struct Baked {
     pub texels: texels::Texels,
     pub transport: transport::Transport,
     pub solution: solve::Solution,
-    /// `H/π` per texel (what the pages hold before dilation).
+    /// `H/π` per texel (what the pages hold before dilation and seam stitching).
     pub lightmap: Vec<Vec3>,
     pub pages: LightmapPages,
     pub validity: texels::validity::ValidityReport,
     /// The settings the bake ran with: `config` with the automatic choices applied.
     pub config: BakeConfig,
     pub plan: Option<Plan>,
+    pub seams: Option<lightmap::seams::SeamReport>,
     pub stages: Vec<StageTime>,
 }
 
@@ -220,6 +231,12 @@ pub fn compute(input: &Path, config: &BakeConfig, progress: &dyn Progress) -> Re
     let mut pages = LightmapPages::from_texels(&texels, &lightmap);
     lightmap::dilate(&mut pages, config.atlas.padding.max(2) * 2);
     timed("dilate", t);
+    let t = Instant::now();
+    let seams = config
+        .output
+        .seams
+        .then(|| lightmap::seams::stitch_bake(&scene, &atlas, &mut pages, &Default::default()));
+    timed("seams", t);
 
     Ok(Baked {
         scene,
@@ -233,6 +250,7 @@ pub fn compute(input: &Path, config: &BakeConfig, progress: &dyn Progress) -> Re
         validity,
         config,
         plan,
+        seams,
         stages,
     })
 }
@@ -255,6 +273,7 @@ pub fn write(
         pages,
         validity,
         plan,
+        seams,
         mut stages,
         ..
     } = baked;
@@ -305,6 +324,7 @@ pub fn write(
         converged: solution.converged,
         validity,
         plan,
+        seams,
         stages,
         files,
     })

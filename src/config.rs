@@ -102,6 +102,9 @@ pub struct OutputParams {
     pub preview_exposure: f32,
     /// Also write each page as an 8-bit RGBM PNG (`lightmap::rgbm`, range 8).
     pub rgbm: bool,
+    /// Stitch UV seams after dilation (`lightmap::seams`): least squares on the texels along
+    /// chart cuts through smooth surfaces, so both sides filter to the same value.
+    pub seams: bool,
 }
 
 /// All options of a bake.
@@ -149,6 +152,7 @@ impl BakeConfig {
                 float: false,
                 preview_exposure: 0.0,
                 rgbm: false,
+                seams: true,
             },
             auto: None,
         }

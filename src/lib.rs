@@ -17,6 +17,7 @@
 //!        ─ transport::build ──▶ Transport             form factors F_ij (CSR rows) + H_direct
 //!            ─ solve::solve ──▶ Solution              H = H_direct + F·(ρH), iterated
 //! ─ LightmapPages::from_texels ▶ LightmapPages         H/π per texel, dilated into the gutters
+//!         ─ lightmap::seams ──▶ LightmapPages         UV seams stitched (least squares)
 //!                  ─ output ──▶ .exr + .png pages, .gltf/.bin or .glb
 //! ```
 //!

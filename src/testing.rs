@@ -106,6 +106,49 @@ impl Geometry {
         geometry
     }
 
+    /// A UV sphere with smooth normals: `nu` segments around +Y, `nv` rings, `uv0 = (s, t)`
+    /// (one column of vertices repeated where `s` wraps, as exporters write it).
+    pub fn uv_sphere(center: Vec3, radius: f32, nu: u32, nv: u32) -> Self {
+        assert!(
+            nu >= 3 && nv >= 2,
+            "a sphere needs at least 3 segments and 2 rings"
+        );
+        let mut geometry = Geometry {
+            normals: Some(Vec::new()),
+            uv0: Some(Vec::new()),
+            ..Default::default()
+        };
+        for j in 0..=nv {
+            for i in 0..=nu {
+                let (s, t) = (i as f32 / nu as f32, j as f32 / nv as f32);
+                let (phi, theta) = (s * std::f32::consts::TAU, t * std::f32::consts::PI);
+                let n = Vec3::new(
+                    theta.sin() * phi.cos(),
+                    theta.cos(),
+                    -theta.sin() * phi.sin(),
+                );
+                geometry.positions.push(center + n * radius);
+                geometry.normals.as_mut().unwrap().push(n);
+                geometry.uv0.as_mut().unwrap().push(Vec2::new(s, t));
+            }
+        }
+        let vertex = |i: u32, j: u32| j * (nu + 1) + i;
+        for j in 0..nv {
+            for i in 0..nu {
+                let (a, b) = (vertex(i, j), vertex(i + 1, j));
+                let (c, d) = (vertex(i + 1, j + 1), vertex(i, j + 1));
+                // Counter-clockwise seen from outside; the pole rows have one triangle per quad.
+                if j > 0 {
+                    geometry.indices.extend_from_slice(&[a, d, b]);
+                }
+                if j + 1 < nv {
+                    geometry.indices.extend_from_slice(&[b, d, c]);
+                }
+            }
+        }
+        geometry
+    }
+
     /// Appends `other`'s vertices and triangles; both must carry the same attributes
     /// (an empty geometry takes on `other`'s).
     pub fn append(&mut self, other: &Geometry) {
@@ -1357,6 +1400,26 @@ pub fn large_hall() -> GltfBuilder {
         camera,
         Vec3::new(-10.0, 2.0, 10.0),
         Vec3::new(2.0, 1.5, -2.0),
+    );
+    gltf
+}
+
+/// A smooth sphere (radius 0.5, 24 × 12 segments) on a 3 × 3 m floor under a point light and
+/// a dim sky: xatlas cuts the sphere into several charts, so its lightmap has UV seams across
+/// a smooth surface (`lightmap::seams`). Not a committed fixture: generated on demand.
+pub fn sphere_on_floor() -> GltfBuilder {
+    let mut gltf = GltfBuilder::new("sphere_on_floor");
+    let floor_m = gltf.add_material(Material::grey("floor", 0.5));
+    let sphere_m = gltf.add_material(Material::diffuse("sphere", [0.8, 0.7, 0.6]));
+    let floor_mesh = gltf.add_mesh("floor", floor(3.0, 4), floor_m);
+    gltf.add_mesh_node("floor", floor_mesh);
+    let sphere = Geometry::uv_sphere(Vec3::new(0.0, 0.5, 0.0), 0.5, 24, 12);
+    let sphere_mesh = gltf.add_mesh("sphere", sphere, sphere_m);
+    gltf.add_mesh_node("sphere", sphere_mesh);
+    gltf.add_light_node(
+        Light::point("light", [1.0; 3], 8.0),
+        Vec3::new(0.8, 2.0, 0.6),
+        Vec3::NEG_Y,
     );
     gltf
 }

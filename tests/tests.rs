@@ -12,4 +12,5 @@ mod plan;
 mod quality;
 mod reference;
 mod render;
+mod seams;
 mod solvers;

@@ -156,6 +156,9 @@ struct BakeArgs {
     /// Skip the edge-aware denoiser (Monte Carlo method only; see lightmap::denoise).
     #[arg(long)]
     no_denoise: bool,
+    /// Leave UV seams unstitched (see lightbake::lightmap::seams).
+    #[arg(long)]
+    no_seams: bool,
     /// Exposure of the PNG previews, in stops.
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     exposure: f32,
@@ -256,6 +259,7 @@ impl BakeArgs {
                 },
             });
         }
+        c.output.seams = !self.no_seams;
         c
     }
 }

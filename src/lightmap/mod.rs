@@ -1,4 +1,4 @@
-//! Stage 7 — `LightmapPages`: the solution laid back into page images, then dilated.
+//! Stage 7 — `LightmapPages`: the solution laid back into page images, dilated, seams stitched.
 //!
 //! A texel stores `H/π` (irradiance over π): the radiance a white Lambertian surface would
 //! reflect, so a renderer shades with `baseColor × lightmap + emission`.
@@ -6,6 +6,7 @@
 pub mod denoise;
 mod dilate;
 pub mod rgbm;
+pub mod seams;
 
 use glam::Vec3;
 

@@ -1,0 +1,668 @@
+//! Seam stitching: texels on both sides of a UV seam are made to agree along it.
+//!
+//! Why: a chart boundary that cuts through a smooth surface is one 3D edge with two places in
+//! the lightmap. A renderer filters each side bilinearly from its own texels, which were solved
+//! (and denoised, and dilated) independently, so the two sides disagree and a visible line runs
+//! along every seam.
+//!
+//! Measured (mean and max of |A − B| along all seams, `H/π` units; time of finding, measuring
+//! twice and stitching):
+//!
+//! | scene (preset)                                   | edges | mean before → after | max before → after | time   |
+//! |--------------------------------------------------|-------|---------------------|--------------------|--------|
+//! | `testing::sphere_on_floor` (medium)              | 104   | 0.0303 → 0.0008     | 0.384 → 0.012      | 2 ms   |
+//! | `point_light.gltf`, 32-texel pages (medium)      | 63    | 0.0062 → 0.00002    | 0.0177 → 0.0005    | 6 ms   |
+//! | `two_rooms.gltf`, 64-texel pages (medium)        | 43    | 0.0092 → 0.0003     | 0.278 → 0.014      | 3 ms   |
+//! | `testing::large_hall`, 116k triangles (draft)    | 5995  | 0.0211 → 0.0002     | 0.479 → 0.011      | 0.29 s |
+//!
+//! (mean values along the seams 0.25, 0.46, 0.55, 0.29: the mean discontinuity drops from
+//! 1–12 % to 0.01–0.3 % of the value; the large hall's stitching is 0.8 % of its 36 s bake).
+//! At the default page size the committed fixtures (Cornell box, two rooms, …) are flat faces
+//! meeting at creases: no seam edges, nothing changes.
+//!
+//! ## What a seam is
+//!
+//! Two triangle edges form a seam edge when
+//! - their end points are the same points in space (welded within `weld` × the scene's bounding
+//!   box diagonal), traversed in opposite directions (the two faces lie side by side, not folded
+//!   onto each other), in any instances;
+//! - the surface is smooth there: at both end points the vertex normals of the two sides agree
+//!   within `acos(min_normal_dot)` and the faces fold by less than `acos(min_face_dot)`. Across a
+//!   hard crease (a floor meeting a wall, a box corner) `H/π` legitimately jumps, because
+//!   irradiance depends on the normal; those edges are left alone. The back face of a
+//!   double-sided surface has the opposite normal, so it never pairs with its front;
+//! - their lightmap UVs differ (another page, or another place on the page): an edge inside a
+//!   chart is filtered from the same texels on both sides and needs nothing.
+//!
+//! Edges that meet only partly (T-junctions) are not found.
+//!
+//! ## Measure and stitch
+//!
+//! Each seam edge is sampled at `samples_per_texel` points per texel of its longer UV side, at
+//! the midpoints of equal steps. At a sample `s`, `A(s)` and `B(s)` are the bilinear lookups of
+//! the two sides exactly as a renderer makes them (texel centres at half-integers, clamp to edge),
+//! each a weighted sum of 4 page texels. [`measure`] reports the mean and maximum over samples
+//! of `|A − B|` (averaged over RGB), absolute in `H/π` units, and the mean value there, for
+//! relative figures.
+//!
+//! [`stitch`] then solves, per RGB channel, the least-squares problem of The Witness
+//! (I. Castaño, "Lightmap seams", 2014) and Godot's lightmapper:
+//!
+//! ```text
+//! min_x  Σ_s ‖A_s·x − B_s·x‖²  +  λ Σ_t ‖x_t − x⁰_t‖²
+//! ```
+//!
+//! over the texels `t` that some lookup touches (every other texel keeps its value bit for
+//! bit). The normal equations `(λI + Σ_s d_s d_sᵀ) x = λx⁰`, `d_s = a_s − b_s` (8 taps), are
+//! symmetric positive definite; they are solved matrix-free by conjugate gradients started at
+//! `x⁰`, the three channels in lockstep, serially (deterministic, no thread dependence). The
+//! result is clamped to ≥ 0 and non-finite values fall back to `x⁰`.
+//!
+//! Stitching runs on the final page texels, after dilation: a lookup on a chart border reaches
+//! half a texel beyond it into the gutter, and those gutter texels are what a renderer reads.
+//!
+//! | parameter           | default | effect                                                     |
+//! |---------------------|---------|------------------------------------------------------------|
+//! | `samples_per_texel` | 3       | sample density along each seam                             |
+//! | `lambda` λ          | 0.01    | pull towards the solved values; larger = seams stay open   |
+//! | `iterations`        | 300     | conjugate-gradient cap (stops earlier on `1e-6` residual)  |
+//! | `min_normal_dot`    | 0.995   | vertex normals within ~5.7° make a smooth edge             |
+//! | `min_face_dot`      | 0.5     | faces folding by more than 60° are a crease                |
+//! | `weld`              | 1e-5    | position tolerance, relative to the scene's diagonal       |
+//!
+//! Limits: a seam can only be closed as far as the bilinear footprints allow: where a chart
+//! border is shorter than a texel, or one texel serves two seams pulling different ways, some
+//! difference remains. Stitching moves texels by at most the seam's own discontinuity, so it
+//! does not change the energy of a chart noticeably.
+
+use std::collections::HashMap;
+
+use glam::{Vec2, Vec3};
+
+use super::LightmapPages;
+use crate::atlas::{Atlas, PageSize};
+use crate::scene::Scene;
+
+/// Seam detection and stitching settings (see the table in the module docs).
+#[derive(Clone, Debug)]
+pub struct SeamParams {
+    pub samples_per_texel: f32,
+    pub lambda: f32,
+    pub iterations: u32,
+    pub min_normal_dot: f32,
+    pub min_face_dot: f32,
+    pub weld: f32,
+}
+
+impl Default for SeamParams {
+    fn default() -> Self {
+        SeamParams {
+            samples_per_texel: 3.0,
+            lambda: 0.01,
+            iterations: 300,
+            min_normal_dot: 0.995,
+            min_face_dot: 0.5,
+            weld: 1e-5,
+        }
+    }
+}
+
+/// One seam edge: the same 3D edge on two triangles with different lightmap UVs.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SeamEdge {
+    /// Scene triangles of side A and side B.
+    pub triangles: [u32; 2],
+    /// Page of each side.
+    pub page: [u32; 2],
+    /// End points P and Q of the edge on each side, in texel units of its page
+    /// (`uv[side][0]` is P on both sides).
+    pub uv: [[Vec2; 2]; 2],
+}
+
+/// The seam edges of a scene and their sample points.
+#[derive(Clone, Debug, Default)]
+pub struct Seams {
+    pub edges: Vec<SeamEdge>,
+    /// Sample points along the edges: page and position (texel units) of each side.
+    pub samples: Vec<SeamSample>,
+}
+
+/// One point on a seam edge, as seen from its two sides.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SeamSample {
+    pub page: [u32; 2],
+    pub uv: [Vec2; 2],
+}
+
+/// Discontinuity along the seams: over all samples, `|A − B|` averaged over RGB (`H/π` units).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct SeamStats {
+    pub edges: usize,
+    pub samples: usize,
+    pub mean_abs_diff: f32,
+    pub max_abs_diff: f32,
+    /// Mean of `(A + B)/2` over samples and RGB (divide by it for relative figures).
+    pub mean_value: f32,
+}
+
+/// What stitching did: the discontinuity before and after, the texels it changed, its time.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct SeamReport {
+    pub before: SeamStats,
+    pub after: SeamStats,
+    /// Texels that are unknowns of the least-squares problem.
+    pub texels: usize,
+    /// Conjugate-gradient iterations run.
+    pub iterations: u32,
+    pub seconds: f64,
+}
+
+/// The bake's seam step: finds the seams, measures, stitches `pages` in place, measures again.
+pub fn stitch_bake(
+    scene: &Scene,
+    atlas: &Atlas,
+    pages: &mut LightmapPages,
+    params: &SeamParams,
+) -> SeamReport {
+    let start = std::time::Instant::now();
+    let seams = find(scene, atlas, params);
+    let before = measure(&seams, pages);
+    let (texels, iterations) = stitch(&seams, pages, params);
+    let after = measure(&seams, pages);
+    SeamReport {
+        before,
+        after,
+        texels,
+        iterations,
+        seconds: start.elapsed().as_secs_f64(),
+    }
+}
+
+/// Finds the seam edges of `scene` under `atlas` (see the module docs for the rules).
+pub fn find(scene: &Scene, atlas: &Atlas, params: &SeamParams) -> Seams {
+    let weld = weld_positions(&scene.positions, params.weld);
+    // Every triangle edge as (welded end points sorted, triangle, corner it starts at).
+    let mut half_edges: Vec<([u32; 2], u32, u8)> = Vec::with_capacity(scene.triangles.len() * 3);
+    for (t, tri) in scene.triangles.iter().enumerate() {
+        for k in 0..3 {
+            let (a, b) = (weld[tri[k] as usize], weld[tri[(k + 1) % 3] as usize]);
+            if a != b {
+                half_edges.push(([a.min(b), a.max(b)], t as u32, k as u8));
+            }
+        }
+    }
+    half_edges.sort_unstable();
+
+    let face_normal = |t: u32| {
+        let [a, b, c] = scene.triangles[t as usize].map(|v| scene.positions[v as usize]);
+        (b - a).cross(c - a).normalize_or_zero()
+    };
+    let mut seams = Seams::default();
+    for group in half_edges.chunk_by(|x, y| x.0 == y.0) {
+        for (i, &(_, ta, ka)) in group.iter().enumerate() {
+            for &(_, tb, kb) in &group[i + 1..] {
+                if ta == tb {
+                    continue;
+                }
+                // Corners of each triangle at P (where side A's edge starts) and at Q.
+                let tri_a = scene.triangles[ta as usize];
+                let tri_b = scene.triangles[tb as usize];
+                let (pa, qa) = (ka as usize, (ka as usize + 1) % 3);
+                let (qb, pb) = (kb as usize, (kb as usize + 1) % 3);
+                // Side by side means opposite directions: B's edge runs Q → P.
+                if weld[tri_b[qb] as usize] != weld[tri_a[qa] as usize] {
+                    continue;
+                }
+                let n = |tri: [u32; 3], k: usize| scene.normals[tri[k] as usize];
+                let smooth = n(tri_a, pa).dot(n(tri_b, pb)) >= params.min_normal_dot
+                    && n(tri_a, qa).dot(n(tri_b, qb)) >= params.min_normal_dot
+                    && face_normal(ta).dot(face_normal(tb)) >= params.min_face_dot;
+                if !smooth {
+                    continue;
+                }
+                let (uv_a, page_a) = texel_uv(atlas, scene, ta);
+                let (uv_b, page_b) = texel_uv(atlas, scene, tb);
+                let uv = [[uv_a[pa], uv_a[qa]], [uv_b[pb], uv_b[qb]]];
+                let same_place = page_a == page_b
+                    && uv[0][0].distance(uv[1][0]) < 1e-3
+                    && uv[0][1].distance(uv[1][1]) < 1e-3;
+                if same_place || !uv.as_flattened().iter().all(|q| q.is_finite()) {
+                    continue;
+                }
+                let edge = SeamEdge {
+                    triangles: [ta, tb],
+                    page: [page_a, page_b],
+                    uv,
+                };
+                push_samples(&mut seams.samples, &edge, params.samples_per_texel);
+                seams.edges.push(edge);
+            }
+        }
+    }
+    seams
+}
+
+/// Samples at the midpoints of `n` equal steps along the edge, `n` ≈ density × UV length.
+fn push_samples(samples: &mut Vec<SeamSample>, edge: &SeamEdge, per_texel: f32) {
+    let [[pa, qa], [pb, qb]] = edge.uv;
+    let length = pa.distance(qa).max(pb.distance(qb));
+    let n = (length * per_texel).ceil().clamp(1.0, 4096.0) as u32;
+    for k in 0..n {
+        let s = (k as f32 + 0.5) / n as f32;
+        samples.push(SeamSample {
+            page: edge.page,
+            uv: [pa.lerp(qa, s), pb.lerp(qb, s)],
+        });
+    }
+}
+
+/// Lightmap UVs of triangle `t` in texel units of its page, and the page.
+fn texel_uv(atlas: &Atlas, scene: &Scene, t: u32) -> ([Vec2; 3], u32) {
+    let (uv, page) = atlas.triangle_uv(scene, t);
+    let size = atlas.pages[page as usize];
+    let scale = Vec2::new(size.width as f32, size.height as f32);
+    (uv.map(|q| q * scale), page)
+}
+
+/// Welded id per position: positions within `relative` × the bounding-box diagonal share one
+/// (the first in order wins, so ids are deterministic).
+fn weld_positions(positions: &[Vec3], relative: f32) -> Vec<u32> {
+    let (lo, hi) = positions.iter().fold(
+        (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
+        |(lo, hi), &p| (lo.min(p), hi.max(p)),
+    );
+    let diagonal = if positions.is_empty() {
+        1.0
+    } else {
+        (hi - lo).length()
+    };
+    let eps = (relative * diagonal).max(f32::MIN_POSITIVE);
+    let cell = |p: Vec3| ((p - lo) / eps).floor().as_ivec3();
+    let mut grid: HashMap<glam::IVec3, Vec<u32>> = HashMap::new();
+    let mut representative: Vec<u32> = Vec::new(); // weld id → vertex
+    let mut weld = Vec::with_capacity(positions.len());
+    for &p in positions {
+        let c = cell(p);
+        let near = |id: &&u32| positions[representative[**id as usize] as usize].distance(p) <= eps;
+        let found = (0..27)
+            .map(|k| c + glam::IVec3::new(k % 3 - 1, k / 3 % 3 - 1, k / 9 - 1))
+            .find_map(|cell| {
+                grid.get(&cell)
+                    .and_then(|ids| ids.iter().find(near).copied())
+            });
+        let id = found.unwrap_or_else(|| {
+            let id = representative.len() as u32;
+            representative.push(weld.len() as u32);
+            grid.entry(c).or_default().push(id);
+            id
+        });
+        weld.push(id);
+    }
+    weld
+}
+
+/// The 4 texels (row-major index in the page) and weights of a renderer's bilinear lookup at
+/// `q` (texel units): texel centres at half-integers, clamp to edge.
+#[inline]
+fn bilinear(size: PageSize, q: Vec2) -> [(u32, f32); 4] {
+    let (w, h) = (size.width as i64, size.height as i64);
+    let (x, y) = (q.x - 0.5, q.y - 0.5);
+    let (x0, y0) = (x.floor(), y.floor());
+    let (fx, fy) = (x - x0, y - y0);
+    let (x0, y0) = (x0 as i64, y0 as i64);
+    let at = |xi: i64, yi: i64| (yi.clamp(0, h - 1) * w + xi.clamp(0, w - 1)) as u32;
+    [
+        (at(x0, y0), (1.0 - fx) * (1.0 - fy)),
+        (at(x0 + 1, y0), fx * (1.0 - fy)),
+        (at(x0, y0 + 1), (1.0 - fx) * fy),
+        (at(x0 + 1, y0 + 1), fx * fy),
+    ]
+}
+
+fn lookup(pages: &LightmapPages, page: u32, q: Vec2) -> Vec3 {
+    let p = &pages.pages[page as usize];
+    let size = PageSize {
+        width: p.width,
+        height: p.height,
+    };
+    bilinear(size, q)
+        .iter()
+        .map(|&(k, w)| p.rgb[k as usize] * w)
+        .sum()
+}
+
+/// The discontinuity along `seams` in `pages` (bilinear lookups, as a renderer makes them).
+pub fn measure(seams: &Seams, pages: &LightmapPages) -> SeamStats {
+    let mut sum_diff = 0.0f64;
+    let mut sum_value = 0.0f64;
+    let mut max_diff = 0.0f32;
+    for s in &seams.samples {
+        let a = lookup(pages, s.page[0], s.uv[0]);
+        let b = lookup(pages, s.page[1], s.uv[1]);
+        let diff = (a - b).abs().element_sum() / 3.0;
+        sum_diff += diff as f64;
+        sum_value += ((a + b).element_sum() / 6.0) as f64;
+        max_diff = max_diff.max(diff);
+    }
+    let n = seams.samples.len().max(1) as f64;
+    SeamStats {
+        edges: seams.edges.len(),
+        samples: seams.samples.len(),
+        mean_abs_diff: (sum_diff / n) as f32,
+        max_abs_diff: max_diff,
+        mean_value: (sum_value / n) as f32,
+    }
+}
+
+/// Stitches `pages` along `seams` (least squares, see the module docs). Returns the number of
+/// texels solved for and the conjugate-gradient iterations run. Texels no lookup touches are
+/// not changed.
+pub fn stitch(seams: &Seams, pages: &mut LightmapPages, params: &SeamParams) -> (usize, u32) {
+    if seams.samples.is_empty() {
+        return (0, 0);
+    }
+    // Unknowns: every texel some lookup touches, numbered in sample order.
+    let mut unknown: Vec<Vec<u32>> = pages
+        .pages
+        .iter()
+        .map(|p| vec![u32::MAX; p.rgb.len()])
+        .collect();
+    let mut texel_of: Vec<(u32, u32)> = Vec::new(); // unknown → (page, index in page)
+    // Per sample, `d_s` as 8 (unknown, coefficient) taps: side A positive, side B negative.
+    let mut taps: Vec<[(u32, f32); 8]> = Vec::with_capacity(seams.samples.len());
+    for s in &seams.samples {
+        let mut d = [(0u32, 0.0f32); 8];
+        for side in 0..2 {
+            let page = s.page[side] as usize;
+            let size = PageSize {
+                width: pages.pages[page].width,
+                height: pages.pages[page].height,
+            };
+            let sign = if side == 0 { 1.0 } else { -1.0 };
+            for (j, (k, w)) in bilinear(size, s.uv[side]).into_iter().enumerate() {
+                let slot = &mut unknown[page][k as usize];
+                if *slot == u32::MAX {
+                    *slot = texel_of.len() as u32;
+                    texel_of.push((page as u32, k));
+                }
+                d[side * 4 + j] = (*slot, sign * w);
+            }
+        }
+        taps.push(d);
+    }
+    let n = texel_of.len();
+    let x0: Vec<Vec3> = texel_of
+        .iter()
+        .map(|&(p, k)| pages.pages[p as usize].rgb[k as usize])
+        .collect();
+    let lambda = params.lambda.max(1e-6);
+
+    // y = (λI + Σ_s d_s d_sᵀ) x, matrix-free.
+    let apply = |x: &[Vec3], y: &mut [Vec3]| {
+        for (y, x) in y.iter_mut().zip(x) {
+            *y = *x * lambda;
+        }
+        for d in &taps {
+            let dx: Vec3 = d.iter().map(|&(j, c)| x[j as usize] * c).sum();
+            for &(j, c) in d {
+                y[j as usize] += dx * c;
+            }
+        }
+    };
+    let dot = |a: &[Vec3], b: &[Vec3]| -> Vec3 {
+        let s = a
+            .iter()
+            .zip(b)
+            .fold(glam::DVec3::ZERO, |s, (a, b)| s + (*a * *b).as_dvec3());
+        s.as_vec3()
+    };
+
+    // Conjugate gradients from x⁰, three channels in lockstep: r = λx⁰ − A x⁰.
+    let mut x = x0.clone();
+    let mut r = vec![Vec3::ZERO; n];
+    let mut ap = vec![Vec3::ZERO; n];
+    apply(&x, &mut ap);
+    for ((r, x0), ax) in r.iter_mut().zip(&x0).zip(&ap) {
+        *r = *x0 * lambda - *ax;
+    }
+    let mut p = r.clone();
+    let mut rr = dot(&r, &r);
+    let scale = dot(&x0, &x0).max_element() * lambda * lambda;
+    let tolerance = (scale * 1e-12).max(f32::MIN_POSITIVE);
+    let mut iterations = 0;
+    while iterations < params.iterations && rr.max_element() > tolerance {
+        apply(&p, &mut ap);
+        let pap = dot(&p, &ap);
+        // A channel that has converged (or has nothing to do) takes no step.
+        let alpha = Vec3::select(pap.cmpgt(Vec3::ZERO), rr / pap, Vec3::ZERO);
+        for ((x, r), (p, ap)) in x.iter_mut().zip(r.iter_mut()).zip(p.iter().zip(&ap)) {
+            *x += alpha * *p;
+            *r -= alpha * *ap;
+        }
+        let rr_new = dot(&r, &r);
+        let beta = Vec3::select(rr.cmpgt(Vec3::ZERO), rr_new / rr, Vec3::ZERO);
+        for (p, r) in p.iter_mut().zip(&r) {
+            *p = *r + beta * *p;
+        }
+        rr = rr_new;
+        iterations += 1;
+    }
+
+    for ((&(page, k), x), x0) in texel_of.iter().zip(&x).zip(&x0) {
+        let v = x.max(Vec3::ZERO);
+        pages.pages[page as usize].rgb[k as usize] = if v.is_finite() { v } else { *x0 };
+    }
+    (n, iterations)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::lightmap::Page;
+
+    fn page(w: u32, h: u32, f: impl Fn(u32, u32) -> Vec3) -> Page {
+        Page {
+            width: w,
+            height: h,
+            rgb: (0..h)
+                .flat_map(|y| (0..w).map(move |x| (x, y)))
+                .map(|(x, y)| f(x, y))
+                .collect(),
+            valid: vec![true; (w * h) as usize],
+        }
+    }
+
+    #[test]
+    fn bilinear_weights_match_the_renderer_convention() {
+        let size = PageSize {
+            width: 4,
+            height: 4,
+        };
+        // At a texel centre all weight is on that texel.
+        let t = bilinear(size, Vec2::new(1.5, 2.5));
+        assert_eq!(t[0], (2 * 4 + 1, 1.0));
+        // Halfway between two centres.
+        let t = bilinear(size, Vec2::new(2.0, 0.5));
+        assert_eq!((t[0], t[1]), ((1, 0.5), (2, 0.5)));
+    }
+
+    #[test]
+    fn a_seam_between_two_regions_closes_and_nothing_else_moves() {
+        // Side A: a vertical edge x = 2 on the left half (value 1); side B: x = 6 (value 3).
+        let mut pages = LightmapPages {
+            pages: vec![page(8, 4, |x, _| {
+                Vec3::splat(if x < 4 { 1.0 } else { 3.0 })
+            })],
+        };
+        let edge = SeamEdge {
+            triangles: [0, 1],
+            page: [0, 0],
+            uv: [
+                [Vec2::new(2.0, 0.0), Vec2::new(2.0, 4.0)],
+                [Vec2::new(6.0, 0.0), Vec2::new(6.0, 4.0)],
+            ],
+        };
+        let mut seams = Seams::default();
+        push_samples(&mut seams.samples, &edge, 3.0);
+        seams.edges.push(edge);
+        let before = measure(&seams, &pages);
+        assert!((before.mean_abs_diff - 2.0).abs() < 1e-6);
+        let (texels, _) = stitch(&seams, &mut pages, &SeamParams::default());
+        assert_eq!(texels, 16);
+        let after = measure(&seams, &pages);
+        assert!(after.max_abs_diff < 0.05 * before.max_abs_diff, "{after:?}");
+        let p = &pages.pages[0];
+        for y in 0..4 {
+            for x in [0, 3, 4, 7] {
+                let v = if x < 4 { 1.0 } else { 3.0 };
+                assert_eq!(p.rgb[(y * 8 + x) as usize], Vec3::splat(v));
+            }
+        }
+    }
+
+    #[test]
+    fn stitched_values_stay_finite_and_non_negative() {
+        let edge = SeamEdge {
+            triangles: [0, 1],
+            page: [0, 0],
+            uv: [
+                [Vec2::new(1.0, 0.0), Vec2::new(1.0, 8.0)],
+                [Vec2::new(7.0, 0.0), Vec2::new(7.0, 8.0)],
+            ],
+        };
+        let mut seams = Seams::default();
+        push_samples(&mut seams.samples, &edge, 3.0);
+        seams.edges.push(edge);
+        // A bright stripe next to black on one side, a checker on the other; then values so
+        // large their squares overflow f32.
+        let stripes = |x: u32, y: u32| match x {
+            0 => Vec3::ZERO,
+            1 => Vec3::new(100.0, 0.0, 5.0),
+            _ if (x + y).is_multiple_of(2) => Vec3::splat(50.0),
+            _ => Vec3::ZERO,
+        };
+        for (scale, lambda) in [(1.0, 1e-6), (1.0, 0.01), (1e30, 0.01)] {
+            let mut pages = LightmapPages {
+                pages: vec![page(9, 8, |x, y| stripes(x, y) * scale)],
+            };
+            let params = SeamParams {
+                lambda,
+                ..SeamParams::default()
+            };
+            stitch(&seams, &mut pages, &params);
+            let p = &pages.pages[0];
+            assert!(
+                p.rgb
+                    .iter()
+                    .all(|v| v.is_finite() && v.min_element() >= 0.0),
+                "scale {scale} lambda {lambda}"
+            );
+        }
+    }
+
+    #[test]
+    fn welding_joins_close_points_only() {
+        let p = [
+            Vec3::ZERO,
+            Vec3::new(1.0, 1.0, 1.0),
+            Vec3::new(1e-7, 0.0, 0.0),
+            Vec3::new(1e-3, 0.0, 0.0),
+        ];
+        assert_eq!(weld_positions(&p, 1e-5), vec![0, 1, 0, 2]);
+    }
+
+    /// Two triangles sharing the edge (0,0,0)–(1,0,0), each with its own vertices, flat normals
+    /// and its own place on the page; the second is folded up by `fold` radians about the edge.
+    fn hinge(fold: f32) -> (Scene, Atlas) {
+        use crate::atlas::InstanceUv;
+        use crate::scene::{Instance, Material};
+        let (s, c) = fold.sin_cos();
+        let positions = vec![
+            Vec3::ZERO,
+            Vec3::X,
+            Vec3::new(0.5, 0.0, -1.0),
+            // second triangle: the same edge, its own vertices, on the other side
+            Vec3::X,
+            Vec3::ZERO,
+            Vec3::new(0.5, s, c),
+        ];
+        let triangles = vec![[0, 1, 2], [3, 4, 5]];
+        let mut normals = vec![Vec3::ZERO; 6];
+        for tri in &triangles {
+            let p = tri.map(|v: u32| positions[v as usize]);
+            let face = (p[1] - p[0]).cross(p[2] - p[0]).normalize();
+            for &v in tri {
+                normals[v as usize] = face;
+            }
+        }
+        let uv = vec![
+            Vec2::new(0.1, 0.4),
+            Vec2::new(0.4, 0.4),
+            Vec2::new(0.25, 0.1),
+            Vec2::new(0.9, 0.6),
+            Vec2::new(0.6, 0.6),
+            Vec2::new(0.75, 0.9),
+        ];
+        let scene = Scene {
+            uv0: vec![Vec2::ZERO; 6],
+            uv1: vec![Vec2::ZERO; 6],
+            positions,
+            normals,
+            triangles: triangles.clone(),
+            triangle_instance: vec![0; 2],
+            instances: vec![Instance {
+                node: 0,
+                mesh: 0,
+                primitive: 0,
+                material: 0,
+                vertices: 0..6,
+                triangles: 0..2,
+                source_triangle: vec![0, 1],
+                back_of: None,
+                back: None,
+                has_uv1: false,
+            }],
+            materials: vec![Material::default()],
+            ..Scene::default()
+        };
+        let atlas = Atlas {
+            pages: vec![PageSize {
+                width: 16,
+                height: 16,
+            }],
+            instances: vec![InstanceUv {
+                xref: (0..6).collect(),
+                uv,
+                triangles,
+                triangle_page: vec![0; 2],
+            }],
+            texels_per_unit: 16.0,
+            reused_input_uvs: false,
+        };
+        (scene, atlas)
+    }
+
+    #[test]
+    fn a_flat_cut_is_a_seam_and_a_crease_is_not() {
+        let params = SeamParams::default();
+        let (scene, atlas) = hinge(0.0);
+        let flat = find(&scene, &atlas, &params);
+        assert_eq!(flat.edges.len(), 1);
+        // P = (0,0,0) on both sides: side A's UV (0.1,0.4), side B's (0.6,0.6), in texels.
+        assert_eq!(flat.edges[0].uv[0][0], Vec2::new(1.6, 6.4));
+        assert_eq!(flat.edges[0].uv[1][0], Vec2::new(9.6, 9.6));
+        // 4.8 texels long at 3 samples per texel.
+        assert_eq!(flat.samples.len(), 15);
+        for fold in [0.5f32, std::f32::consts::FRAC_PI_2] {
+            let (scene, atlas) = hinge(fold);
+            assert!(
+                find(&scene, &atlas, &params).edges.is_empty(),
+                "fold {fold}"
+            );
+        }
+        // A smooth (shared) vertex normal does not hide a 90° box corner either.
+        let (mut scene, atlas) = hinge(std::f32::consts::FRAC_PI_2);
+        scene.normals = vec![Vec3::new(0.0, 1.0, -1.0).normalize(); 6];
+        assert!(find(&scene, &atlas, &params).edges.is_empty());
+    }
+}
