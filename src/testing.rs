@@ -1421,6 +1421,8 @@ pub fn sphere_on_floor() -> GltfBuilder {
         Vec3::new(0.8, 2.0, 0.6),
         Vec3::NEG_Y,
     );
+    let camera = Camera::perspective("camera", 0.8, None);
+    gltf.add_camera_node(camera, Vec3::new(0.0, 1.2, 2.6), Vec3::new(0.0, 0.4, 0.0));
     gltf
 }
 
@@ -1442,6 +1444,7 @@ pub fn fixture_files() -> Vec<(&'static str, Vec<u8>)> {
         ("instanced.gltf", instanced().to_gltf_bytes()),
         ("textured.gltf", textured().to_gltf_bytes()),
         ("two_rooms.gltf", two_rooms().to_gltf_bytes()),
+        ("sphere_on_floor.gltf", sphere_on_floor().to_gltf_bytes()),
     ]
 }
 

@@ -548,17 +548,22 @@ impl Patch {
         let c = &record.coverage;
         let dominant = &setups[c.dominant as usize];
         let mean = |sum: DVec3| sum / c.area;
+        let corners =
+            scene.triangles[c.dominant as usize].map(|v| scene.positions[v as usize].as_dvec3());
         let position = mean(c.position);
         let position = if position.is_finite() {
             position
         } else {
-            let p = scene.triangles[c.dominant as usize]
-                .map(|v| scene.positions[v as usize].as_dvec3());
-            (p[0] + p[1] + p[2]) / 3.0
+            (corners[0] + corners[1] + corners[2]) / 3.0
         };
+        // A texel spanning several facets of a curved surface has its centroid on a chord,
+        // inside a convex solid (a 24-segment sphere at 4 cm texels: ~2 mm deep), where every
+        // shadow ray hits the solid's back: dark spots all over a lit sphere. The dominant
+        // facet's plane bounds a convex solid, so the centroid goes onto it.
+        let g = dominant.geometric_normal;
+        let position = position - g * (position - corners[0]).dot(g);
         // Interpolated normals, unless they cancel out or turn against the dominant face
         // (opposite faces mapped onto one texel by bad input UVs).
-        let g = dominant.geometric_normal;
         let normal = match c.normal.try_normalize() {
             Some(n)
                 if c.normal.length() > 1e-6 * c.area && (g == DVec3::ZERO || n.dot(g) > 0.0) =>
