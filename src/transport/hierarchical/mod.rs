@@ -161,6 +161,7 @@ pub fn solve_with_stats(
         progress.end();
         rays += links.rays;
         stats.links = links.len();
+        state.scale = refiner.row_scale(&links);
         let converged = state.iterate(&tree, &links, solve, start, &mut solution, progress)?;
         solution.converged = converged;
     }
@@ -183,6 +184,8 @@ struct State<'a> {
     texels: &'a Texels,
     direct: &'a [Vec3],
     emitted: &'a [Vec3],
+    /// Per-texel correction of the pushed irradiance ([`Refiner::row_scale`]).
+    scale: Vec<f32>,
     h: Vec<Vec3>,
     b: Vec<Vec3>,
 }
@@ -193,6 +196,7 @@ impl<'a> State<'a> {
             texels,
             direct,
             emitted,
+            scale: vec![1.0; texels.len()],
             h: direct.to_vec(),
             b: vec![Vec3::ZERO; tree.len()],
         };
@@ -262,7 +266,7 @@ impl<'a> State<'a> {
             }
             let (mut change, mut total) = (0.0f64, 0.0f64);
             for (i, h) in self.h.iter_mut().enumerate() {
-                let new = self.direct[i] + pushed[i];
+                let new = self.direct[i] + pushed[i] * self.scale[i];
                 change += (new - *h).abs().element_sum() as f64;
                 total += new.element_sum() as f64;
                 *h = new;
