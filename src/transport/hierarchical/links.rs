@@ -35,6 +35,22 @@ pub const SAMPLES: u32 = 4;
 pub const NEAR: f32 = 2.0;
 /// Pairs per parallel work item.
 const CHUNK: usize = 256;
+pub fn knob(name: &str, default: f32) -> f32 {
+    static KNOBS: std::sync::OnceLock<std::sync::Mutex<Vec<(String, f32)>>> =
+        std::sync::OnceLock::new();
+    thread_local! {
+        static CACHE: std::cell::RefCell<Vec<(String, f32)>> = const { std::cell::RefCell::new(Vec::new()) };
+    }
+    let _ = &KNOBS;
+    CACHE.with(|c| {
+        if let Some(v) = c.borrow().iter().find(|(n, _)| n == name) {
+            return v.1;
+        }
+        let v = std::env::var(name).ok().and_then(|v| v.parse().ok()).unwrap_or(default);
+        c.borrow_mut().push((name.to_string(), v));
+        v
+    })
+}
 /// Random-stream purpose of link sampling.
 const PURPOSE: u64 = 0x4852_4c4b;
 
@@ -146,7 +162,7 @@ impl Refiner<'_> {
             }
         }
         let (split_p, split_q) = (!t.is_leaf(p), !t.is_leaf(q));
-        let near = p == q || dist < NEAR * reach;
+        let near = p == q || dist < knob("LB_NEAR", NEAR) * reach;
         let mut rng = Rng::new(self.seed, ((p as u64) << 32) | q as u64, PURPOSE);
         let mut x = [Vec3::ZERO; KERNEL_SAMPLES as usize];
         let mut y = [Vec3::ZERO; KERNEL_SAMPLES as usize];
@@ -169,6 +185,8 @@ impl Refiner<'_> {
                 // Visibility from SAMPLES shadow rays, spread over the strata (5 is coprime
                 // to 16, so the order visits every row and column of a 4×4 grid early).
                 let (mut seen, mut total, mut cast) = (0.0f32, 0.0f32, 0);
+                let (mut hits, mut misses) = (0, 0);
+                let samples = knob("LB_SAMPLES", SAMPLES as f32) as u32;
                 for k in 0..KERNEL_SAMPLES as usize {
                     let s = k * 5 % KERNEL_SAMPLES as usize;
                     if f[s] <= 0.0 {
@@ -177,13 +195,25 @@ impl Refiner<'_> {
                     total += f[s];
                     if !self.tracer.occluded(x[s], y[s]) {
                         seen += f[s];
+                        misses += 1;
+                    } else {
+                        hits += 1;
                     }
                     cast += 1;
-                    if cast == SAMPLES {
+                    if cast == samples {
                         break;
                     }
                 }
                 out.rays += cast as u64;
+                // Partly visible: a shadow edge crosses the pair; refine it further.
+                if hits > 0
+                    && misses > 0
+                    && (split_p || split_q)
+                    && error > self.epsilon * knob("LB_PARTIAL", 2.0)
+                {
+                    self.split(p, q, out);
+                    return;
+                }
                 if seen > 0.0 {
                     let visible = seen / total;
                     out.links.push((p, q, (f_est * visible).min(1.0), visible));
@@ -191,7 +221,14 @@ impl Refiner<'_> {
                 return;
             }
         }
-        // Split: a node linked with itself pairs up its children; else the larger node.
+        self.split(p, q, out);
+    }
+
+    /// Split: a node linked with itself pairs up its children; else the larger node.
+    fn split(&self, p: u32, q: u32, out: &mut Chunk) {
+        let t = self.tree;
+        let (pi, qi) = (p as usize, q as usize);
+        let (split_p, split_q) = (!t.is_leaf(p), !t.is_leaf(q));
         if p == q {
             for &a in t.children(p) {
                 for &b in t.children(p) {
