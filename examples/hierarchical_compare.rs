@@ -22,7 +22,10 @@ fn config(tpu: f32, method: Method, k: u32) -> BakeConfig {
 
 fn main() -> lightbake::Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let path = PathBuf::from(args.first().map_or("fixtures/cornell_box.gltf", |s| s.as_str()));
+    let path = PathBuf::from(
+        args.first()
+            .map_or("fixtures/cornell_box.gltf", |s| s.as_str()),
+    );
     let tpu: f32 = args.get(1).map_or(32.0, |s| s.parse().unwrap());
     let ks: Vec<u32> = if args.len() > 2 {
         args[2..].iter().map(|s| s.parse().unwrap()).collect()
@@ -43,17 +46,29 @@ fn main() -> lightbake::Result<()> {
         let mc = compute(&path, &config(tpu, Method::MonteCarlo, 1024), &NoProgress)?;
         eprintln!("Monte Carlo K=1024: {:.1}s", t.elapsed().as_secs_f64());
         let v: Vec<f32> = mc.lightmap.iter().flat_map(|v| v.to_array()).collect();
-        std::fs::write(&cache, v.iter().flat_map(|f| f.to_le_bytes()).collect::<Vec<u8>>())
-            .unwrap();
+        std::fs::write(
+            &cache,
+            v.iter().flat_map(|f| f.to_le_bytes()).collect::<Vec<u8>>(),
+        )
+        .unwrap();
         v
     };
     let mean_r = reference.iter().map(|&v| v as f64).sum::<f64>() / reference.len() as f64;
     for k in ks {
         let t = Instant::now();
         let cpu = cpu_seconds();
-        let h = compute(&path, &config(tpu, Method::Hierarchical, k), &NoProgress)?;
+        let method = if std::env::var("LB_METHOD").is_ok_and(|m| m == "mc") {
+            Method::MonteCarlo
+        } else {
+            Method::Hierarchical
+        };
+        let h = compute(&path, &config(tpu, method, k), &NoProgress)?;
         let (wall, cpu) = (t.elapsed().as_secs_f64(), cpu_seconds() - cpu);
-        let x: Vec<f32> = h.lightmap.iter().flat_map(|v: &Vec3| v.to_array()).collect();
+        let x: Vec<f32> = h
+            .lightmap
+            .iter()
+            .flat_map(|v: &Vec3| v.to_array())
+            .collect();
         assert_eq!(x.len(), reference.len());
         let se = x
             .iter()
@@ -85,6 +100,11 @@ fn cpu_seconds() -> f64 {
     let fields: Vec<&str> = stat
         .rsplit_once(')')
         .map_or(vec![], |(_, r)| r.split_whitespace().collect());
-    let tick = |i: usize| fields.get(i).and_then(|v| v.parse::<f64>().ok()).unwrap_or(0.0);
+    let tick = |i: usize| {
+        fields
+            .get(i)
+            .and_then(|v| v.parse::<f64>().ok())
+            .unwrap_or(0.0)
+    };
     (tick(11) + tick(12)) / 100.0
 }

@@ -73,7 +73,11 @@ fn main() -> lightbake::Result<()> {
     let n = tx.len();
     let b_uniform = (std::f64::consts::PI * want) as f32;
     let b = vec![b_uniform; tree.len()];
-    let area: f64 = tree.roots.iter().map(|&r| tree.area[r as usize] as f64).sum();
+    let area: f64 = tree
+        .roots
+        .iter()
+        .map(|&r| tree.area[r as usize] as f64)
+        .sum();
     let eta = 1.0 / (k as f64).sqrt();
     let epsilon = (eta * b_uniform as f64 * area / n as f64) as f32;
     let refiner = Refiner {
@@ -120,8 +124,13 @@ fn main() -> lightbake::Result<()> {
             let x = links::footprint_point(&tx, &tracer, i as usize, u);
             for &j in q {
                 if j != i {
-                    sum += links::texel_form_factor(&tx, &feet[j as usize], x, tx.normal[i as usize], j as usize)
-                        as f64;
+                    sum += links::texel_form_factor(
+                        &tx,
+                        &feet[j as usize],
+                        x,
+                        tx.normal[i as usize],
+                        j as usize,
+                    ) as f64;
                 }
             }
         }
@@ -178,21 +187,34 @@ fn main() -> lightbake::Result<()> {
             tx.xy[i]
         );
     }
-    stats("row sum R − 1", &r.iter().map(|v| v - 1.0).collect::<Vec<_>>());
+    stats(
+        "row sum R − 1",
+        &r.iter().map(|v| v - 1.0).collect::<Vec<_>>(),
+    );
     stats(
         "estimate R − R̄",
         &r.iter().zip(&rbar).map(|(a, b)| a - b).collect::<Vec<_>>(),
     );
     stats(
         "variation R̄ − R*",
-        &rbar.iter().zip(&rstar).map(|(a, b)| a - b).collect::<Vec<_>>(),
+        &rbar
+            .iter()
+            .zip(&rstar)
+            .map(|(a, b)| a - b)
+            .collect::<Vec<_>>(),
     );
     let scale = refiner.row_scale(&l);
     stats(
         "corrected R·s − 1",
-        &r.iter().zip(&scale).map(|(a, s)| a * *s as f64 - 1.0).collect::<Vec<_>>(),
+        &r.iter()
+            .zip(&scale)
+            .map(|(a, s)| a * *s as f64 - 1.0)
+            .collect::<Vec<_>>(),
     );
-    stats("coverage R* − 1", &rstar.iter().map(|v| v - 1.0).collect::<Vec<_>>());
+    stats(
+        "coverage R* − 1",
+        &rstar.iter().map(|v| v - 1.0).collect::<Vec<_>>(),
+    );
     let total_area: f64 = tx.area.iter().map(|&a| a as f64).sum();
     for (name, k) in ["leaf←leaf", "leaf←node", "node←leaf", "node←node"]
         .iter()

@@ -20,10 +20,10 @@ use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 
 use super::tree::Tree;
-use crate::transport::all_pairs;
 use crate::scene::Scene;
 use crate::texels::Texels;
 use crate::trace::Tracer;
+use crate::transport::all_pairs;
 use crate::transport::sampling::Rng;
 
 /// Kernel samples per link (no rays: cheap), on a 4×4 grid of a texel or area strata of a node.
@@ -33,24 +33,11 @@ pub const SAMPLES: u32 = 4;
 /// Pairs closer than this many times the sum of their radii are near field: split while
 /// possible (the kernel then varies little over either node, so few samples suffice).
 pub const NEAR: f32 = 2.0;
+/// Height above a node's plane (in units of the pair's summed radii) below which the other
+/// node counts as in the plane: it receives at most a cosine of about this much.
+const COPLANAR: f32 = 1e-3;
 /// Pairs per parallel work item.
 const CHUNK: usize = 256;
-pub fn knob(name: &str, default: f32) -> f32 {
-    static KNOBS: std::sync::OnceLock<std::sync::Mutex<Vec<(String, f32)>>> =
-        std::sync::OnceLock::new();
-    thread_local! {
-        static CACHE: std::cell::RefCell<Vec<(String, f32)>> = const { std::cell::RefCell::new(Vec::new()) };
-    }
-    let _ = &KNOBS;
-    CACHE.with(|c| {
-        if let Some(v) = c.borrow().iter().find(|(n, _)| n == name) {
-            return v.1;
-        }
-        let v = std::env::var(name).ok().and_then(|v| v.parse().ok()).unwrap_or(default);
-        c.borrow_mut().push((name.to_string(), v));
-        v
-    })
-}
 /// Random-stream purpose of link sampling.
 const PURPOSE: u64 = 0x4852_4c4b;
 
@@ -156,13 +143,25 @@ impl Refiner<'_> {
         let dist = d.length();
         let reach = t.radius[pi] + t.radius[qi];
         if t.is_planar(p) && t.is_planar(q) && p != q {
-            // Every point of q behind p's plane, or p behind q's front: no exchange.
-            if t.normal[pi].dot(d) + reach <= 0.0 || t.normal[qi].dot(-d) + reach <= 0.0 {
+            // Every point of q on or behind p's plane, or p on or behind q's front: no
+            // exchange. Points of a planar node lie within `r·sin(spread)` of its plane, and
+            // the other node's points within `r·(sin∠(n_p, n_q) + sin(spread))` of a plane
+            // through its centroid parallel to it; so coplanar blocks of one face (no light
+            // between them) are culled here instead of being split down to texel pairs in the
+            // near field, each pair estimated only to find zero.
+            let (np, nq) = (t.normal[pi], t.normal[qi]);
+            let tilt = np.cross(nq).length();
+            let (sp, sq) = (t.spread[pi].sin(), t.spread[qi].sin());
+            let (rp, rq) = (t.radius[pi], t.radius[qi]);
+            let tolerance = COPLANAR * reach;
+            if np.dot(d) + rp * sp + rq * (tilt + sq) <= tolerance
+                || nq.dot(-d) + rq * sq + rp * (tilt + sp) <= tolerance
+            {
                 return;
             }
         }
         let (split_p, split_q) = (!t.is_leaf(p), !t.is_leaf(q));
-        let near = p == q || dist < knob("LB_NEAR", NEAR) * reach;
+        let near = p == q || dist < NEAR * reach;
         let mut rng = Rng::new(self.seed, ((p as u64) << 32) | q as u64, PURPOSE);
         let mut x = [Vec3::ZERO; KERNEL_SAMPLES as usize];
         let mut y = [Vec3::ZERO; KERNEL_SAMPLES as usize];
@@ -185,8 +184,6 @@ impl Refiner<'_> {
                 // Visibility from SAMPLES shadow rays, spread over the strata (5 is coprime
                 // to 16, so the order visits every row and column of a 4×4 grid early).
                 let (mut seen, mut total, mut cast) = (0.0f32, 0.0f32, 0);
-                let (mut hits, mut misses) = (0, 0);
-                let samples = knob("LB_SAMPLES", SAMPLES as f32) as u32;
                 for k in 0..KERNEL_SAMPLES as usize {
                     let s = k * 5 % KERNEL_SAMPLES as usize;
                     if f[s] <= 0.0 {
@@ -195,25 +192,13 @@ impl Refiner<'_> {
                     total += f[s];
                     if !self.tracer.occluded(x[s], y[s]) {
                         seen += f[s];
-                        misses += 1;
-                    } else {
-                        hits += 1;
                     }
                     cast += 1;
-                    if cast == samples {
+                    if cast == SAMPLES {
                         break;
                     }
                 }
                 out.rays += cast as u64;
-                // Partly visible: a shadow edge crosses the pair; refine it further.
-                if hits > 0
-                    && misses > 0
-                    && (split_p || split_q)
-                    && error > self.epsilon * knob("LB_PARTIAL", 2.0)
-                {
-                    self.split(p, q, out);
-                    return;
-                }
                 if seen > 0.0 {
                     let visible = seen / total;
                     out.links.push((p, q, (f_est * visible).min(1.0), visible));
