@@ -34,19 +34,19 @@ fn errors(lightmap: &[Vec3], expected: f32) -> (f32, f32) {
     ((mean - expected).abs() / expected, worst)
 }
 
-/// Furnace (closed box, ρ and Le = 1): the mean meets the analytic answer within 1% (ρ 0.5)
-/// and 2% (ρ 0.9). Per texel it does not: coarse links carry a 16-sample kernel estimate and
-/// near-field texel links a 4×4-point one, which leaves row sums off by up to ~7% at single
-/// texels, amplified by 1/(1−ρ) in the slow ρ = 0.9 case.
+/// Furnace (closed box, ρ and Le = 1): every texel within 1% of 1/(1−ρ), for ρ 0.5 and 0.9
+/// (measured worst 0.36% and 0.44%; before the per-texel row correction and the exact
+/// footprints of chart-corner texels, 8.5% and 12%), the mean within 0.5%.
 #[test]
-fn furnace_mean_is_exact_within_1_and_2_percent() {
+fn furnace_every_texel_within_1_percent() {
     for (name, rho, mean_tol, worst_tol) in [
-        ("furnace.gltf", 0.5, 0.01, 0.12),
-        ("furnace_09.gltf", 0.9, 0.02, 0.25),
+        ("furnace.gltf", 0.5, 0.005, 0.01),
+        ("furnace_09.gltf", 0.9, 0.005, 0.01),
     ] {
         let baked = compute(&fixture(name), &hierarchical_config(), &NoProgress).unwrap();
         assert!(baked.solution.converged, "{name}");
         let (mean, worst) = errors(&baked.lightmap, 1.0 / (1.0 - rho));
+        eprintln!("{name}: mean error {mean:.5}, worst texel {worst:.5}");
         assert!(mean < mean_tol, "{name}: mean error {mean}");
         assert!(worst < worst_tol, "{name}: worst texel error {worst}");
         let t = &baked.transport;
@@ -57,8 +57,9 @@ fn furnace_mean_is_exact_within_1_and_2_percent() {
 }
 
 /// The Cornell box agrees with the Monte Carlo method at the same texels: relative RMSE over
-/// texels (summed channels) below 10% (measured 4.8% at 16 texels/unit, most of it MC noise
-/// and sampled link visibility) and the mean within 3% (measured −1%).
+/// texels (summed channels) below 7% (measured 4.4% at 16 texels/unit, 4.8% before the
+/// per-texel row correction; most of it the noise of 16 light samples per texel in both) and
+/// the mean within 3% (measured −0.5%).
 #[test]
 fn cornell_box_agrees_with_monte_carlo() {
     let mut config = hierarchical_config();
@@ -79,7 +80,8 @@ fn cornell_box_agrees_with_monte_carlo() {
     }
     let rmse = (se / norm).sqrt();
     let mean = sum_h / sum_mc - 1.0;
-    assert!(rmse < 0.10, "relative RMSE against Monte Carlo {rmse}");
+    eprintln!("Cornell box against Monte Carlo: relative RMSE {rmse:.4}, mean {mean:+.4}");
+    assert!(rmse < 0.07, "relative RMSE against Monte Carlo {rmse}");
     assert!(mean.abs() < 0.03, "mean differs from Monte Carlo by {mean}");
 }
 
@@ -114,6 +116,7 @@ fn links_grow_about_linearly() {
     let (n2, s2) = solve_at(&path, 16.0);
     let texel_ratio = n2 as f64 / n1 as f64;
     let link_ratio = s2.links as f64 / s1.links as f64;
+    eprintln!("links {} → {} for texels {n1} → {n2}", s1.links, s2.links);
     assert!(texel_ratio > 3.0, "{n1} → {n2} texels");
     assert!(
         link_ratio < 2.0 * texel_ratio,

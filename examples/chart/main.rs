@@ -5,6 +5,7 @@
 //! cargo run --release --example chart               # full run (about 10 minutes on 2 cores)
 //! cargo run --release --example chart -- --quick    # fewer settings, smaller reference
 //! cargo run --release --example chart -- --scene cornell_box --scene furnace
+//! cargo run --release --example chart -- --scene furnace --method hierarchical
 //! ```
 //!
 //! Writes `examples/gallery/bench.csv`, `bench.md` and the charts `error_vs_time_<scene>.png`
@@ -716,6 +717,11 @@ fn main() {
         .filter(|w| w[0] == "--scene")
         .map(|w| w[1].as_str())
         .collect();
+    let methods: Vec<&str> = args
+        .windows(2)
+        .filter(|w| w[0] == "--method")
+        .map(|w| w[1].as_str())
+        .collect();
     let gallery = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("examples/gallery");
     let work = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("target/chart");
     std::fs::create_dir_all(&work).unwrap();
@@ -745,6 +751,9 @@ fn main() {
         let pt = path_tracer_curve(&scene, &reference, quick);
         let mut scene_rows = Vec::new();
         for setting in settings(&scene, quick) {
+            if !methods.is_empty() && !methods.contains(&method_name(setting.method)) {
+                continue;
+            }
             let values = work.join("values.bin");
             let _ = std::fs::remove_file(&values);
             let measured = run_child(&scene, &setting, &values);

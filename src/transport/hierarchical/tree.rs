@@ -6,7 +6,7 @@
 //! texels do not share one orientation (a block straddling a chart border, a page root) is a
 //! *cluster*: its kernel is sampled at its texels' own normals, never at an average normal.
 
-use glam::Vec3;
+use glam::{DVec3, Vec3};
 
 use crate::texels::Texels;
 
@@ -20,6 +20,10 @@ pub struct Tree {
     pub order: Vec<u32>,
     /// Cumulative area along `order` (length `order.len() + 1`), for area-weighted picks.
     pub prefix_area: Vec<f64>,
+    /// Cumulative `A·position` and `A·normal` along `order` (as `prefix_area`), for the
+    /// centroid and projected area of any run of a node's texels.
+    pub prefix_moment: Vec<DVec3>,
+    pub prefix_normal: Vec<DVec3>,
     /// Range of `order` covered by each node.
     pub range: Vec<[u32; 2]>,
     /// Parent node, `u32::MAX` for page roots.
@@ -73,6 +77,27 @@ impl Tree {
         self.order[at.min(hi as usize - 1)]
     }
 
+    /// Stratum `s` of `m` equal runs of node `k`'s texels (in Morton order, so the runs of a
+    /// full node are its quadtree sub-blocks): area, centroid and `Σ A_j n_j` (whose length is
+    /// below the area where the normals differ). `None` for an empty run.
+    #[inline]
+    pub fn stratum(&self, k: u32, s: u32, m: u32) -> Option<(f32, Vec3, Vec3)> {
+        let [lo, hi] = self.range[k as usize];
+        let len = (hi - lo) as u64;
+        let a = lo as usize + (len * s as u64 / m as u64) as usize;
+        let b = lo as usize + (len * (s as u64 + 1) / m as u64) as usize;
+        if b <= a {
+            return None;
+        }
+        let area = self.prefix_area[b] - self.prefix_area[a];
+        if area <= 0.0 {
+            return None;
+        }
+        let centroid = (self.prefix_moment[b] - self.prefix_moment[a]) / area;
+        let normal = self.prefix_normal[b] - self.prefix_normal[a];
+        Some((area as f32, centroid.as_vec3(), normal.as_vec3()))
+    }
+
     pub fn build(texels: &Texels) -> Tree {
         let n = texels.len();
         let mut t = Tree::default();
@@ -106,6 +131,18 @@ impl Tree {
                 Some(*acc)
             }))
             .collect();
+
+        let mut moment = DVec3::ZERO;
+        let mut normal = DVec3::ZERO;
+        t.prefix_moment = vec![moment];
+        t.prefix_normal = vec![normal];
+        for &i in &t.order {
+            let a = texels.area[i as usize] as f64;
+            moment += texels.position[i as usize].as_dvec3() * a;
+            normal += texels.normal[i as usize].as_dvec3() * a;
+            t.prefix_moment.push(moment);
+            t.prefix_normal.push(normal);
+        }
 
         // Group level by level: items are (page, key, node); a parent groups key >> 2.
         let mut items: Vec<(u32, u64, u32)> = keyed;

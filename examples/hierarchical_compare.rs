@@ -1,0 +1,110 @@
+//! The hierarchical method against the Monte Carlo method at K = 1024 on the same texels
+//! (the Monte Carlo lightmap is cached in `target/`): relative RMSE over texels and channels
+//! (`sqrt(mean((x−r)²)) / mean(r)`, as the chart), mean ratio, time and link counts.
+//!
+//!     cargo run --release --example hierarchical_compare [scene.gltf] [texels-per-unit] [K...]
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use glam::Vec3;
+use lightbake::config::Method;
+use lightbake::{BakeConfig, NoProgress, compute};
+
+fn config(tpu: f32, method: Method, k: u32) -> BakeConfig {
+    let mut c = BakeConfig::medium();
+    c.atlas.texels_per_unit = tpu;
+    c.transport.method = method;
+    c.transport.gather_rays = k;
+    c.transport.light_samples = (k / 4).max(4);
+    c
+}
+
+fn main() -> lightbake::Result<()> {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let path = PathBuf::from(
+        args.first()
+            .map_or("fixtures/cornell_box.gltf", |s| s.as_str()),
+    );
+    let tpu: f32 = args.get(1).map_or(32.0, |s| s.parse().unwrap());
+    let ks: Vec<u32> = if args.len() > 2 {
+        args[2..].iter().map(|s| s.parse().unwrap()).collect()
+    } else {
+        vec![256, 1024]
+    };
+    let stem = path.file_stem().unwrap().to_string_lossy().into_owned();
+    let cache = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("target")
+        .join(format!("mc1024_{stem}_{tpu}.bin"));
+    let reference: Vec<f32> = if let Ok(bytes) = std::fs::read(&cache) {
+        bytes
+            .chunks_exact(4)
+            .map(|b| f32::from_le_bytes(b.try_into().unwrap()))
+            .collect()
+    } else {
+        let t = Instant::now();
+        let mc = compute(&path, &config(tpu, Method::MonteCarlo, 1024), &NoProgress)?;
+        eprintln!("Monte Carlo K=1024: {:.1}s", t.elapsed().as_secs_f64());
+        let v: Vec<f32> = mc.lightmap.iter().flat_map(|v| v.to_array()).collect();
+        std::fs::write(
+            &cache,
+            v.iter().flat_map(|f| f.to_le_bytes()).collect::<Vec<u8>>(),
+        )
+        .unwrap();
+        v
+    };
+    let mean_r = reference.iter().map(|&v| v as f64).sum::<f64>() / reference.len() as f64;
+    for k in ks {
+        let t = Instant::now();
+        let cpu = cpu_seconds();
+        let method = if std::env::var("LB_METHOD").is_ok_and(|m| m == "mc") {
+            Method::MonteCarlo
+        } else {
+            Method::Hierarchical
+        };
+        let h = compute(&path, &config(tpu, method, k), &NoProgress)?;
+        let (wall, cpu) = (t.elapsed().as_secs_f64(), cpu_seconds() - cpu);
+        let x: Vec<f32> = h
+            .lightmap
+            .iter()
+            .flat_map(|v: &Vec3| v.to_array())
+            .collect();
+        assert_eq!(x.len(), reference.len());
+        let se = x
+            .iter()
+            .zip(&reference)
+            .map(|(&a, &b)| ((a - b) as f64).powi(2))
+            .sum::<f64>()
+            / x.len() as f64;
+        let mean_x = x.iter().map(|&v| v as f64).sum::<f64>() / x.len() as f64;
+        let stages: Vec<String> = h
+            .stages
+            .iter()
+            .map(|s| format!("{} {:.2}", s.stage, s.seconds))
+            .collect();
+        println!(
+            "{stem} tpu {tpu} K {k}: {} texels, rel. RMSE vs MC1024 {:.2}%, mean {:+.2}%, wall {wall:.2}s cpu {cpu:.2}s, rays {:.1}M [{}]",
+            h.texels.len(),
+            se.sqrt() / mean_r * 100.0,
+            (mean_x / mean_r - 1.0) * 100.0,
+            h.transport.rays as f64 * 1e-6,
+            stages.join(", ")
+        );
+    }
+    Ok(())
+}
+
+/// CPU seconds (user + system) of this process so far.
+fn cpu_seconds() -> f64 {
+    let stat = std::fs::read_to_string("/proc/self/stat").unwrap_or_default();
+    let fields: Vec<&str> = stat
+        .rsplit_once(')')
+        .map_or(vec![], |(_, r)| r.split_whitespace().collect());
+    let tick = |i: usize| {
+        fields
+            .get(i)
+            .and_then(|v| v.parse::<f64>().ok())
+            .unwrap_or(0.0)
+    };
+    (tick(11) + tick(12)) / 100.0
+}
