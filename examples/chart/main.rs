@@ -856,6 +856,8 @@ fn main() {
         known("cornell_box").as_ref(),
         known("two_rooms").as_ref(),
     );
+    eprintln!("== quality figures");
+    let quality_md = stability::quality_table(&work, known("cornell_box").as_ref());
 
     // Residual chart: every solver on the Cornell box and the furnace at 256 rays.
     let residual_rows: Vec<&Row> = rows
@@ -971,6 +973,8 @@ fn main() {
         "\nStability: where methods fail, what lightbake does, measured in the same run:\n"
     );
     report.push_str(&stability_md);
+    let _ = writeln!(report, "\nLightmap quality, measured in the same run:\n");
+    report.push_str(&quality_md);
     let _ = writeln!(report, "\nEvery run:\n");
     report.push_str(&md);
     std::fs::write(gallery.join("bench.csv"), csv).unwrap();

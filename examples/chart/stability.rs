@@ -253,6 +253,68 @@ fn leak(two_rooms: &Known) -> Case {
     }
 }
 
+/// Issue-6 figures measured in the same run: the denoiser's gain against the reference at low
+/// and high ray counts (Cornell box), and the seam discontinuity before and after stitching.
+pub fn quality_table(dir: &Path, cornell: Option<&Known>) -> String {
+    let mut md = String::from("| what | setting | without | with |\n|---|---|---:|---:|\n");
+    if let Some(c) = cornell {
+        for k in [16u32, 64, 512] {
+            let error = |denoise: bool| {
+                let mut config = BakeConfig::medium();
+                config.atlas.texels_per_unit = c.texels_per_unit;
+                config.transport.gather_rays = k;
+                config.transport.light_samples = (k / 4).max(4);
+                config.transport.denoise = denoise;
+                bake(c.path, &config).map_or(f32::NAN, |(b, _)| rmse(&b.lightmap, c, |_| true))
+            };
+            let _ = writeln!(
+                md,
+                "| denoiser: relative RMSE vs reference (noise {:.2}%), Cornell box | K={k}, L={} | {:.2}% | {:.2}% |",
+                c.noise * 100.0,
+                (k / 4).max(4),
+                error(false) * 100.0,
+                error(true) * 100.0
+            );
+        }
+    }
+    let sphere = dir.join("sphere_on_floor.gltf");
+    lightbake::testing::sphere_on_floor()
+        .write_gltf(&sphere)
+        .expect("write sphere");
+    let large = dir.join("large_hall.glb");
+    for (name, path, tpu) in [
+        ("sphere_on_floor", &sphere, 16.0),
+        ("large_hall", &large, 3.0),
+    ] {
+        let mut config = BakeConfig::medium();
+        config.atlas.texels_per_unit = tpu;
+        config.transport.gather_rays = 64;
+        config.transport.light_samples = 16;
+        match bake(path, &config) {
+            Ok((b, _)) => {
+                if let Some(r) = b.seams {
+                    let rel = |x: f32| x / r.before.mean_value.max(1e-12) * 100.0;
+                    let _ = writeln!(
+                        md,
+                        "| seams: mean / max difference of the two sides' bilinear lookups, relative to the mean along seams, {name} | {} edges, {} texels solved in {:.0} ms | {:.2}% / {:.1}% | {:.3}% / {:.2}% |",
+                        r.before.edges,
+                        r.texels,
+                        r.seconds * 1e3,
+                        rel(r.before.mean_abs_diff),
+                        rel(r.before.max_abs_diff),
+                        rel(r.after.mean_abs_diff),
+                        rel(r.after.max_abs_diff)
+                    );
+                }
+            }
+            Err(e) => {
+                let _ = writeln!(md, "| seams, {name} | failed: {e} | | |");
+            }
+        }
+    }
+    md
+}
+
 /// Runs every case whose inputs exist (`cornell`, `two_rooms`: references from the main run)
 /// and returns the Markdown table.
 pub fn table(dir: &Path, cornell: Option<&Known>, two_rooms: Option<&Known>) -> String {
