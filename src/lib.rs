@@ -11,17 +11,26 @@
 //!
 //! ```text
 //!  input.gltf ─ scene::load ──▶ Scene + Source        world-space triangles, materials, lights
+//!   ─ plan::choose_density ──▶ BakeConfig            texel density for the scene's area (auto)
 //!            ─ atlas::build ──▶ Atlas                 xatlas charts + pages, or input TEXCOORD_1
 //!           ─ texels::build ──▶ Texels                one radiosity patch per covered texel
 //!             Tracer::new   ──▶ Tracer                obvhs CWBVH: closest hit, occlusion
+//!       ─ texels::validity ──▶ Texels                 samples moved out of geometry, invalid marked
+//! ─ plan::choose_transport ──▶ BakeConfig + pilot    rays for the target error, measured (auto)
 //!        ─ transport::build ──▶ Transport             form factors F_ij (CSR rows) + H_direct
 //!            ─ solve::solve ──▶ Solution              H = H_direct + F·(ρH), iterated
+//!     ─ lightmap::denoise  ──▶ H/π per texel         edge-aware, Monte Carlo only
 //! ─ LightmapPages::from_texels ▶ LightmapPages         H/π per texel, dilated into the gutters
 //!         ─ lightmap::seams ──▶ LightmapPages         UV seams stitched (least squares)
 //!                  ─ output ──▶ .exr + .png pages, .gltf/.bin or .glb
 //! ```
 //!
 //! [`bake`] chains the stages; build tools that want the intermediate data call them directly.
+//! `solve::run` joins transport and solve for the methods that do not store rows (hierarchical,
+//! the matrix-free gather solver); `plan::final_bake` wraps it to reuse the pilot's bakes.
+//! Beside the pipeline: [`reference`](mod@reference) (the path tracer every accuracy figure is measured
+//! against, at texels or through a camera) and [`render`] (lightmapped views with a ray-traced
+//! specular layer).
 //!
 //! ## Conventions
 //!

@@ -295,7 +295,12 @@ fn child(args: &[String]) {
                 history.join(","),
                 method_name(c.transport.method),
                 solver_name(c.solve.solver),
-                c.transport.gather_rays,
+                // Automatic runs: rays per texel in all, the reused pilot bakes included.
+                baked
+                    .plan
+                    .as_ref()
+                    .and_then(|p| p.total_rays)
+                    .unwrap_or(c.transport.gather_rays),
                 c.transport.light_samples
             );
         }

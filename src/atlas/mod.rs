@@ -2,7 +2,7 @@
 //!
 //! Either xatlas charts and packs the instances in world-space units (`xatlas.rs`, the only file
 //! that touches xatlas-rs), or the input's own `TEXCOORD_1` is reused (`existing.rs`), after
-//! checking it is inside [0,1] and free of overlaps.
+//! checking it is inside \[0,1\] and free of overlaps.
 
 mod existing;
 mod xatlas;
@@ -38,7 +38,7 @@ pub struct Atlas {
 pub struct InstanceUv {
     /// Local source vertex (index into the primitive's attribute accessors) of each atlas vertex.
     pub xref: Vec<u32>,
-    /// Lightmap UV of each atlas vertex, in [0,1] of its page (glTF convention, v down).
+    /// Lightmap UV of each atlas vertex, in \[0,1\] of its page (glTF convention, v down).
     pub uv: Vec<Vec2>,
     /// One per instance triangle, same order as `Scene::triangles[instance.triangles]`,
     /// as indices into `xref`/`uv`, same winding.

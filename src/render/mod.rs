@@ -9,7 +9,7 @@
 //! ```
 //!
 //! With `specular` on, surfaces with `roughness ≤ GLOSSY_MAX_ROUGHNESS` become nodes of a
-//! Whitted ray tree ([`shade`] documents the model: Schlick Fresnel, GGX glossy lobe,
+//! Whitted ray tree (the `shade` module documents the model: Schlick Fresnel, GGX glossy lobe,
 //! refraction with absorption, energy-conserving composite). Leaves of the tree (depth limit,
 //! rough surfaces) take `L_d` from the lightmap, so indirect diffuse light is never re-traced.
 //!

@@ -99,7 +99,7 @@ impl Default for Material {
     }
 }
 
-/// Texture addressing outside [0,1].
+/// Texture addressing outside \[0,1\].
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Wrap {
     Repeat,
