@@ -32,8 +32,8 @@ fn furnace_rho_05_within_1_percent() {
 }
 
 #[test]
-fn furnace_rho_09_within_2_percent() {
-    furnace("furnace_09.gltf", 0.9, 0.02);
+fn furnace_rho_09_within_1_percent() {
+    furnace("furnace_09.gltf", 0.9, 0.01);
 }
 
 /// Point light of intensity I at height d over a black floor: H/π = I cos³θ / (π d²).

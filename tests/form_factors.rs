@@ -8,7 +8,8 @@ use glam::Vec3;
 use lightbake::config::Method;
 use lightbake::testing::{Geometry, GltfBuilder, Material};
 use lightbake::transport::kernel::{
-    parallel_rectangles, perpendicular_rectangles, point_to_disk_bound, point_to_point,
+    parallel_rectangles, perpendicular_rectangles, point_to_coaxial_disk, point_to_disk_bound,
+    point_to_point,
 };
 use lightbake::{BakeConfig, Baked, NoProgress, compute};
 
@@ -210,6 +211,93 @@ fn perpendicular_unit_squares_sharing_an_edge() {
     // Next to the shared edge the point kernel is capped by the disk bound, but texels there
     // still overestimate (measured +4.7% at 16 texels per unit).
     check_configuration("perpendicular", &perpendicular(), up, east, want, 0.06);
+}
+
+/// A small square receiver (side `side`, centred at the origin, facing +y) under a coaxial disk
+/// of radius `r` at height `h` facing down, the disk a 96-segment emissive fan (its area is
+/// 0.07% short of the circle's).
+fn plate_under_disk(side: f32, r: f32, h: f32) -> GltfBuilder {
+    let mut gltf = GltfBuilder::new("disk");
+    let grey = gltf.add_material(Material::grey("grey", 0.5));
+    let lit = gltf.add_material(Material::grey("lit", 0.5).emitting([1.0; 3], 1.0));
+    let plate = Geometry::grid(
+        Vec3::new(-side / 2.0, 0.0, -side / 2.0),
+        Vec3::Z * side,
+        Vec3::X * side,
+        1,
+        1,
+    );
+    let mesh = gltf.add_mesh("plate", plate, grey);
+    gltf.add_mesh_node("plate", mesh);
+    let n = 96u32;
+    let mut positions = vec![Vec3::new(0.0, h, 0.0)];
+    positions.extend((0..n).map(|k| {
+        let a = k as f32 / n as f32 * std::f32::consts::TAU;
+        Vec3::new(r * a.cos(), h, r * a.sin())
+    }));
+    // Counter-clockwise seen from below (front facing −y).
+    let indices: Vec<u32> = (0..n).flat_map(|k| [0, 1 + k, 1 + (k + 1) % n]).collect();
+    let normals = vec![Vec3::NEG_Y; positions.len()];
+    let disk = Geometry::new(&positions, Some(&normals), None, &indices);
+    let mesh = gltf.add_mesh("disk", disk, lit);
+    gltf.add_mesh_node("disk", mesh);
+    gltf
+}
+
+/// Howell's differential area to a parallel coaxial disk, `F = r²/(h² + r²)`, at the texel on
+/// the axis (the polygon method evaluates at the receiving texel's sample point, the
+/// differential area itself), and over the plate (every texel near the axis).
+#[test]
+fn differential_area_to_a_coaxial_disk() {
+    let dir = scratch();
+    for (r, h) in [(0.5f32, 0.5f32), (0.3, 1.0), (0.6, 0.25)] {
+        let want = point_to_coaxial_disk(r as f64, h as f64);
+        let gltf = plate_under_disk(0.1, r, h);
+        let baked = bake(&gltf, dir.path(), &config(Method::Polygon, 64.0));
+        let t = &baked.texels;
+        let centre = (0..t.len())
+            .filter(|&i| up(t.normal[i]))
+            .min_by(|&a, &b| t.position[a].length().total_cmp(&t.position[b].length()))
+            .unwrap();
+        let f: f64 = baked
+            .transport
+            .row(centre)
+            .filter(|&(j, _)| down(t.normal[j as usize]))
+            .map(|(_, f)| f as f64)
+            .sum();
+        let k = 1024;
+        let mut mc = config(Method::MonteCarlo, 64.0);
+        mc.transport.gather_rays = k;
+        let montecarlo = bake(&gltf, dir.path(), &mc);
+        let (f_mc, sigma) = plate_factor(&montecarlo, up, down, k);
+        // The plate's texels are up to 5 cm off the axis, where F is lower by O((x/h)²).
+        let off_axis: f64 = {
+            let (mut sum, mut area) = (0.0f64, 0.0f64);
+            for i in (0..t.len()).filter(|&i| up(t.normal[i])) {
+                let p = t.position[i];
+                let x = (p.x * p.x + p.z * p.z).sqrt() as f64;
+                // Differential area off the axis of a disk: the exact formula (Howell B-13).
+                let (hh, rr) = (h as f64, r as f64);
+                let z = hh * hh + x * x + rr * rr;
+                let f_x =
+                    0.5 * (1.0 - (z - 2.0 * rr * rr) / (z * z - 4.0 * rr * rr * x * x).sqrt());
+                sum += f_x * t.area[i] as f64;
+                area += t.area[i] as f64;
+            }
+            sum / area
+        };
+        eprintln!(
+            "disk r={r} h={h}: Howell {want:.5}; polygon at the axis {f:.5} ({:+.2}%); \
+             montecarlo K={k} over the plate {f_mc:.5} ± {sigma:.5} vs {off_axis:.5} ({:+.1}σ)",
+            100.0 * (f - want) / want,
+            (f_mc - off_axis) / sigma
+        );
+        assert!((f - want).abs() / want < 0.01, "polygon {f} vs {want}");
+        assert!(
+            (f_mc - off_axis).abs() < 3.0 * sigma + 1e-3 * off_axis,
+            "montecarlo {f_mc} vs {off_axis}"
+        );
+    }
 }
 
 /// Largest `Σ_j F_ij` over the rows.
