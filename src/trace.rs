@@ -138,6 +138,8 @@ pub struct Tracer {
     prims: Vec<Prim>,
     /// Scale-aware self-intersection offset (world units).
     pub epsilon: f32,
+    /// Traverse with the x86-64-v3 build of the traversal ([`wide_isa`]).
+    wide_isa: bool,
 }
 
 impl Tracer {
@@ -190,6 +192,7 @@ impl Tracer {
                 triangles: vec![],
                 prims: vec![],
                 epsilon,
+                wide_isa: false,
             };
         }
         let mut build_time = Duration::ZERO;
@@ -220,6 +223,7 @@ impl Tracer {
             triangles,
             prims,
             epsilon,
+            wide_isa: wide_isa(),
         }
     }
 
@@ -237,9 +241,27 @@ impl Tracer {
         if self.triangles.is_empty() {
             return None;
         }
+        let ray = make_ray(origin, dir, tmax);
+        #[cfg(target_arch = "x86_64")]
+        if self.wide_isa {
+            // SAFETY: `Tracer::new` checked that this CPU has the enabled features.
+            return unsafe { self.closest_x86_64_v3(ray) };
+        }
+        self.closest_ray(ray)
+    }
+
+    /// [`Tracer::closest_ray`] compiled for x86-64-v3 (see the module docs).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx,avx2,bmi1,bmi2,lzcnt,popcnt")]
+    unsafe fn closest_x86_64_v3(&self, ray: Ray) -> Option<Hit> {
+        self.closest_ray(ray)
+    }
+
+    #[inline(always)]
+    fn closest_ray(&self, mut ray: Ray) -> Option<Hit> {
         // obvhs' `ray_traverse`, written out so the hit keeps its barycentric numerators and
         // determinant (no second triangle test for the barycentrics).
-        let mut ray = make_ray(origin, dir, tmax);
+        let tmax = ray.tmax;
         let (mut best, mut num, mut det) = (u32::MAX, Vec2::ZERO, 0.0f32);
         let mut state = self.bvh.new_traversal(ray.direction);
         let mut node;
@@ -277,6 +299,47 @@ impl Tracer {
         })
     }
 
+    /// True when the ray hits anything (stops at the first hit found).
+    #[inline]
+    fn any_hit(&self, ray: Ray) -> bool {
+        #[cfg(target_arch = "x86_64")]
+        if self.wide_isa {
+            // SAFETY: `Tracer::new` checked that this CPU has the enabled features.
+            return unsafe { self.any_hit_x86_64_v3(ray) };
+        }
+        self.any_hit_ray(ray)
+    }
+
+    /// [`Tracer::any_hit_ray`] compiled for x86-64-v3 (see the module docs).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx,avx2,bmi1,bmi2,lzcnt,popcnt")]
+    unsafe fn any_hit_x86_64_v3(&self, ray: Ray) -> bool {
+        self.any_hit_ray(ray)
+    }
+
+    /// obvhs' `ray_traverse_miss` (negated), written out so it inlines into both variants.
+    #[inline(always)]
+    fn any_hit_ray(&self, ray: Ray) -> bool {
+        let mut state = self.bvh.new_traversal(ray.direction);
+        let mut node;
+        let mut hit = false;
+        'found: {
+            traverse!(
+                self.bvh,
+                node,
+                state,
+                node.intersect_ray(&ray, state.oct_inv4),
+                {
+                    if intersect(&self.triangles[state.primitive_id as usize], &ray) < ray.tmax {
+                        hit = true;
+                        break 'found;
+                    }
+                }
+            );
+        }
+        hit
+    }
+
     /// True when something blocks the open segment from `a` to `b` (both already offset by the
     /// caller; the last `epsilon` before `b` is not tested so `b`'s own surface does not count).
     #[inline]
@@ -289,10 +352,7 @@ impl Tracer {
         if len <= self.epsilon {
             return false;
         }
-        let ray = make_ray(a, d / len, len - self.epsilon);
-        !self
-            .bvh
-            .ray_traverse_miss(ray, |ray, id| intersect(&self.triangles[id], ray))
+        self.any_hit(make_ray(a, d / len, len - self.epsilon))
     }
 
     /// True when the ray from `origin` along unit `dir` hits nothing (escapes to the sky).
@@ -301,10 +361,26 @@ impl Tracer {
         if self.triangles.is_empty() {
             return true;
         }
-        let ray = make_ray(origin, dir, tmax);
-        self.bvh
-            .ray_traverse_miss(ray, |ray, id| intersect(&self.triangles[id], ray))
+        !self.any_hit(make_ray(origin, dir, tmax))
     }
+}
+
+/// Whether this CPU runs the x86-64-v3 traversal (AVX2, BMI1/2, LZCNT, POPCNT).
+/// `LIGHTBAKE_TRACE_ISA=baseline` forces the portable one (for comparisons).
+fn wide_isa() -> bool {
+    if std::env::var("LIGHTBAKE_TRACE_ISA").as_deref() == Ok("baseline") {
+        return false;
+    }
+    #[cfg(target_arch = "x86_64")]
+    {
+        std::arch::is_x86_feature_detected!("avx2")
+            && std::arch::is_x86_feature_detected!("bmi1")
+            && std::arch::is_x86_feature_detected!("bmi2")
+            && std::arch::is_x86_feature_detected!("lzcnt")
+            && std::arch::is_x86_feature_detected!("popcnt")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    false
 }
 
 #[cfg(test)]
