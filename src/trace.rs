@@ -8,6 +8,30 @@
 //! obvhs' CWBVH node test ignores `Ray::tmin` and clamps entry distances to 1e-4, so hits closer
 //! than that are lost. Ray origins are therefore offset by [`Tracer::epsilon`], a scale-aware
 //! distance well above 1e-4 scene units.
+//!
+//! ## Speed
+//!
+//! Closest hits run obvhs' `traverse!` macro directly, keeping the best hit's barycentric
+//! numerators (no second triangle test); occlusion stops at the first hit. Triangles are packed
+//! to 36 bytes in BVH order (traversal of large scenes stalls on loading them), and the
+//! traversal is compiled twice: for the baseline target and for x86-64-v3 (AVX2, BMI, LZCNT,
+//! POPCNT), chosen at run time — bit-identical results, the v3 build 0–25% faster (hall
+//! closest hits +7%, hall occlusion +15%).
+//! `LIGHTBAKE_TRACE_ISA=baseline` forces the portable build.
+//!
+//! `cargo run --release --example ray_throughput`, incoherent rays (cosine-distributed from
+//! random surface points; occlusion between two random surface points), Mrays per CPU-second,
+//! 2 threads, before → after this module's tuning, mean of two runs in one session on a shared
+//! 2-core Xeon (the machine gave the process about one core; in a quiet moment 2 threads ran
+//! 1.9–2.1× one thread at 90–100% CPU use):
+//!
+//! | scene (triangles)    | closest hit  | occlusion     |
+//! |----------------------|--------------|---------------|
+//! | Cornell box (242)    | 3.37 → 3.60  | 3.60 → 3.65   |
+//! | large hall (116 528) | 1.83 → 2.03  | 0.60 → 2.55   |
+//!
+//! The hall's occlusion rays were slow because BVH boxes were padded by the full ray epsilon:
+//! a ray between two floor points, lifted by epsilon, entered every floor leaf on its way.
 
 use std::time::Duration;
 
