@@ -5,7 +5,11 @@
 //!
 //! ```sh
 //! cargo run --release --example ray_throughput
+//! cargo run --release --example ray_throughput -- --write-scenes DIR   # .glb files to profile
 //! ```
+//!
+//! On a shared machine wall-clock rates depend on the load; the table therefore also gives
+//! Mrays per CPU-second of the 2-thread run, which does not.
 
 use std::time::Instant;
 
@@ -38,8 +42,9 @@ fn cpu_seconds() -> f64 {
     (ticks(11) + ticks(12)) / 100.0 // USER_HZ is 100 on Linux
 }
 
-/// Casts `RAYS` rays of one kind on the current rayon pool: (Mrays/s, hit fraction, CPU use).
-fn run(scene: &Scene, tracer: &Tracer, occlusion: bool) -> (f64, f64, f64) {
+/// Casts `RAYS` rays of one kind on the current rayon pool:
+/// (Mrays/s, hit fraction, CPU use, Mrays per CPU-second).
+fn run(scene: &Scene, tracer: &Tracer, occlusion: bool) -> (f64, f64, f64, f64) {
     let eps = tracer.epsilon;
     let (cpu0, start) = (cpu_seconds(), Instant::now());
     let hits: usize = (0..RAYS / CHUNK)
@@ -63,9 +68,15 @@ fn run(scene: &Scene, tracer: &Tracer, occlusion: bool) -> (f64, f64, f64) {
         })
         .sum();
     let wall = start.elapsed().as_secs_f64();
-    let cpu = (cpu_seconds() - cpu0) / (wall * rayon::current_num_threads() as f64);
+    let cpu_s = cpu_seconds() - cpu0;
+    let cpu = cpu_s / (wall * rayon::current_num_threads() as f64);
     let n = (RAYS / CHUNK * CHUNK) as f64;
-    (n / wall * 1e-6, hits as f64 / n, cpu)
+    (
+        n / wall * 1e-6,
+        hits as f64 / n,
+        cpu,
+        n / cpu_s.max(1e-3) * 1e-6,
+    )
 }
 
 fn main() {
@@ -74,12 +85,23 @@ fn main() {
         ("cornell_box", lightbake::testing::cornell_box()),
         ("large_hall", lightbake::testing::large_hall()),
     ];
+    let args: Vec<String> = std::env::args().collect();
+    if let Some(k) = args.iter().position(|a| a == "--write-scenes") {
+        let out = std::path::PathBuf::from(args.get(k + 1).expect("--write-scenes DIR"));
+        std::fs::create_dir_all(&out).expect("create dir");
+        for (name, gltf) in scenes {
+            let path = out.join(format!("{name}.glb"));
+            std::fs::write(&path, gltf.to_glb_bytes()).expect("write scene");
+            println!("wrote {}", path.display());
+        }
+        return;
+    }
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     println!("{RAYS} incoherent rays per run; {cores} cores; Mrays/s (hit or occluded fraction)\n");
     println!(
-        "| scene | triangles | kind | 1 thread | {cores} threads | speed-up | CPU use ({cores} threads) |"
+        "| scene | triangles | kind | 1 thread | {cores} threads | speed-up | CPU use ({cores} threads) | per CPU-second |"
     );
-    println!("|---|---:|---|---:|---:|---:|---:|");
+    println!("|---|---:|---|---:|---:|---:|---:|---:|");
     for (name, gltf) in scenes {
         let path = dir.path().join(format!("{name}.glb"));
         std::fs::write(&path, gltf.to_glb_bytes()).expect("write scene");
@@ -93,7 +115,7 @@ fn main() {
                 .install(|| run(&scene, &tracer, occlusion));
             let all = run(&scene, &tracer, occlusion);
             println!(
-                "| {name} | {} | {} | {:.2} ({:.0}%) | {:.2} | {:.2}× | {:.0}% |",
+                "| {name} | {} | {} | {:.2} ({:.0}%) | {:.2} | {:.2}× | {:.0}% | {:.2} |",
                 scene.triangles.len(),
                 if occlusion {
                     "occlusion"
@@ -104,7 +126,8 @@ fn main() {
                 one.1 * 100.0,
                 all.0,
                 all.0 / one.0,
-                all.2 * 100.0
+                all.2 * 100.0,
+                all.3
             );
         }
     }
