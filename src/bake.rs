@@ -55,11 +55,11 @@ impl BakeReport {
             .as_ref()
             .map_or(String::new(), |p| format!("; {}", p.brief));
         let seams = match &self.seams {
-            Some(s) => format!(
+            Some(s) if s.before.edges > 0 => format!(
                 "; seams: {} edges, max diff {:.1e} → {:.1e}",
                 s.before.edges, s.before.max_abs_diff, s.after.max_abs_diff
             ),
-            None => String::new(),
+            _ => String::new(),
         };
         format!(
             "{} texels ({} moved out of geometry, {} invalid) on {} page(s), {} triangles, {:.2} M rays, {} iterations, residual {:.1e}{}{}{plan}; {} (total {:.2}s)",

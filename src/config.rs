@@ -67,6 +67,21 @@ pub struct TransportParams {
     /// method only (any solver, Gather included); point, polygon and hierarchical form factors
     /// are deterministic, so their errors are not the white noise it removes and it is skipped.
     pub denoise: bool,
+    /// Gathering rays per texel where fewer than `gather_rays` suffice (emitters, black and
+    /// unlit texels, measured by [`crate::plan`]'s pilot); `None`: `gather_rays` everywhere.
+    /// Monte Carlo rows only (not the gather solver, not hierarchical).
+    pub texel_rays: Option<TexelRays>,
+}
+
+/// Per-texel gathering rays (indexed like `Texels`); light samples scale with them.
+#[derive(Clone, PartialEq, Eq)]
+pub struct TexelRays(pub std::sync::Arc<[u32]>);
+
+impl std::fmt::Debug for TexelRays {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let total: u64 = self.0.iter().map(|&k| k as u64).sum();
+        write!(f, "TexelRays({} texels, {total} rays)", self.0.len())
+    }
 }
 
 /// Iterative method for the stored radiosity system.
@@ -142,6 +157,7 @@ impl BakeConfig {
                 seed: 0,
                 validity: true,
                 denoise: true,
+                texel_rays: None,
             },
             solve: SolveParams {
                 solver: Solver::Jacobi,

@@ -209,3 +209,42 @@ fn cli_automatic_bake_is_identical_on_one_and_two_threads() {
         "EXR pages differ between 1 and 2 threads"
     );
 }
+
+/// Emitters (whose rendered radiance is mostly `Le`) and unlit texels get fewer rays than
+/// the rest; the light keeps the full count's accuracy where it is seen.
+#[test]
+fn emitter_and_unlit_texels_cast_fewer_rays() {
+    let config = auto(BakeConfig::draft(), 0.03, Keep::default());
+    let baked = lightbake::compute(&fixture("cornell_box.gltf"), &config, &NoProgress).unwrap();
+    let k = baked.config.transport.gather_rays;
+    let rays = baked
+        .config
+        .transport
+        .texel_rays
+        .as_ref()
+        .expect("per-texel rays");
+    let t = &baked.texels;
+    let (mut emitters, mut reduced_emitters, mut full_plain) = (0, 0, 0);
+    for i in 0..t.len() {
+        if t.emission[i].max_element() > 0.0 {
+            emitters += 1;
+            reduced_emitters += (rays.0[i] < k) as usize;
+        } else {
+            full_plain += (rays.0[i] == k) as usize;
+        }
+    }
+    assert!(
+        emitters > 0 && reduced_emitters * 10 >= emitters * 9,
+        "{reduced_emitters} of {emitters} emitter texels reduced"
+    );
+    assert!(
+        full_plain * 10 >= (t.len() - emitters) * 9,
+        "most other texels keep K={k}"
+    );
+    assert!(
+        baked
+            .lightmap
+            .iter()
+            .all(|v| v.is_finite() && v.min_element() >= 0.0)
+    );
+}

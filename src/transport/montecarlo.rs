@@ -148,11 +148,19 @@ impl Context<'_> {
         let texels = self.texels;
         let n = texels.normal[i];
         let (tx, ty) = frame(n);
-        let k = self.params.gather_rays;
-        let l = if self.emitters.is_empty() {
+        let p = self.params;
+        let k = p
+            .texel_rays
+            .as_ref()
+            .map_or(p.gather_rays, |r| r.0[i])
+            .max(1);
+        let l = if self.emitters.is_empty() || p.light_samples == 0 {
             0
+        } else if k == p.gather_rays {
+            p.light_samples
         } else {
-            self.params.light_samples
+            // A reduced texel keeps the light-sample-to-ray ratio.
+            ((p.light_samples as u64 * k as u64 / p.gather_rays.max(1) as u64) as u32).max(4)
         };
         let (kf, lf) = (k as f32, l as f32);
         let mut rng = Rng::new(self.params.seed, i as u64, 0);
