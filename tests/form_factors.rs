@@ -493,3 +493,21 @@ fn all_pairs_methods_refuse_large_scenes() {
     );
     assert!(started.elapsed().as_secs_f64() < 30.0);
 }
+
+/// No gathering ray leaves a closed box: a tracer that lets one in 25 000 out (BVH boxes padded
+/// by epsilon/16 instead of epsilon) made the ρ = 0.99 furnace 0.8% dark.
+#[test]
+fn closed_box_lets_no_ray_out() {
+    let dir = scratch();
+    let path = dir.path().join("furnace.gltf");
+    lightbake::testing::furnace(0.99, 1.0)
+        .write_gltf(&path)
+        .unwrap();
+    for tpu in [8.0, 16.0, 32.0] {
+        let mut c = config(Method::MonteCarlo, tpu);
+        c.transport.gather_rays = 256;
+        let baked = compute(&path, &c, &NoProgress).unwrap();
+        let escaped: f32 = baked.transport.escape.iter().sum();
+        assert_eq!(escaped, 0.0, "{tpu} texels/m: rays escaped the closed box");
+    }
+}
