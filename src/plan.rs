@@ -9,7 +9,7 @@
 //!   (`examples/chart.rs`) puts Monte Carlo + Jacobi on the measured error-vs-time Pareto
 //!   front of every fixture scene: point and polygon form factors are all-pairs (O(N²)) and
 //!   3.0–9.7% off on the Cornell box and the two-room scene (where Monte Carlo reaches
-//!   1.5–3.6%), hierarchical is 2.7–8.7% off at 2–5× the time.
+//!   1.5–3.6%), hierarchical is 2.7–7.9% off at 4–5× the time.
 //! - **Rays per texel** from a measured noise level: a *pilot* bakes the texels twice with
 //!   [`PILOT_RAYS`] gathering rays and independent seeds; the RMS difference of the two
 //!   lightmaps over √2 is the noise of one such bake. Assuming 1/√K, the rays that reach the
@@ -223,7 +223,7 @@ pub fn choose_transport(
         plan.reasons.push(
             "method montecarlo: on the benchmark's error-vs-time Pareto front on every fixture; \
              point/polygon are all-pairs (O(N²)) and 3.0–9.7% off on the Cornell box and two rooms \
-             where Monte Carlo reaches 1.5–3.6%; hierarchical is 2.7–8.7% off at 2–5× the time"
+             where Monte Carlo reaches 1.5–3.6%; hierarchical is 2.7–7.9% off at 4–5× the time"
                 .into(),
         );
     }
