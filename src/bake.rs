@@ -318,7 +318,8 @@ pub fn write(
         triangles: scene.triangles.len(),
         texels: texels.len(),
         pages: pages.pages.len(),
-        rays: transport.rays,
+        // Every ray cast, the pilot bakes that are not part of the result included.
+        rays: transport.rays + plan.as_ref().map_or(0, |p| p.discarded_rays),
         iterations: solution.history.len(),
         residual: solution.residual(),
         converged: solution.converged,

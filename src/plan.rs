@@ -105,6 +105,8 @@ pub struct Plan {
     pub total_rays: Option<u32>,
     pub pilot_seconds: f64,
     pub pilot_rays: u64,
+    /// Rays of pilot bakes not reused in the result (the first pair, when a second ran).
+    pub discarded_rays: u64,
     /// One line per decision: what, and the measurement or rule behind it.
     pub reasons: Vec<String>,
     /// The choice in a few words, for the one-line summary.
@@ -243,6 +245,7 @@ pub fn choose_transport(
         // A hard scene: measure again at 4× the rays and fit how fast the noise falls.
         let second = wanted > SECOND_PILOT_ABOVE as f32 && n0 > 0.0;
         if second {
+            plan.discarded_rays = runs.rays();
             runs = bake(4 * PILOT_RAYS)?;
             let n1 = runs.noise(texels, config.transport.indirect_only);
             rays += runs.rays();
