@@ -18,7 +18,8 @@
 //!   per octave. When that asks for more than [`SECOND_PILOT_ABOVE`], a second pair at 4·K₀
 //!   measures how fast the noise really falls (exponent clamped to ½ … [`MAX_EXPONENT`]):
 //!   stratified samples fall faster than 1/√K at first (the 116k-triangle hall: 66% at K=16,
-//!   15% at K=64), and 1/√K from K=16 asked that hall for 4096 rays where 640 reach the target.
+//!   15% at K=64), and 1/√K from K=16 asked that hall for 4096 rays for a 4% target; the
+//!   fit asks for 640, which gave 4.4% (bench.md).
 //!   Light samples follow as K/4, like the presets.
 //! - **Nothing measured is thrown away**: the last pilot pair is part of the result. The
 //!   final lightmap is the ray-weighted mean of the two pilot bakes and one more bake at the
@@ -27,7 +28,7 @@
 //! - **Fewer rays where the lightmap matters less**: from the pilot's irradiance, an emitter
 //!   texel whose rendered radiance is mostly its own `Le` gets `K·w²` rays (`w` the lightmap's
 //!   share of what is seen), black and unlit texels the minimum ([`MIN_TEXEL_RAYS`]); on the
-//!   fixtures this saves 2–3% of the rays (emitters are small) and never touches lit texels.
+//!   fixtures this saves 1.8–3.0% of the rays (emitters are small) and never touches lit texels.
 //! - **Tolerance** E/10: the solver stops once its remaining error is well below the Monte
 //!   Carlo error, not later.
 //!
@@ -533,15 +534,18 @@ pub fn final_bake(
     progress: &dyn Progress,
 ) -> Result<(Transport, Solution, u32, u32)> {
     let (k, l) = (config.transport.gather_rays, config.transport.light_samples);
-    let Some(pilot) = pilot else {
-        let (t, s) = solve::run(
+    let bake = || {
+        solve::run(
             scene,
             texels,
             tracer,
             &config.transport,
             &config.solve,
             progress,
-        )?;
+        )
+    };
+    let Some(pilot) = pilot else {
+        let (t, s) = bake()?;
         return Ok((t, s, k, l));
     };
     let mut runs: Vec<(f32, Transport, Solution)> = pilot
@@ -551,14 +555,7 @@ pub fn final_bake(
         .collect();
     let (mut k_total, mut l_total) = (2 * pilot.gather_rays, 2 * pilot.light_samples);
     if !pilot.enough {
-        let (t, s) = solve::run(
-            scene,
-            texels,
-            tracer,
-            &config.transport,
-            &config.solve,
-            progress,
-        )?;
+        let (t, s) = bake()?;
         runs.push((k as f32, t, s));
         k_total += k;
         l_total += l;

@@ -150,34 +150,17 @@ fn radiance(paths: &Paths, origin: Vec3, dir: Vec3, rng: &mut Rng, rays: &mut u6
         return paths.params.sky;
     };
     let s = paths.scene;
-    let [a, b, c] = s.triangles[hit.triangle as usize].map(|v| v as usize);
-    let w = Vec3::new(1.0 - hit.bary.x - hit.bary.y, hit.bary.x, hit.bary.y);
-    let p = s.positions[a] * w.x + s.positions[b] * w.y + s.positions[c] * w.z;
-    let n_geo = (s.positions[b] - s.positions[a])
-        .cross(s.positions[c] - s.positions[a])
-        .normalize_or_zero();
-    if n_geo == Vec3::ZERO {
+    let sp = s.surface_point(hit.triangle, hit.bary);
+    if sp.n_geo == Vec3::ZERO {
         return Vec3::ZERO;
     }
-    let n = (s.normals[a] * w.x + s.normals[b] * w.y + s.normals[c] * w.z).normalize_or_zero();
-    let n = if n.dot(n_geo) > 0.0 { n } else { n_geo };
-    let uv0 = s.uv0[a] * w.x + s.uv0[b] * w.y + s.uv0[c] * w.z;
-    let instance = s.triangle_instance[hit.triangle as usize];
-    let material = &s.materials[s.instances[instance as usize].material as usize];
-    let emission = textured(s, material.emission, material.emissive_texture, uv0);
-    let base = textured(s, material.base_color, material.base_color_texture, uv0);
+    let emission = s.emission(sp.material, sp.uv0);
+    let base = s.base_color(sp.material, sp.uv0);
     if base.max_element() <= 0.0 {
         return emission;
     }
-    let x = p + n_geo * paths.tracer.epsilon;
-    base * paths.reflected(x, n, rng, rays) + emission
-}
-
-fn textured(scene: &Scene, factor: Vec3, texture: Option<u32>, uv: Vec2) -> Vec3 {
-    match texture {
-        Some(t) => factor * scene.textures[t as usize].sample(uv),
-        None => factor,
-    }
+    let x = sp.p + sp.n_geo * paths.tracer.epsilon;
+    base * paths.reflected(x, sp.n, rng, rays) + emission
 }
 
 /// Closest front-face hit along the ray, skipping back faces of single-sided surfaces.

@@ -126,19 +126,6 @@ impl Surface {
     }
 }
 
-/// Where a ray hit, resolved to shading inputs.
-struct SurfacePoint {
-    p: Vec3,
-    /// Unit geometric normal of the face that was hit (its front side).
-    n_geo: Vec3,
-    /// Unit interpolated vertex normal, on the same side as `n_geo`.
-    n: Vec3,
-    uv0: Vec2,
-    uv1: Vec2,
-    instance: u32,
-    material: u32,
-}
-
 pub(super) struct Shader<'a> {
     scene: &'a RenderScene,
     options: &'a RenderOptions,
@@ -166,12 +153,12 @@ impl<'a> Shader<'a> {
         let Some(hit) = self.intersect(origin, dir, rays) else {
             return self.options.background;
         };
-        let sp = self.surface_point(&hit);
-        let material = &self.scene.scene.materials[sp.material as usize];
+        let scene = &self.scene.scene;
+        let sp = scene.surface_point(hit.triangle, hit.bary);
         let surface = &self.scene.surfaces[sp.material as usize];
-        let base = self.base_color(material, sp.uv0);
+        let base = scene.base_color(sp.material, sp.uv0);
         let emission = if hit.front {
-            self.emission(material, sp.uv0)
+            scene.emission(sp.material, sp.uv0)
         } else {
             Vec3::ZERO
         };
@@ -313,42 +300,6 @@ impl<'a> Shader<'a> {
             travelled += step;
         }
         None
-    }
-
-    fn surface_point(&self, hit: &Hit) -> SurfacePoint {
-        let s = &self.scene.scene;
-        let [a, b, c] = s.triangles[hit.triangle as usize].map(|v| v as usize);
-        let w = Vec3::new(1.0 - hit.bary.x - hit.bary.y, hit.bary.x, hit.bary.y);
-        let p = s.positions[a] * w.x + s.positions[b] * w.y + s.positions[c] * w.z;
-        let n_geo = (s.positions[b] - s.positions[a])
-            .cross(s.positions[c] - s.positions[a])
-            .normalize_or_zero();
-        let n = (s.normals[a] * w.x + s.normals[b] * w.y + s.normals[c] * w.z).normalize_or_zero();
-        let n = if n.dot(n_geo) > 0.0 { n } else { n_geo };
-        let instance = s.triangle_instance[hit.triangle as usize];
-        SurfacePoint {
-            p,
-            n_geo,
-            n,
-            uv0: s.uv0[a] * w.x + s.uv0[b] * w.y + s.uv0[c] * w.z,
-            uv1: s.uv1[a] * w.x + s.uv1[b] * w.y + s.uv1[c] * w.z,
-            instance,
-            material: s.instances[instance as usize].material,
-        }
-    }
-
-    fn base_color(&self, m: &Material, uv0: Vec2) -> Vec3 {
-        match m.base_color_texture {
-            Some(t) => m.base_color * self.scene.scene.textures[t as usize].sample(uv0),
-            None => m.base_color,
-        }
-    }
-
-    fn emission(&self, m: &Material, uv0: Vec2) -> Vec3 {
-        match m.emissive_texture {
-            Some(t) => m.emission * self.scene.scene.textures[t as usize].sample(uv0),
-            None => m.emission,
-        }
     }
 
     /// Bilinear lookup of `H/π` at `uv1`, clamped to the page (dilation filled the gutters).

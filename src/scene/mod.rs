@@ -198,7 +198,62 @@ pub struct Source {
     pub buffers: Vec<Vec<u8>>,
 }
 
+/// A point of a scene triangle, interpolated at a hit's barycentrics.
+#[derive(Clone, Copy, Debug)]
+pub struct SurfacePoint {
+    pub p: Vec3,
+    /// Unit geometric normal of the face (its front side); zero for a degenerate triangle.
+    pub n_geo: Vec3,
+    /// Unit interpolated vertex normal, turned to the side of `n_geo`.
+    pub n: Vec3,
+    pub uv0: Vec2,
+    pub uv1: Vec2,
+    pub instance: u32,
+    pub material: u32,
+}
+
 impl Scene {
+    /// The point of triangle `t` at barycentrics `b` (`p = (1−u−v)·p0 + u·p1 + v·p2`).
+    pub fn surface_point(&self, t: u32, b: Vec2) -> SurfacePoint {
+        let [i0, i1, i2] = self.triangles[t as usize].map(|v| v as usize);
+        let w = Vec3::new(1.0 - b.x - b.y, b.x, b.y);
+        let lerp3 = |a: &[Vec3]| a[i0] * w.x + a[i1] * w.y + a[i2] * w.z;
+        let lerp2 = |a: &[Vec2]| a[i0] * w.x + a[i1] * w.y + a[i2] * w.z;
+        let n_geo = (self.positions[i1] - self.positions[i0])
+            .cross(self.positions[i2] - self.positions[i0])
+            .normalize_or_zero();
+        let n = lerp3(&self.normals).normalize_or_zero();
+        let instance = self.triangle_instance[t as usize];
+        SurfacePoint {
+            p: lerp3(&self.positions),
+            n_geo,
+            n: if n.dot(n_geo) > 0.0 { n } else { n_geo },
+            uv0: lerp2(&self.uv0),
+            uv1: lerp2(&self.uv1),
+            instance,
+            material: self.instances[instance as usize].material,
+        }
+    }
+
+    /// Reflectance `baseColorFactor × baseColorTexture(uv0)` of material `m`.
+    pub fn base_color(&self, m: u32, uv0: Vec2) -> Vec3 {
+        let m = &self.materials[m as usize];
+        self.textured(m.base_color, m.base_color_texture, uv0)
+    }
+
+    /// Emitted radiance `emission × emissiveTexture(uv0)` of material `m`.
+    pub fn emission(&self, m: u32, uv0: Vec2) -> Vec3 {
+        let m = &self.materials[m as usize];
+        self.textured(m.emission, m.emissive_texture, uv0)
+    }
+
+    fn textured(&self, factor: Vec3, texture: Option<u32>, uv: Vec2) -> Vec3 {
+        match texture {
+            Some(t) => factor * self.textures[t as usize].sample(uv),
+            None => factor,
+        }
+    }
+
     /// Emission is anywhere in the scene (an emissive material or a light).
     pub fn has_light_sources(&self) -> bool {
         !self.lights.is_empty()
