@@ -173,7 +173,7 @@ pub fn compute(input: &Path, config: &BakeConfig, progress: &dyn Progress) -> Re
             seed: config.transport.seed,
             ..Default::default()
         };
-        texels::validity::fix(&mut texels, &tracer, &params)
+        texels::validity::fix(&mut texels, &scene, &tracer, &params)
     } else {
         Default::default()
     };

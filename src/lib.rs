@@ -15,7 +15,8 @@
 //!            ─ atlas::build ──▶ Atlas                 xatlas charts + pages, or input TEXCOORD_1
 //!           ─ texels::build ──▶ Texels                one radiosity patch per covered texel
 //!             Tracer::new   ──▶ Tracer                obvhs CWBVH: closest hit, occlusion
-//!       ─ texels::validity ──▶ Texels                 samples moved out of geometry, invalid marked
+//!       ─ texels::validity ──▶ Texels                 samples moved out of geometry, invalid marked,
+//!                                                     texels a wall divides kept to one side (cuts)
 //! ─ plan::choose_transport ──▶ BakeConfig + pilot    rays for the target error, measured (auto)
 //!        ─ transport::build ──▶ Transport             form factors F_ij (CSR rows) + H_direct
 //!            ─ solve::solve ──▶ Solution              H = H_direct + F·(ρH), iterated

@@ -419,7 +419,7 @@ pub fn prepare(input: &Path, config: &BakeConfig, progress: &dyn Progress) -> Re
             seed: config.transport.seed,
             ..Default::default()
         };
-        texels::validity::fix(&mut texels, &tracer, &params);
+        texels::validity::fix(&mut texels, &scene, &tracer, &params);
     }
     Ok(Prepared {
         scene,

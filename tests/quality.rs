@@ -124,9 +124,9 @@ fn print_leak(name: &str, l: &Leak) {
 
 /// Light reaches room B only through the doorway: B's floor away from the door must be much
 /// darker than A's, and darker still along the wall (a leak through or under the wall would
-/// brighten it). Measured (16 texels/m, 128 rays): far A 0.946, far B 0.178 (B/A 0.19); along
-/// the wall A 0.824, B 0.100; the texels straddling the zero-thickness double-sided wall mix
-/// both rooms (0.274): validity cannot see a wall that has no back side.
+/// brighten it). Measured (16 texels/m, 128 rays): far A 0.947, far B 0.176 (B/A 0.19); along
+/// the wall A 0.842, B 0.090. The texels under the wall keep their samples on one side or the
+/// other, so their mean (0.457) lies between the rooms.
 #[test]
 fn two_rooms_room_b_is_lit_only_through_the_doorway() {
     let baked = bake(&fixture("two_rooms.gltf"), &moderate(true));
@@ -142,6 +142,105 @@ fn two_rooms_room_b_is_lit_only_through_the_doorway() {
     assert!(
         l.along_b < l.straddling && l.straddling < l.along_a,
         "straddling texels lie between the rooms"
+    );
+}
+
+/// Hits just beside the zero-thickness partition (2 cm, less than half a texel) on the floor,
+/// the ceiling and the side walls, whose texels run on under it, read a texel whose sample
+/// point is on the hit's side of the wall ([`lightbake::texels::cuts`]); without that, about
+/// half read the other room's texel.
+#[test]
+fn hits_beside_a_zero_thickness_wall_read_the_texel_on_their_side() {
+    let baked = bake(&fixture("two_rooms.gltf"), &moderate(true));
+    let tracer = lightbake::trace::Tracer::new(&baked.scene);
+    let t = &baked.texels;
+    assert!(baked.validity.divided > 0, "{:?}", baked.validity);
+    let mut checked = 0;
+    for k in 0..40 {
+        // Away from the doorway (|z| < 0.4 below 1.6 m) and from the room corners.
+        let z = -0.95 + 0.5 * (k % 20) as f32 / 19.0;
+        let z = if k < 20 { z } else { -z };
+        for x in [-0.02f32, 0.02] {
+            // Down to the floor, up to the ceiling, and sideways to the nearer side wall.
+            let y = 0.3 + 1.4 * (k % 7) as f32 / 6.0;
+            for (origin, dir) in [
+                (Vec3::new(x, 1.0, z), Vec3::NEG_Y),
+                (Vec3::new(x, 1.0, z), Vec3::Y),
+                (Vec3::new(x, y, 0.5 * z.signum()), Vec3::Z * z.signum()),
+            ] {
+                let hit = tracer.closest(origin, dir, 10.0).expect("closed rooms");
+                let j = t.texel_at(hit.triangle, hit.bary) as usize;
+                assert!(
+                    t.position[j].x * x > 0.0,
+                    "hit at x = {x} from {origin} along {dir} reads texel {j} at {}",
+                    t.position[j]
+                );
+                checked += 1;
+            }
+        }
+    }
+    eprintln!("{checked} hits checked, {:?}", baked.validity);
+}
+
+/// Room B's floor away from the doorway, which sees room A only through the door, matches
+/// the path-traced reference: the leak criterion. Measured (8 texels/m as the
+/// benchmark, K = 1024, reference 1024 paths): mean +3.8% above the reference before texels
+/// under the wall were divided, see the test's output for the current figure.
+#[test]
+fn room_b_floor_matches_the_reference_away_from_the_doorway() {
+    let mut config = BakeConfig::medium();
+    config.atlas.texels_per_unit = 8.0;
+    config.transport.gather_rays = 1024;
+    config.transport.light_samples = 128;
+    let input = fixture("two_rooms.gltf");
+    let baked = bake(&input, &config);
+    let params = lightbake::reference::ReferenceParams {
+        max_samples: 1024,
+        samples_per_pass: 64,
+        ..lightbake::reference::ReferenceParams::like(&config)
+    };
+    let r = lightbake::reference::compute(&input, &config, &params, &NoProgress)
+        .unwrap()
+        .reference;
+    let t = &baked.texels;
+    let far_b: Vec<usize> = (0..t.len())
+        .filter(|&i| {
+            let p = t.position[i];
+            t.normal[i].y > 0.9 && p.y.abs() < 0.01 && p.x > 0.5 && p.z.abs() > 0.6
+        })
+        .filter(|i| !t.invalid.contains(&(*i as u32)))
+        .collect();
+    let m = far_b.len() as f64;
+    let mean = |v: &[Vec3]| {
+        far_b
+            .iter()
+            .map(|&i| v[i].element_sum() as f64)
+            .sum::<f64>()
+            / m
+    };
+    let (bake_mean, ref_mean) = (mean(&baked.lightmap), mean(&r.mean));
+    let ref_error = far_b
+        .iter()
+        .map(|&i| r.std_error[i].element_sum() as f64)
+        .map(|e| e * e)
+        .sum::<f64>()
+        .sqrt()
+        / m;
+    let bias = bake_mean / ref_mean - 1.0;
+    eprintln!(
+        "room B far floor: {} texels, bake {:.4}, reference {:.4} ± {:.4}: {:+.2}%",
+        far_b.len(),
+        bake_mean / 3.0,
+        ref_mean / 3.0,
+        ref_error / 3.0,
+        100.0 * bias
+    );
+    assert!(far_b.len() > 50);
+    // The bake's own noise in the region mean is a few tenths of a percent at K = 1024.
+    assert!(
+        bias.abs() < 0.015,
+        "room B floor {:+.2}% from the reference",
+        100.0 * bias
     );
 }
 

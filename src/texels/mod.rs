@@ -4,6 +4,7 @@
 //! (or partly covered) gets the area-weighted average of what covers it: position, normal,
 //! albedo and emission, and the world area actually covered.
 
+pub mod cuts;
 mod raster;
 pub mod validity;
 
@@ -57,6 +58,8 @@ pub struct Texels {
     /// Texels whose footprint has no point outside geometry (ascending ids; see
     /// [`validity`]): solved, but their lightmap value is filled from valid neighbours.
     pub invalid: Vec<u32>,
+    /// Texels another surface divides: which texel serves each part of them ([`cuts`]).
+    pub cuts: cuts::Cuts,
 }
 
 impl Texels {
@@ -68,7 +71,8 @@ impl Texels {
     }
 
     /// The texel a surface hit on triangle `t` at barycentrics (`u`, `v`) lands in
-    /// (`p = (1−u−v)·p0 + u·p1 + v·p2`), or [`NO_TEXEL`] for triangles with no texels.
+    /// (`p = (1−u−v)·p0 + u·p1 + v·p2`), or [`NO_TEXEL`] for triangles with no texels. A hit
+    /// on the far side of a wall that divides its texel reads the neighbour there ([`cuts`]).
     #[inline]
     pub fn texel_at(&self, t: u32, bary: Vec2) -> u32 {
         let [a, b, c] = self.triangle_uv[t as usize];
@@ -79,7 +83,8 @@ impl Texels {
         let y = (p.y.max(0.0) as u32).min(size.height - 1);
         let id = self.index[page][(y * size.width + x) as usize];
         if id != NO_TEXEL {
-            id
+            // The part of a divided texel beyond a wall belongs to the neighbour there.
+            self.cuts.resolve(id, p - Vec2::new(x as f32, y as f32))
         } else {
             self.triangle_texel[t as usize]
         }

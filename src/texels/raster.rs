@@ -150,6 +150,7 @@ fn assemble(
         triangle_uv: setups.iter().map(|s| s.uv.map(|q| q.as_vec2())).collect(),
         triangle_page: setups.iter().map(|s| s.page).collect(),
         invalid: Vec::new(),
+        cuts: Default::default(),
     };
     let cell = |(page, y, x): TexelKey| {
         (

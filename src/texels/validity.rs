@@ -32,7 +32,7 @@
 //!
 //! When to use: always (it costs `R` rays per texel, `R·(1 + G²)` for texels near back faces).
 //! Limits: only single-sided solids are detected — a zero-thickness double-sided wall has no
-//! back side, so a floor texel straddling it still mixes both rooms; solids deeper than `REACH`
+//! back side; [`fix`] hands texels such a wall divides to [`cuts`] next. Solids deeper than `REACH`
 //! texels leave their inner texels black but valid (never visible). A moved texel's gathering
 //! rays jitter within the candidate cell around its new point (`Texels::jitter` = 1/G), not
 //! over the whole footprint, which would start some of them back inside the solid.
@@ -40,7 +40,9 @@
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 
-use super::{NO_TEXEL, Texels};
+use super::Texels;
+use super::cuts::{self, page_neighbours};
+use crate::scene::Scene;
 use crate::trace::Tracer;
 use crate::transport::sampling::{Rng, cosine_hemisphere, frame, hammersley};
 
@@ -78,10 +80,18 @@ pub struct ValidityReport {
     pub moved: usize,
     /// Texels with no valid point (listed in [`Texels::invalid`]).
     pub invalid: usize,
+    /// Texels another surface divides (a wall standing on them; see [`cuts`]).
+    pub divided: usize,
 }
 
-/// Moves sample points out of geometry and records invalid texels in `texels.invalid`.
-pub fn fix(texels: &mut Texels, tracer: &Tracer, params: &ValidityParams) -> ValidityReport {
+/// Moves sample points out of geometry, records invalid texels in `texels.invalid`, then keeps
+/// the samples of texels another surface divides on one side ([`cuts::divide`]).
+pub fn fix(
+    texels: &mut Texels,
+    scene: &Scene,
+    tracer: &Tracer,
+    params: &ValidityParams,
+) -> ValidityReport {
     let rays = params.rays.max(1);
     let grid = params.grid.max(1);
     let limit = (MAX_BACK * rays as f32) as u32;
@@ -105,6 +115,9 @@ pub fn fix(texels: &mut Texels, tracer: &Tracer, params: &ValidityParams) -> Val
         }
     }
     report.invalid = texels.invalid.len();
+    let divided = cuts::divide(texels, scene, tracer, grid);
+    report.moved += divided.moved;
+    report.divided = divided.divided;
     report
 }
 
@@ -186,7 +199,7 @@ pub fn fill_invalid(texels: &Texels, values: &mut [Vec3]) {
         ring.clear();
         for &i in &pending {
             let i = i as usize;
-            let (sum, count) = neighbours(texels, i)
+            let (sum, count) = page_neighbours(texels, i)
                 .filter(|&j| known[j] && texels.normal[j].dot(texels.normal[i]) >= FILL_COS)
                 .fold((Vec3::ZERO, 0u32), |(s, c), j| (s + values[j], c + 1));
             if count > 0 {
@@ -203,25 +216,6 @@ pub fn fill_invalid(texels: &Texels, values: &mut [Vec3]) {
         }
         pending.retain(|&i| !known[i as usize]);
     }
-}
-
-/// Texel ids of the (up to 8) page neighbours of texel `i`.
-fn neighbours(texels: &Texels, i: usize) -> impl Iterator<Item = usize> + '_ {
-    let page = texels.page[i] as usize;
-    let size = texels.pages[page];
-    let [x, y] = texels.xy[i];
-    (-1..=1i64)
-        .flat_map(move |dy| (-1..=1i64).map(move |dx| (x as i64 + dx, y as i64 + dy)))
-        .filter(move |&(nx, ny)| {
-            (nx, ny) != (x as i64, y as i64)
-                && nx >= 0
-                && ny >= 0
-                && nx < size.width as i64
-                && ny < size.height as i64
-        })
-        .map(move |(nx, ny)| texels.index[page][(ny as u32 * size.width + nx as u32) as usize])
-        .filter(|&j| j != NO_TEXEL)
-        .map(|j| j as usize)
 }
 
 #[cfg(test)]

@@ -1,0 +1,130 @@
+//! Where a bake's error against the reference sits: overall relative RMSE and mean bias, the
+//! texels contributing most to the squared error (position, normal, bake vs reference), and for
+//! `two_rooms` the mean of room B's floor away from the doorway (the leak criterion).
+//!
+//!     cargo run --release --example error_map [scene.gltf] [texels-per-unit] [K] [ref samples]
+
+use std::path::PathBuf;
+
+use glam::Vec3;
+use lightbake::reference::ReferenceParams;
+use lightbake::{BakeConfig, NoProgress, compute};
+
+fn main() -> lightbake::Result<()> {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let path = PathBuf::from(
+        args.first()
+            .map_or("fixtures/two_rooms.gltf", |s| s.as_str()),
+    );
+    let tpu: f32 = args.get(1).map_or(8.0, |s| s.parse().unwrap());
+    let k: u32 = args.get(2).map_or(1024, |s| s.parse().unwrap());
+    let samples: u32 = args.get(3).map_or(4096, |s| s.parse().unwrap());
+    let mut config = BakeConfig::medium();
+    config.atlas.texels_per_unit = tpu;
+    config.transport.gather_rays = k;
+    config.transport.light_samples = k / 8;
+    config.solve.tolerance = 1e-5;
+    let baked = compute(&path, &config, &NoProgress)?;
+    let params = ReferenceParams {
+        samples_per_pass: 32,
+        max_samples: samples,
+        ..Default::default()
+    };
+    let reference = lightbake::reference::compute(&path, &config, &params, &NoProgress)?.reference;
+    let t = &baked.texels;
+    let n = t.len();
+    let skip: Vec<bool> = {
+        let mut s = vec![false; n];
+        for &i in &t.invalid {
+            s[i as usize] = true;
+        }
+        s
+    };
+    let mean_r = (0..n)
+        .filter(|&i| !skip[i])
+        .map(|i| reference.mean[i].element_sum() as f64 / 3.0)
+        .sum::<f64>()
+        / (0..n).filter(|&i| !skip[i]).count() as f64;
+    let sq: Vec<f64> = (0..n)
+        .map(|i| {
+            if skip[i] {
+                0.0
+            } else {
+                (baked.lightmap[i] - reference.mean[i]).length_squared() as f64 / 3.0
+            }
+        })
+        .collect();
+    let total: f64 = sq.iter().sum();
+    let count = (0..n).filter(|&i| !skip[i]).count() as f64;
+    let bias: f64 = (0..n)
+        .filter(|&i| !skip[i])
+        .map(|i| (baked.lightmap[i] - reference.mean[i]).element_sum() as f64 / 3.0)
+        .sum::<f64>()
+        / count;
+    let noise: f64 = (0..n)
+        .filter(|&i| !skip[i])
+        .map(|i| reference.std_error[i].length_squared() as f64 / 3.0)
+        .sum::<f64>()
+        / count;
+    println!("{:?}; stages {:?}", baked.validity, baked.stages);
+    println!(
+        "{n} texels, rel RMSE {:.2}%, mean bias {:+.2}%, reference noise {:.2}%",
+        100.0 * (total / count).sqrt() / mean_r,
+        100.0 * bias / mean_r,
+        100.0 * noise.sqrt() / mean_r
+    );
+    // Room B's floor away from the doorway in `two_rooms` (lit only through the door).
+    let far_b: Vec<usize> = (0..n)
+        .filter(|&i| {
+            let p = t.position[i];
+            !skip[i] && p.x > 0.5 && p.z.abs() > 0.6 && p.y.abs() < 0.01
+        })
+        .collect();
+    if !far_b.is_empty() {
+        let m = far_b.len() as f64;
+        let mean = |v: &[Vec3]| far_b.iter().map(|&i| v[i].x as f64).sum::<f64>() / m;
+        let (b, r) = (mean(&baked.lightmap), mean(&reference.mean));
+        let se = (far_b
+            .iter()
+            .map(|&i| (reference.std_error[i].x as f64).powi(2))
+            .sum::<f64>())
+        .sqrt()
+            / m;
+        let rmse = (far_b
+            .iter()
+            .map(|&i| ((baked.lightmap[i].x - reference.mean[i].x) as f64).powi(2))
+            .sum::<f64>()
+            / m)
+            .sqrt();
+        println!(
+            "far B floor: {} texels, bake mean {b:.4}, reference {r:.4} ± {se:.4} ({:+.2}%), rel RMSE {:.2}%",
+            far_b.len(),
+            100.0 * (b / r - 1.0),
+            100.0 * rmse / r
+        );
+    }
+    let mut order: Vec<usize> = (0..n).collect();
+    order.sort_by(|&a, &b| sq[b].total_cmp(&sq[a]));
+    let mut acc = 0.0;
+    for (rank, &i) in order.iter().enumerate() {
+        acc += sq[i];
+        if rank < 40 || [100, 200, 400, 800].contains(&rank) {
+            let p: Vec3 = t.position[i];
+            println!(
+                "#{rank:4} share {:5.1}% cum {:5.1}%  p ({:+.3},{:+.3},{:+.3}) n ({:+.0},{:+.0},{:+.0}) bake {:.4} ref {:.4} ± {:.4}",
+                100.0 * sq[i] / total,
+                100.0 * acc / total,
+                p.x,
+                p.y,
+                p.z,
+                t.normal[i].x,
+                t.normal[i].y,
+                t.normal[i].z,
+                baked.lightmap[i].x,
+                reference.mean[i].x,
+                reference.std_error[i].x
+            );
+        }
+    }
+    Ok(())
+}
