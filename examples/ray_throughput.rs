@@ -1,6 +1,7 @@
 //! Ray throughput of the tracer (obvhs CWBVH + lightbake's triangle test) on this machine:
 //! closest-hit and occlusion rays, incoherent like gathering rays (random surface points,
-//! cosine-distributed directions; occlusion between two random surface points), on one thread
+//! cosine-distributed directions; occlusion between two random surface points that face each
+//! other, as form-factor visibility rays do), on one thread
 //! and on all cores, with the CPU utilisation of the parallel run.
 //!
 //! ```sh
@@ -44,18 +45,39 @@ fn cpu_seconds() -> f64 {
 
 /// Casts `RAYS` rays of one kind on the current rayon pool:
 /// (Mrays/s, hit fraction, CPU use, Mrays per CPU-second).
-fn run(scene: &Scene, tracer: &Tracer, occlusion: bool) -> (f64, f64, f64, f64) {
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+enum Kind {
+    Closest,
+    /// Occlusion between points that face each other (what the methods cast).
+    Facing,
+    /// Occlusion between any two points, coplanar floor pairs included (grazing rays).
+    AnyPair,
+}
+
+fn run(scene: &Scene, tracer: &Tracer, kind: Kind) -> (f64, f64, f64, f64) {
     let eps = tracer.epsilon;
     let (cpu0, start) = (cpu_seconds(), Instant::now());
     let hits: usize = (0..RAYS / CHUNK)
         .into_par_iter()
         .map(|c| {
-            let mut rng = Rng::new(1, c as u64, occlusion as u64);
+            let mut rng = Rng::new(1, c as u64, kind as u64);
             let mut hits = 0;
             for _ in 0..CHUNK {
                 let (o, n) = surface_point(scene, &mut rng, eps);
-                if occlusion {
+                if kind == Kind::AnyPair {
                     let (p, _) = surface_point(scene, &mut rng, eps);
+                    hits += tracer.occluded(o, p) as usize;
+                } else if kind == Kind::Facing {
+                    // A pair that faces each other, as every method's visibility rays join
+                    // (the form-factor kernel is zero otherwise, so none casts the ray):
+                    // coplanar floor pairs would graze the floor the whole way.
+                    let p = loop {
+                        let (p, m) = surface_point(scene, &mut rng, eps);
+                        let d = p - o;
+                        if n.dot(d) > 0.0 && m.dot(d) < 0.0 {
+                            break p;
+                        }
+                    };
                     hits += tracer.occluded(o, p) as usize;
                 } else {
                     let (tx, ty) = frame(n);
@@ -107,20 +129,20 @@ fn main() {
         std::fs::write(&path, gltf.to_glb_bytes()).expect("write scene");
         let (scene, _) = scene::load(&path).expect("load");
         let tracer = Tracer::new(&scene);
-        for occlusion in [false, true] {
+        for kind in [Kind::Closest, Kind::Facing, Kind::AnyPair] {
             let one = rayon::ThreadPoolBuilder::new()
                 .num_threads(1)
                 .build()
                 .unwrap()
-                .install(|| run(&scene, &tracer, occlusion));
-            let all = run(&scene, &tracer, occlusion);
+                .install(|| run(&scene, &tracer, kind));
+            let all = run(&scene, &tracer, kind);
             println!(
                 "| {name} | {} | {} | {:.2} ({:.0}%) | {:.2} | {:.2}× | {:.0}% | {:.2} |",
                 scene.triangles.len(),
-                if occlusion {
-                    "occlusion"
-                } else {
-                    "closest hit"
+                match kind {
+                    Kind::Closest => "closest hit",
+                    Kind::Facing => "occlusion, facing pairs",
+                    Kind::AnyPair => "occlusion, any pair (grazing included)",
                 },
                 one.0,
                 one.1 * 100.0,

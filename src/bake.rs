@@ -62,10 +62,11 @@ impl BakeReport {
             _ => String::new(),
         };
         format!(
-            "{} texels ({} moved out of geometry, {} invalid) on {} page(s), {} triangles, {:.2} M rays, {} iterations, residual {:.1e}{}{}{plan}; {} (total {:.2}s)",
+            "{} texels ({} moved out of geometry, {} invalid, {} divided by a wall) on {} page(s), {} triangles, {:.2} M rays, {} iterations, residual {:.1e}{}{}{plan}; {} (total {:.2}s)",
             self.texels,
             self.validity.moved,
             self.validity.invalid,
+            self.validity.divided,
             self.pages,
             self.triangles,
             self.rays as f64 * 1e-6,

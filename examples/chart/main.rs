@@ -127,6 +127,12 @@ struct Scene {
     texels_per_unit: f32,
     /// All-pairs methods are only run where the texel count allows.
     all_pairs: bool,
+    /// Only Monte Carlo + Jacobi and the automatic choice (the scene is there for its size).
+    montecarlo_only: bool,
+    /// Sample counts of the path tracer's own curve.
+    pt_counts: &'static [u32],
+    /// The reference stops after this long (or at 0.4% noise).
+    reference_seconds: u64,
 }
 
 fn scenes(out: &Path, quick: bool) -> Vec<Scene> {
@@ -146,26 +152,56 @@ fn scenes(out: &Path, quick: bool) -> Vec<Scene> {
             path: fixture("cornell_box.gltf"),
             texels_per_unit: 32.0,
             all_pairs: true,
+            ..Scene::default()
         },
         Scene {
             name: "furnace",
             path: fixture("furnace_09.gltf"),
             texels_per_unit: 16.0,
             all_pairs: true,
+            ..Scene::default()
         },
         Scene {
             name: "two_rooms",
             path: fixture("two_rooms.gltf"),
             texels_per_unit: 8.0,
             all_pairs: true,
+            ..Scene::default()
         },
         Scene {
             name: "large_hall",
             path: large,
             texels_per_unit: if quick { 2.0 } else { 3.0 },
             all_pairs: false,
+            ..Scene::default()
+        },
+        // The large case: the Cornell box at about 167k texels (161 texels/m), where a
+        // CPU path-tracing baker needs about 15 minutes for 1%. Its path tracer curve stops at
+        // 64 paths per texel; the time to each error is scaled from there as 1/error².
+        Scene {
+            name: "cornell_box_167k",
+            path: fixture("cornell_box.gltf"),
+            texels_per_unit: if quick { 64.0 } else { 161.0 },
+            all_pairs: false,
+            montecarlo_only: true,
+            pt_counts: &[16, 64],
+            reference_seconds: if quick { 60 } else { 420 },
         },
     ]
+}
+
+impl Default for Scene {
+    fn default() -> Self {
+        Scene {
+            name: "",
+            path: PathBuf::new(),
+            texels_per_unit: 16.0,
+            all_pairs: false,
+            montecarlo_only: false,
+            pt_counts: &[16, 64, 256, 1024],
+            reference_seconds: 240,
+        }
+    }
 }
 
 fn settings(scene: &Scene, quick: bool) -> Vec<Setting> {
@@ -184,7 +220,18 @@ fn settings(scene: &Scene, quick: bool) -> Vec<Setting> {
         auto: None,
     };
     for &k in rays {
-        out.push(s(Method::MonteCarlo, Solver::Jacobi, k));
+        if !(scene.montecarlo_only && k < 64) {
+            out.push(s(Method::MonteCarlo, Solver::Jacobi, k));
+        }
+    }
+    if scene.montecarlo_only {
+        for target in [0.04, 0.02] {
+            out.push(Setting {
+                auto: Some(target),
+                ..s(Method::MonteCarlo, Solver::Jacobi, 256)
+            });
+        }
+        return out;
     }
     for solver in [Solver::GaussSeidel, Solver::Southwell] {
         out.push(s(Method::MonteCarlo, solver, 256));
@@ -423,7 +470,11 @@ fn reference(scene: &Scene, quick: bool) -> Ref {
         samples_per_pass: 32,
         max_samples: if quick { 1024 } else { 4096 },
         target_rel_error: Some(if quick { 0.01 } else { 0.004 }),
-        time_limit: Some(Duration::from_secs(if quick { 60 } else { 240 })),
+        time_limit: Some(Duration::from_secs(if quick {
+            60.min(scene.reference_seconds)
+        } else {
+            scene.reference_seconds
+        })),
         ..Default::default()
     };
     let start = Instant::now();
@@ -450,9 +501,9 @@ fn path_tracer_curve(scene: &Scene, reference: &Ref, quick: bool) -> Vec<(u32, f
     let mut config = BakeConfig::medium();
     config.atlas.texels_per_unit = scene.texels_per_unit;
     let counts: &[u32] = if quick {
-        &[16, 64, 256]
+        &scene.pt_counts[..scene.pt_counts.len().min(3)]
     } else {
-        &[16, 64, 256, 1024]
+        scene.pt_counts
     };
     counts
         .iter()

@@ -46,7 +46,8 @@ pub struct Texels {
     pub dv: Vec<Vec3>,
     /// Fraction of the footprint that sample points jitter over: 1, or the candidate cell
     /// (1/G of a side) around a sample point that validity moved out of geometry, so gathering
-    /// rays do not start back inside it. Empty means 1 everywhere.
+    /// rays do not start back inside it, narrowed further to stay clear of a wall that divides
+    /// the texel ([`cuts`]). Empty means 1 everywhere.
     pub jitter: Vec<f32>,
     /// Per page, row-major `width × height`: texel id or [`NO_TEXEL`].
     pub index: Vec<Vec<u32>>,
