@@ -1,5 +1,6 @@
-//! xatlas unwrapping: one xatlas mesh per scene instance, charted and packed into pages of at
-//! most `max_page_size`², each page then trimmed to the texels it uses.
+//! xatlas unwrapping: each scene instance's convex planar regions go to xatlas as their outlines,
+//! its other triangles in blocks; all are charted and packed together into pages of at most
+//! `max_page_size`², each page then trimmed to the texels it uses.
 //!
 //! What we found in the xatlas (2019) vendored by xatlas-rs 0.1.3, and why this file looks the
 //! way it does:
@@ -13,7 +14,7 @@
 //!   parameterisation run one job per chart group; each job owns its group and a fixed-seed
 //!   random generator. Packing is single-threaded with a fixed-seed generator in a fresh packer,
 //!   and the output is assembled in (mesh, chart group, chart) order. Nothing depends on thread
-//!   scheduling; `unwrap_is_deterministic` checks it.
+//!   scheduling; `unwrap_is_deterministic` checks it. Our own region pass is sequential.
 //! - Order: output triangle `f` of a mesh is input triangle `f` (xatlas writes indices at
 //!   `3·sourceFace`), same winding. An output vertex's `xref` may name a colocal twin of the
 //!   input vertex (same position, other normal or UV), so the source vertex of each corner is
@@ -26,7 +27,23 @@
 //! - Density: planar charts get exactly `texels_per_unit`. Curved (LSCM) charts come out denser,
 //!   about 1.4× the texel area on a sphere: this xatlas scales a chart by the ratio of surface to
 //!   parametric *area* where the square root would be right, and rounds chart extents up to whole
-//!   texels. Charting dominates the time: a few seconds per 30k curved triangles.
+//!   texels. Charting dominates the time: a few seconds per 30k curved triangles, and quadratic
+//!   in a chart's face count, hence the blocks ([`MAX_FACES_PER_XATLAS_MESH`]).
+//! - Planar regions: xatlas charts a planar chart by orthogonal projection, and packing only
+//!   sees the chart's outline (minimal bounding box of its convex hull, rasterised coverage).
+//!   So a convex planar region is handed over as the fan of its convex outline, a few triangles
+//!   instead of thousands, and its triangles are placed by the affine map xatlas gave the
+//!   outline ([`placement`]) — the layout xatlas would give the region as one chart, without
+//!   the quadratic chart growing and without block cuts. Only regions xatlas would chart on
+//!   their own qualify ([`planar_regions`]): bounded by open edges or creases of 60° or more
+//!   (xatlas never grows a chart over those), convex without holes, within the chart limits.
+//!   Non-convex regions, gentle folds and curved surfaces go to xatlas as triangles. An outline
+//!   xatlas does not return as one chart (slivers below its area epsilon) is charted again as
+//!   triangles in a second run. On `testing::large_hall` at 3 texels per unit (116k triangles,
+//!   floor and ceiling 51k each) the atlas stage went from 3.6 s to 0.16 s, with 194 charts
+//!   instead of 368, 0 seam edges instead of 5995 (`lightmap::seams`), 27 950 patches instead of
+//!   32 315 and 44 944 page texels instead of 63 504 (`examples/atlas_speed.rs`, old and new
+//!   interleaved in one session, shared machine).
 //! - Padding: `PackOptions::padding` only applies with `conservative`. xatlas reserves the padded
 //!   chart image but places the UVs `padding` texels up-left of it, so the gap to the next chart
 //!   lies right of and below each chart: at least `padding` texels between charts, none at the
@@ -35,7 +52,9 @@
 //!   far, so charts pack from the origin outwards. Packing at `max_page_size` and trimming each
 //!   page to its used extent gives small pages for small scenes in one xatlas run.
 
-use glam::{DVec3, Vec2, Vec3};
+use std::collections::BTreeSet;
+
+use glam::{DMat2, DVec2, DVec3, Vec2, Vec3};
 // Only for the vendored C++ library (and libstdc++) it builds and links; see [`ffi`].
 use xatlas_rs as _;
 
@@ -73,7 +92,15 @@ pub fn unwrap(scene: &Scene, source: &Source, params: &AtlasParams) -> Result<At
     }
 
     let resolution = params.max_page_size;
-    let output = run_xatlas(scene, tpu, resolution, params.padding);
+    // A region outline xatlas did not place as one planar chart is charted as triangles again;
+    // charting is per chart group, so the second run places every remaining outline alike.
+    let mut excluded = BTreeSet::new();
+    let output = loop {
+        match run_xatlas(scene, tpu, resolution, params.padding, &excluded) {
+            Ok(output) => break output,
+            Err(failed) => excluded.extend(failed),
+        }
+    };
     if output.page_count == 0 {
         return Err(Error::invalid(
             &source.path,
@@ -140,10 +167,34 @@ struct MeshOutput {
 /// Triangles per xatlas mesh. xatlas 2019 grows a chart with a priority update over all its
 /// candidate faces at every step — quadratic in the chart's face count: the 51k-triangle floor
 /// of `testing::large_hall` ran for over ten minutes in `AtlasBuilder::updatePriorities`.
-/// Instances above this are cut into spatially coherent blocks (triangles in Morton order of
-/// their centroids); charts then end at block borders (a few more seams) and unwrapping stays
-/// roughly linear in the triangle count.
+/// Triangles outside planar regions are cut into spatially coherent blocks of at most this many
+/// (triangles in Morton order of their centroids); charts then end at block borders (a few more
+/// seams) and unwrapping stays roughly linear in the triangle count.
 const MAX_FACES_PER_XATLAS_MESH: usize = 1024;
+
+/// Planar regions of fewer triangles are left to xatlas: they cost it little, and every proxy
+/// is a chart group of its own, which xatlas looks up by a linear scan over all groups.
+const MIN_REGION_TRIANGLES: usize = 16;
+
+/// A triangle joins a region when its corners lie this close to the region's plane (texels).
+const PLANE_TOLERANCE: f64 = 1e-3;
+
+/// xatlas never grows a chart onto a face turned 60° or more from the chart's mean normal, so a
+/// region whose neighbours all turn that far is a chart of its own in xatlas too.
+const CREASE_DOT: f64 = 0.5;
+
+/// Hull corners closer than this to the line through their neighbours are dropped (texels), so
+/// no proxy triangle is degenerate.
+const HULL_TOLERANCE: f64 = 1e-6;
+
+/// How far xatlas' placement of a proxy corner may stray from one affine map (texels).
+const PLACEMENT_TOLERANCE: f64 = 1e-2;
+
+/// Proxies per xatlas mesh: `createFaceGroups` rescans the mesh's faces for every new group.
+const PROXIES_PER_MESH: usize = 64;
+
+/// Proxies of one xatlas mesh are stacked this far apart in z so they never share an edge.
+const PROXY_Z_STEP: f32 = 16.0;
 
 /// A part of an instance given to xatlas as one mesh.
 struct Block {
@@ -153,19 +204,19 @@ struct Block {
     vertices: Vec<u32>,
 }
 
-/// Cuts an instance into blocks of at most [`MAX_FACES_PER_XATLAS_MESH`] triangles.
-fn blocks(scene: &Scene, inst: &Instance) -> Vec<Block> {
+/// Cuts instance-local `triangles` into blocks of at most [`MAX_FACES_PER_XATLAS_MESH`].
+fn blocks(scene: &Scene, inst: &Instance, mut triangles: Vec<u32>) -> Vec<Block> {
     let tris = &scene.triangles[inst.triangles.start as usize..inst.triangles.end as usize];
-    let mut order: Vec<u32> = (0..tris.len() as u32).collect();
-    if tris.len() > MAX_FACES_PER_XATLAS_MESH {
+    if triangles.len() > MAX_FACES_PER_XATLAS_MESH {
         let centroid =
             |t: &[u32; 3]| t.iter().map(|&v| scene.positions[v as usize]).sum::<Vec3>() / 3.0;
-        let (lo, hi) = tris
-            .iter()
-            .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), t| {
-                let c = centroid(t);
-                (lo.min(c), hi.max(c))
-            });
+        let (lo, hi) =
+            triangles
+                .iter()
+                .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), &t| {
+                    let c = centroid(&tris[t as usize]);
+                    (lo.min(c), hi.max(c))
+                });
         let scale = 1023.0 / (hi - lo).max(Vec3::splat(1e-12));
         let key = |t: &[u32; 3]| {
             morton(
@@ -174,9 +225,9 @@ fn blocks(scene: &Scene, inst: &Instance) -> Vec<Block> {
                     .min(glam::UVec3::splat(1023)),
             )
         };
-        order.sort_by_key(|&t| (key(&tris[t as usize]), t));
+        triangles.sort_by_key(|&t| (key(&tris[t as usize]), t));
     }
-    order
+    triangles
         .chunks(MAX_FACES_PER_XATLAS_MESH)
         .map(|chunk| {
             let mut vertices: Vec<u32> = chunk
@@ -206,38 +257,288 @@ fn morton(p: glam::UVec3) -> u32 {
     spread(p.x) | (spread(p.y) << 1) | (spread(p.z) << 2)
 }
 
-fn run_xatlas(scene: &Scene, tpu: f32, resolution: u32, padding: u32) -> XatlasOutput {
-    let atlas = ffi::Handle::create();
-    let mut given: Vec<Vec<Block>> = Vec::with_capacity(scene.instances.len());
-    for inst in &scene.instances {
-        let inst_blocks = if inst.triangles.is_empty() {
-            Vec::new()
-        } else {
-            blocks(scene, inst)
-        };
-        for block in &inst_blocks {
-            let (positions, normals, indices) = mesh_input(scene, inst, block, tpu);
-            let decl = ffi::MeshDecl {
-                vertex_count: positions.len() as u32,
-                vertex_position_data: positions.as_ptr().cast(),
-                vertex_position_stride: 12,
-                vertex_normal_data: normals.as_ptr().cast(),
-                vertex_normal_stride: 12,
-                vertex_uv_data: std::ptr::null(),
-                vertex_uv_stride: 0,
-                index_count: indices.len() as u32,
-                index_data: indices.as_ptr().cast(),
-                index_offset: 0,
-                index_format: ffi::INDEX_FORMAT_U32,
-                face_ignore_data: std::ptr::null(),
-            };
-            // The indices are local and in range, and a multiple of three: AddMesh cannot fail.
-            let status = atlas.add_mesh(&decl);
-            debug_assert_eq!(status, 0, "xatlas AddMesh failed");
+/// A convex planar region of an instance, bounded by open edges and creases. xatlas charts and
+/// parameterises it as the fan of its convex outline, a few triangles however many the region
+/// has; the region's triangles are then placed by the same affine map as the outline.
+struct Region {
+    instance: u32,
+    /// Instance-local triangles, ascending; the first is the region's seed.
+    triangles: Vec<u32>,
+    /// Instance-local vertices of those triangles, ascending.
+    vertices: Vec<u32>,
+    /// Plane coordinates of each of `vertices` in texels, relative to the outline's low corner.
+    plane: Vec<DVec2>,
+    /// The convex outline, counter-clockwise, in the same coordinates.
+    outline: Vec<DVec2>,
+}
+
+/// Chart limits a region must respect to stay one chart in xatlas.
+#[derive(Clone, Copy)]
+struct Limits {
+    max_chart_area: f64,
+    max_chart_size: f64,
+}
+
+/// Splits instance `index` into planar regions xatlas need not chart and the remaining
+/// instance-local triangles (ascending). Regions named in `excluded` (instance, seed) are left
+/// to xatlas.
+fn planar_regions(
+    scene: &Scene,
+    index: u32,
+    tpu: f32,
+    limits: Limits,
+    excluded: &BTreeSet<(u32, u32)>,
+) -> (Vec<Region>, Vec<u32>) {
+    let inst = &scene.instances[index as usize];
+    let tris = &scene.triangles[inst.triangles.start as usize..inst.triangles.end as usize];
+    let first_vertex = inst.vertices.start;
+    let local = |t: u32| tris[t as usize].map(|v| v - first_vertex);
+    let at = |v: u32| scene.positions[(first_vertex + v) as usize].as_dvec3() * f64::from(tpu);
+
+    // Faces meet where their corners have the same position (+0.0 folds −0.0 into 0.0).
+    let key = |v: u32| (scene.positions[(first_vertex + v) as usize] + Vec3::ZERO).to_array();
+    let mut order: Vec<u32> = (0..inst.vertices.end - first_vertex).collect();
+    order.sort_unstable_by_key(|&v| (key(v).map(f32::to_bits), v));
+    let mut weld = vec![0u32; order.len()];
+    for (id, same) in order.chunk_by(|&a, &b| key(a) == key(b)).enumerate() {
+        for &v in same {
+            weld[v as usize] = id as u32;
         }
-        given.push(inst_blocks);
+    }
+    let welded = |t: u32| local(t).map(|v| weld[v as usize]);
+    // Every edge as (welded end points, ascending; triangle), sorted: the faces on an edge are
+    // neighbours in the list.
+    let mut edges: Vec<([u32; 2], u32)> = Vec::with_capacity(3 * tris.len());
+    for t in 0..tris.len() as u32 {
+        let w = welded(t);
+        for k in 0..3 {
+            let (a, b) = (w[k], w[(k + 1) % 3]);
+            if a != b {
+                edges.push(([a.min(b), a.max(b)], t));
+            }
+        }
+    }
+    edges.sort_unstable();
+    let faces_on = |a: u32, b: u32| {
+        let e = [a.min(b), a.max(b)];
+        let lo = edges.partition_point(|x| x.0 < e);
+        let len = edges[lo..].partition_point(|x| x.0 == e);
+        &edges[lo..lo + len]
+    };
+
+    let mut normal = Vec::with_capacity(tris.len());
+    let mut ignored = Vec::with_capacity(tris.len());
+    for t in 0..tris.len() as u32 {
+        let [a, b, c] = local(t).map(at);
+        let n = (b - a).cross(c - a);
+        normal.push(n.normalize_or_zero());
+        // xatlas leaves faces this small out of every chart; they neither join nor bound regions.
+        ignored.push(0.5 * n.length() <= f64::from(f32::EPSILON));
     }
 
+    let mut region_of = vec![u32::MAX; tris.len()];
+    let (mut regions, mut rest) = (Vec::new(), Vec::new());
+    let mut stack = Vec::new();
+    let mut members = Vec::new();
+    let mut directed = Vec::new();
+    for seed in 0..tris.len() as u32 {
+        if region_of[seed as usize] != u32::MAX {
+            continue;
+        }
+        // Grow over edges to faces facing the same way with all corners in the seed's plane
+        // (measured against the seed, so a gentle curve never creeps in).
+        region_of[seed as usize] = seed;
+        members.clear();
+        members.push(seed);
+        let n = normal[seed as usize];
+        let d = n.dot(at(local(seed)[0]));
+        if !ignored[seed as usize] {
+            stack.push(seed);
+        }
+        while let Some(t) = stack.pop() {
+            let w = welded(t);
+            for k in 0..3 {
+                for &(_, u) in faces_on(w[k], w[(k + 1) % 3]) {
+                    let joins = region_of[u as usize] == u32::MAX
+                        && !ignored[u as usize]
+                        && normal[u as usize].dot(n) > 0.0
+                        && local(u)
+                            .iter()
+                            .all(|&v| (n.dot(at(v)) - d).abs() <= PLANE_TOLERANCE);
+                    if joins {
+                        region_of[u as usize] = seed;
+                        members.push(u);
+                        stack.push(u);
+                    }
+                }
+            }
+        }
+        members.sort_unstable();
+
+        let region = (|| {
+            if members.len() < MIN_REGION_TRIANGLES || excluded.contains(&(index, seed)) {
+                return None;
+            }
+            // Bounded by open edges and creases, so xatlas would not chart it with others.
+            directed.clear();
+            for &t in &members {
+                let w = welded(t);
+                for k in 0..3 {
+                    directed.push([w[k], w[(k + 1) % 3]]);
+                    let crossed = faces_on(w[k], w[(k + 1) % 3]).iter().any(|&(_, u)| {
+                        region_of[u as usize] != seed
+                            && !ignored[u as usize]
+                            && normal[u as usize].dot(n) >= CREASE_DOT
+                    });
+                    if crossed {
+                        return None;
+                    }
+                }
+            }
+            // Manifold: no edge traversed twice the same way (no folds or duplicate faces).
+            directed.sort_unstable();
+            if directed.windows(2).any(|e| e[0] == e[1]) {
+                return None;
+            }
+            // Plane coordinates, (u, v, n) right-handed: every member has positive area.
+            let u_axis = n.any_orthonormal_vector();
+            let v_axis = n.cross(u_axis);
+            let mut vertices: Vec<u32> = members.iter().flat_map(|&t| local(t)).collect();
+            vertices.sort_unstable();
+            vertices.dedup();
+            let mut plane: Vec<DVec2> = vertices
+                .iter()
+                .map(|&v| {
+                    let p = at(v);
+                    DVec2::new(p.dot(u_axis), p.dot(v_axis))
+                })
+                .collect();
+            let mut area = 0.0;
+            for &t in &members {
+                let [a, b, c] = local(t).map(|v| plane[vertices.binary_search(&v).unwrap_or(0)]);
+                let twice = (b - a).perp_dot(c - a);
+                if twice <= 0.0 {
+                    return None;
+                }
+                area += 0.5 * twice;
+            }
+            // Convex without holes: the triangles cover their hull exactly.
+            let mut outline = convex_hull(&plane);
+            let hull_area = polygon_area(&outline);
+            if outline.len() < 3 || (area - hull_area).abs() > 1e-6 * hull_area {
+                return None;
+            }
+            let lo = outline.iter().fold(DVec2::INFINITY, |m, p| m.min(*p));
+            let hi = outline.iter().fold(DVec2::NEG_INFINITY, |m, p| m.max(*p));
+            if hull_area > limits.max_chart_area || (hi - lo).length() > limits.max_chart_size {
+                return None;
+            }
+            plane.iter_mut().for_each(|p| *p -= lo);
+            outline.iter_mut().for_each(|p| *p -= lo);
+            Some(Region {
+                instance: index,
+                triangles: members.clone(),
+                vertices,
+                plane,
+                outline,
+            })
+        })();
+        match region {
+            Some(region) => regions.push(region),
+            None => rest.extend_from_slice(&members),
+        }
+    }
+    rest.sort_unstable();
+    (regions, rest)
+}
+
+/// Convex hull, counter-clockwise, without corners on straight runs (Andrew's monotone chain).
+fn convex_hull(points: &[DVec2]) -> Vec<DVec2> {
+    let mut sorted = points.to_vec();
+    sorted.sort_unstable_by(|a, b| a.x.total_cmp(&b.x).then(a.y.total_cmp(&b.y)));
+    sorted.dedup();
+    if sorted.len() < 3 {
+        return sorted;
+    }
+    // a → b → c turns counter-clockwise, b more than HULL_TOLERANCE off the line a c.
+    let turns_left =
+        |a: DVec2, b: DVec2, c: DVec2| (c - a).perp_dot(b - a) < -HULL_TOLERANCE * (c - a).length();
+    // Lower chain left to right, then upper chain back from the second-to-last point; a chain
+    // never pops into the one before it.
+    let mut hull: Vec<DVec2> = Vec::with_capacity(sorted.len() + 1);
+    for &p in &sorted {
+        while hull.len() >= 2 && !turns_left(hull[hull.len() - 2], hull[hull.len() - 1], p) {
+            hull.pop();
+        }
+        hull.push(p);
+    }
+    let lower = hull.len();
+    for &p in sorted[..sorted.len() - 1].iter().rev() {
+        while hull.len() > lower && !turns_left(hull[hull.len() - 2], hull[hull.len() - 1], p) {
+            hull.pop();
+        }
+        hull.push(p);
+    }
+    hull.pop();
+    hull
+}
+
+/// Area of a counter-clockwise polygon.
+fn polygon_area(polygon: &[DVec2]) -> f64 {
+    let n = polygon.len();
+    0.5 * (0..n)
+        .map(|i| polygon[i].perp_dot(polygon[(i + 1) % n]))
+        .sum::<f64>()
+}
+
+/// The affine map (page, linear part, offset) by which xatlas placed `region`'s outline, given
+/// as fan triangles from `first_face` of `mesh`; `None` unless one map places every corner.
+fn placement(
+    region: &Region,
+    mesh: &ffi::MeshView<'_>,
+    first_face: usize,
+) -> Option<(i32, DMat2, DVec2)> {
+    let fan = region.outline.len() - 2;
+    // Plane coordinates as xatlas saw them (f32), the page texel and page of each fan corner.
+    let corner = |f: usize, c: usize| -> Option<(DVec2, DVec2, i32)> {
+        let o = *mesh.indices.get(3 * (first_face + f) + c)?;
+        let v = mesh.vertices.get(o as usize)?;
+        let p = region.outline[[0, f + 1, f + 2][c]].as_vec2().as_dvec2();
+        Some((p, Vec2::from(v.uv).as_dvec2(), v.atlas_index))
+    };
+    // Fitted on the largest fan triangle, checked on all.
+    let twice_area = |f: usize| {
+        let o = &region.outline;
+        (o[f + 1] - o[0]).perp_dot(o[f + 2] - o[0])
+    };
+    let widest = (0..fan).max_by(|&a, &b| twice_area(a).total_cmp(&twice_area(b)))?;
+    let [(p0, q0, page), (p1, q1, _), (p2, q2, _)] =
+        [0, 1, 2].map(|c| corner(widest, c).unwrap_or_default());
+    if page < 0 {
+        return None;
+    }
+    let linear = DMat2::from_cols(q1 - q0, q2 - q0) * DMat2::from_cols(p1 - p0, p2 - p0).inverse();
+    let offset = q0 - linear * p0;
+    for f in 0..fan {
+        for c in 0..3 {
+            let (p, q, at) = corner(f, c)?;
+            if at != page || (linear * p + offset).distance(q) > PLACEMENT_TOLERANCE {
+                return None;
+            }
+        }
+    }
+    linear.is_finite().then_some((page, linear, offset))
+}
+
+/// Charts and packs the scene in one xatlas atlas. `Err` lists the regions (instance, seed)
+/// whose outline xatlas did not place as one planar chart; run again with them excluded.
+fn run_xatlas(
+    scene: &Scene,
+    tpu: f32,
+    resolution: u32,
+    padding: u32,
+    excluded: &BTreeSet<(u32, u32)>,
+) -> std::result::Result<XatlasOutput, Vec<(u32, u32)>> {
     // Big charts are split while growing (`max_chart_area`) and, as a last resort, scaled down
     // to fit an empty page (`max_chart_size`), so no chart is ever left unplaced.
     let side = resolution as f32;
@@ -254,26 +555,70 @@ fn run_xatlas(scene: &Scene, tpu: f32, resolution: u32, padding: u32) -> XatlasO
         conservative: true,
         padding,
     };
-    atlas.generate(chart_options, pack_options);
+    let limits = Limits {
+        max_chart_area: f64::from(chart_options.max_chart_area),
+        max_chart_size: f64::from(pack_options.max_chart_size),
+    };
 
-    // Reassemble each instance's blocks into one mesh in the instance's triangle order, with
-    // `xref` local to the instance.
-    let raw = atlas.output();
-    let mut meshes = Vec::with_capacity(given.len());
-    let mut next = 0;
-    for inst_blocks in given {
-        if inst_blocks.is_empty() {
-            meshes.push(None);
+    let atlas = ffi::Handle::create();
+    let mut given: Vec<Vec<Block>> = Vec::with_capacity(scene.instances.len());
+    let mut regions = Vec::new();
+    for (index, inst) in scene.instances.iter().enumerate() {
+        if inst.triangles.is_empty() {
+            given.push(Vec::new());
             continue;
         }
-        let triangle_count: usize = inst_blocks.iter().map(|b| b.triangles.len()).sum();
-        let mut vertices = Vec::new();
-        let mut indices = vec![0u32; 3 * triangle_count];
+        let (inst_regions, rest) = planar_regions(scene, index as u32, tpu, limits, excluded);
+        regions.extend(inst_regions);
+        let inst_blocks = blocks(scene, inst, rest);
         for block in &inst_blocks {
+            let (positions, normals, indices) = mesh_input(scene, inst, block, tpu);
+            add_mesh(&atlas, &positions, &normals, &indices);
+        }
+        given.push(inst_blocks);
+    }
+    // Region outlines after all blocks, several to an xatlas mesh: plane coordinates at a
+    // z of their own, facing +z.
+    for chunk in regions.chunks(PROXIES_PER_MESH) {
+        let (mut positions, mut indices) = (Vec::new(), Vec::new());
+        for (k, region) in chunk.iter().enumerate() {
+            let base = positions.len() as u32;
+            let z = k as f32 * PROXY_Z_STEP;
+            positions.extend(region.outline.iter().map(|p| [p.x as f32, p.y as f32, z]));
+            for i in 1..region.outline.len() as u32 - 1 {
+                indices.extend([base, base + i, base + i + 1]);
+            }
+        }
+        add_mesh(
+            &atlas,
+            &positions,
+            &vec![[0.0, 0.0, 1.0]; positions.len()],
+            &indices,
+        );
+    }
+    atlas.generate(chart_options, pack_options);
+
+    // Reassemble each instance's blocks and regions into one mesh in the instance's triangle
+    // order, with `xref` local to the instance.
+    let raw = atlas.output();
+    let mut meshes: Vec<Option<MeshOutput>> = scene
+        .instances
+        .iter()
+        .map(|inst| {
+            (!inst.triangles.is_empty()).then(|| MeshOutput {
+                vertices: Vec::new(),
+                indices: vec![u32::MAX; 3 * inst.triangles.len()],
+            })
+        })
+        .collect();
+    let mut next = 0;
+    for (inst_blocks, out) in given.iter().zip(&mut meshes) {
+        let Some(out) = out else { continue };
+        for block in inst_blocks {
             let mesh = &raw.meshes[next];
             next += 1;
-            let base = vertices.len() as u32;
-            vertices.extend(mesh.vertices.iter().map(|v| {
+            let base = out.vertices.len() as u32;
+            out.vertices.extend(mesh.vertices.iter().map(|v| {
                 ffi::Vertex {
                     xref: block
                         .vertices
@@ -285,17 +630,75 @@ fn run_xatlas(scene: &Scene, tpu: f32, resolution: u32, padding: u32) -> XatlasO
             }));
             for (k, &t) in block.triangles.iter().enumerate() {
                 for c in 0..3 {
-                    indices[3 * t as usize + c] =
+                    out.indices[3 * t as usize + c] =
                         mesh.indices.get(3 * k + c).map_or(u32::MAX, |i| i + base);
                 }
             }
         }
-        meshes.push(Some(MeshOutput { vertices, indices }));
     }
-    XatlasOutput {
+    let mut failed = Vec::new();
+    for chunk in regions.chunks(PROXIES_PER_MESH) {
+        let mesh = &raw.meshes[next];
+        next += 1;
+        let mut first_face = 0;
+        for region in chunk {
+            let placed = placement(region, mesh, first_face);
+            first_face += region.outline.len() - 2;
+            let Some((page, linear, offset)) = placed else {
+                failed.push((region.instance, region.triangles[0]));
+                continue;
+            };
+            let inst = &scene.instances[region.instance as usize];
+            let Some(out) = &mut meshes[region.instance as usize] else {
+                continue;
+            };
+            let base = out.vertices.len() as u32;
+            out.vertices
+                .extend(region.vertices.iter().zip(&region.plane).map(|(&v, &p)| {
+                    let uv = (linear * p + offset).max(DVec2::ZERO).as_vec2();
+                    ffi::Vertex {
+                        atlas_index: page,
+                        uv: uv.to_array(),
+                        xref: v,
+                    }
+                }));
+            for &t in &region.triangles {
+                let tri = scene.triangles[(inst.triangles.start + t) as usize];
+                for (c, &v) in tri.iter().enumerate() {
+                    let at = region.vertices.binary_search(&(v - inst.vertices.start));
+                    out.indices[3 * t as usize + c] = at.map_or(u32::MAX, |i| base + i as u32);
+                }
+            }
+        }
+    }
+    if !failed.is_empty() {
+        return Err(failed);
+    }
+    Ok(XatlasOutput {
         page_count: raw.page_count,
         meshes,
-    }
+    })
+}
+
+/// Adds one mesh (positions in texels, unit normals, triangles) to `atlas`.
+fn add_mesh(atlas: &ffi::Handle, positions: &[[f32; 3]], normals: &[[f32; 3]], indices: &[u32]) {
+    let decl = ffi::MeshDecl {
+        vertex_count: positions.len() as u32,
+        vertex_position_data: positions.as_ptr().cast(),
+        vertex_position_stride: 12,
+        vertex_normal_data: normals.as_ptr().cast(),
+        vertex_normal_stride: 12,
+        vertex_uv_data: std::ptr::null(),
+        vertex_uv_stride: 0,
+        index_count: indices.len() as u32,
+        index_data: indices.as_ptr().cast(),
+        index_offset: 0,
+        index_format: ffi::INDEX_FORMAT_U32,
+        face_ignore_data: std::ptr::null(),
+    };
+    // The indices are local and in range, and a multiple of three: AddMesh cannot fail.
+    let status = atlas.add_mesh(&decl);
+    debug_assert_eq!(status, 0, "xatlas AddMesh failed");
 }
 
 /// Positions in texel units relative to the instance's bounding box, normals, and indices into
@@ -933,24 +1336,171 @@ pub(super) mod tests {
     }
 
     #[test]
-    fn large_instances_are_unwrapped_in_blocks_without_overlaps() {
-        // 3072 triangles: three blocks of at most MAX_FACES_PER_XATLAS_MESH.
-        let scene = scene_of(&[cube(1.0, 16)], &[]);
-        assert!(scene.triangles.len() > 2 * MAX_FACES_PER_XATLAS_MESH);
-        let atlas = unwrap_ok(&scene, &params(32.0, 1024));
+    fn large_curved_instances_are_unwrapped_in_blocks_without_overlaps() {
+        // 4512 triangles without a planar region: five blocks of MAX_FACES_PER_XATLAS_MESH.
+        let scene = scene_of(&[sphere(Vec3::ZERO, 1.0, 48, 48)], &[]);
+        assert!(scene.triangles.len() > 4 * MAX_FACES_PER_XATLAS_MESH);
+        let atlas = unwrap_ok(&scene, &params(16.0, 1024));
         let overlaps = Overlaps::find(
             atlas.pages[0],
             page_triangles(&scene, &atlas, 0).into_iter(),
         );
         assert_eq!(atlas.pages.len(), 1);
         assert_eq!(overlaps.overlapping, 0, "{overlaps:?}");
-        // 6 m² at 32 texels per unit: 6144 texels, less the centres on chart borders.
-        assert!(overlaps.covered > 5500, "{overlaps:?}");
+        // 4π m² at 16 texels per unit: 3217 texels, less the centres on chart borders.
+        assert!(overlaps.covered > 2800, "{overlaps:?}");
         let ratio = texel_area_ratio(&scene, &atlas);
         assert!(
-            (0.9..1.3).contains(&ratio),
+            (0.9..1.6).contains(&ratio),
             "texel area / expected = {ratio}"
         );
+    }
+
+    /// An `n × n` grid of `size`-sided squares in the z = 0 plane facing +z, vertices shared;
+    /// the squares listed in `holes` (x, y) are left out.
+    fn grid(size: f32, n: u32, holes: &[(u32, u32)]) -> Part {
+        let mut part = Part::default();
+        for j in 0..=n {
+            for i in 0..=n {
+                part.positions
+                    .push(Vec3::new(i as f32 * size, j as f32 * size, 0.0));
+            }
+        }
+        for j in 0..n {
+            for i in 0..n {
+                if holes.contains(&(i, j)) {
+                    continue;
+                }
+                let a = j * (n + 1) + i;
+                part.triangles.push([a, a + 1, a + n + 2]);
+                part.triangles.push([a, a + n + 2, a + n + 1]);
+            }
+        }
+        part
+    }
+
+    /// Charts of an instance: triangles joined across edges whose two atlas vertices they share.
+    fn chart_count(inst: &InstanceUv) -> usize {
+        let mut parent: Vec<usize> = (0..inst.triangles.len()).collect();
+        fn root(parent: &mut [usize], mut i: usize) -> usize {
+            while parent[i] != i {
+                parent[i] = parent[parent[i]];
+                i = parent[i];
+            }
+            i
+        }
+        let mut first = std::collections::BTreeMap::new();
+        for (t, tri) in inst.triangles.iter().enumerate() {
+            for k in 0..3 {
+                let (a, b) = (tri[k], tri[(k + 1) % 3]);
+                let other = *first.entry((a.min(b), a.max(b))).or_insert(t);
+                let (ra, rb) = (root(&mut parent, t), root(&mut parent, other));
+                parent[ra] = rb;
+            }
+        }
+        (0..parent.len())
+            .filter(|&t| root(&mut parent, t) == t)
+            .count()
+    }
+
+    fn regions_of(scene: &Scene, tpu: f32) -> (Vec<Region>, Vec<u32>) {
+        let limits = Limits {
+            max_chart_area: 0.25 * 1024.0 * 1024.0,
+            max_chart_size: 1020.0,
+        };
+        planar_regions(scene, 0, tpu, limits, &BTreeSet::new())
+    }
+
+    #[test]
+    fn large_planar_instances_are_one_chart_at_exact_density() {
+        // 8192 triangles, eight blocks' worth, but one convex planar region: no block cuts.
+        let scene = scene_of(&[grid(1.0 / 16.0, 64, &[])], &[]);
+        let (regions, rest) = regions_of(&scene, 16.0);
+        assert_eq!((regions.len(), rest.len()), (1, 0));
+        assert_eq!(regions[0].outline.len(), 4);
+        let atlas = unwrap_ok(&scene, &params(16.0, 1024));
+        assert_eq!(chart_count(&atlas.instances[0]), 1);
+        let overlaps = Overlaps::find(
+            atlas.pages[0],
+            page_triangles(&scene, &atlas, 0).into_iter(),
+        );
+        assert_eq!(overlaps.overlapping, 0, "{overlaps:?}");
+        // 64 × 64 texels; xatlas only rounds the chart's extents up to whole texels.
+        assert!(overlaps.covered >= 63 * 63, "{overlaps:?}");
+        let ratio = texel_area_ratio(&scene, &atlas);
+        assert!(
+            (0.999..1.04).contains(&ratio),
+            "texel area / expected = {ratio}"
+        );
+    }
+
+    #[test]
+    fn only_convex_crease_bounded_planar_regions_skip_charting() {
+        // A cube's faces meet at 90°: six regions of 32 triangles.
+        let (regions, rest) = regions_of(&scene_of(&[cube(1.0, 4)], &[]), 16.0);
+        assert_eq!((regions.len(), rest.len()), (6, 0));
+        // Non-convex (an L), with a hole, too small: left to xatlas.
+        let l_shape: Vec<(u32, u32)> = (4..8).flat_map(|i| (4..8).map(move |j| (i, j))).collect();
+        for part in [
+            grid(0.1, 8, &l_shape),
+            grid(0.1, 8, &[(3, 3)]),
+            grid(0.1, 2, &[]),
+        ] {
+            let scene = scene_of(&[part], &[]);
+            let (regions, rest) = regions_of(&scene, 16.0);
+            assert!(regions.is_empty());
+            assert_eq!(rest.len(), scene.triangles.len());
+        }
+        // Two flat halves folded by 10°: xatlas may chart across the fold, so neither is taken.
+        let mut roof = grid(0.1, 8, &[]);
+        let fold = glam::Quat::from_rotation_y(10f32.to_radians());
+        for p in roof.positions.iter_mut().filter(|p| p.x > 0.45) {
+            *p = Vec3::new(0.4, p.y, 0.0) + fold * Vec3::new(p.x - 0.4, 0.0, 0.0);
+        }
+        let (regions, _) = regions_of(&scene_of(&[roof], &[]), 16.0);
+        assert!(regions.is_empty());
+        // A curved surface has no planar region.
+        let (regions, _) = regions_of(&scene_of(&[sphere(Vec3::ZERO, 1.0, 16, 16)], &[]), 16.0);
+        assert!(regions.is_empty());
+    }
+
+    #[test]
+    fn convex_hull_drops_corners_on_straight_runs() {
+        let square: Vec<DVec2> = (0..=4)
+            .flat_map(|i| (0..=4).map(move |j| DVec2::new(f64::from(i), f64::from(j))))
+            .collect();
+        let hull = convex_hull(&square);
+        assert_eq!(
+            hull,
+            [
+                DVec2::ZERO,
+                DVec2::new(4.0, 0.0),
+                DVec2::new(4.0, 4.0),
+                DVec2::new(0.0, 4.0)
+            ]
+        );
+        assert_eq!(polygon_area(&hull), 16.0);
+    }
+
+    #[test]
+    fn a_region_xatlas_does_not_place_whole_is_charted_again() {
+        // A 1024-gon 0.8 texels across: the fan of its outline has slivers below xatlas' area
+        // epsilon, left out of every chart, so the outline is not placed as one chart.
+        let mut disc = Part::new(vec![Vec3::ZERO], Vec::new());
+        for s in 0..1024u32 {
+            let a = std::f32::consts::TAU * s as f32 / 1024.0;
+            disc.positions.push(Vec3::new(a.cos(), a.sin(), 0.0) * 0.05);
+            disc.triangles.push([0, 1 + s, 1 + (s + 1) % 1024]);
+        }
+        let scene = scene_of(&[disc], &[]);
+        assert!(run_xatlas(&scene, 16.0, 1024, 2, &BTreeSet::new()).is_err());
+        let atlas = unwrap_ok(&scene, &params(16.0, 1024));
+        let overlaps = Overlaps::find(
+            atlas.pages[0],
+            page_triangles(&scene, &atlas, 0).into_iter(),
+        );
+        assert_eq!(overlaps.overlapping, 0, "{overlaps:?}");
+        assert!(overlaps.covered > 0, "{overlaps:?}");
     }
 
     #[test]
