@@ -308,7 +308,13 @@ pub fn quality_table(dir: &Path, cornell: Option<&Known>) -> String {
         config.transport.light_samples = 16;
         match bake(path, &config) {
             Ok((b, _)) => {
-                if let Some(r) = b.seams {
+                if let Some(r) = b.seams.filter(|r| r.before.edges == 0) {
+                    let _ = writeln!(
+                        md,
+                        "| seams, {name} | {} edges: every chart ends at a crease or open edge | – | – |",
+                        r.before.edges
+                    );
+                } else if let Some(r) = b.seams {
                     let rel = |x: f32| x / r.before.mean_value.max(1e-12) * 100.0;
                     let _ = writeln!(
                         md,
