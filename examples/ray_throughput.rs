@@ -71,13 +71,19 @@ fn run(scene: &Scene, tracer: &Tracer, kind: Kind) -> (f64, f64, f64, f64) {
                     // A pair that faces each other, as every method's visibility rays join
                     // (the form-factor kernel is zero otherwise, so none casts the ray):
                     // coplanar floor pairs would graze the floor the whole way.
-                    let p = loop {
+                    // Redraw both ends (a degenerate triangle faces nothing); give up after
+                    // a while in a scene with no facing surfaces.
+                    let (mut a, mut b) = (o, surface_point(scene, &mut rng, eps).0);
+                    for _ in 0..1000 {
                         let (p, m) = surface_point(scene, &mut rng, eps);
-                        let d = p - o;
-                        if n.dot(d) > 0.0 && m.dot(d) < 0.0 {
-                            break p;
+                        let (q, k) = surface_point(scene, &mut rng, eps);
+                        let d = q - p;
+                        if m.dot(d) > 0.0 && k.dot(d) < 0.0 {
+                            (a, b) = (p, q);
+                            break;
                         }
-                    };
+                    }
+                    let (o, p) = (a, b);
                     hits += tracer.occluded(o, p) as usize;
                 } else {
                     let (tx, ty) = frame(n);
