@@ -10,11 +10,16 @@
 //!   links the vendored C++.
 //! - Printing: xatlas prints warnings with `printf` unless told otherwise; we pass a null print
 //!   function (the library never prints).
-//! - Determinism: `Create` starts a task scheduler with worker threads. Charting and
-//!   parameterisation run one job per chart group; each job owns its group and a fixed-seed
-//!   random generator. Packing is single-threaded with a fixed-seed generator in a fresh packer,
-//!   and the output is assembled in (mesh, chart group, chart) order. Nothing depends on thread
-//!   scheduling; `unwrap_is_deterministic` checks it. Our own region pass is sequential.
+//! - Threads: xatlas is built without its task scheduler (`XA_MULTITHREADED=0`, set for the
+//!   cc build in `.cargo/config.toml`). Its 2019 scheduler loses the shutdown wake-up when a
+//!   worker is between its "still running?" check and going to sleep, and `Destroy` then joins
+//!   that worker forever: a benchmark bake hung so. After the planar-region pass below xatlas
+//!   charts little, and one thread costs nothing measurable on the hall (0.17 s either way).
+//!   Crates that depend on lightbake need the same `[env]` entry.
+//! - Determinism: charting and parameterisation run one chart group after another, each with a
+//!   fixed-seed random generator; packing uses a fixed-seed generator in a fresh packer, and the
+//!   output is assembled in (mesh, chart group, chart) order. `unwrap_is_deterministic` checks
+//!   it. Our own region pass is sequential.
 //! - Order: output triangle `f` of a mesh is input triangle `f` (xatlas writes indices at
 //!   `3·sourceFace`), same winding. An output vertex's `xref` may name a colocal twin of the
 //!   input vertex (same position, other normal or UV), so the source vertex of each corner is
