@@ -2,7 +2,7 @@
 //! fixture scenes, measured against the built-in path-traced reference.
 //!
 //! ```sh
-//! cargo run --release --example chart               # full run (about 10 minutes on 2 cores)
+//! cargo run --release --example chart               # full run (about 20 minutes on 2 cores)
 //! cargo run --release --example chart -- --quick    # fewer settings, smaller reference
 //! cargo run --release --example chart -- --scene cornell_box --scene furnace
 //! cargo run --release --example chart -- --scene furnace --method hierarchical
