@@ -2,7 +2,7 @@
 //! texels contributing most to the squared error (position, normal, bake vs reference), and for
 //! `two_rooms` the mean of room B's floor away from the doorway (the leak criterion).
 //!
-//!     cargo run --release --example error_map [scene.gltf] [texels-per-unit] [K] [ref samples]
+//!     cargo run --release --example error_map [scene.gltf] [texels-per-unit] [K] [ref samples] [hierarchical]
 
 use std::path::PathBuf;
 
@@ -24,6 +24,10 @@ fn main() -> lightbake::Result<()> {
     config.transport.gather_rays = k;
     config.transport.light_samples = k / 8;
     config.solve.tolerance = 1e-5;
+    if args.get(4).map(String::as_str) == Some("hierarchical") {
+        config.transport.method = lightbake::config::Method::Hierarchical;
+    }
+    config.transport.validity = std::env::var_os("NO_VALIDITY").is_none();
     let baked = compute(&path, &config, &NoProgress)?;
     let params = ReferenceParams {
         samples_per_pass: 32,

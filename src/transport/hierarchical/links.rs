@@ -359,26 +359,14 @@ impl Refiner<'_> {
     }
 }
 
-/// A point of texel `i`'s footprint for `u ∈ [0,1)²`, lifted off the surface by the ray
-/// epsilon; a partly covered texel is shrunk around its covered centroid so points stay on
-/// the surface (as in the Monte Carlo method).
+/// A point of texel `i`'s footprint for `u ∈ [0,1)²` ([`Texels::footprint_point`]: partly
+/// covered texels shrunk around their covered centroid, moved samples within their jitter
+/// cell), lifted off the surface by the ray epsilon. The same points the Monte Carlo method
+/// and the reference start from: a copy that ignored the jitter put receivers of texels moved
+/// away from a block back under it (Cornell box 3.05% → 3.61% once divided texels moved).
 #[inline]
 pub fn footprint_point(t: &Texels, tracer: &Tracer, i: usize, u: Vec2) -> Vec3 {
-    let o = (u - Vec2::splat(0.5)) * cover_scale(t, i);
-    t.position[i] + t.du[i] * o.x + t.dv[i] * o.y + t.normal[i] * tracer.epsilon
-}
-
-/// Footprint scale of a partly covered texel: the covered fraction, which keeps a half-covered
-/// border texel's square inside its strip of the surface.
-#[inline]
-fn cover_scale(t: &Texels, i: usize) -> f32 {
-    let full = t.du[i].cross(t.dv[i]).length();
-    let cover = if full > 0.0 {
-        (t.area[i] / full).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    if cover > 0.99 { 1.0 } else { cover }
+    t.footprint_point(i, u) + t.normal[i] * tracer.epsilon
 }
 
 /// A texel's footprint polygon (world space): the texel square, cut for a partly covered
