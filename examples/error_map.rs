@@ -3,6 +3,8 @@
 //! `two_rooms` the mean of room B's floor away from the doorway (the leak criterion).
 //!
 //!     cargo run --release --example error_map [scene.gltf] [texels-per-unit] [K] [ref samples] [hierarchical]
+//!
+//! `NO_VALIDITY=1` bakes (and traces the reference) without texel validity and divided texels.
 
 use std::path::PathBuf;
 
