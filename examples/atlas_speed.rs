@@ -12,10 +12,10 @@
 use std::collections::HashMap;
 use std::time::Instant;
 
-use glam::{DVec2, Vec2};
 use lightbake::BakeConfig;
-use lightbake::atlas::{Atlas, PageSize};
+use lightbake::atlas::{Atlas, Overlaps};
 use lightbake::scene::Scene;
+use lightbake::testing::cpu_seconds;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut args = std::env::args().skip(1);
@@ -97,22 +97,6 @@ fn digest(atlas: &Atlas) -> u64 {
     })
 }
 
-/// User + system CPU time of this process so far (Linux; 0 elsewhere).
-fn cpu_seconds() -> f64 {
-    let stat = std::fs::read_to_string("/proc/self/stat").unwrap_or_default();
-    // Fields after the parenthesised command name; utime and stime are the 12th and 13th.
-    let rest = stat.rsplit_once(')').map_or("", |(_, r)| r);
-    let fields: Vec<f64> = rest
-        .split_whitespace()
-        .map(|f| f.parse().unwrap_or(0.0))
-        .collect();
-    // Clock ticks; 100 per second on Linux.
-    fields
-        .get(11)
-        .zip(fields.get(12))
-        .map_or(0.0, |(u, s)| (u + s) / 100.0)
-}
-
 /// Charts: triangles joined through shared atlas vertex pairs (edges inside a chart), per
 /// instance.
 fn charts(atlas: &Atlas) -> usize {
@@ -143,52 +127,13 @@ fn charts(atlas: &Atlas) -> usize {
 
 /// Texel centres strictly inside more than one triangle of the same page.
 fn overlapping(scene: &Scene, atlas: &Atlas) -> u64 {
-    let mut claimed: Vec<Vec<bool>> = atlas
-        .pages
-        .iter()
-        .map(|p| vec![false; (p.width * p.height) as usize])
-        .collect();
-    let mut overlaps = 0;
-    for t in 0..scene.triangles.len() as u32 {
-        let (uv, page) = atlas.triangle_uv(scene, t);
-        let size = atlas.pages[page as usize];
-        for_each_centre_inside(uv, size, |x, y| {
-            let c = &mut claimed[page as usize][(y * size.width + x) as usize];
-            overlaps += u64::from(*c);
-            *c = true;
-        });
-    }
-    overlaps
-}
-
-/// As in `atlas::existing`: centres strictly inside, edge functions in a canonical order so two
-/// triangles sharing an edge never both claim a centre on it.
-fn for_each_centre_inside(uv: [Vec2; 3], size: PageSize, mut f: impl FnMut(u32, u32)) {
-    let scale = DVec2::new(f64::from(size.width), f64::from(size.height));
-    let p = uv.map(|v| v.as_dvec2() * scale);
-    let lo = p[0].min(p[1]).min(p[2]);
-    let hi = p[0].max(p[1]).max(p[2]);
-    let first = |v: f64| (v - 0.5).ceil().max(0.0) as u32;
-    let last = |v: f64, n: u32| ((v - 0.5).floor().min(f64::from(n) - 1.0)).max(-1.0) as i64;
-    let (x_end, y_end) = (last(hi.x, size.width), last(hi.y, size.height));
-    let edge = |a: DVec2, b: DVec2, c: DVec2| {
-        if (a.x, a.y) <= (b.x, b.y) {
-            (b - a).perp_dot(c - a)
-        } else {
-            -(a - b).perp_dot(c - b)
-        }
-    };
-    for y in first(lo.y)..(y_end + 1).max(0) as u32 {
-        for x in first(lo.x)..(x_end + 1).max(0) as u32 {
-            let c = DVec2::new(f64::from(x) + 0.5, f64::from(y) + 0.5);
-            let e = [
-                edge(p[0], p[1], c),
-                edge(p[1], p[2], c),
-                edge(p[2], p[0], c),
-            ];
-            if e.iter().all(|&v| v > 0.0) || e.iter().all(|&v| v < 0.0) {
-                f(x, y);
-            }
-        }
-    }
+    (0..atlas.pages.len() as u32)
+        .map(|page| {
+            let triangles = (0..scene.triangles.len() as u32)
+                .map(|t| atlas.triangle_uv(scene, t))
+                .filter(|&(_, p)| p == page)
+                .map(|(uv, _)| uv);
+            Overlaps::find(atlas.pages[page as usize], triangles).overlapping
+        })
+        .sum()
 }

@@ -9,6 +9,7 @@ use std::time::Instant;
 
 use glam::Vec3;
 use lightbake::config::Method;
+use lightbake::testing::cpu_seconds;
 use lightbake::{BakeConfig, NoProgress, compute};
 
 fn config(tpu: f32, method: Method, k: u32) -> BakeConfig {
@@ -92,19 +93,4 @@ fn main() -> lightbake::Result<()> {
         );
     }
     Ok(())
-}
-
-/// CPU seconds (user + system) of this process so far.
-fn cpu_seconds() -> f64 {
-    let stat = std::fs::read_to_string("/proc/self/stat").unwrap_or_default();
-    let fields: Vec<&str> = stat
-        .rsplit_once(')')
-        .map_or(vec![], |(_, r)| r.split_whitespace().collect());
-    let tick = |i: usize| {
-        fields
-            .get(i)
-            .and_then(|v| v.parse::<f64>().ok())
-            .unwrap_or(0.0)
-    };
-    (tick(11) + tick(12)) / 100.0
 }

@@ -16,6 +16,7 @@ use std::time::Instant;
 
 use glam::Vec3;
 use lightbake::scene::{self, Scene};
+use lightbake::testing::cpu_seconds;
 use lightbake::trace::Tracer;
 use lightbake::transport::sampling::{Rng, cosine_hemisphere, frame, triangle_point};
 use rayon::prelude::*;
@@ -31,16 +32,6 @@ fn surface_point(scene: &Scene, rng: &mut Rng, eps: f32) -> (Vec3, Vec3) {
     let n = (p(1) - p(0)).cross(p(2) - p(0)).normalize_or_zero();
     let x = p(0) + (p(1) - p(0)) * b.x + (p(2) - p(0)) * b.y;
     (x + n * eps, n)
-}
-
-/// CPU seconds (user + system) of this process so far.
-fn cpu_seconds() -> f64 {
-    let stat = std::fs::read_to_string("/proc/self/stat").unwrap_or_default();
-    // Fields after the command name (which may hold spaces): utime is the 14th, stime the 15th.
-    let rest = stat.rsplit_once(')').map_or("", |r| r.1);
-    let f: Vec<&str> = rest.split_whitespace().collect();
-    let ticks = |k: usize| f.get(k).and_then(|v| v.parse::<f64>().ok()).unwrap_or(0.0);
-    (ticks(11) + ticks(12)) / 100.0 // USER_HZ is 100 on Linux
 }
 
 /// Casts `RAYS` rays of one kind on the current rayon pool:

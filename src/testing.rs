@@ -1249,6 +1249,17 @@ pub fn checker(size: u32, squares: u32) -> image::RgbImage {
     })
 }
 
+/// User + system CPU seconds of this process so far (Linux `/proc/self/stat`; 0 elsewhere), for
+/// the examples' CPU-utilisation figures.
+pub fn cpu_seconds() -> f64 {
+    let stat = std::fs::read_to_string("/proc/self/stat").unwrap_or_default();
+    // Fields after the command name (which may hold spaces): utime is the 14th, stime the 15th.
+    let rest = stat.rsplit_once(')').map_or("", |r| r.1);
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    let ticks = |k: usize| f.get(k).and_then(|v| v.parse::<f64>().ok()).unwrap_or(0.0);
+    (ticks(11) + ticks(12)) / 100.0 // USER_HZ is 100 on Linux
+}
+
 /// Emissive ceiling panel of `two_rooms`: radiance per channel.
 pub const TWO_ROOMS_PANEL_RADIANCE: f32 = 10.0;
 

@@ -212,7 +212,7 @@ fn instance_uv(scene: &Scene, inst: &Instance) -> InstanceUv {
 
 /// Texel centres claimed by more than one triangle of a page layout.
 #[derive(Clone, Copy, Debug, Default)]
-pub(super) struct Overlaps {
+pub struct Overlaps {
     /// Texel centres strictly inside at least one triangle.
     pub covered: u64,
     /// Texel centres strictly inside a second (third, …) triangle, counted once per extra claim.
@@ -222,8 +222,9 @@ pub(super) struct Overlaps {
 }
 
 impl Overlaps {
-    /// Rasterises `triangles` (UVs in [0,1] of a `size` page) and counts shared texel centres.
-    /// Triangles sharing an edge never both claim a centre (see [`for_each_centre_inside`]).
+    /// Rasterises `triangles` (UVs in \[0, 1\] of a `size` page) and counts shared texel
+    /// centres. Centres strictly inside count, with each edge evaluated in a canonical order, so
+    /// triangles sharing an edge never both claim a centre on it.
     pub fn find(size: PageSize, triangles: impl Iterator<Item = [Vec2; 3]>) -> Overlaps {
         let mut claimed = vec![0u64; (size.width as usize * size.height as usize).div_ceil(64)];
         let mut overlaps = Overlaps::default();
@@ -248,7 +249,7 @@ impl Overlaps {
 /// of a `size` page), whatever its winding. Each edge function is evaluated with the edge's end
 /// points in a canonical order, so the two triangles sharing an edge get exactly opposite values
 /// there and a centre on the edge is inside neither.
-pub(super) fn for_each_centre_inside(uv: [Vec2; 3], size: PageSize, mut f: impl FnMut(u32, u32)) {
+pub(crate) fn for_each_centre_inside(uv: [Vec2; 3], size: PageSize, mut f: impl FnMut(u32, u32)) {
     let scale = DVec2::new(f64::from(size.width), f64::from(size.height));
     let p = uv.map(|v| v.as_dvec2() * scale);
     let lo = p[0].min(p[1]).min(p[2]);

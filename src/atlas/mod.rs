@@ -7,6 +7,8 @@
 mod existing;
 mod xatlas;
 
+pub use existing::Overlaps;
+
 use glam::Vec2;
 
 use crate::Result;
