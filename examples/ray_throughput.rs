@@ -15,10 +15,10 @@
 use std::time::Instant;
 
 use glam::Vec3;
+use lightbake::sampling::{Rng, cosine_hemisphere, frame, triangle_point};
 use lightbake::scene::{self, Scene};
 use lightbake::testing::cpu_seconds;
 use lightbake::trace::Tracer;
-use lightbake::transport::sampling::{Rng, cosine_hemisphere, frame, triangle_point};
 use rayon::prelude::*;
 
 const RAYS: usize = 4_000_000;

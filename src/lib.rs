@@ -37,7 +37,7 @@
 //!
 //! Units are radiometric, linear Rec.709 RGB. Emitted radiance is
 //! `emissiveFactor × emissiveStrength`; reflectance is `baseColorFactor × baseColorTexture`
-//! (clamped to [`texels::MAX_ALBEDO`]). A lightmap texel stores `H/π` — the radiance a white
+//! (clamped to [`scene::MAX_ALBEDO`]). A lightmap texel stores `H/π` — the radiance a white
 //! Lambertian surface would reflect — so a renderer shades `baseColor × lightmap + emission`.
 //! Lightmap UVs are in `TEXCOORD_1`, glTF image convention (v down, EXR row 0 at the top).
 //!
@@ -50,11 +50,13 @@ pub mod atlas;
 pub mod config;
 pub mod error;
 pub mod lightmap;
+pub mod lights;
 pub mod output;
 pub mod plan;
 pub mod progress;
 pub mod reference;
 pub mod render;
+pub mod sampling;
 pub mod scene;
 pub mod solve;
 pub mod texels;

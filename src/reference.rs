@@ -58,12 +58,12 @@ use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 
 use crate::config::BakeConfig;
+use crate::lights::{Emitters, punctual_irradiance, triangle_point};
+use crate::sampling::{
+    Rng, cosine_hemisphere, frame, power_weight, triangle_point as sample_triangle,
+};
 use crate::texels::{NO_TEXEL, Texels};
 use crate::trace::Tracer;
-use crate::transport::direct::{Emitters, punctual_irradiance, triangle_point};
-use crate::transport::sampling::{
-    Rng, cosine_hemisphere, frame, triangle_point as sample_triangle,
-};
 use crate::{Error, Progress, Result, atlas, scene, texels};
 
 mod camera;
@@ -449,13 +449,6 @@ pub fn compute(
         texels: p.texels,
         reference,
     })
-}
-
-/// Power heuristic (β = 2), one sample of each strategy: weight / p = this / (this² + other²).
-#[inline]
-fn power_weight(this: f32, other: f32) -> f32 {
-    let d = this * this + other * other;
-    if d > 0.0 { this / d } else { 0.0 }
 }
 
 pub(crate) struct Paths<'a> {

@@ -8,8 +8,8 @@ use base64::Engine;
 use glam::Vec3;
 use lightbake::reference::{self, ReferenceParams};
 use lightbake::render::{Camera, RenderOptions, RenderScene};
+use lightbake::sampling::Rng;
 use lightbake::testing::{Face, Geometry, GltfBuilder, Light, Material};
-use lightbake::transport::sampling::Rng;
 use lightbake::{NoProgress, bake};
 use serde_json::{Value, json};
 

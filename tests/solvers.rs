@@ -7,7 +7,7 @@ use std::path::Path;
 use glam::Vec3;
 use lightbake::config::Solver;
 use lightbake::progress::CollectWarnings;
-use lightbake::texels::MAX_ALBEDO;
+use lightbake::scene::MAX_ALBEDO;
 use lightbake::{BakeConfig, Baked, NoProgress, compute};
 
 use crate::util::{fixture, quick, scratch};

@@ -281,7 +281,7 @@ mod tests {
         let t = flat(16, 16);
         let mut v: Vec<Vec3> = (0..t.len())
             .map(|i| {
-                let u = crate::transport::sampling::Rng::new(7, i as u64, 0).next_f32();
+                let u = crate::sampling::Rng::new(7, i as u64, 0).next_f32();
                 Vec3::splat(1.0 + (u - 0.5) * 0.4)
             })
             .collect();

@@ -35,12 +35,12 @@ use std::time::Instant;
 use glam::{Vec2, Vec3};
 
 use super::{Paths, ReferenceParams, SEED_SALT, Stop, run_passes};
+use crate::lights::Emitters;
 use crate::render::Camera;
+use crate::sampling::Rng;
 use crate::scene::Scene;
 use crate::texels::Texels;
 use crate::trace::{Hit, Tracer};
-use crate::transport::direct::Emitters;
-use crate::transport::sampling::Rng;
 use crate::{Error, Progress, Result};
 
 /// Mixed into the seed so pixel streams differ from texel streams of the same index.

@@ -42,9 +42,9 @@ pub use camera::{Camera, GltfCamera, gltf_cameras, select};
 pub use shade::{GLOSSY_MAX_ROUGHNESS, MIRROR_ROUGHNESS, Surface};
 
 use crate::lightmap::Page;
+use crate::sampling::Rng;
 use crate::scene::{self, Scene, Source};
 use crate::trace::Tracer;
-use crate::transport::sampling::Rng;
 use crate::{Error, Result, output};
 
 /// What to render and how.

@@ -40,9 +40,9 @@ use glam::{Vec2, Vec3};
 use serde_json::Value;
 
 use super::{RenderOptions, RenderScene};
+use crate::sampling::{Rng, frame, hammersley};
 use crate::scene::Material;
 use crate::trace::Hit;
-use crate::transport::sampling::{Rng, frame, hammersley};
 
 /// Roughness at or below which reflection is one perfect mirror ray.
 pub const MIRROR_ROUGHNESS: f32 = 0.02;

@@ -18,6 +18,10 @@ use glam::{Vec2, Vec3};
 
 pub use gltf_in::load;
 
+/// Reflectance is clamped to this: ρ = 1 (glTF's default white) in a closed room would make
+/// the radiosity series diverge; 0.99 keeps it convergent (about 100 bounces carry the light).
+pub const MAX_ALBEDO: f32 = 0.99;
+
 /// World-space geometry, materials and lights of the default scene.
 #[derive(Clone, Debug, Default)]
 pub struct Scene {

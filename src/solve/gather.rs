@@ -41,13 +41,13 @@ use rayon::prelude::*;
 
 use super::{Iteration, Solution};
 use crate::config::{SolveParams, TransportParams};
+use crate::lights::Emitters;
+use crate::sampling::{Rng, cosine_hemisphere, frame, hammersley};
 use crate::scene::Scene;
 use crate::texels::{NO_TEXEL, Texels};
 use crate::trace::Tracer;
 use crate::transport::Transport;
-use crate::transport::direct::Emitters;
 use crate::transport::montecarlo::{ChunkRows, Context};
-use crate::transport::sampling::{Rng, cosine_hemisphere, frame, hammersley};
 use crate::{Error, Progress, Result};
 
 /// Texels per parallel work item (fixed, so sums do not depend on the thread count).

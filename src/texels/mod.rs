@@ -11,12 +11,9 @@ pub mod validity;
 use glam::{Vec2, Vec3};
 
 use crate::atlas::PageSize;
+use crate::scene::MAX_ALBEDO;
 
 pub use raster::build;
-
-/// Reflectance is clamped to this: ρ = 1 (glTF's default white) in a closed room would make
-/// the radiosity series diverge; 0.99 keeps it convergent (about 100 bounces carry the light).
-pub const MAX_ALBEDO: f32 = 0.99;
 
 /// No texel at this page position.
 pub const NO_TEXEL: u32 = u32::MAX;

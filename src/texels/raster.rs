@@ -28,9 +28,10 @@ use std::collections::BTreeMap;
 use glam::{DMat2, DVec2, DVec3, Vec2, Vec3};
 use rayon::prelude::*;
 
-use super::{MAX_ALBEDO, NO_TEXEL, Texels};
+use super::{NO_TEXEL, Texels};
 use crate::Result;
 use crate::atlas::{Atlas, PageSize};
+use crate::scene::MAX_ALBEDO;
 use crate::scene::{Material, Scene};
 
 /// Rows per parallel work item: small enough to balance two cores on one page, large enough

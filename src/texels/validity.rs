@@ -42,9 +42,9 @@ use rayon::prelude::*;
 
 use super::Texels;
 use super::cuts::{self, page_neighbours};
+use crate::sampling::{Rng, cosine_hemisphere, frame, hammersley};
 use crate::scene::Scene;
 use crate::trace::Tracer;
-use crate::transport::sampling::{Rng, cosine_hemisphere, frame, hammersley};
 
 /// Random-stream purpose of the probe directions (distinct from the transport's streams).
 const PURPOSE: u64 = 0x7a11_d17e;

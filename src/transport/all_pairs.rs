@@ -21,9 +21,9 @@ use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 
 use super::Transport;
-use super::direct::punctual_irradiance;
-use super::sampling::Rng;
 use crate::config::TransportParams;
+use crate::lights::punctual_irradiance;
+use crate::sampling::Rng;
 use crate::scene::Scene;
 use crate::texels::Texels;
 use crate::trace::Tracer;

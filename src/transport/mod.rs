@@ -15,13 +15,11 @@
 //! are otherwise missed) combined with the gathering rays by multiple importance sampling.
 
 mod all_pairs;
-pub mod direct;
 pub mod hierarchical;
 pub mod kernel;
 pub(crate) mod montecarlo;
 mod point;
 mod polygon;
-pub mod sampling;
 
 use glam::Vec3;
 

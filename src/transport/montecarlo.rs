@@ -25,11 +25,11 @@ use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 
 use super::Transport;
-use super::direct::{Emitters, punctual_irradiance, triangle_point};
-use super::sampling::{
-    Rng, cosine_hemisphere, frame, hammersley, triangle_point as sample_triangle,
-};
 use crate::config::TransportParams;
+use crate::lights::{Emitters, punctual_irradiance, triangle_point};
+use crate::sampling::{
+    Rng, cosine_hemisphere, frame, hammersley, power_weight, triangle_point as sample_triangle,
+};
 use crate::scene::Scene;
 use crate::texels::{NO_TEXEL, Texels};
 use crate::trace::Tracer;
@@ -115,16 +115,6 @@ pub fn build(
         t.rays += c.rays;
     }
     Ok(t)
-}
-
-/// Power heuristic (β = 2) for a sample of the strategy with `n·p = this` against `other`:
-/// weight / (n·p) = this / (this² + other²). It favours the better strategy more sharply than
-/// the balance heuristic; in a furnace (every surface an emitter) light samples have high
-/// variance near corners and the balance heuristic left 3.7% per-texel noise at K=128, L=16.
-#[inline]
-fn power_weight(this: f32, other: f32) -> f32 {
-    let d = this * this + other * other;
-    if d > 0.0 { this / d } else { 0.0 }
 }
 
 pub(crate) struct Context<'a> {

@@ -28,8 +28,8 @@
 use super::Transport;
 use super::all_pairs::{self, PairKernel};
 use super::kernel::{point_to_disk_bound, point_to_point};
-use super::sampling::Rng;
 use crate::config::TransportParams;
+use crate::sampling::Rng;
 use crate::scene::Scene;
 use crate::texels::Texels;
 use crate::trace::Tracer;

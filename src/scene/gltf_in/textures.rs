@@ -6,8 +6,8 @@ use glam::Vec3;
 
 use super::{Files, warn};
 use crate::Result;
+use crate::scene::MAX_ALBEDO;
 use crate::scene::{Material, Scene, Texture, Wrap};
-use crate::texels::MAX_ALBEDO;
 
 /// Appends one [`Material`] per glTF material, in document order, plus glTF's default material
 /// when some instance has none. Only materials that instances use get their textures decoded.

@@ -20,11 +20,11 @@ use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 
 use super::tree::Tree;
+use crate::sampling::Rng;
 use crate::scene::Scene;
 use crate::texels::Texels;
 use crate::trace::Tracer;
 use crate::transport::all_pairs;
-use crate::transport::sampling::Rng;
 
 /// Kernel samples per link (no rays: cheap), on a 4×4 grid of a texel or area strata of a node.
 pub const KERNEL_SAMPLES: u32 = 16;

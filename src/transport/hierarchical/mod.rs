@@ -82,11 +82,11 @@ use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 
 use super::Transport;
-use super::direct::{Emitters, punctual_irradiance, triangle_point};
-use super::sampling::{
+use crate::config::{SolveParams, TransportParams};
+use crate::lights::{Emitters, punctual_irradiance, triangle_point};
+use crate::sampling::{
     Rng, cosine_hemisphere, frame, hammersley, triangle_point as sample_triangle,
 };
-use crate::config::{SolveParams, TransportParams};
 use crate::scene::Scene;
 use crate::solve::{Iteration, Solution};
 use crate::texels::Texels;

@@ -1,4 +1,5 @@
-//! Deterministic random numbers and sample patterns.
+//! Deterministic random numbers, sample patterns and the MIS weight, shared by texels,
+//! transport, the reference and the renderer.
 //!
 //! Every stream is seeded from (bake seed, texel, purpose), never from a thread id, so results
 //! do not depend on how rayon splits the work (and one texel can be recomputed alone).
@@ -116,6 +117,16 @@ pub fn sample_cdf(cdf: &[f32], u: f32) -> usize {
     let target = u * total;
     cdf.partition_point(|&c| c <= target)
         .min(cdf.len().saturating_sub(1))
+}
+
+/// Power heuristic (β = 2) for a sample of the strategy with `n·p = this` against `other`:
+/// weight / (n·p) = this / (this² + other²). It favours the better strategy more sharply than
+/// the balance heuristic; in a furnace (every surface an emitter) light samples have high
+/// variance near corners and the balance heuristic left 3.7% per-texel noise at K=128, L=16.
+#[inline]
+pub fn power_weight(this: f32, other: f32) -> f32 {
+    let d = this * this + other * other;
+    if d > 0.0 { this / d } else { 0.0 }
 }
 
 #[cfg(test)]

@@ -1,9 +1,10 @@
-//! Direct light: punctual lights (KHR_lights_punctual) with shadow rays, and the emissive
-//! triangles as area lights for explicit light sampling.
+//! Light sampling shared by transport, the reference and the renderer: irradiance from punctual
+//! lights (KHR_lights_punctual) with shadow rays, and the emissive triangles as area lights for
+//! explicit light sampling (the emitted radiance of each comes from its texel).
 
 use glam::{Vec2, Vec3};
 
-use super::sampling::sample_cdf;
+use crate::sampling::sample_cdf;
 use crate::scene::{Light, LightKind, Scene};
 use crate::texels::Texels;
 use crate::trace::Tracer;
