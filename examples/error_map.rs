@@ -10,7 +10,7 @@ use std::path::PathBuf;
 
 use glam::Vec3;
 use lightbake::reference::ReferenceParams;
-use lightbake::{BakeConfig, NoProgress, compute};
+use lightbake::{BakeConfig, NoProgress, compute, metrics};
 
 fn main() -> lightbake::Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -39,76 +39,41 @@ fn main() -> lightbake::Result<()> {
     let reference = lightbake::reference::compute(&path, &config, &params, &NoProgress)?.reference;
     let t = &baked.texels;
     let n = t.len();
-    let skip: Vec<bool> = {
-        let mut s = vec![false; n];
-        for &i in &t.invalid {
-            s[i as usize] = true;
-        }
-        s
+    let (x, r, skip) = (&baked.lightmap, &reference.mean, &t.invalid);
+    let valid = |i: usize| skip.binary_search(&(i as u32)).is_err();
+    println!("{:?}; stages {:?}", baked.validity, baked.stages);
+    println!(
+        "{n} texels, rel RMSE {:.2}%, mean bias {:+.2}%, reference noise {:.2}%",
+        100.0 * metrics::rmse_over_mean(x, r, skip),
+        100.0 * metrics::relative_bias(x, r, skip),
+        100.0 * metrics::noise_over_mean(&reference.std_error, r, skip)
+    );
+    // Room B's floor away from the doorway in `two_rooms` (lit only through the door).
+    let far_b = |i: usize| {
+        let p = t.position[i];
+        valid(i) && p.x > 0.5 && p.z.abs() > 0.6 && p.y.abs() < 0.01
     };
-    let mean_r = (0..n)
-        .filter(|&i| !skip[i])
-        .map(|i| reference.mean[i].element_sum() as f64 / 3.0)
-        .sum::<f64>()
-        / (0..n).filter(|&i| !skip[i]).count() as f64;
+    let outside: Vec<u32> = (0..n).filter(|&i| !far_b(i)).map(|i| i as u32).collect();
+    if outside.len() < n {
+        println!(
+            "far B floor: {} texels, rel RMSE {:.2}%, mean bias {:+.2}%, reference noise {:.2}%",
+            n - outside.len(),
+            100.0 * metrics::rmse_over_mean(x, r, &outside),
+            100.0 * metrics::relative_bias(x, r, &outside),
+            100.0 * metrics::noise_over_mean(&reference.std_error, r, &outside)
+        );
+    }
+    // Each texel's share of the squared error.
     let sq: Vec<f64> = (0..n)
         .map(|i| {
-            if skip[i] {
-                0.0
+            if valid(i) {
+                (x[i] - r[i]).length_squared() as f64
             } else {
-                (baked.lightmap[i] - reference.mean[i]).length_squared() as f64 / 3.0
+                0.0
             }
         })
         .collect();
     let total: f64 = sq.iter().sum();
-    let count = (0..n).filter(|&i| !skip[i]).count() as f64;
-    let bias: f64 = (0..n)
-        .filter(|&i| !skip[i])
-        .map(|i| (baked.lightmap[i] - reference.mean[i]).element_sum() as f64 / 3.0)
-        .sum::<f64>()
-        / count;
-    let noise: f64 = (0..n)
-        .filter(|&i| !skip[i])
-        .map(|i| reference.std_error[i].length_squared() as f64 / 3.0)
-        .sum::<f64>()
-        / count;
-    println!("{:?}; stages {:?}", baked.validity, baked.stages);
-    println!(
-        "{n} texels, rel RMSE {:.2}%, mean bias {:+.2}%, reference noise {:.2}%",
-        100.0 * (total / count).sqrt() / mean_r,
-        100.0 * bias / mean_r,
-        100.0 * noise.sqrt() / mean_r
-    );
-    // Room B's floor away from the doorway in `two_rooms` (lit only through the door).
-    let far_b: Vec<usize> = (0..n)
-        .filter(|&i| {
-            let p = t.position[i];
-            !skip[i] && p.x > 0.5 && p.z.abs() > 0.6 && p.y.abs() < 0.01
-        })
-        .collect();
-    if !far_b.is_empty() {
-        let m = far_b.len() as f64;
-        let mean = |v: &[Vec3]| far_b.iter().map(|&i| v[i].x as f64).sum::<f64>() / m;
-        let (b, r) = (mean(&baked.lightmap), mean(&reference.mean));
-        let se = (far_b
-            .iter()
-            .map(|&i| (reference.std_error[i].x as f64).powi(2))
-            .sum::<f64>())
-        .sqrt()
-            / m;
-        let rmse = (far_b
-            .iter()
-            .map(|&i| ((baked.lightmap[i].x - reference.mean[i].x) as f64).powi(2))
-            .sum::<f64>()
-            / m)
-            .sqrt();
-        println!(
-            "far B floor: {} texels, bake mean {b:.4}, reference {r:.4} ± {se:.4} ({:+.2}%), rel RMSE {:.2}%",
-            far_b.len(),
-            100.0 * (b / r - 1.0),
-            100.0 * rmse / r
-        );
-    }
     let mut order: Vec<usize> = (0..n).collect();
     order.sort_by(|&a, &b| sq[b].total_cmp(&sq[a]));
     let mut acc = 0.0;

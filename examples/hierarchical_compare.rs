@@ -1,6 +1,6 @@
 //! The hierarchical method against the Monte Carlo method at K = 1024 on the same texels
 //! (the Monte Carlo lightmap is cached in `target/`): relative RMSE over texels and channels
-//! (`sqrt(mean((x−r)²)) / mean(r)`, as the chart), mean ratio, time and link counts.
+//! (`metrics::rmse_over_mean`, as the chart), mean ratio, time and link counts.
 //!
 //!     cargo run --release --example hierarchical_compare [scene.gltf] [texels-per-unit] [K...]
 
@@ -10,7 +10,7 @@ use std::time::Instant;
 use glam::Vec3;
 use lightbake::config::Method;
 use lightbake::testing::cpu_seconds;
-use lightbake::{BakeConfig, NoProgress, compute};
+use lightbake::{BakeConfig, NoProgress, compute, metrics};
 
 fn config(tpu: f32, method: Method, k: u32) -> BakeConfig {
     let mut c = BakeConfig::medium();
@@ -37,7 +37,7 @@ fn main() -> lightbake::Result<()> {
     let cache = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
         .join("target")
         .join(format!("mc1024_{stem}_{tpu}.bin"));
-    let reference: Vec<f32> = if let Ok(bytes) = std::fs::read(&cache) {
+    let flat: Vec<f32> = if let Ok(bytes) = std::fs::read(&cache) {
         bytes
             .chunks_exact(4)
             .map(|b| f32::from_le_bytes(b.try_into().unwrap()))
@@ -54,7 +54,7 @@ fn main() -> lightbake::Result<()> {
         .unwrap();
         v
     };
-    let mean_r = reference.iter().map(|&v| v as f64).sum::<f64>() / reference.len() as f64;
+    let reference: Vec<Vec3> = flat.chunks_exact(3).map(Vec3::from_slice).collect();
     for k in ks {
         let t = Instant::now();
         let cpu = cpu_seconds();
@@ -65,19 +65,8 @@ fn main() -> lightbake::Result<()> {
         };
         let h = compute(&path, &config(tpu, method, k), &NoProgress)?;
         let (wall, cpu) = (t.elapsed().as_secs_f64(), cpu_seconds() - cpu);
-        let x: Vec<f32> = h
-            .lightmap
-            .iter()
-            .flat_map(|v: &Vec3| v.to_array())
-            .collect();
+        let x = &h.lightmap;
         assert_eq!(x.len(), reference.len());
-        let se = x
-            .iter()
-            .zip(&reference)
-            .map(|(&a, &b)| ((a - b) as f64).powi(2))
-            .sum::<f64>()
-            / x.len() as f64;
-        let mean_x = x.iter().map(|&v| v as f64).sum::<f64>() / x.len() as f64;
         let stages: Vec<String> = h
             .stages
             .iter()
@@ -86,8 +75,8 @@ fn main() -> lightbake::Result<()> {
         println!(
             "{stem} tpu {tpu} K {k}: {} texels, rel. RMSE vs MC1024 {:.2}%, mean {:+.2}%, wall {wall:.2}s cpu {cpu:.2}s, rays {:.1}M [{}]",
             h.texels.len(),
-            se.sqrt() / mean_r * 100.0,
-            (mean_x / mean_r - 1.0) * 100.0,
+            metrics::rmse_over_mean(x, &reference, &[]) * 100.0,
+            metrics::relative_bias(x, &reference, &[]) * 100.0,
             h.transport.rays as f64 * 1e-6,
             stages.join(", ")
         );

@@ -13,22 +13,17 @@ use lightbake::config::Method;
 use lightbake::trace::Tracer;
 use lightbake::transport::hierarchical::links::{self, Refiner};
 use lightbake::transport::hierarchical::tree::Tree;
-use lightbake::{BakeConfig, NoProgress, atlas, compute, scene, texels};
+use lightbake::{BakeConfig, NoProgress, atlas, compute, metrics, scene, texels};
 
 fn stats(name: &str, v: &[f64]) {
     let n = v.len().max(1) as f64;
     let mean = v.iter().sum::<f64>() / n;
     let rms = (v.iter().map(|x| x * x).sum::<f64>() / n).sqrt();
-    let mut s = v.to_vec();
-    s.sort_by(|a, b| a.total_cmp(b));
-    let pct = |p: f64| s[((s.len() - 1) as f64 * p).round() as usize];
+    let v: Vec<f32> = v.iter().map(|&x| x as f32).collect();
+    let [p0, p5, p50, p95, p100] = metrics::percentiles(&v, [0.0, 0.05, 0.5, 0.95, 1.0]);
     println!(
         "{name:>28}: mean {mean:+.5} rms {rms:.5} min {:+.5} p5 {:+.5} p50 {:+.5} p95 {:+.5} max {:+.5}",
-        pct(0.0),
-        pct(0.05),
-        pct(0.5),
-        pct(0.95),
-        pct(1.0)
+        p0, p5, p50, p95, p100
     );
 }
 

@@ -6,10 +6,11 @@
 use std::path::PathBuf;
 use std::time::Instant;
 
+use glam::Vec3;
 use lightbake::config::Method;
 use lightbake::trace::Tracer;
 use lightbake::transport::hierarchical;
-use lightbake::{BakeConfig, NoProgress, atlas, compute, scene, texels};
+use lightbake::{BakeConfig, NoProgress, atlas, compute, metrics, scene, texels};
 
 fn main() -> lightbake::Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -50,14 +51,10 @@ fn main() -> lightbake::Result<()> {
         // The Monte Carlo method at the same texels.
         config.transport.method = Method::MonteCarlo;
         let mc = compute(&path, &config, &NoProgress)?;
-        let (mut se, mut norm, mut sum_h, mut sum_mc) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
-        for (h, m) in solution.irradiance.iter().zip(&mc.solution.irradiance) {
-            let (h, m) = (h.element_sum() as f64, m.element_sum() as f64);
-            se += (h - m) * (h - m);
-            norm += m * m;
-            sum_h += h;
-            sum_mc += m;
-        }
+        let (h, m) = (&solution.irradiance, &mc.solution.irradiance);
+        // Over the channel sums, as grey values (as tests/hierarchical.rs).
+        let grey =
+            |l: &[Vec3]| -> Vec<Vec3> { l.iter().map(|v| Vec3::splat(v.element_sum())).collect() };
         println!(
             "| {tpu} | {} | {} | {} | {:.1} | {:.2} | {:.2} | {} | {:.4} | {:+.4} |",
             tx.len(),
@@ -67,8 +64,8 @@ fn main() -> lightbake::Result<()> {
             transport.rays as f64 * 1e-6,
             seconds,
             solution.history.len(),
-            (se / norm).sqrt(),
-            sum_h / sum_mc - 1.0
+            metrics::rmse_over_rms(&grey(h), &grey(m), &[]),
+            metrics::relative_bias(h, m, &[])
         );
     }
     Ok(())

@@ -51,6 +51,7 @@ pub mod config;
 pub mod error;
 pub mod lightmap;
 pub mod lights;
+pub mod metrics;
 pub mod output;
 pub mod plan;
 pub mod progress;

@@ -243,13 +243,7 @@ impl Sums {
 /// is useless as a stopping rule: texels buried under the Cornell box's blocks or above its
 /// light (μ ≈ 1e-4 of the room's) had ratios near 1 and set the RMS alone. 0 for a black scene.
 pub fn rms_rel_error(mean: &[Vec3], std_error: &[Vec3]) -> f32 {
-    let noise: f64 = std_error.iter().map(|s| s.length_squared() as f64).sum();
-    let signal: f64 = mean.iter().map(|m| m.length_squared() as f64).sum();
-    if signal > 0.0 {
-        (noise / signal).sqrt() as f32
-    } else {
-        0.0
-    }
+    crate::metrics::noise_over_rms(std_error, mean, &[])
 }
 
 /// Traces reference paths at every texel until a stopping rule of `params` holds.

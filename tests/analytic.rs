@@ -2,7 +2,7 @@
 
 use std::f32::consts::PI;
 
-use lightbake::{NoProgress, compute};
+use lightbake::{NoProgress, compute, metrics};
 
 use crate::util::{fixture, quick};
 
@@ -13,12 +13,7 @@ fn furnace(name: &str, rho: f32, tolerance: f32) {
     config.solve.tolerance = 1e-5;
     let baked = compute(&fixture(name), &config, &NoProgress).unwrap();
     let expected = 1.0 / (1.0 - rho);
-    let mut worst = 0.0f32;
-    for v in &baked.lightmap {
-        for c in v.to_array() {
-            worst = worst.max((c - expected).abs() / expected);
-        }
-    }
+    let worst = metrics::max_relative_deviation(&baked.lightmap, expected);
     assert!(baked.solution.converged);
     assert!(
         worst < tolerance,

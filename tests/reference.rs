@@ -8,7 +8,7 @@ use std::time::Duration;
 use glam::{Vec2, Vec3};
 use lightbake::reference::{self, Reference, ReferenceParams, Stop, footprint_point};
 use lightbake::trace::Tracer;
-use lightbake::{BakeConfig, NoProgress};
+use lightbake::{BakeConfig, NoProgress, metrics};
 
 use crate::util::{fixture, quick, scratch};
 
@@ -102,17 +102,10 @@ fn cornell_box_bake_agrees_with_the_reference() {
         &NoProgress,
     )
     .unwrap();
-    let (mut diff, mut norm, mut noise) = (0.0f64, 0.0f64, 0.0f64);
     // Buried texels hold their neighbours' values in a bake: compare the others.
-    let texels = 0..baked.texels.len();
-    for i in texels.filter(|i| baked.texels.invalid.binary_search(&(*i as u32)).is_err()) {
-        let (b, m, se) = (baked.lightmap[i], r.mean[i], r.std_error[i]);
-        diff += (b - m).length_squared() as f64;
-        norm += m.length_squared() as f64;
-        noise += se.length_squared() as f64;
-    }
-    let rel_rmse = (diff / norm).sqrt();
-    let rel_noise = (noise / norm).sqrt();
+    let skip = &baked.texels.invalid;
+    let rel_rmse = metrics::rmse_over_rms(&baked.lightmap, &r.mean, skip);
+    let rel_noise = metrics::noise_over_rms(&r.std_error, &r.mean, skip);
     println!(
         "cornell medium: relative RMS difference bake vs reference {:.2}% (reference noise {:.2}%), {}",
         rel_rmse * 100.0,

@@ -10,7 +10,7 @@ use lightbake::reference::{self, ReferenceParams};
 use lightbake::render::{Camera, RenderOptions, RenderScene};
 use lightbake::sampling::Rng;
 use lightbake::testing::{Face, Geometry, GltfBuilder, Light, Material};
-use lightbake::{NoProgress, bake};
+use lightbake::{NoProgress, bake, metrics};
 use serde_json::{Value, json};
 
 use crate::util::{fixture, quick, scratch};
@@ -342,7 +342,7 @@ fn image_error(
     skip: &[bool],
     block: u32,
 ) -> (f64, f64) {
-    let (mut diff, mut norm, mut noise) = (0.0f64, 0.0f64, 0.0f64);
+    let (mut a, mut r, mut se) = (Vec::new(), Vec::new(), Vec::new());
     for by in 0..size / block {
         for bx in 0..size / block {
             let pixels: Vec<usize> = (by * block..(by + 1) * block)
@@ -353,18 +353,20 @@ fn image_error(
             }
             let k = pixels.len() as f32;
             let mean = |v: &[Vec3]| pixels.iter().map(|&i| v[i]).sum::<Vec3>() / k;
-            let (a, r) = (mean(render), mean(reference));
+            a.push(mean(render));
+            r.push(mean(reference));
             let var: Vec3 = pixels
                 .iter()
                 .map(|&i| std_error[i] * std_error[i])
                 .sum::<Vec3>()
                 / (k * k);
-            diff += (a - r).length_squared() as f64;
-            norm += r.length_squared() as f64;
-            noise += (var.x + var.y + var.z) as f64;
+            se.push(var.map(f32::sqrt));
         }
     }
-    ((diff / norm).sqrt(), (noise / norm).sqrt())
+    (
+        metrics::rmse_over_rms(&a, &r, &[]) as f64,
+        metrics::noise_over_rms(&se, &r, &[]) as f64,
+    )
 }
 
 /// Issue 5: the lightmapped view of the Cornell box (no `--specular`) against a path-traced

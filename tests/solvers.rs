@@ -8,7 +8,7 @@ use glam::Vec3;
 use lightbake::config::Solver;
 use lightbake::progress::CollectWarnings;
 use lightbake::scene::MAX_ALBEDO;
-use lightbake::{BakeConfig, Baked, NoProgress, compute};
+use lightbake::{BakeConfig, Baked, NoProgress, compute, metrics};
 
 use crate::util::{fixture, quick, scratch};
 
@@ -34,25 +34,6 @@ fn run(path: &Path, config: &BakeConfig, solver: Solver) -> Baked {
     baked
 }
 
-/// Worst relative error of every texel and channel against `expected`.
-fn worst_error(lightmap: &[Vec3], expected: f32) -> f32 {
-    lightmap
-        .iter()
-        .flat_map(|v| v.to_array())
-        .map(|c| (c - expected).abs() / expected)
-        .fold(0.0, f32::max)
-}
-
-/// Σ|a − b| / Σ|b| over all texels and channels.
-fn relative_l1(a: &[Vec3], b: &[Vec3]) -> f32 {
-    let diff: f32 = a
-        .iter()
-        .zip(b)
-        .map(|(a, b)| (*a - *b).abs().element_sum())
-        .sum();
-    diff / b.iter().map(|b| b.abs().element_sum()).sum::<f32>()
-}
-
 fn furnace_config() -> BakeConfig {
     let mut config = quick();
     config.transport.gather_rays = 128;
@@ -65,7 +46,7 @@ fn furnace_every_solver(path: &Path, config: &BakeConfig, rho: f32, tolerance: f
     for (name, solver) in SOLVERS {
         let baked = run(path, config, solver);
         assert!(baked.solution.converged, "{name} did not converge");
-        let worst = worst_error(&baked.lightmap, expected);
+        let worst = metrics::max_relative_deviation(&baked.lightmap, expected);
         assert!(
             worst < tolerance,
             "{name}: worst relative error {worst} (expected {expected})"
@@ -110,7 +91,7 @@ fn solvers_agree_on_the_cornell_box() {
     for (name, solver) in &SOLVERS[1..] {
         let baked = run(&path, &config, *solver);
         assert!(baked.solution.converged, "{name} did not converge");
-        let err = relative_l1(&baked.lightmap, &reference.lightmap);
+        let err = metrics::relative_l1(&baked.lightmap, &reference.lightmap);
         let mean_err =
             (mean(&baked.lightmap) - mean(&reference.lightmap)).abs() / mean(&reference.lightmap);
         eprintln!("cornell: {name} vs jacobi: L1 {err:.2e}, mean {mean_err}");

@@ -12,14 +12,16 @@
 //! and `residual_vs_iteration.png`. Each bake runs in a child process (this program run with
 //! `--child`), so its peak memory (VmHWM) is its own.
 //!
-//! Error metrics over all texels and channels, against the reference `r` (`x` = bake):
-//! - relative RMSE `sqrt(mean((x−r)²)) / mean(r)`;
+//! Error metrics over all valid texels and channels, against the reference `r` (`x` = bake), from
+//! `lightbake::metrics`:
+//! - relative RMSE `sqrt(mean((x−r)²)) / mean(r)` (`rmse_over_mean`);
 //! - p95 and max of `|x−r| / (r + 0.05·mean(r))` (the floor keeps dark texels from dominating).
 //!
-//! The reference's own noise (its RMS standard error, relative to `mean(r)`) is drawn as a
-//! dashed line: errors below it cannot be told apart from zero. The headline table ("time to
-//! reach 5%, 2%, 1%") subtracts it in quadrature, `sqrt(rmse² − noise²)`: the expected squared
-//! error against a noisy reference is the true squared error plus the reference's variance.
+//! The reference's own noise (its RMS standard error, relative to `mean(r)`: `noise_over_mean`)
+//! is drawn as a dashed line: errors below it cannot be told apart from zero. The headline table
+//! ("time to reach 5%, 2%, 1%") subtracts it in quadrature, `sqrt(rmse² − noise²)`
+//! (`without_noise`): the expected squared error against a noisy reference is the true squared
+//! error plus the reference's variance.
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -29,7 +31,7 @@ use std::time::{Duration, Instant};
 use glam::Vec3;
 use lightbake::config::{Method, Solver};
 use lightbake::plan::{AutoParams, Keep};
-use lightbake::{BakeConfig, NoProgress};
+use lightbake::{BakeConfig, NoProgress, metrics};
 use plotters::prelude::*;
 
 mod stability;
@@ -421,34 +423,12 @@ fn read_values(path: &Path) -> Vec<Vec3> {
         .collect()
 }
 
-/// (relative RMSE, p95, max) of `x` against `r` over the texels not flagged in `skip` (texels
+/// (relative RMSE, p95, max) of `x` against `r` over the texels not listed in `skip` (texels
 /// buried in geometry, which a bake fills from neighbours); see the module docs.
-fn errors(x: &[Vec3], r: &[Vec3], skip: &[bool]) -> (f32, f32, f32) {
-    assert_eq!(x.len(), r.len(), "bake and reference must share texels");
-    let (x, r): (Vec<Vec3>, Vec<Vec3>) = x
-        .iter()
-        .zip(r)
-        .zip(skip)
-        .filter(|(_, s)| !**s)
-        .map(|((a, b), _)| (*a, *b))
-        .unzip();
-    let n = (r.len() * 3) as f64;
-    let mean_r = r.iter().map(|v| v.element_sum() as f64).sum::<f64>() / n;
-    let mse = x
-        .iter()
-        .zip(&r)
-        .map(|(a, b)| (*a - *b).length_squared() as f64)
-        .sum::<f64>()
-        / n;
-    let floor = 0.05 * mean_r as f32;
-    let mut rel: Vec<f32> = x
-        .iter()
-        .zip(&r)
-        .flat_map(|(a, b)| (0..3).map(move |c| (a[c] - b[c]).abs() / (b[c] + floor)))
-        .collect();
-    rel.sort_by(f32::total_cmp);
-    let p95 = rel[((rel.len() as f32 * 0.95) as usize).min(rel.len() - 1)];
-    ((mse.sqrt() / mean_r) as f32, p95, *rel.last().unwrap())
+fn errors(x: &[Vec3], r: &[Vec3], skip: &[u32]) -> (f32, f32, f32) {
+    let [p95, max] =
+        metrics::percentiles(&metrics::floored_relative_errors(x, r, skip), [0.95, 1.0]);
+    (metrics::rmse_over_mean(x, r, skip), p95, max)
 }
 
 /// The path-traced reference at the scene's texels: mean, relative RMS standard error,
@@ -458,7 +438,7 @@ struct Ref {
     noise: f32,
     seconds: f64,
     samples: u32,
-    skip: Vec<bool>,
+    invalid: Vec<u32>,
     /// Where each texel's sample is (for region errors in the stability table).
     position: Vec<Vec3>,
 }
@@ -481,16 +461,13 @@ fn reference(scene: &Scene, quick: bool) -> Ref {
     let computed = lightbake::reference::compute(&scene.path, &config, &params, &NoProgress)
         .expect("reference");
     let reference = computed.reference;
-    let mut skip = vec![false; reference.mean.len()];
-    for &i in &computed.texels.invalid {
-        skip[i as usize] = true;
-    }
+    let invalid = computed.texels.invalid;
     Ref {
-        noise: reference.rms_rel_error,
+        noise: metrics::noise_over_mean(&reference.std_error, &reference.mean, &invalid),
         seconds: start.elapsed().as_secs_f64(),
         samples: reference.samples,
         mean: reference.mean,
-        skip,
+        invalid,
         position: computed.texels.position,
     }
 }
@@ -521,7 +498,7 @@ fn path_tracer_curve(scene: &Scene, reference: &Ref, quick: bool) -> Vec<(u32, f
             (
                 spp,
                 seconds,
-                errors(&pt.reference.mean, &reference.mean, &reference.skip).0,
+                errors(&pt.reference.mean, &reference.mean, &reference.invalid).0,
             )
         })
         .collect()
@@ -710,7 +687,7 @@ fn pareto_rows(rows: &[Row], noise: f32) -> String {
     for a in rows.iter().filter(ok).filter(|r| r.setting.auto.is_some()) {
         let target = a.setting.auto.unwrap();
         let (t, e) = (a.measured.seconds, a.rmse);
-        let corrected = (e * e - noise * noise).max(0.0).sqrt();
+        let corrected = metrics::without_noise(e, noise);
         let dominated = fixed
             .iter()
             .filter(|f| f.measured.seconds < t && f.rmse < e)
@@ -820,7 +797,7 @@ fn main() {
                 setting.light_samples = light;
             }
             let (rmse, p95, max) = if measured.error.is_none() {
-                errors(&read_values(&values), &reference.mean, &reference.skip)
+                errors(&read_values(&values), &reference.mean, &reference.invalid)
             } else {
                 (f32::NAN, f32::NAN, f32::NAN)
             };
@@ -857,7 +834,7 @@ fn main() {
             {
                 let mut cells = String::new();
                 for target in [0.05f32, 0.02, 0.01] {
-                    let true_error = |e: f32| (e * e - noise * noise).max(0.0).sqrt();
+                    let true_error = |e: f32| metrics::without_noise(e, noise);
                     let bake = scene_rows
                         .iter()
                         .filter(|r| r.measured.error.is_none() && true_error(r.rmse) <= target)
@@ -902,7 +879,7 @@ fn main() {
                 path,
                 texels_per_unit: *tpu,
                 mean: &r.mean,
-                skip: &r.skip,
+                invalid: &r.invalid,
                 noise: r.noise,
                 position: &r.position,
             })

@@ -8,14 +8,15 @@ use std::time::Instant;
 use glam::Vec3;
 use lightbake::config::{Method, Solver};
 use lightbake::transport::kernel::point_to_point;
-use lightbake::{BakeConfig, Baked, NoProgress};
+use lightbake::{BakeConfig, Baked, NoProgress, metrics};
 
 /// A reference the main run computed, with where its texels are.
 pub struct Known<'a> {
     pub path: &'a Path,
     pub texels_per_unit: f32,
     pub mean: &'a [Vec3],
-    pub skip: &'a [bool],
+    /// Texels buried in geometry (sorted), left out of every error.
+    pub invalid: &'a [u32],
     pub noise: f32,
     pub position: &'a [Vec3],
 }
@@ -38,42 +39,17 @@ fn finite(b: &Baked) -> bool {
     b.lightmap.iter().all(|v| v.is_finite())
 }
 
-/// Worst relative deviation of the lightmap from the uniform value `expected`.
-fn worst(b: &Baked, expected: f32) -> f32 {
-    b.lightmap
-        .iter()
-        .flat_map(|v| v.to_array())
-        .map(|x| (x - expected).abs() / expected)
-        .fold(0.0, f32::max)
+/// The texels an error over the region `select` leaves out: the reference's invalid ones and
+/// those outside the region.
+fn outside(known: &Known, select: impl Fn(Vec3) -> bool) -> Vec<u32> {
+    (0..known.position.len() as u32)
+        .filter(|&i| known.invalid.binary_search(&i).is_ok() || !select(known.position[i as usize]))
+        .collect()
 }
 
 /// Relative RMSE against a reference over the texels `select` keeps (and the reference keeps).
 fn rmse(x: &[Vec3], known: &Known, select: impl Fn(Vec3) -> bool) -> f32 {
-    let (mut sq, mut sum, mut n) = (0.0f64, 0.0f64, 0usize);
-    for (((v, r), skip), p) in x.iter().zip(known.mean).zip(known.skip).zip(known.position) {
-        if *skip || !select(*p) {
-            continue;
-        }
-        sq += (*v - *r).length_squared() as f64;
-        sum += r.element_sum() as f64;
-        n += 3;
-    }
-    if n == 0 || sum <= 0.0 {
-        return f32::NAN;
-    }
-    ((sq / n as f64).sqrt() / (sum / n as f64)) as f32
-}
-
-/// Mean of `x` over the selected valid texels relative to the reference's, minus 1.
-fn bias(x: &[Vec3], known: &Known, select: impl Fn(Vec3) -> bool) -> f32 {
-    let (mut a, mut b) = (0.0f64, 0.0f64);
-    for (((v, r), skip), p) in x.iter().zip(known.mean).zip(known.skip).zip(known.position) {
-        if !*skip && select(*p) {
-            a += v.element_sum() as f64;
-            b += r.element_sum() as f64;
-        }
-    }
-    (a / b - 1.0) as f32
+    metrics::rmse_over_mean(x, known.mean, &outside(known, select))
 }
 
 /// The furnace of `lightbake::testing` with albedo `rho`; above 1 written by editing the JSON
@@ -124,7 +100,7 @@ fn point_singularity(dir: &Path) -> Case {
                 "furnace ρ=0.9, {} texels: raw max row sum {raw_max:.3}; cured rows ≤ {cured_max:.4}; \
                  worst texel {:.2}% from 1/(1−ρ), finite: {} ({seconds:.1}s)",
                 t.len(),
-                worst(&b, 10.0) * 100.0,
+                metrics::max_relative_deviation(&b.lightmap, 10.0) * 100.0,
                 finite(&b)
             )
         }
@@ -160,7 +136,7 @@ fn high_albedo(dir: &Path) -> Vec<Case> {
                 lightbake::plan::solver_name(solver),
                 b.solution.history.len(),
                 if b.solution.converged { "" } else { " (cap)" },
-                worst(&b, 100.0) * 100.0
+                metrics::max_relative_deviation(&b.lightmap, 100.0) * 100.0
             ),
             Err(e) => format!("{solver:?}: {e}"),
         });
@@ -248,7 +224,7 @@ fn leak(two_rooms: &Known) -> Case {
                 "validity {}: rel. RMSE {:.1}%, mean {:+.1}% ({} moved, {} invalid, {} divided); whole scene {:.2}%",
                 if validity { "on" } else { "off" },
                 rmse(&b.lightmap, two_rooms, far_b) * 100.0,
-                bias(&b.lightmap, two_rooms, far_b) * 100.0,
+                metrics::relative_bias(&b.lightmap, two_rooms.mean, &outside(two_rooms, far_b)) * 100.0,
                 b.validity.moved,
                 b.validity.invalid,
                 b.validity.divided,
