@@ -64,6 +64,7 @@ pub mod texels;
 pub mod trace;
 pub mod transport;
 
+#[cfg(feature = "testing")]
 #[doc(hidden)]
 pub mod testing;
 
