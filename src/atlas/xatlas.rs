@@ -47,7 +47,7 @@
 //!   triangles in a second run. On `testing::large_hall` at 3 texels per unit (116k triangles,
 //!   floor and ceiling 51k each) the atlas stage went from 3.6 s to 0.16 s, with 194 charts
 //!   instead of 368, 0 seam edges instead of 5995 (`lightmap::seams`), 27 950 patches instead of
-//!   32 315 and 44 944 page texels instead of 63 504 (`examples/atlas_speed.rs`, old and new
+//!   32 315 and 44 944 page texels instead of 63 504 (`examples/dev/atlas_speed.rs`, old and new
 //!   interleaved in one session, shared machine).
 //! - Padding: `PackOptions::padding` only applies with `conservative`. xatlas reserves the padded
 //!   chart image but places the UVs `padding` texels up-left of it, so the gap to the next chart

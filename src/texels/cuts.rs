@@ -6,7 +6,7 @@
 //! it, from either room, reads that mix: on the `two_rooms` fixture (8 texels/m, K = 1024) the
 //! partition's room-B texels next to the side walls read 0.17 where the reference has 0.08, and
 //! its room-A texels there 0.82 for 0.92 — the 40 worst texels of the bake, 28% of its squared
-//! error (`examples/error_map.rs`). Validity ([`super::validity`]) cannot see such a wall: it
+//! error (`examples/dev/error_map.rs`). Validity ([`super::validity`]) cannot see such a wall: it
 //! has no back side.
 //!
 //! A surface divides texel `i` when it stands across the texel's plane (more than 30° from it)

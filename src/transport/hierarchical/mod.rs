@@ -26,8 +26,8 @@
 //! furnace) is then exact per texel; the spread of light over a row's sources stays the
 //! nodes'.
 //!
-//! Measured (2 shared cores under load; `examples/hierarchical_diagnose.rs`,
-//! `examples/hierarchical_compare.rs`), before → after this correction, the exact footprints
+//! Measured (2 shared cores under load; `examples/dev/hierarchical_diagnose.rs`,
+//! `examples/dev/hierarchical_compare.rs`), before → after this correction, the exact footprints
 //! of chart-corner texels and stratified light sampling:
 //!
 //! | case                                                  | before        | after         |

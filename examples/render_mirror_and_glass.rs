@@ -1,7 +1,7 @@
 //! A room with a mirror panel, a polished metal floor strip and a glass block,
 //! baked and rendered with and without the ray-traced specular layer, side by side.
 //!
-//!     cargo run --release --example mirror_and_glass [-- <output dir>]
+//!     cargo run --release --example render_mirror_and_glass [-- <output dir>]
 //!
 //! The scene is built with `lightbake::testing::GltfBuilder`; metallic, roughness and the glass
 //! (KHR_materials_transmission, KHR_materials_ior, KHR_materials_volume) are added to the

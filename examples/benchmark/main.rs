@@ -2,10 +2,10 @@
 //! fixture scenes, measured against the built-in path-traced reference.
 //!
 //! ```sh
-//! cargo run --release --example chart               # full run (about 20 minutes on 2 cores)
-//! cargo run --release --example chart -- --quick    # fewer settings, smaller reference
-//! cargo run --release --example chart -- --scene cornell_box --scene furnace
-//! cargo run --release --example chart -- --scene furnace --method hierarchical
+//! cargo run --release --example benchmark               # full run (about 20 minutes on 2 cores)
+//! cargo run --release --example benchmark -- --quick    # fewer settings, smaller reference
+//! cargo run --release --example benchmark -- --scene cornell_box --scene furnace
+//! cargo run --release --example benchmark -- --scene furnace --method hierarchical
 //! ```
 //!
 //! Writes `examples/gallery/bench.csv`, `bench.md` and the charts `error_vs_time_<scene>.png`

@@ -1,4 +1,4 @@
-//! The failure cases of the radiosity core, measured in the chart run: for each, what fails,
+//! The failure cases of the radiosity core, measured in the benchmark run: for each, what fails,
 //! what lightbake does about it, and the measured effect (a Markdown table in `bench.md`).
 
 use std::fmt::Write as _;

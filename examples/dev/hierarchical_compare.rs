@@ -1,6 +1,6 @@
 //! The hierarchical method against the Monte Carlo method at K = 1024 on the same texels
 //! (the Monte Carlo lightmap is cached in `target/`): relative RMSE over texels and channels
-//! (`metrics::rmse_over_mean`, as the chart), mean ratio, time and link counts.
+//! (`metrics::rmse_over_mean`, as the benchmark), mean ratio, time and link counts.
 //!
 //!     cargo run --release --example hierarchical_compare [scene.gltf] [texels-per-unit] [K...]
 

@@ -1,7 +1,7 @@
 //! A procedurally generated 100k+-triangle landscape — a displaced terrain grid with a ring of
 //! instanced columns under a sun and a sky — baked at a modest texel density and rendered.
 //!
-//!     cargo run --release --example large_scene [-- <output dir>]
+//!     cargo run --release --example bake_large_scene [-- <output dir>]
 //!
 //! Writes `<dir>/large_scene/` (input and bake) and `<dir>/large_scene.png` (default dir:
 //! `target/examples-out`), and prints the time of each stage. The gallery image

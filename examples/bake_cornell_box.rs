@@ -1,6 +1,6 @@
 //! Bakes the Cornell box fixture and renders its camera view.
 //!
-//!     cargo run --release --example cornell [-- <output dir>]
+//!     cargo run --release --example bake_cornell_box [-- <output dir>]
 //!
 //! Writes the baked scene to `<dir>/cornell/` and the render to `<dir>/cornell.png`
 //! (default dir: `target/examples-out`). The gallery image `examples/gallery/cornell.png` is

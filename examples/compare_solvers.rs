@@ -1,6 +1,6 @@
 //! Iterations, wall time and rays per solver on the furnace (ρ = 0.9, 0.99) and the Cornell box.
 //!
-//!     cargo run --release --example solver_comparison
+//!     cargo run --release --example compare_solvers
 //!
 //! Prints a Markdown table. Times are from the solver's own history (transport + solve for the
 //! matrix-free gather solver, which builds no transport first; solve only for the others).
