@@ -270,20 +270,26 @@ impl Tracer {
         if self.triangles.is_empty() {
             return None;
         }
-        let ray = make_ray(origin, dir, tmax);
+        self.traverse(make_ray(origin, dir, tmax), Self::closest_ray)
+    }
+
+    /// Runs the traversal `with` on `ray`, compiled for x86-64-v3 when this CPU has it (see the
+    /// module docs).
+    #[inline(always)]
+    fn traverse<R>(&self, ray: Ray, with: impl Fn(&Self, Ray) -> R) -> R {
         #[cfg(target_arch = "x86_64")]
         if self.wide_isa {
             // SAFETY: `Tracer::new` checked that this CPU has the enabled features.
-            return unsafe { self.closest_x86_64_v3(ray) };
+            return unsafe { self.traverse_x86_64_v3(ray, with) };
         }
-        self.closest_ray(ray)
+        with(self, ray)
     }
 
-    /// [`Tracer::closest_ray`] compiled for x86-64-v3 (see the module docs).
+    /// [`Tracer::traverse`] compiled for x86-64-v3: `with` (`#[inline(always)]`) is inlined here.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx,avx2,bmi1,bmi2,lzcnt,popcnt")]
-    unsafe fn closest_x86_64_v3(&self, ray: Ray) -> Option<Hit> {
-        self.closest_ray(ray)
+    unsafe fn traverse_x86_64_v3<R>(&self, ray: Ray, with: impl Fn(&Self, Ray) -> R) -> R {
+        with(self, ray)
     }
 
     #[inline(always)]
@@ -331,19 +337,7 @@ impl Tracer {
     /// True when the ray hits anything (stops at the first hit found).
     #[inline]
     fn any_hit(&self, ray: Ray) -> bool {
-        #[cfg(target_arch = "x86_64")]
-        if self.wide_isa {
-            // SAFETY: `Tracer::new` checked that this CPU has the enabled features.
-            return unsafe { self.any_hit_x86_64_v3(ray) };
-        }
-        self.any_hit_ray(ray)
-    }
-
-    /// [`Tracer::any_hit_ray`] compiled for x86-64-v3 (see the module docs).
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx,avx2,bmi1,bmi2,lzcnt,popcnt")]
-    unsafe fn any_hit_x86_64_v3(&self, ray: Ray) -> bool {
-        self.any_hit_ray(ray)
+        self.traverse(ray, Self::any_hit_ray)
     }
 
     /// obvhs' `ray_traverse_miss` (negated), written out so it inlines into both variants.

@@ -1285,6 +1285,17 @@ pub(super) mod tests {
             .collect()
     }
 
+    /// Texel centres claimed by more than one triangle (and covered) on page 0.
+    fn first_page_overlaps(scene: &Scene, atlas: &Atlas) -> Overlaps {
+        Overlaps::find(atlas.pages[0], page_triangles(scene, atlas, 0).into_iter())
+    }
+
+    /// Asserts that the atlas's texel area over the expected one is in `range`.
+    fn assert_texel_area(scene: &Scene, atlas: &Atlas, range: std::ops::Range<f64>) {
+        let ratio = texel_area_ratio(scene, atlas);
+        assert!(range.contains(&ratio), "texel area / expected = {ratio}");
+    }
+
     /// Texel area of every triangle over world area × tpu².
     fn texel_area_ratio(scene: &Scene, atlas: &Atlas) -> f64 {
         let mut texels = 0.0;
@@ -1333,11 +1344,7 @@ pub(super) mod tests {
                 "page {page} is empty"
             );
         }
-        let ratio = texel_area_ratio(&scene, &atlas);
-        assert!(
-            (0.7..1.6).contains(&ratio),
-            "texel area / expected = {ratio}"
-        );
+        assert_texel_area(&scene, &atlas, 0.7..1.6);
     }
 
     #[test]
@@ -1346,19 +1353,12 @@ pub(super) mod tests {
         let scene = scene_of(&[sphere(Vec3::ZERO, 1.0, 48, 48)], &[]);
         assert!(scene.triangles.len() > 4 * MAX_FACES_PER_XATLAS_MESH);
         let atlas = unwrap_ok(&scene, &params(16.0, 1024));
-        let overlaps = Overlaps::find(
-            atlas.pages[0],
-            page_triangles(&scene, &atlas, 0).into_iter(),
-        );
+        let overlaps = first_page_overlaps(&scene, &atlas);
         assert_eq!(atlas.pages.len(), 1);
         assert_eq!(overlaps.overlapping, 0, "{overlaps:?}");
         // 4π m² at 16 texels per unit: 3217 texels, less the centres on chart borders.
         assert!(overlaps.covered > 2800, "{overlaps:?}");
-        let ratio = texel_area_ratio(&scene, &atlas);
-        assert!(
-            (0.9..1.6).contains(&ratio),
-            "texel area / expected = {ratio}"
-        );
+        assert_texel_area(&scene, &atlas, 0.9..1.6);
     }
 
     /// An `n × n` grid of `size`-sided squares in the z = 0 plane facing +z, vertices shared;
@@ -1425,18 +1425,11 @@ pub(super) mod tests {
         assert_eq!(regions[0].outline.len(), 4);
         let atlas = unwrap_ok(&scene, &params(16.0, 1024));
         assert_eq!(chart_count(&atlas.instances[0]), 1);
-        let overlaps = Overlaps::find(
-            atlas.pages[0],
-            page_triangles(&scene, &atlas, 0).into_iter(),
-        );
+        let overlaps = first_page_overlaps(&scene, &atlas);
         assert_eq!(overlaps.overlapping, 0, "{overlaps:?}");
         // 64 × 64 texels; xatlas only rounds the chart's extents up to whole texels.
         assert!(overlaps.covered >= 63 * 63, "{overlaps:?}");
-        let ratio = texel_area_ratio(&scene, &atlas);
-        assert!(
-            (0.999..1.04).contains(&ratio),
-            "texel area / expected = {ratio}"
-        );
+        assert_texel_area(&scene, &atlas, 0.999..1.04);
     }
 
     #[test]
@@ -1500,10 +1493,7 @@ pub(super) mod tests {
         let scene = scene_of(&[disc], &[]);
         assert!(run_xatlas(&scene, 16.0, 1024, 2, &BTreeSet::new()).is_err());
         let atlas = unwrap_ok(&scene, &params(16.0, 1024));
-        let overlaps = Overlaps::find(
-            atlas.pages[0],
-            page_triangles(&scene, &atlas, 0).into_iter(),
-        );
+        let overlaps = first_page_overlaps(&scene, &atlas);
         assert_eq!(overlaps.overlapping, 0, "{overlaps:?}");
         assert!(overlaps.covered > 0, "{overlaps:?}");
     }
@@ -1513,17 +1503,10 @@ pub(super) mod tests {
         let scene = box_and_sphere();
         let atlas = unwrap_ok(&scene, &params(32.0, 1024));
         assert_eq!(atlas.pages.len(), 1);
-        let overlaps = Overlaps::find(
-            atlas.pages[0],
-            page_triangles(&scene, &atlas, 0).into_iter(),
-        );
+        let overlaps = first_page_overlaps(&scene, &atlas);
         assert!(overlaps.covered > 6 * 32 * 32, "{overlaps:?}");
         assert_eq!(overlaps.overlapping, 0, "{overlaps:?}");
-        let ratio = texel_area_ratio(&scene, &atlas);
-        assert!(
-            (0.7..1.6).contains(&ratio),
-            "texel area / expected = {ratio}"
-        );
+        assert_texel_area(&scene, &atlas, 0.7..1.6);
         // Packed tightly: the page is not much bigger than the charts.
         let page = atlas.pages[0];
         let fill = overlaps.covered as f64 / f64::from(page.width * page.height);
@@ -1654,10 +1637,7 @@ pub(super) mod tests {
     fn back_faces_get_their_own_charts() {
         let scene = scene_of(&[quad(Vec3::ZERO, 1.0, 1.0)], &[0]);
         let atlas = unwrap_ok(&scene, &params(16.0, 1024));
-        let overlaps = Overlaps::find(
-            atlas.pages[0],
-            page_triangles(&scene, &atlas, 0).into_iter(),
-        );
+        let overlaps = first_page_overlaps(&scene, &atlas);
         assert_eq!(atlas.pages.len(), 1);
         assert_eq!(overlaps.overlapping, 0);
         // Each 16×16-texel chart starts half a texel into its first texel; centres on the
@@ -1687,11 +1667,7 @@ pub(super) mod tests {
         // every triangle is below xatlas' absolute area epsilon.
         let scene = scene_of(&[cube(1e-3, 2)], &[]);
         let atlas = unwrap_ok(&scene, &params(10_000.0, 256));
-        let ratio = texel_area_ratio(&scene, &atlas);
-        assert!(
-            (0.7..1.8).contains(&ratio),
-            "texel area / expected = {ratio}"
-        );
+        assert_texel_area(&scene, &atlas, 0.7..1.8);
     }
 
     #[test]

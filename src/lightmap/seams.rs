@@ -486,6 +486,22 @@ mod tests {
         assert_eq!((t[0], t[1]), ((1, 0.5), (2, 0.5)));
     }
 
+    /// One seam between the vertical page lines x = `a` and x = `b`, from y = 0 to `height`.
+    fn vertical_seam(a: f32, b: f32, height: f32) -> Seams {
+        let edge = SeamEdge {
+            triangles: [0, 1],
+            page: [0, 0],
+            uv: [
+                [Vec2::new(a, 0.0), Vec2::new(a, height)],
+                [Vec2::new(b, 0.0), Vec2::new(b, height)],
+            ],
+        };
+        let mut seams = Seams::default();
+        push_samples(&mut seams.samples, &edge, 3.0);
+        seams.edges.push(edge);
+        seams
+    }
+
     #[test]
     fn a_seam_between_two_regions_closes_and_nothing_else_moves() {
         // Side A: a vertical edge x = 2 on the left half (value 1); side B: x = 6 (value 3).
@@ -494,17 +510,7 @@ mod tests {
                 Vec3::splat(if x < 4 { 1.0 } else { 3.0 })
             })],
         };
-        let edge = SeamEdge {
-            triangles: [0, 1],
-            page: [0, 0],
-            uv: [
-                [Vec2::new(2.0, 0.0), Vec2::new(2.0, 4.0)],
-                [Vec2::new(6.0, 0.0), Vec2::new(6.0, 4.0)],
-            ],
-        };
-        let mut seams = Seams::default();
-        push_samples(&mut seams.samples, &edge, 3.0);
-        seams.edges.push(edge);
+        let seams = vertical_seam(2.0, 6.0, 4.0);
         let before = measure(&seams, &pages);
         assert!((before.mean_abs_diff - 2.0).abs() < 1e-6);
         let (texels, _) = stitch(&seams, &mut pages, &SeamParams::default());
@@ -522,17 +528,7 @@ mod tests {
 
     #[test]
     fn stitched_values_stay_finite_and_non_negative() {
-        let edge = SeamEdge {
-            triangles: [0, 1],
-            page: [0, 0],
-            uv: [
-                [Vec2::new(1.0, 0.0), Vec2::new(1.0, 8.0)],
-                [Vec2::new(7.0, 0.0), Vec2::new(7.0, 8.0)],
-            ],
-        };
-        let mut seams = Seams::default();
-        push_samples(&mut seams.samples, &edge, 3.0);
-        seams.edges.push(edge);
+        let seams = vertical_seam(1.0, 7.0, 8.0);
         // A bright stripe next to black on one side, a checker on the other; then values so
         // large their squares overflow f32.
         let stripes = |x: u32, y: u32| match x {

@@ -747,6 +747,24 @@ mod tests {
         (scene, atlas)
     }
 
+    /// [`scene`] without textures, in the default material.
+    fn untextured(
+        positions: &[Vec3],
+        lightmap_uv: &[Vec2],
+        triangles: &[[u32; 3]],
+        size: (u32, u32),
+    ) -> (Scene, Atlas) {
+        scene(
+            positions,
+            lightmap_uv,
+            &[],
+            triangles,
+            Material::default(),
+            vec![],
+            size,
+        )
+    }
+
     /// The unit square in z = 0 facing +z, mapped onto the whole page (v down, so y flips).
     fn unit_quad(material: Material, textures: Vec<Texture>, size: (u32, u32)) -> (Scene, Atlas) {
         let positions = [
@@ -821,15 +839,7 @@ mod tests {
             Vec3::new(0.0, 0.0, -2.0),
         ];
         let uv = [Vec2::ZERO, Vec2::new(0.5, 0.0), Vec2::new(0.0, 0.5)];
-        let (scene, atlas) = scene(
-            &positions,
-            &uv,
-            &[],
-            &[[0, 1, 2]],
-            Material::default(),
-            vec![],
-            (2, 2),
-        );
+        let (scene, atlas) = untextured(&positions, &uv, &[[0, 1, 2]], (2, 2));
         let texels = build(&scene, &atlas).unwrap();
         assert_eq!(texels.len(), 1);
         // A full texel is 4 m² here; half of it is the whole triangle.
@@ -850,15 +860,7 @@ mod tests {
             Vec2::new(0.91, 0.27),
             Vec2::new(0.36, 0.97),
         ];
-        let (scene, atlas) = scene(
-            &positions,
-            &uv,
-            &[],
-            &[[0, 1, 2]],
-            Material::default(),
-            vec![],
-            (37, 29),
-        );
+        let (scene, atlas) = untextured(&positions, &uv, &[[0, 1, 2]], (37, 29));
         let texels = build(&scene, &atlas).unwrap();
         let area: f64 = texels.area.iter().map(|&a| a as f64).sum();
         let expected = 0.5
@@ -947,15 +949,7 @@ mod tests {
             Vec2::new(0.6001, 0.6),
             Vec2::new(0.6, 0.6001),
         ];
-        let (scene, atlas) = scene(
-            &positions,
-            &uv,
-            &[],
-            &[[0, 1, 2]],
-            Material::default(),
-            vec![],
-            (4, 4),
-        );
+        let (scene, atlas) = untextured(&positions, &uv, &[[0, 1, 2]], (4, 4));
         let texels = build(&scene, &atlas).unwrap();
         assert_eq!(texels.len(), 1);
         assert_eq!(texels.xy[0], [2, 2]);
@@ -967,15 +961,7 @@ mod tests {
     fn degenerate_lightmap_uvs_fall_back_to_the_centroid_texel() {
         let positions = [Vec3::ZERO, Vec3::X, Vec3::Y];
         let uv = [Vec2::splat(0.3); 3];
-        let (scene, atlas) = scene(
-            &positions,
-            &uv,
-            &[],
-            &[[0, 1, 2]],
-            Material::default(),
-            vec![],
-            (4, 4),
-        );
+        let (scene, atlas) = untextured(&positions, &uv, &[[0, 1, 2]], (4, 4));
         let texels = build(&scene, &atlas).unwrap();
         assert_eq!(texels.len(), 1);
         assert_eq!(texels.xy[0], [1, 1]);
@@ -1004,15 +990,7 @@ mod tests {
             Vec2::new(0.5, 0.0),
         ];
         let tris = [[0, 1, 2], [3, 4, 5]];
-        let (scene, atlas) = scene(
-            &positions,
-            &uv,
-            &[],
-            &tris,
-            Material::default(),
-            vec![],
-            (1, 1),
-        );
+        let (scene, atlas) = untextured(&positions, &uv, &tris, (1, 1));
         let texels = build(&scene, &atlas).unwrap();
         assert_eq!(texels.len(), 1);
         assert_eq!(texels.normal[0], Vec3::Z);
