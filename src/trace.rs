@@ -270,26 +270,26 @@ impl Tracer {
         if self.triangles.is_empty() {
             return None;
         }
-        self.traverse(make_ray(origin, dir, tmax), Self::closest_ray)
+        self.traverse::<Closest>(make_ray(origin, dir, tmax))
     }
 
-    /// Runs the traversal `with` on `ray`, compiled for x86-64-v3 when this CPU has it (see the
+    /// Runs the traversal `T` on `ray`, compiled for x86-64-v3 when this CPU has it (see the
     /// module docs).
     #[inline(always)]
-    fn traverse<R>(&self, ray: Ray, with: impl Fn(&Self, Ray) -> R) -> R {
+    fn traverse<T: Traversal>(&self, ray: Ray) -> T::Output {
         #[cfg(target_arch = "x86_64")]
         if self.wide_isa {
             // SAFETY: `Tracer::new` checked that this CPU has the enabled features.
-            return unsafe { self.traverse_x86_64_v3(ray, with) };
+            return unsafe { self.traverse_x86_64_v3::<T>(ray) };
         }
-        with(self, ray)
+        T::run(self, ray)
     }
 
-    /// [`Tracer::traverse`] compiled for x86-64-v3: `with` (`#[inline(always)]`) is inlined here.
+    /// [`Tracer::traverse`] compiled for x86-64-v3 (`T::run` is inlined here, always).
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx,avx2,bmi1,bmi2,lzcnt,popcnt")]
-    unsafe fn traverse_x86_64_v3<R>(&self, ray: Ray, with: impl Fn(&Self, Ray) -> R) -> R {
-        with(self, ray)
+    unsafe fn traverse_x86_64_v3<T: Traversal>(&self, ray: Ray) -> T::Output {
+        T::run(self, ray)
     }
 
     #[inline(always)]
@@ -337,7 +337,7 @@ impl Tracer {
     /// True when the ray hits anything (stops at the first hit found).
     #[inline]
     fn any_hit(&self, ray: Ray) -> bool {
-        self.traverse(ray, Self::any_hit_ray)
+        self.traverse::<AnyHit>(ray)
     }
 
     /// obvhs' `ray_traverse_miss` (negated), written out so it inlines into both variants.
@@ -385,6 +385,35 @@ impl Tracer {
             return true;
         }
         !self.any_hit(make_ray(origin, dir, tmax))
+    }
+}
+
+/// A BVH traversal, compiled twice by [`Tracer::traverse`]. A static `#[inline(always)]` call,
+/// unlike a closure, is inlined into the x86-64-v3 build whatever the traversal's size.
+trait Traversal {
+    type Output;
+    fn run(tracer: &Tracer, ray: Ray) -> Self::Output;
+}
+
+/// [`Tracer::closest_ray`].
+struct Closest;
+
+impl Traversal for Closest {
+    type Output = Option<Hit>;
+    #[inline(always)]
+    fn run(tracer: &Tracer, ray: Ray) -> Option<Hit> {
+        tracer.closest_ray(ray)
+    }
+}
+
+/// [`Tracer::any_hit_ray`].
+struct AnyHit;
+
+impl Traversal for AnyHit {
+    type Output = bool;
+    #[inline(always)]
+    fn run(tracer: &Tracer, ray: Ray) -> bool {
+        tracer.any_hit_ray(ray)
     }
 }
 
