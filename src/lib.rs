@@ -30,8 +30,8 @@
 //! `solve::run` joins transport and solve for the methods that do not store rows (hierarchical,
 //! the matrix-free gather solver); `plan::final_bake` wraps it to reuse the pilot's bakes.
 //! Beside the pipeline: [`reference`](mod@reference) (the path tracer every accuracy figure is measured
-//! against, at texels or through a camera) and [`render`] (lightmapped views with a ray-traced
-//! specular layer).
+//! against, at texels or through a camera), [`render`] (lightmapped views with a ray-traced
+//! specular layer) and [`metrics`] (the error measures of every accuracy figure).
 //!
 //! ## Conventions
 //!

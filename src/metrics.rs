@@ -13,13 +13,12 @@
 //! | [`rmse_over_mean`] | `√(mean((x−r)²)) / mean(r)`     | *the* relative RMSE: README, benchmark, `--target-error`, the planner's pilot noise ([`relative_noise`]) |
 //! | [`rmse_over_rms`]  | `√(Σ‖x−r‖² / Σ‖r‖²)`            | the reference's stopping rule and the tests written against it (images, bake vs reference) |
 //!
-//! Both weigh a texel by its brightness. Where every texel should count alike (the denoiser's
-//! test: the Cornell box at K = 512 is 3% worse after denoising by this measure, 9% worse by
-//! `rmse_over_mean`), [`rms_texel_relative_error`] is the RMS of per-texel relative errors.
-//!
 //! They differ by the factor `rms(r)/mean(r)` ≥ 1 (`rmse_over_rms` is the smaller): a bright
-//! light's texels weigh more in `√Σr²`. Both ignore where the error sits; a mean of per-texel
-//! ratios would not (texels near black would set it alone, see `reference::rms_rel_error`).
+//! light's texels weigh more in `√Σr²`. Both weigh a texel's error by the scene's overall
+//! brightness, so near-black texels cannot dominate. Where every texel should count alike (the
+//! denoiser's test, with texels below a floor left out), [`rms_texel_relative_error`] is the RMS
+//! of per-texel relative errors: the Cornell box at K = 512 is 3% worse after denoising by it,
+//! 9.5% worse by `rmse_over_mean` (the bright texels lose more).
 //!
 //! A reference's own noise (its standard errors σ) is normalised the same way by
 //! [`noise_over_mean`] and [`noise_over_rms`]; against a noisy reference the expected squared
