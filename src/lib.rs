@@ -68,7 +68,7 @@ pub mod testing;
 
 mod bake;
 
-pub use bake::{BakeReport, Baked, StageTime, bake, compute, write};
+pub use bake::{BakeReport, Baked, Prepared, StageTime, bake, compute, prepare, write};
 pub use config::BakeConfig;
 pub use error::{Error, Result};
 pub use progress::{NoProgress, Progress};

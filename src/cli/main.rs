@@ -11,8 +11,7 @@ use anyhow::{Context, Result};
 use clap::{Parser, Subcommand, ValueEnum};
 use glam::Vec3;
 use lightbake::BakeConfig;
-use lightbake::config::{Method, Solver, UvMode};
-use lightbake::plan::{AutoParams, Keep};
+use lightbake::config::{AutoParams, Keep, Technique, UvMode};
 use progress::Bars;
 
 #[derive(Parser)]
@@ -57,6 +56,7 @@ enum UvArg {
     Existing,
 }
 
+/// The names are [`Technique::METHODS`].
 #[derive(Clone, Copy, ValueEnum)]
 enum MethodArg {
     /// Monte Carlo hemisphere gathering with explicit light sampling: the general default.
@@ -69,6 +69,7 @@ enum MethodArg {
     Hierarchical,
 }
 
+/// The names are [`Technique::SOLVERS`].
 #[derive(Clone, Copy, ValueEnum)]
 enum SolverArg {
     /// Parallel sweeps from the previous iterate.
@@ -126,7 +127,9 @@ struct BakeArgs {
     /// Uniform sky radiance R,G,B (W/sr/m²) for rays leaving the scene.
     #[arg(long, value_parser = parse_rgb, default_value = "0,0,0")]
     sky: Vec3,
-    /// How form factors between texels are computed [default: chosen; montecarlo].
+    /// How form factors between texels are computed [default: chosen; montecarlo]. The
+    /// hierarchical method takes no other solver than jacobi, the gather solver no other
+    /// method than montecarlo.
     #[arg(long, value_enum)]
     method: Option<MethodArg>,
     /// Solver for the radiosity system [default: chosen; jacobi, or gather when the stored
@@ -187,23 +190,46 @@ fn parse_rgb(s: &str) -> Result<Vec3, String> {
     }
 }
 
-impl BakeArgs {
-    fn config(&self) -> BakeConfig {
-        let mut c = match self.quality {
+impl Quality {
+    fn preset(self) -> BakeConfig {
+        match self {
             Quality::Draft => BakeConfig::draft(),
             Quality::Medium => BakeConfig::medium(),
             Quality::High => BakeConfig::high(),
-        };
+        }
+    }
+
+    /// The error the automatic choice aims at.
+    fn target_error(self) -> f32 {
+        AutoParams::for_preset(&value_name(self)).unwrap_or(0.04)
+    }
+}
+
+impl UvArg {
+    fn mode(self) -> UvMode {
+        match self {
+            UvArg::Auto => UvMode::Auto,
+            UvArg::Unwrap => UvMode::Unwrap,
+            UvArg::Existing => UvMode::Existing,
+        }
+    }
+}
+
+/// The name clap parses and prints for a value.
+fn value_name(v: impl ValueEnum) -> String {
+    v.to_possible_value()
+        .map_or_else(String::new, |p| p.get_name().to_string())
+}
+
+impl BakeArgs {
+    fn config(&self) -> Result<BakeConfig> {
+        let mut c = self.quality.preset();
         if let Some(t) = self.texels_per_unit {
             c.atlas.texels_per_unit = t;
         }
         c.atlas.max_page_size = self.max_page_size;
         c.atlas.padding = self.padding;
-        c.atlas.uv = match self.uv {
-            UvArg::Auto => UvMode::Auto,
-            UvArg::Unwrap => UvMode::Unwrap,
-            UvArg::Existing => UvMode::Existing,
-        };
+        c.atlas.uv = self.uv.mode();
         if let Some(r) = self.rays {
             c.transport.gather_rays = r;
         }
@@ -213,21 +239,15 @@ impl BakeArgs {
         c.transport.sky = self.sky;
         c.transport.indirect_only = self.indirect_only;
         c.transport.seed = self.seed;
-        if let Some(m) = self.method {
-            c.transport.method = match m {
-                MethodArg::Montecarlo => Method::MonteCarlo,
-                MethodArg::Point => Method::Point,
-                MethodArg::Polygon => Method::Polygon,
-                MethodArg::Hierarchical => Method::Hierarchical,
-            };
-        }
-        if let Some(s) = self.solver {
-            c.solve.solver = match s {
-                SolverArg::Jacobi => Solver::Jacobi,
-                SolverArg::GaussSeidel => Solver::GaussSeidel,
-                SolverArg::Southwell => Solver::Southwell,
-                SolverArg::Gather => Solver::Gather,
-            };
+        if self.method.is_some() || self.solver.is_some() {
+            // The flag not given keeps the preset's part (the automatic choice may change it).
+            let method = self
+                .method
+                .map_or_else(|| c.technique.method().to_string(), value_name);
+            let solver = self
+                .solver
+                .map_or_else(|| c.technique.solver().to_string(), value_name);
+            c.technique = Technique::from_names(&method, &solver)?;
         }
         if let Some(t) = self.tolerance {
             c.solve.tolerance = t;
@@ -239,16 +259,10 @@ impl BakeArgs {
         c.transport.validity = !self.no_validity;
         c.transport.denoise = !self.no_denoise;
         if !self.no_auto {
-            let preset = match self.quality {
-                Quality::Draft => "draft",
-                Quality::Medium => "medium",
-                Quality::High => "high",
-            };
             c.auto = Some(AutoParams {
                 target_error: self
                     .target_error
-                    .or(AutoParams::for_preset(preset))
-                    .unwrap_or(0.04),
+                    .unwrap_or(self.quality.target_error()),
                 keep: Keep {
                     texels_per_unit: self.texels_per_unit.is_some(),
                     method: self.method.is_some(),
@@ -260,12 +274,12 @@ impl BakeArgs {
             });
         }
         c.output.seams = !self.no_seams;
-        c
+        Ok(c)
     }
 }
 
 fn bake(args: &BakeArgs) -> Result<()> {
-    let config = args.config();
+    let config = args.config()?;
     let bars = Bars::new(args.quiet);
     let report = lightbake::bake(&args.scene, &args.output, &config, &bars)
         .with_context(|| format!("baking {} failed", args.scene.display()))?;

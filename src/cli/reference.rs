@@ -6,7 +6,7 @@ use std::time::Duration;
 
 use anyhow::{Context, Result, bail};
 use glam::Vec3;
-use lightbake::config::UvMode;
+use lightbake::config::{AutoParams, Keep};
 use lightbake::lightmap::{self, LightmapPages};
 use lightbake::output::{self, Staging};
 use lightbake::reference::{self, ReferenceParams};
@@ -41,7 +41,8 @@ pub struct Args {
     /// Exposure of a --view PNG in stops (ignored for EXR).
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     exposure: f32,
-    /// Preset whose texel density the reference uses (match the bake's).
+    /// Preset whose texel density the reference uses (match the bake's): adjusted for the
+    /// scene's surface area exactly as `lightbake bake` adjusts it (without --no-auto).
     #[arg(long, value_enum, default_value = "medium")]
     quality: Quality,
     /// Lightmap texels per world unit [default: from --quality: 8 / 16 / 32].
@@ -98,7 +99,7 @@ const AFTER_HELP: &str = "\
 Writes <stem>_reference<k>.exr (H/π per texel, dilated like bake pages) and
 <stem>_reference<k>_stderr.exr (its standard error) per page. The texels are a bake's when the
 scene and the atlas options (--quality, --texels-per-unit, --max-page-size, --padding, --uv,
---no-validity) are the same; give --sky and --indirect-only as the bake did. Tracing stops at
+--no-validity) are the same (the density is adjusted to the scene's size as bake adjusts it); give --sky and --indirect-only as the bake did. Tracing stops at
 --spp paths per texel, at --target-error (relative RMS standard error √(Σσ²/Σμ²)), or after
 --time seconds, whichever comes first.
 
@@ -112,26 +113,26 @@ error. Rays that leave the scene see --sky (give render the same --background).
 
 impl Args {
     fn config(&self) -> BakeConfig {
-        let mut c = match self.quality {
-            Quality::Draft => BakeConfig::draft(),
-            Quality::Medium => BakeConfig::medium(),
-            Quality::High => BakeConfig::high(),
-        };
+        let mut c = self.quality.preset();
         if let Some(t) = self.texels_per_unit {
             c.atlas.texels_per_unit = t;
         }
         c.atlas.max_page_size = self.max_page_size;
         c.atlas.padding = self.padding;
-        c.atlas.uv = match self.uv {
-            UvArg::Auto => UvMode::Auto,
-            UvArg::Unwrap => UvMode::Unwrap,
-            UvArg::Existing => UvMode::Existing,
-        };
+        c.atlas.uv = self.uv.mode();
         c.transport.sky = self.sky;
         c.transport.indirect_only = self.indirect_only;
         c.transport.validity = !self.no_validity;
         c.transport.seed = self.seed;
         c.output.float = self.float;
+        // The density a bake's automatic choice gives (nothing else of it applies here).
+        c.auto = Some(AutoParams {
+            target_error: self.quality.target_error(),
+            keep: Keep {
+                texels_per_unit: self.texels_per_unit.is_some(),
+                ..Keep::default()
+            },
+        });
         c
     }
 
