@@ -6,9 +6,10 @@
 use std::path::PathBuf;
 use std::time::Instant;
 
-use lightbake::config::Method;
+use lightbake::config::Technique;
+use lightbake::solve::hierarchical;
 use lightbake::trace::Tracer;
-use lightbake::transport::hierarchical;
+use lightbake::transport::Surfaces;
 use lightbake::{BakeConfig, NoProgress, atlas, compute, scene, texels};
 
 fn main() -> lightbake::Result<()> {
@@ -32,23 +33,26 @@ fn main() -> lightbake::Result<()> {
     for tpu in densities {
         let mut config = BakeConfig::medium();
         config.atlas.texels_per_unit = tpu;
-        config.transport.method = Method::Hierarchical;
+        config.technique = Technique::Hierarchical;
         let (sc, source) = scene::load(&path)?;
         let at = atlas::build(&sc, &source, &config.atlas)?;
         let tx = texels::build(&sc, &at)?;
         let tracer = Tracer::new(&sc);
         let t = Instant::now();
+        let surfaces = Surfaces {
+            scene: &sc,
+            texels: &tx,
+            tracer: &tracer,
+        };
         let (transport, solution, stats) = hierarchical::solve_with_stats(
-            &sc,
-            &tx,
-            &tracer,
+            surfaces,
             &config.transport,
             &config.solve,
             &NoProgress,
         )?;
         let seconds = t.elapsed().as_secs_f64();
         // The Monte Carlo method at the same texels.
-        config.transport.method = Method::MonteCarlo;
+        config.technique = Technique::DEFAULT;
         let mc = compute(&path, &config, &NoProgress)?;
         let (mut se, mut norm, mut sum_h, mut sum_mc) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
         for (h, m) in solution.irradiance.iter().zip(&mc.solution.irradiance) {

@@ -203,7 +203,12 @@ pub fn needs_second_pilot(first: f32, e: f32) -> bool {
 /// when [`needs_second_pilot`]): the gathering rays of the bake that completes the last pilot
 /// pair. Returns true when that pair alone reaches the target (no further bake). Expects
 /// `plan.pilot_seconds` to be set.
-pub fn choose_rays(config: &mut BakeConfig, plan: &mut Plan, first: f32, second: Option<f32>) -> bool {
+pub fn choose_rays(
+    config: &mut BakeConfig,
+    plan: &mut Plan,
+    first: f32,
+    second: Option<f32>,
+) -> bool {
     let e = plan.target_error;
     let k0 = PILOT_RAYS as f32;
     let (mut noise, mut k_pilot, mut alpha) = (first, k0, 0.5f32);
@@ -222,7 +227,11 @@ pub fn choose_rays(config: &mut BakeConfig, plan: &mut Plan, first: f32, second:
     let k = round_up_quarter_octave(wanted).clamp(RAYS_RANGE.0, RAYS_RANGE.1);
     let predicted = noise * (k_pilot / k as f32).powf(alpha);
     // The last pilot's two runs are reused: only the rays they lack are cast again.
-    let last_pilot = if second.is_some() { 4 * PILOT_RAYS } else { PILOT_RAYS };
+    let last_pilot = if second.is_some() {
+        4 * PILOT_RAYS
+    } else {
+        PILOT_RAYS
+    };
     let reused = 2 * last_pilot;
     let enough = k <= reused;
     config.transport.gather_rays = if enough {

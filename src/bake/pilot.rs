@@ -119,7 +119,14 @@ impl PilotRuns {
                     ..transport.clone()
                 };
                 let technique = Technique::DEFAULT;
-                transport_and_solve(surfaces, technique, &params, None, &solve_params, &NoProgress)
+                transport_and_solve(
+                    surfaces,
+                    technique,
+                    &params,
+                    None,
+                    &solve_params,
+                    &NoProgress,
+                )
             })
             .collect::<Result<Vec<_>>>()?;
         Ok(PilotRuns {
@@ -181,7 +188,9 @@ pub fn final_bake(
     progress: &dyn Progress,
 ) -> Result<FinalBake> {
     let (k, l) = (config.transport.gather_rays, config.transport.light_samples);
-    let texel_rays = plan.and_then(|p| p.texel_rays.as_ref()).map(|r| r.0.as_slice());
+    let texel_rays = plan
+        .and_then(|p| p.texel_rays.as_ref())
+        .map(|r| r.0.as_slice());
     let bake = || {
         transport_and_solve(
             surfaces,

@@ -260,9 +260,7 @@ impl BakeArgs {
         c.transport.denoise = !self.no_denoise;
         if !self.no_auto {
             c.auto = Some(AutoParams {
-                target_error: self
-                    .target_error
-                    .unwrap_or(self.quality.target_error()),
+                target_error: self.target_error.unwrap_or(self.quality.target_error()),
                 keep: Keep {
                     texels_per_unit: self.texels_per_unit.is_some(),
                     method: self.method.is_some(),

@@ -179,12 +179,14 @@ pub fn solve(
     params: &SolveParams,
     progress: &dyn Progress,
 ) -> Result<Solution> {
-    let (sweep, name): (fn(&Transport, &[Vec3], &[Vec3], &mut [Vec3]) -> (f64, f64), _) =
-        match solver {
-            RowSolver::Southwell => return southwell::solve(transport, texels, params, progress),
-            RowSolver::Jacobi => (jacobi::sweep, "jacobi"),
-            RowSolver::GaussSeidel => (gauss_seidel::sweep, "gauss-seidel"),
-        };
+    let (sweep, name): (
+        fn(&Transport, &[Vec3], &[Vec3], &mut [Vec3]) -> (f64, f64),
+        _,
+    ) = match solver {
+        RowSolver::Southwell => return southwell::solve(transport, texels, params, progress),
+        RowSolver::Jacobi => (jacobi::sweep, "jacobi"),
+        RowSolver::GaussSeidel => (gauss_seidel::sweep, "gauss-seidel"),
+    };
     let n = transport.len();
     let emitted = row_emission(transport, texels);
     let mut h = transport.direct.clone();

@@ -388,7 +388,15 @@ mod tests {
         let mut c = config();
         c.technique = Technique::stored(FormFactors::MonteCarlo, RowSolver::GaussSeidel);
         let baked = compute(&fixture("cornell_box.gltf"), &c, &NoProgress).unwrap();
-        let southwell = |t| super::super::solve(t, &baked.texels, RowSolver::Southwell, &c.solve, &NoProgress);
+        let southwell = |t| {
+            super::super::solve(
+                t,
+                &baked.texels,
+                RowSolver::Southwell,
+                &c.solve,
+                &NoProgress,
+            )
+        };
         let a = southwell(&baked.transport).unwrap();
         let b = southwell(&baked.transport).unwrap();
         assert!(a.converged);

@@ -27,16 +27,20 @@
 
 use glam::{Vec2, Vec3};
 
-use super::{Surfaces, Transport};
 use super::all_pairs::{self, Footprint, PairKernel};
 use super::kernel::point_to_polygon;
+use super::{Surfaces, Transport};
 use crate::config::TransportParams;
 use crate::sampling::Rng;
 use crate::texels::Texels;
 use crate::trace::Tracer;
 use crate::{Progress, Result};
 
-pub fn build(surfaces: Surfaces, params: &TransportParams, progress: &dyn Progress) -> Result<Transport> {
+pub fn build(
+    surfaces: Surfaces,
+    params: &TransportParams,
+    progress: &dyn Progress,
+) -> Result<Transport> {
     let Surfaces {
         scene,
         texels,
