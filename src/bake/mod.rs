@@ -233,22 +233,13 @@ pub fn prepare(input: &Path, config: &BakeConfig, progress: &dyn Progress) -> Re
 
 /// Runs every stage up to the dilated pages, in memory.
 pub fn compute(input: &Path, config: &BakeConfig, progress: &dyn Progress) -> Result<Baked> {
-    let Prepared {
-        scene,
-        source,
-        tracer,
-        atlas,
-        texels,
-        validity,
-        mut config,
-        mut plan,
-        mut stages,
-    } = prepare(input, config, progress)?;
-    let surfaces = Surfaces {
-        scene: &scene,
-        texels: &texels,
-        tracer: &tracer,
-    };
+    let prepared = prepare(input, config, progress)?;
+    let surfaces = prepared.surfaces();
+    let (mut config, mut plan, mut stages) = (
+        prepared.config.clone(),
+        prepared.plan.clone(),
+        prepared.stages.clone(),
+    );
 
     let mut pilot = None;
     if let (Some(plan), Some(auto)) = (&mut plan, config.auto) {
@@ -275,6 +266,14 @@ pub fn compute(input: &Path, config: &BakeConfig, progress: &dyn Progress) -> Re
         ));
     }
     timed(&mut stages, "transport+solve", t);
+    let Prepared {
+        scene,
+        source,
+        atlas,
+        texels,
+        validity,
+        ..
+    } = prepared;
 
     let t = Instant::now();
     // A texel stores H/π; indirect-only leaves out light that arrived without a bounce.

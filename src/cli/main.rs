@@ -82,6 +82,38 @@ enum SolverArg {
     Gather,
 }
 
+/// The atlas options, shared by `bake` and `reference` so their texels line up.
+#[derive(clap::Args)]
+struct AtlasArgs {
+    /// Lightmap texels per world unit (metre) [default: from --quality: 8 / 16 / 32, adjusted
+    /// to keep the texel count within the preset's budget for the scene's surface area].
+    #[arg(long)]
+    texels_per_unit: Option<f32>,
+    /// Largest page side in texels; more pages are made when charts do not fit.
+    #[arg(long, default_value_t = 1024)]
+    max_page_size: u32,
+    /// Empty texels between charts, filled by dilation.
+    #[arg(long, default_value_t = 2)]
+    padding: u32,
+    /// Where lightmap UVs come from.
+    #[arg(long, value_enum, default_value = "auto")]
+    uv: UvArg,
+}
+
+impl AtlasArgs {
+    /// The preset of `quality` with these atlas options.
+    fn config(&self, quality: Quality) -> BakeConfig {
+        let mut c = quality.preset();
+        if let Some(t) = self.texels_per_unit {
+            c.atlas.texels_per_unit = t;
+        }
+        c.atlas.max_page_size = self.max_page_size;
+        c.atlas.padding = self.padding;
+        c.atlas.uv = self.uv.mode();
+        c
+    }
+}
+
 #[derive(clap::Args)]
 struct BakeArgs {
     /// Input scene (.gltf or .glb).
@@ -103,19 +135,8 @@ struct BakeArgs {
     /// Use the preset's settings as they are: no pilot, no automatic choice.
     #[arg(long, conflicts_with_all = ["target_error", "explain"])]
     no_auto: bool,
-    /// Lightmap texels per world unit (metre) [default: from --quality: 8 / 16 / 32, adjusted
-    /// to keep the texel count within the preset's budget for the scene's surface area].
-    #[arg(long)]
-    texels_per_unit: Option<f32>,
-    /// Largest page side in texels; more pages are made when charts do not fit.
-    #[arg(long, default_value_t = 1024)]
-    max_page_size: u32,
-    /// Empty texels between charts, filled by dilation.
-    #[arg(long, default_value_t = 2)]
-    padding: u32,
-    /// Where lightmap UVs come from.
-    #[arg(long, value_enum, default_value = "auto")]
-    uv: UvArg,
+    #[command(flatten)]
+    atlas: AtlasArgs,
     /// Gathering rays per texel (form factors) [default: chosen by a pilot bake for the target
     /// error; with --no-auto from --quality: 64 / 256 / 1024].
     #[arg(long)]
@@ -168,12 +189,32 @@ struct BakeArgs {
     /// Seed of the random sample streams (output depends on it, never on --threads).
     #[arg(long, default_value_t = 0)]
     seed: u64,
+    #[command(flatten)]
+    run: RunArgs,
+}
+
+/// Threads and verbosity, shared by `bake` and `reference`.
+#[derive(clap::Args)]
+struct RunArgs {
     /// Worker threads [default: all cores].
     #[arg(long)]
     threads: Option<usize>,
     /// No progress bars and no summary; warnings and errors still go to stderr.
     #[arg(short, long)]
     quiet: bool,
+}
+
+impl RunArgs {
+    /// Starts the worker threads (before any parallel work).
+    fn start_threads(&self) -> Result<()> {
+        if let Some(n) = self.threads {
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(n.max(1))
+                .build_global()
+                .with_context(|| format!("cannot start {n} threads"))?;
+        }
+        Ok(())
+    }
 }
 
 fn parse_rgb(s: &str) -> Result<Vec3, String> {
@@ -223,13 +264,7 @@ fn value_name(v: impl ValueEnum) -> String {
 
 impl BakeArgs {
     fn config(&self) -> Result<BakeConfig> {
-        let mut c = self.quality.preset();
-        if let Some(t) = self.texels_per_unit {
-            c.atlas.texels_per_unit = t;
-        }
-        c.atlas.max_page_size = self.max_page_size;
-        c.atlas.padding = self.padding;
-        c.atlas.uv = self.uv.mode();
+        let mut c = self.atlas.config(self.quality);
         if let Some(r) = self.rays {
             c.transport.gather_rays = r;
         }
@@ -262,7 +297,7 @@ impl BakeArgs {
             c.auto = Some(AutoParams {
                 target_error: self.target_error.unwrap_or(self.quality.target_error()),
                 keep: Keep {
-                    texels_per_unit: self.texels_per_unit.is_some(),
+                    texels_per_unit: self.atlas.texels_per_unit.is_some(),
                     method: self.method.is_some(),
                     solver: self.solver.is_some(),
                     rays: self.rays.is_some(),
@@ -277,8 +312,9 @@ impl BakeArgs {
 }
 
 fn bake(args: &BakeArgs) -> Result<()> {
+    args.run.start_threads()?;
     let config = args.config()?;
-    let bars = Bars::new(args.quiet);
+    let bars = Bars::new(args.run.quiet);
     let report = lightbake::bake(&args.scene, &args.output, &config, &bars)
         .with_context(|| format!("baking {} failed", args.scene.display()))?;
     if args.explain
@@ -292,7 +328,7 @@ fn bake(args: &BakeArgs) -> Result<()> {
             println!("  - {reason}");
         }
     }
-    if !args.quiet {
+    if !args.run.quiet {
         println!("{}", report.summary());
         if let Some(gltf) = report.files.first() {
             println!("wrote {}", gltf.display());
@@ -306,17 +342,7 @@ fn main() -> ExitCode {
     let result = match &cli.command {
         Command::Render(args) => render::run(args),
         Command::Reference(args) => reference::run(args),
-        Command::Bake(args) => {
-            if let Some(n) = args.threads
-                && let Err(e) = rayon::ThreadPoolBuilder::new()
-                    .num_threads(n.max(1))
-                    .build_global()
-            {
-                eprintln!("error: cannot start {n} threads: {e}");
-                return ExitCode::FAILURE;
-            }
-            bake(args)
-        }
+        Command::Bake(args) => bake(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -15,7 +15,7 @@ use lightbake::{BakeConfig, Progress, texels};
 
 use super::progress::Bars;
 use super::render::{ViewArgs, check_image_path};
-use super::{Quality, UvArg, parse_rgb};
+use super::{AtlasArgs, Quality, RunArgs, parse_rgb};
 
 /// Writes `<stem>_reference<k>.exr` (mean `H/π`, dilated like bake pages) and
 /// `<stem>_reference<k>_stderr.exr` (its per-texel standard error) for every page; with
@@ -45,18 +45,8 @@ pub struct Args {
     /// scene's surface area exactly as `lightbake bake` adjusts it (without --no-auto).
     #[arg(long, value_enum, default_value = "medium")]
     quality: Quality,
-    /// Lightmap texels per world unit [default: from --quality: 8 / 16 / 32].
-    #[arg(long)]
-    texels_per_unit: Option<f32>,
-    /// Largest page side in texels.
-    #[arg(long, default_value_t = 1024)]
-    max_page_size: u32,
-    /// Empty texels between charts.
-    #[arg(long, default_value_t = 2)]
-    padding: u32,
-    /// Where lightmap UVs come from.
-    #[arg(long, value_enum, default_value = "auto")]
-    uv: UvArg,
+    #[command(flatten)]
+    atlas: AtlasArgs,
     /// Paths per texel (per pixel with --view) at most; standard error shrinks like 1/√N.
     #[arg(long, default_value_t = 1024)]
     spp: u32,
@@ -87,12 +77,8 @@ pub struct Args {
     /// Seed of the random paths (output depends on it, never on --threads).
     #[arg(long, default_value_t = 0)]
     seed: u64,
-    /// Worker threads [default: all cores].
-    #[arg(long)]
-    threads: Option<usize>,
-    /// No progress bars and no summary; warnings and errors still go to stderr.
-    #[arg(short, long)]
-    quiet: bool,
+    #[command(flatten)]
+    run: RunArgs,
 }
 
 const AFTER_HELP: &str = "\
@@ -113,13 +99,7 @@ error. Rays that leave the scene see --sky (give render the same --background).
 
 impl Args {
     fn config(&self) -> BakeConfig {
-        let mut c = self.quality.preset();
-        if let Some(t) = self.texels_per_unit {
-            c.atlas.texels_per_unit = t;
-        }
-        c.atlas.max_page_size = self.max_page_size;
-        c.atlas.padding = self.padding;
-        c.atlas.uv = self.uv.mode();
+        let mut c = self.atlas.config(self.quality);
         c.transport.sky = self.sky;
         c.transport.indirect_only = self.indirect_only;
         c.transport.validity = !self.no_validity;
@@ -129,7 +109,7 @@ impl Args {
         c.auto = Some(AutoParams {
             target_error: self.quality.target_error(),
             keep: Keep {
-                texels_per_unit: self.texels_per_unit.is_some(),
+                texels_per_unit: self.atlas.texels_per_unit.is_some(),
                 ..Keep::default()
             },
         });
@@ -154,12 +134,7 @@ impl Args {
 }
 
 pub fn run(args: &Args) -> Result<()> {
-    if let Some(n) = args.threads {
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(n.max(1))
-            .build_global()
-            .with_context(|| format!("cannot start {n} threads"))?;
-    }
+    args.run.start_threads()?;
     let config = args.config();
     let params = args.params(&config)?;
     if args.view {
@@ -168,7 +143,7 @@ pub fn run(args: &Args) -> Result<()> {
     if args.camera.any() {
         bail!("--camera, --eye, --target, --fov and --size need --view");
     }
-    let bars = Bars::new(args.quiet);
+    let bars = Bars::new(args.run.quiet);
     let computed = reference::compute(&args.scene, &config, &params, &bars)
         .with_context(|| format!("tracing a reference for {} failed", args.scene.display()))?;
     let (texels, r) = (&computed.texels, &computed.reference);
@@ -198,7 +173,7 @@ pub fn run(args: &Args) -> Result<()> {
         bail!("aborted");
     }
     let files = staging.commit()?;
-    if !args.quiet {
+    if !args.run.quiet {
         println!("{}", r.summary());
         println!("wrote {} file(s) to {}", files.len(), args.output.display());
     }
@@ -208,7 +183,7 @@ pub fn run(args: &Args) -> Result<()> {
 /// `--view`: a path-traced image and its standard error.
 fn view(args: &Args, config: &BakeConfig, params: &ReferenceParams) -> Result<()> {
     check_image_path(&args.output)?;
-    let bars = Bars::new(args.quiet);
+    let bars = Bars::new(args.run.quiet);
     let p = reference::prepare(&args.scene, config, &bars)
         .with_context(|| format!("loading {} failed", args.scene.display()))?;
     let cameras = gltf_cameras(&p.source.json);
@@ -257,7 +232,7 @@ fn view(args: &Args, config: &BakeConfig, params: &ReferenceParams) -> Result<()
             .save(path, args.exposure)
             .with_context(|| format!("writing {} failed", path.display()))?;
     }
-    if !args.quiet {
+    if !args.run.quiet {
         println!("{}", v.summary());
         println!(
             "wrote {} and {}",

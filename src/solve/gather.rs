@@ -74,7 +74,8 @@ pub fn solve(
     let mut reflected = vec![Vec3::ZERO; n];
     let mut solution = Solution::default();
     let aborted = AtomicBool::new(false);
-    let mut stopping = Stopping::begin("gather", "bounces", params, start, progress);
+    let history = &mut solution.history;
+    let mut stopping = Stopping::begin(("gather", "bounces"), params, history, start, progress);
     let mut bounce = 0;
     while stopping.next()? {
         bounce += 1;
@@ -117,7 +118,7 @@ pub fn solve(
             .iter()
             .fold((0.0, 0.0), |(c, t), (dc, dt)| (c + dc, t + dt));
         // The stopping rule of the stored-row solvers, on the bounce as the update.
-        if stopping.sweep(change, total, &mut solution.history)? {
+        if stopping.sweep(change, total)? {
             solution.converged = true;
             break;
         }
@@ -161,13 +162,8 @@ fn gather(ctx: &Context, i: usize, bounce: u32, reflected: &[Vec3]) -> Vec3 {
 #[cfg(test)]
 mod tests {
     use crate::config::{BakeConfig, Technique};
+    use crate::solve::tests::fixture;
     use crate::{NoProgress, compute};
-
-    fn fixture(name: &str) -> std::path::PathBuf {
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("fixtures")
-            .join(name)
-    }
 
     /// Same direct light as the stored Monte Carlo transport, no rows, deterministic.
     #[test]

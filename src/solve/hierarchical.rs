@@ -170,7 +170,9 @@ impl<'a> State<'a> {
     ) -> Result<bool> {
         let mut gathered = vec![Vec3::ZERO; tree.len()];
         let mut pushed = vec![Vec3::ZERO; tree.len()];
-        let mut stopping = Stopping::begin("hierarchical", "sweeps", params, start, progress);
+        let history = &mut solution.history;
+        let mut stopping =
+            Stopping::begin(("hierarchical", "sweeps"), params, history, start, progress);
         let mut converged = false;
         while stopping.next()? {
             let b = &self.b;
@@ -203,7 +205,7 @@ impl<'a> State<'a> {
                 *h = new;
             }
             self.pull(tree);
-            if stopping.sweep(change, total, &mut solution.history)? {
+            if stopping.sweep(change, total)? {
                 converged = true;
                 break;
             }

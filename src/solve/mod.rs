@@ -62,6 +62,7 @@ impl Solution {
 /// the loop ends at the tolerance, the iteration cap, or an abort.
 pub(crate) struct Stopping<'a> {
     params: &'a SolveParams,
+    history: &'a mut Vec<Iteration>,
     progress: &'a dyn Progress,
     /// Named in the divergence error, with the unit of one iteration.
     solver: &'static str,
@@ -73,17 +74,19 @@ pub(crate) struct Stopping<'a> {
 }
 
 impl<'a> Stopping<'a> {
-    /// Begins the `solve` progress stage; iteration times count from `start`.
+    /// Begins the `solve` progress stage; iterations are recorded in `history`, their times
+    /// counted from `start`.
     pub(crate) fn begin(
-        solver: &'static str,
-        unit: &'static str,
+        (solver, unit): (&'static str, &'static str),
         params: &'a SolveParams,
+        history: &'a mut Vec<Iteration>,
         start: Instant,
         progress: &'a dyn Progress,
     ) -> Self {
         progress.begin("solve", params.max_iterations as u64);
         Stopping {
             params,
+            history,
             progress,
             solver,
             unit,
@@ -107,12 +110,7 @@ impl<'a> Stopping<'a> {
     /// An iteration that changed `H` by `change = Σ|ΔH|` with `total = Σ|H|`: the residual is
     /// their ratio, and the error left is the update extrapolated over the geometric series of
     /// the updates' ratio (see the module doc). True when converged.
-    pub(crate) fn sweep(
-        &mut self,
-        change: f64,
-        total: f64,
-        history: &mut Vec<Iteration>,
-    ) -> Result<bool> {
+    pub(crate) fn sweep(&mut self, change: f64, total: f64) -> Result<bool> {
         let residual = if total > 0.0 {
             (change / total) as f32
         } else {
@@ -125,19 +123,14 @@ impl<'a> Stopping<'a> {
         };
         self.previous_residual = residual;
         let error_estimate = residual * ratio / (1.0 - ratio);
-        let below = self.record(residual, error_estimate, history)?;
+        let below = self.record(residual, error_estimate)?;
         Ok(below && self.count >= 2 || residual == 0.0)
     }
 
     /// An iteration with the solver's own error estimate; true when it is below the tolerance.
-    pub(crate) fn record(
-        &mut self,
-        residual: f32,
-        error_estimate: f32,
-        history: &mut Vec<Iteration>,
-    ) -> Result<bool> {
+    pub(crate) fn record(&mut self, residual: f32, error_estimate: f32) -> Result<bool> {
         self.count += 1;
-        history.push(Iteration {
+        self.history.push(Iteration {
             residual,
             error_estimate,
             seconds: self.start.elapsed().as_secs_f64(),
@@ -171,6 +164,9 @@ fn row_emission(transport: &Transport, texels: &Texels) -> Vec<Vec3> {
     }
 }
 
+/// One sweep of Jacobi or Gauss–Seidel: (rows, albedo, emitted, H) → (Σ|ΔH|, Σ|H|).
+type Sweep = fn(&Transport, &[Vec3], &[Vec3], &mut [Vec3]) -> (f64, f64);
+
 /// Iterates the stored system with `solver`.
 pub fn solve(
     transport: &Transport,
@@ -179,10 +175,7 @@ pub fn solve(
     params: &SolveParams,
     progress: &dyn Progress,
 ) -> Result<Solution> {
-    let (sweep, name): (
-        fn(&Transport, &[Vec3], &[Vec3], &mut [Vec3]) -> (f64, f64),
-        _,
-    ) = match solver {
+    let (sweep, name): (Sweep, _) = match solver {
         RowSolver::Southwell => return southwell::solve(transport, texels, params, progress),
         RowSolver::Jacobi => (jacobi::sweep, "jacobi"),
         RowSolver::GaussSeidel => (gauss_seidel::sweep, "gauss-seidel"),
@@ -191,10 +184,17 @@ pub fn solve(
     let emitted = row_emission(transport, texels);
     let mut h = transport.direct.clone();
     let mut solution = Solution::default();
-    let mut stopping = Stopping::begin(name, "sweeps", params, Instant::now(), progress);
+    let start = Instant::now();
+    let mut stopping = Stopping::begin(
+        (name, "sweeps"),
+        params,
+        &mut solution.history,
+        start,
+        progress,
+    );
     while stopping.next()? {
         let (change, total) = sweep(transport, &texels.albedo, &emitted, &mut h);
-        if stopping.sweep(change, total, &mut solution.history)? {
+        if stopping.sweep(change, total)? {
             solution.converged = true;
             break;
         }
@@ -204,4 +204,14 @@ pub fn solve(
     debug_assert!(h.iter().all(|v| v.is_finite()));
     solution.irradiance = h;
     Ok(solution)
+}
+
+#[cfg(test)]
+pub(crate) mod tests {
+    /// A scene of `fixtures/`.
+    pub(crate) fn fixture(name: &str) -> std::path::PathBuf {
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("fixtures")
+            .join(name)
+    }
 }

@@ -317,11 +317,12 @@ pub fn solve(
     let start = Instant::now();
     let mut state = Progressive::new(transport, texels);
     let mut solution = Solution::default();
-    let mut stopping = Stopping::begin("southwell", "batches", params, start, progress);
+    let history = &mut solution.history;
+    let mut stopping = Stopping::begin(("southwell", "batches"), params, history, start, progress);
     while stopping.next()? {
         let shots = state.shoot(n);
         let (residual, error_estimate) = state.take_tally();
-        if stopping.record(residual, error_estimate, &mut solution.history)? || shots < n {
+        if stopping.record(residual, error_estimate)? || shots < n {
             solution.converged = true;
             break;
         }
@@ -340,13 +341,8 @@ pub fn solve(
 mod tests {
     use super::*;
     use crate::config::{BakeConfig, FormFactors, RowSolver, Technique};
+    use crate::solve::tests::fixture;
     use crate::{NoProgress, compute};
-
-    fn fixture(name: &str) -> std::path::PathBuf {
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("fixtures")
-            .join(name)
-    }
 
     fn config() -> BakeConfig {
         let mut c = BakeConfig::draft();

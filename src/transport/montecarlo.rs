@@ -26,9 +26,7 @@ use super::rows::{self, ChunkRows};
 use super::{Surfaces, Transport};
 use crate::config::TransportParams;
 use crate::lights::{Emitters, punctual_irradiance, triangle_point};
-use crate::sampling::{
-    Rng, cosine_hemisphere, frame, hammersley, power_weight, triangle_point as sample_triangle,
-};
+use crate::sampling::{Rng, cosine_hemisphere, frame, hammersley, power_weight};
 use crate::texels::NO_TEXEL;
 use crate::{Progress, Result};
 
@@ -152,24 +150,16 @@ impl Context<'_> {
         let light_shift = rng.next_vec2();
         for s in 0..l {
             let u = hammersley(s, l, light_shift);
-            let (tri, u0) = self.emitters.pick_stratified(u.x);
-            let bary = sample_triangle(Vec2::new(u0, u.y));
-            let (y, n_l) = triangle_point(scene, tri, bary);
             let origin = self.footprint_point(i, rng.next_vec2());
-            let to = y - origin;
-            let r2 = to.length_squared();
-            if r2 <= 0.0 {
+            let Some(x) = self
+                .emitters
+                .sample_from((scene, texels, tracer), origin, n, u)
+            else {
                 continue;
-            }
-            let dir = to / r2.sqrt();
-            let (cos_i, cos_l) = (n.dot(dir), -n_l.dot(dir));
-            if cos_i <= 0.0 || cos_l <= 0.0 || tracer.occluded(origin, y) {
-                continue;
-            }
-            let le = texels.emission[texels.texel_at(tri, bary) as usize];
-            let p_light = self.emitters.pdf_area[tri as usize] * r2 / cos_l;
-            let p_gather = cos_i / PI;
-            emitted += le * (cos_i * power_weight(lf * p_light, kf * p_gather));
+            };
+            let p_light = x.pdf_area * x.r2 / x.cos_l;
+            let p_gather = x.cos_i / PI;
+            emitted += x.le * (x.cos_i * power_weight(lf * p_light, kf * p_gather));
         }
 
         // Punctual lights at stratified footprint points.

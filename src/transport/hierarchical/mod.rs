@@ -35,10 +35,8 @@ use glam::{Vec2, Vec3};
 use super::rows;
 use super::{Surfaces, Transport};
 use crate::config::TransportParams;
-use crate::lights::{Emitters, punctual_irradiance, triangle_point};
-use crate::sampling::{
-    Rng, cosine_hemisphere, frame, hammersley, triangle_point as sample_triangle,
-};
+use crate::lights::{Emitters, punctual_irradiance};
+use crate::sampling::{Rng, cosine_hemisphere, frame, hammersley};
 use crate::texels::Texels;
 use crate::{Error, Progress, Result};
 use links::{Footprint, Links, Refiner, footprint_point};
@@ -186,22 +184,10 @@ fn texel_direct(
     let light_shift = rng.next_vec2();
     for s in 0..l {
         let u = hammersley(s, l, light_shift);
-        let (tri, u0) = emitters.pick_stratified(u.x);
-        let bary = sample_triangle(Vec2::new(u0, u.y));
-        let (y, n_l) = triangle_point(scene, tri, bary);
         let x = footprint_point(texels, tracer, i, rng.next_vec2());
-        let to = y - x;
-        let r2 = to.length_squared();
-        if r2 <= 0.0 {
-            continue;
+        if let Some(y) = emitters.sample_from((scene, texels, tracer), x, n, u) {
+            h += y.le * (y.cos_i * y.cos_l / (y.r2 * y.pdf_area));
         }
-        let dir = to / r2.sqrt();
-        let (cos_i, cos_l) = (n.dot(dir), -n_l.dot(dir));
-        if cos_i <= 0.0 || cos_l <= 0.0 || tracer.occluded(x, y) {
-            continue;
-        }
-        let le = texels.emission[texels.texel_at(tri, bary) as usize];
-        h += le * (cos_i * cos_l / (r2 * emitters.pdf_area[tri as usize]));
     }
     if l > 0 {
         h /= l as f32;
