@@ -8,7 +8,7 @@
 //!   surface area (a 10 cm prop or a 1 km terrain at 16 texels/m would get 2 or 10⁹ texels).
 //! - **Method** Monte Carlo, **solver** Jacobi (the matrix-free gather solver when the stored
 //!   rows would not fit in memory; never a choice that depends on the thread count). The benchmark
-//!   (`examples/chart.rs`) puts Monte Carlo + Jacobi on the measured error-vs-time Pareto
+//!   (`examples/chart`) puts Monte Carlo + Jacobi on the measured error-vs-time Pareto
 //!   front of every fixture scene: point and polygon form factors are all-pairs (O(N²)) and
 //!   3.0–9.7% off on the Cornell box and the two-room scene (where Monte Carlo reaches
 //!   1.5–3.6%), hierarchical is 2.7–7.9% off at 4–5× the time.

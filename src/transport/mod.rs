@@ -18,7 +18,7 @@
 //! [`build`] makes stored rows with the chosen [`FormFactors`]; the matrix-free gather solver
 //! and the hierarchical solver (in [`crate::solve`]) use the pieces here — the Monte Carlo
 //! method's per-texel gathering, the [`hierarchical`] links — without storing texel rows.
-//! Every method builds its rows with one driver ([`rows`]): parallel chunks of receivers,
+//! Every method builds its rows with one driver (`rows.rs`): parallel chunks of receivers,
 //! concatenated in order.
 
 mod all_pairs;
