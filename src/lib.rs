@@ -29,7 +29,7 @@
 //!                  ─ output ──▶ .exr + .png pages, .gltf/.bin or .glb
 //! ```
 //!
-//! [`bake`] chains the stages ([`prepare`], [`compute`], [`write`]); build tools that want the
+//! [`bake`] chains the stages ([`prepare`], [`compute`], [`write()`]); build tools that want the
 //! intermediate data call them directly. Stages call only downwards:
 //!
 //! ```text

@@ -1,6 +1,6 @@
 //! Automatic choice of bake settings: model no more of a scene than its light needs.
 //!
-//! With [`AutoParams`] in the config, [`crate::compute`] chooses what the user did not fix.
+//! With [`AutoParams`](crate::config::AutoParams) in the config, [`crate::compute`] chooses what the user did not fix.
 //! This module holds the decisions and their reasons, and solves nothing: the pipeline
 //! (`bake::pilot`) runs the pilot bakes and hands their measurements to the functions here.
 //!
@@ -354,7 +354,7 @@ pub fn choose_tolerance(config: &mut BakeConfig, plan: &mut Plan, keep: &Keep) {
 }
 
 /// Step 7, when one more bake follows the pilot: fewer rays per texel where the lightmap
-/// matters less ([`texel_rays`]), from the irradiance of each pilot run.
+/// matters less (see `texel_rays`), from the irradiance of each pilot run.
 pub fn choose_texel_rays(texels: &Texels, pilot: &[&[Vec3]], k: u32, plan: &mut Plan) {
     let n = texels.len();
     let (rays, reduced) = texel_rays(texels, pilot, k);

@@ -390,7 +390,7 @@ pub struct Computed {
 /// [`prepare`] (the bake's own: the texels are a bake's texels with the same `config`), then
 /// [`trace`]. The estimates are raw: a bake replaces its `texels.invalid`
 /// (buried) texels by their neighbours' values, so compare on the others or apply
-/// [`texels::validity::fill_invalid`] too.
+/// [`crate::texels::validity::fill_invalid`] too.
 pub fn compute(
     input: &Path,
     config: &BakeConfig,

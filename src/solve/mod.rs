@@ -12,13 +12,13 @@
 //!
 //! The stored-row solvers ([`solve`]: Jacobi, Gauss–Seidel, Southwell) take a built
 //! [`Transport`]; [`gather`] (matrix-free Monte Carlo) and [`hierarchical`] make the light
-//! transport they iterate as they go. All of them stop by the one rule of [`Stopping`].
+//! transport they iterate as they go. All of them stop by one shared rule (`Stopping`, below).
 
 pub mod gather;
 mod gauss_seidel;
 pub mod hierarchical;
 mod jacobi;
-pub mod southwell;
+mod southwell;
 
 use std::time::Instant;
 
