@@ -7,7 +7,7 @@
 
 use std::path::{Path, PathBuf};
 
-use lightbake::config::Solver;
+use lightbake::config::{FormFactors, RowSolver, Technique};
 use lightbake::{BakeConfig, NoProgress, compute};
 
 fn main() -> lightbake::Result<()> {
@@ -32,12 +32,12 @@ fn main() -> lightbake::Result<()> {
     println!("|---|---|---|---|---|---|---|---|");
     for (name, path, _expected) in &scenes {
         for solver in [
-            Solver::Jacobi,
-            Solver::GaussSeidel,
-            Solver::Southwell,
-            Solver::Gather,
+            Technique::DEFAULT,
+            Technique::stored(FormFactors::MonteCarlo, RowSolver::GaussSeidel),
+            Technique::stored(FormFactors::MonteCarlo, RowSolver::Southwell),
+            Technique::Gather,
         ] {
-            config.solve.solver = solver;
+            config.technique = solver;
             let baked = compute(path, &config, &NoProgress)?;
             let s = &baked.solution;
             let mean = baked
@@ -47,8 +47,9 @@ fn main() -> lightbake::Result<()> {
                 .sum::<f32>()
                 / baked.lightmap.len() as f32;
             println!(
-                "| {name} | {} | {solver:?} | {} | {:.3} | {:.2} | {mean:.4} | {} |",
+                "| {name} | {} | {} | {} | {:.3} | {:.2} | {mean:.4} | {} |",
                 baked.texels.len(),
+                solver.solver(),
                 s.history.len(),
                 s.history.last().map_or(0.0, |i| i.seconds),
                 baked.transport.rays as f64 * 1e-6,

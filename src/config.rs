@@ -28,9 +28,9 @@ pub struct AtlasParams {
     pub padding: u32,
 }
 
-/// How texel-to-texel form factors are computed (see the `transport` module of each).
+/// How the form factors of stored rows are computed (see the `transport` module of each).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Method {
+pub enum FormFactors {
     /// Cosine-distributed gathering rays per texel (sparse rows, ≤ K entries). The default.
     MonteCarlo,
     /// Differential point-to-point kernel with one visibility ray per pair (all pairs: small
@@ -39,15 +39,141 @@ pub enum Method {
     /// Lambert's point-to-polygon contour integral over the source texel, visibility from
     /// shadow rays to points on the source (all pairs: small scenes only).
     Polygon,
+}
+
+/// Iterative method for a system of stored rows.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RowSolver {
+    /// All texels updated from the previous sweep; parallel over rows.
+    Jacobi,
+    /// Texels updated in place in order; about twice the convergence per sweep, serial.
+    GaussSeidel,
+    /// Southwell progressive refinement: shoot the texel with the most unshot power.
+    Southwell,
+}
+
+/// How light is transported between texels and how the resulting system is solved: only the
+/// combinations that exist (the matrix-free gatherer re-casts Monte Carlo rays, the hierarchy
+/// iterates its links with Jacobi sweeps).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Technique {
+    /// Rows of form factors built once and stored, then iterated.
+    Stored {
+        form_factors: FormFactors,
+        solver: RowSolver,
+    },
+    /// Matrix-free Monte Carlo: no stored rows; gathering rays are cast again every bounce.
+    Gather,
     /// Hierarchical radiosity with clustering: links between texel blocks refined where the
-    /// transfer error is large.
+    /// transfer error is large, iterated by Jacobi sweeps.
     Hierarchical,
+}
+
+impl Technique {
+    /// Monte Carlo rows and Jacobi: the default.
+    pub const DEFAULT: Technique = Technique::stored(FormFactors::MonteCarlo, RowSolver::Jacobi);
+    /// The names [`Technique::method`] gives, for command lines.
+    pub const METHODS: [&'static str; 4] = ["montecarlo", "point", "polygon", "hierarchical"];
+    /// The names [`Technique::solver`] gives, for command lines.
+    pub const SOLVERS: [&'static str; 4] = ["jacobi", "gauss-seidel", "southwell", "gather"];
+
+    pub const fn stored(form_factors: FormFactors, solver: RowSolver) -> Technique {
+        Technique::Stored {
+            form_factors,
+            solver,
+        }
+    }
+
+    /// The transport's name: `montecarlo`, `point`, `polygon` or `hierarchical`.
+    pub fn method(self) -> &'static str {
+        match self {
+            Technique::Stored {
+                form_factors: FormFactors::MonteCarlo,
+                ..
+            }
+            | Technique::Gather => "montecarlo",
+            Technique::Stored {
+                form_factors: FormFactors::Point,
+                ..
+            } => "point",
+            Technique::Stored {
+                form_factors: FormFactors::Polygon,
+                ..
+            } => "polygon",
+            Technique::Hierarchical => "hierarchical",
+        }
+    }
+
+    /// The solver's name: `jacobi`, `gauss-seidel`, `southwell` or `gather`.
+    pub fn solver(self) -> &'static str {
+        match self {
+            Technique::Stored {
+                solver: RowSolver::Jacobi,
+                ..
+            }
+            | Technique::Hierarchical => "jacobi",
+            Technique::Stored {
+                solver: RowSolver::GaussSeidel,
+                ..
+            } => "gauss-seidel",
+            Technique::Stored {
+                solver: RowSolver::Southwell,
+                ..
+            } => "southwell",
+            Technique::Gather => "gather",
+        }
+    }
+
+    /// The technique a method and a solver name together ([`Technique::METHODS`] ×
+    /// [`Technique::SOLVERS`]); a pair that does not exist is an error that says why.
+    pub fn from_names(method: &str, solver: &str) -> crate::Result<Technique> {
+        use crate::Error::Option;
+        let rows = match solver {
+            "jacobi" => Some(RowSolver::Jacobi),
+            "gauss-seidel" => Some(RowSolver::GaussSeidel),
+            "southwell" => Some(RowSolver::Southwell),
+            "gather" => None,
+            _ => return Err(Option(format!("unknown solver {solver:?}"))),
+        };
+        let form_factors = match method {
+            "montecarlo" => FormFactors::MonteCarlo,
+            "point" => FormFactors::Point,
+            "polygon" => FormFactors::Polygon,
+            "hierarchical" if solver == "jacobi" => return Ok(Technique::Hierarchical),
+            "hierarchical" => {
+                return Err(Option(format!(
+                    "the hierarchical method iterates its own links with Jacobi sweeps: \
+                     the {solver} solver does not apply (leave --solver out)"
+                )));
+            }
+            _ => return Err(Option(format!("unknown method {method:?}"))),
+        };
+        match (form_factors, rows) {
+            (_, Some(solver)) => Ok(Technique::stored(form_factors, solver)),
+            (FormFactors::MonteCarlo, None) => Ok(Technique::Gather),
+            (_, None) => Err(Option(format!(
+                "the gather solver re-casts Monte Carlo gathering rays every bounce: it does not \
+                 apply to the {method} method (use --method montecarlo, or another solver)"
+            ))),
+        }
+    }
+
+    /// True for the noisy Monte Carlo estimates (stored rows or matrix-free): what the pilot
+    /// measures and the denoiser smooths.
+    pub fn is_monte_carlo(self) -> bool {
+        self.method() == "montecarlo"
+    }
+}
+
+impl std::fmt::Display for Technique {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}/{}", self.method(), self.solver())
+    }
 }
 
 /// How light is transported between texels.
 #[derive(Clone, Debug)]
 pub struct TransportParams {
-    pub method: Method,
     /// Cosine-distributed gathering rays per texel for the texel-to-texel form factors.
     /// More rays = less noise in indirect light, linearly more time and row storage.
     pub gather_rays: u32,
@@ -64,43 +190,14 @@ pub struct TransportParams {
     /// neighbours (`texels::validity`; 16 probe rays per texel). Off only to measure leaks.
     pub validity: bool,
     /// Edge-aware denoising of the lightmap (`lightmap::denoise`). Applies to the Monte Carlo
-    /// method only (any solver, Gather included); point, polygon and hierarchical form factors
+    /// method only (stored rows or matrix-free); point, polygon and hierarchical form factors
     /// are deterministic, so their errors are not the white noise it removes and it is skipped.
     pub denoise: bool,
-    /// Gathering rays per texel where fewer than `gather_rays` suffice (emitters, black and
-    /// unlit texels, measured by [`crate::plan`]'s pilot); `None`: `gather_rays` everywhere.
-    /// Monte Carlo rows only (not the gather solver, not hierarchical).
-    pub texel_rays: Option<TexelRays>,
-}
-
-/// Per-texel gathering rays (indexed like `Texels`); light samples scale with them.
-#[derive(Clone, PartialEq, Eq)]
-pub struct TexelRays(pub std::sync::Arc<[u32]>);
-
-impl std::fmt::Debug for TexelRays {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        let total: u64 = self.0.iter().map(|&k| k as u64).sum();
-        write!(f, "TexelRays({} texels, {total} rays)", self.0.len())
-    }
-}
-
-/// Iterative method for the stored radiosity system.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Solver {
-    /// All texels updated from the previous sweep; parallel over rows.
-    Jacobi,
-    /// Texels updated in place in order; about twice the convergence per sweep, serial.
-    GaussSeidel,
-    /// Southwell progressive refinement: shoot the texel with the most unshot power.
-    Southwell,
-    /// Matrix-free: no stored rows; gathering rays are cast again every bounce.
-    Gather,
 }
 
 /// How the radiosity system is iterated.
 #[derive(Clone, Debug)]
 pub struct SolveParams {
-    pub solver: Solver,
     /// Stop when the estimated relative error of the solution (the last update extrapolated
     /// over the remaining geometric series) falls below this.
     pub tolerance: f32,
@@ -122,16 +219,51 @@ pub struct OutputParams {
     pub seams: bool,
 }
 
+/// Which settings the user fixed; the automatic choice ([`crate::plan`]) leaves those alone.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Keep {
+    pub texels_per_unit: bool,
+    /// The transport of [`Technique`] (its [`Technique::method`]).
+    pub method: bool,
+    /// The solver of [`Technique`] (its [`Technique::solver`]).
+    pub solver: bool,
+    pub rays: bool,
+    pub light_samples: bool,
+    pub tolerance: bool,
+}
+
+/// Ask for an automatic choice aiming at a relative RMSE of the lightmap.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AutoParams {
+    /// Target relative RMSE against a converged reference (0.04 = 4%).
+    pub target_error: f32,
+    pub keep: Keep,
+}
+
+impl AutoParams {
+    /// The error each quality preset aims at: draft 8%, medium 4%, high 2%.
+    pub fn for_preset(preset: &str) -> Option<f32> {
+        match preset {
+            "draft" => Some(0.08),
+            "medium" => Some(0.04),
+            "high" => Some(0.02),
+            _ => None,
+        }
+    }
+}
+
 /// All options of a bake.
 #[derive(Clone, Debug)]
 pub struct BakeConfig {
     pub atlas: AtlasParams,
+    /// Which transport and solver: see [`Technique`].
+    pub technique: Technique,
     pub transport: TransportParams,
     pub solve: SolveParams,
     pub output: OutputParams,
     /// Choose density, method, rays and tolerance from the scene for a target error
     /// ([`crate::plan`]); `None` uses the settings above as they are.
-    pub auto: Option<crate::plan::AutoParams>,
+    pub auto: Option<AutoParams>,
 }
 
 impl BakeConfig {
@@ -148,8 +280,8 @@ impl BakeConfig {
                 max_page_size: 1024,
                 padding: 2,
             },
+            technique: Technique::DEFAULT,
             transport: TransportParams {
-                method: Method::MonteCarlo,
                 gather_rays,
                 light_samples,
                 sky: Vec3::ZERO,
@@ -157,10 +289,8 @@ impl BakeConfig {
                 seed: 0,
                 validity: true,
                 denoise: true,
-                texel_rays: None,
             },
             solve: SolveParams {
-                solver: Solver::Jacobi,
                 tolerance,
                 max_iterations: 10_000,
             },

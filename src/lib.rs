@@ -11,24 +11,45 @@
 //!
 //! ```text
 //!  input.gltf ─ scene::load ──▶ Scene + Source        world-space triangles, materials, lights
+//!             Tracer::new   ──▶ Tracer                obvhs CWBVH: closest hit, occlusion
 //!   ─ plan::choose_density ──▶ BakeConfig            texel density for the scene's area (auto)
 //!            ─ atlas::build ──▶ Atlas                 xatlas charts + pages, or input TEXCOORD_1
 //!           ─ texels::build ──▶ Texels                one radiosity patch per covered texel
-//!             Tracer::new   ──▶ Tracer                obvhs CWBVH: closest hit, occlusion
 //!       ─ texels::validity ──▶ Texels                 samples moved out of geometry, invalid marked,
 //!                                                     texels a wall divides kept to one side (cuts)
-//! ─ plan::choose_transport ──▶ BakeConfig + pilot    rays for the target error, measured (auto)
+//!   (all of the above is `prepare`, shared by the bake and the reference)
+//!    ─ pilot runs + plan   ──▶ BakeConfig + pilot    rays for the target error, measured (auto)
+//!  ─ one dispatch on config::Technique:
 //!        ─ transport::build ──▶ Transport             form factors F_ij (CSR rows) + H_direct
 //!            ─ solve::solve ──▶ Solution              H = H_direct + F·(ρH), iterated
+//!     or solve::gather, solve::hierarchical ──▶ Transport (no rows) + Solution
 //!     ─ lightmap::denoise  ──▶ H/π per texel         edge-aware, Monte Carlo only
 //! ─ LightmapPages::from_texels ▶ LightmapPages         H/π per texel, dilated into the gutters
 //!         ─ lightmap::seams ──▶ LightmapPages         UV seams stitched (least squares)
 //!                  ─ output ──▶ .exr + .png pages, .gltf/.bin or .glb
 //! ```
 //!
-//! [`bake`] chains the stages; build tools that want the intermediate data call them directly.
-//! `solve::run` joins transport and solve for the methods that do not store rows (hierarchical,
-//! the matrix-free gather solver); `plan::final_bake` wraps it to reuse the pilot's bakes.
+//! [`bake`] chains the stages ([`prepare`], [`compute`], [`write()`]); build tools that want the
+//! intermediate data call them directly. Stages call only downwards:
+//!
+//! ```text
+//!   error, progress, sampling        below everything
+//!   config                           all options: Technique (only valid transport × solver
+//!                                    pairs), AutoParams/Keep of the automatic choice
+//!   scene → trace → atlas → texels → lights
+//!   transport                        rows (one chunked row builder), montecarlo, point, polygon,
+//!                                    hierarchical link building and direct light
+//!   solve                            one stopping rule; jacobi, gauss_seidel, southwell on stored
+//!                                    rows; gather (matrix-free) and hierarchical make their own
+//!                                    transport as they iterate
+//!   lightmap, output
+//!   plan                             pure decisions of the automatic choice (no solving)
+//!   bake                             prepare/compute/write; `light`: the one dispatch of a
+//!                                    Technique to transport and solver; `pilot`: the pilot runs
+//!                                    and the final bake that reuses them
+//!   reference, render                beside the pipeline (reference uses bake's prepare)
+//! ```
+//!
 //! Beside the pipeline: [`reference`](mod@reference) (the path tracer every accuracy figure is measured
 //! against, at texels or through a camera), [`render`] (lightmapped views with a ray-traced
 //! specular layer) and [`metrics`] (the error measures of every accuracy figure).
@@ -70,7 +91,7 @@ pub mod testing;
 
 mod bake;
 
-pub use bake::{BakeReport, Baked, StageTime, bake, compute, write};
+pub use bake::{BakeReport, Baked, Prepared, StageTime, bake, compute, prepare, write};
 pub use config::BakeConfig;
 pub use error::{Error, Result};
 pub use progress::{NoProgress, Progress};

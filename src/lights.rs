@@ -4,7 +4,7 @@
 
 use glam::{Vec2, Vec3};
 
-use crate::sampling::sample_cdf;
+use crate::sampling::{sample_cdf, triangle_point as sample_triangle};
 use crate::scene::{Light, LightKind, Scene};
 use crate::texels::Texels;
 use crate::trace::Tracer;
@@ -150,6 +150,52 @@ impl Emitters {
     pub fn pick(&self, u: f32) -> u32 {
         self.triangles[sample_cdf(&self.cdf, u)]
     }
+
+    /// The light sample `u ∈ [0,1)²` (stratified: [`Emitters::pick_stratified`]) seen from `x`
+    /// with normal `n`: `None` when either side faces away or the shadow ray is blocked.
+    #[inline]
+    pub fn sample_from(
+        &self,
+        (scene, texels, tracer): (&Scene, &Texels, &Tracer),
+        x: Vec3,
+        n: Vec3,
+        u: Vec2,
+    ) -> Option<LightSample> {
+        let (tri, u0) = self.pick_stratified(u.x);
+        let bary = sample_triangle(Vec2::new(u0, u.y));
+        let (y, n_l) = triangle_point(scene, tri, bary);
+        let to = y - x;
+        let r2 = to.length_squared();
+        if r2 <= 0.0 {
+            return None;
+        }
+        let dir = to / r2.sqrt();
+        let (cos_i, cos_l) = (n.dot(dir), -n_l.dot(dir));
+        if cos_i <= 0.0 || cos_l <= 0.0 || tracer.occluded(x, y) {
+            return None;
+        }
+        Some(LightSample {
+            le: texels.emission[texels.texel_at(tri, bary) as usize],
+            cos_i,
+            cos_l,
+            r2,
+            pdf_area: self.pdf_area[tri as usize],
+        })
+    }
+}
+
+/// An unoccluded light sample ([`Emitters::sample_from`]).
+#[derive(Clone, Copy, Debug)]
+pub struct LightSample {
+    /// Emitted radiance of the texel sampled.
+    pub le: Vec3,
+    /// Cosines at the receiver and at the emitter.
+    pub cos_i: f32,
+    pub cos_l: f32,
+    /// Squared distance.
+    pub r2: f32,
+    /// Area density of the sample on its triangle.
+    pub pdf_area: f32,
 }
 
 pub fn triangle_area(scene: &Scene, tri: &[u32; 3]) -> f32 {

@@ -64,10 +64,11 @@ use crate::sampling::{
 };
 use crate::texels::{NO_TEXEL, Texels};
 use crate::trace::Tracer;
-use crate::{Error, Progress, Result, atlas, scene, texels};
+use crate::{Error, Progress, Result, atlas, scene};
 
 mod camera;
 
+pub use crate::bake::{Prepared, prepare};
 pub use camera::{View, trace_view};
 
 /// Texels per parallel work item (one progress tick each).
@@ -380,53 +381,10 @@ pub struct Computed {
     pub reference: Reference,
 }
 
-/// The stages a reference traces in: a bake's scene, atlas, texels and tracer.
-pub struct Prepared {
-    pub scene: scene::Scene,
-    pub source: scene::Source,
-    pub atlas: atlas::Atlas,
-    pub texels: Texels,
-    pub tracer: Tracer,
-}
-
-/// Loads `input` and builds atlas and texels exactly as [`crate::compute`] does with `config`
-/// (unwrapping is deterministic, and sample points are moved out of geometry by the same
-/// validity pass, so the texels are a bake's texels), and the tracer.
-pub fn prepare(input: &Path, config: &BakeConfig, progress: &dyn Progress) -> Result<Prepared> {
-    config.validate()?;
-    let (scene, source) = scene::load(input)?;
-    for w in &scene.stats.warnings {
-        progress.warn(w);
-    }
-    if scene.triangles.is_empty() {
-        return Err(Error::invalid(input, "the scene has no triangles to trace"));
-    }
-    let atlas = atlas::build(&scene, &source, &config.atlas)?;
-    let mut texels = texels::build(&scene, &atlas)?;
-    if progress.aborted() {
-        return Err(Error::Aborted);
-    }
-    let tracer = Tracer::new(&scene);
-    if config.transport.validity {
-        // Sample points moved out of geometry, as the bake moves them.
-        let params = texels::validity::ValidityParams {
-            seed: config.transport.seed,
-            ..Default::default()
-        };
-        texels::validity::fix(&mut texels, &scene, &tracer, &params);
-    }
-    Ok(Prepared {
-        scene,
-        source,
-        atlas,
-        texels,
-        tracer,
-    })
-}
-
-/// [`prepare`], then [`trace`]. The estimates are raw: a bake replaces its `texels.invalid`
+/// [`prepare`] (the bake's own: the texels are a bake's texels with the same `config`), then
+/// [`trace`]. The estimates are raw: a bake replaces its `texels.invalid`
 /// (buried) texels by their neighbours' values, so compare on the others or apply
-/// [`texels::validity::fill_invalid`] too.
+/// [`crate::texels::validity::fill_invalid`] too.
 pub fn compute(
     input: &Path,
     config: &BakeConfig,

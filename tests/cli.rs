@@ -179,6 +179,40 @@ fn absurd_options_are_refused() {
     );
 }
 
+/// A method and a solver that do not go together are refused before any work, saying why
+/// (they used to run something else silently: point × gather gathered Monte Carlo rays, the
+/// hierarchy ignored the solver).
+#[test]
+fn invalid_method_and_solver_pairs_are_refused() {
+    let cornell = fixture("cornell_box.gltf");
+    for method in ["point", "polygon"] {
+        let args = ["--no-auto", "--method", method, "--solver", "gather"];
+        fails(
+            &cornell,
+            &args,
+            "the gather solver re-casts Monte Carlo gathering rays",
+        );
+        fails(
+            &cornell,
+            &args[1..],
+            &format!("does not apply to the {method} method"),
+        );
+    }
+    for solver in ["gauss-seidel", "southwell", "gather"] {
+        let args = ["--method", "hierarchical", "--solver", solver];
+        fails(
+            &cornell,
+            &args,
+            "the hierarchical method iterates its own links",
+        );
+        fails(
+            &cornell,
+            &args,
+            &format!("the {solver} solver does not apply"),
+        );
+    }
+}
+
 #[test]
 fn refuses_to_overwrite_the_input() {
     let dir = scratch();

@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use glam::Vec3;
-use lightbake::config::Method;
+use lightbake::config::{FormFactors, RowSolver, Technique};
 use lightbake::testing::{Geometry, GltfBuilder, Material};
 use lightbake::transport::kernel::{
     parallel_rectangles, perpendicular_rectangles, point_to_coaxial_disk, point_to_disk_bound,
@@ -15,9 +15,9 @@ use lightbake::{BakeConfig, Baked, NoProgress, compute};
 
 use crate::util::{fixture, quick, scratch};
 
-fn config(method: Method, texels_per_unit: f32) -> BakeConfig {
+fn config(method: FormFactors, texels_per_unit: f32) -> BakeConfig {
     let mut c = quick();
-    c.transport.method = method;
+    c.technique = Technique::stored(method, RowSolver::Jacobi);
     c.atlas.texels_per_unit = texels_per_unit;
     c.transport.light_samples = 64; // polygon: 2×2 visibility rays per pair
     c.solve.tolerance = 1e-5;
@@ -100,17 +100,17 @@ fn check_configuration(
 ) {
     let dir = scratch();
     let start = Instant::now();
-    let polygon = bake(gltf, dir.path(), &config(Method::Polygon, 16.0));
+    let polygon = bake(gltf, dir.path(), &config(FormFactors::Polygon, 16.0));
     let (f_polygon, _) = plate_factor(&polygon, one, two, 1);
     let polygon_time = start.elapsed().as_secs_f64();
 
     let start = Instant::now();
-    let point = bake(gltf, dir.path(), &config(Method::Point, 16.0));
+    let point = bake(gltf, dir.path(), &config(FormFactors::Point, 16.0));
     let (f_point, _) = plate_factor(&point, one, two, 1);
     let point_time = start.elapsed().as_secs_f64();
 
     let k = 1024;
-    let mut mc = config(Method::MonteCarlo, 16.0);
+    let mut mc = config(FormFactors::MonteCarlo, 16.0);
     mc.transport.gather_rays = k;
     let start = Instant::now();
     let montecarlo = bake(gltf, dir.path(), &mc);
@@ -253,7 +253,7 @@ fn differential_area_to_a_coaxial_disk() {
     for (r, h) in [(0.5f32, 0.5f32), (0.3, 1.0), (0.6, 0.25)] {
         let want = point_to_coaxial_disk(r as f64, h as f64);
         let gltf = plate_under_disk(0.1, r, h);
-        let baked = bake(&gltf, dir.path(), &config(Method::Polygon, 64.0));
+        let baked = bake(&gltf, dir.path(), &config(FormFactors::Polygon, 64.0));
         let t = &baked.texels;
         let centre = (0..t.len())
             .filter(|&i| up(t.normal[i]))
@@ -266,7 +266,7 @@ fn differential_area_to_a_coaxial_disk() {
             .map(|(_, f)| f as f64)
             .sum();
         let k = 1024;
-        let mut mc = config(Method::MonteCarlo, 64.0);
+        let mut mc = config(FormFactors::MonteCarlo, 64.0);
         mc.transport.gather_rays = k;
         let montecarlo = bake(&gltf, dir.path(), &mc);
         let (f_mc, sigma) = plate_factor(&montecarlo, up, down, k);
@@ -319,7 +319,7 @@ fn errors(baked: &Baked, expected: f32) -> (f32, f32) {
     (sum / baked.lightmap.len() as f32, worst)
 }
 
-fn furnace(method: Method, name: &str, rho: f32) -> (f32, f32) {
+fn furnace(method: FormFactors, name: &str, rho: f32) -> (f32, f32) {
     let start = Instant::now();
     let baked = compute(&fixture(name), &config(method, 8.0), &NoProgress).unwrap();
     let (mean, worst) = errors(&baked, 1.0 / (1.0 - rho));
@@ -345,7 +345,7 @@ fn furnace(method: Method, name: &str, rho: f32) -> (f32, f32) {
 #[test]
 fn furnace_polygon() {
     for (name, rho) in [("furnace.gltf", 0.5), ("furnace_09.gltf", 0.9)] {
-        let (mean, worst) = furnace(Method::Polygon, name, rho);
+        let (mean, worst) = furnace(FormFactors::Polygon, name, rho);
         assert!(
             mean < 0.01 && worst < 0.01,
             "{name}: mean {mean}, worst {worst}"
@@ -356,7 +356,7 @@ fn furnace_polygon() {
 #[test]
 fn furnace_point() {
     for (name, rho) in [("furnace.gltf", 0.5), ("furnace_09.gltf", 0.9)] {
-        let (mean, worst) = furnace(Method::Point, name, rho);
+        let (mean, worst) = furnace(FormFactors::Point, name, rho);
         assert!(
             mean < 0.01 && worst < 0.01,
             "{name}: mean {mean}, worst {worst}"
@@ -369,7 +369,7 @@ fn furnace_point() {
 fn raw_point_kernel_rows_exceed_one_at_corners() {
     let baked = compute(
         &fixture("furnace.gltf"),
-        &config(Method::Polygon, 8.0),
+        &config(FormFactors::Polygon, 8.0),
         &NoProgress,
     )
     .unwrap();
@@ -428,7 +428,12 @@ fn raw_point_kernel_rows_exceed_one_at_corners() {
 /// not reciprocal within a couple of texels (10% there in the furnace, 18% on the Cornell box
 /// where floor texels straddle the blocks' contact lines).
 fn reciprocity(name: &str) -> (f64, f64) {
-    let baked = compute(&fixture(name), &config(Method::Polygon, 8.0), &NoProgress).unwrap();
+    let baked = compute(
+        &fixture(name),
+        &config(FormFactors::Polygon, 8.0),
+        &NoProgress,
+    )
+    .unwrap();
     let (t, tr) = (&baked.texels, &baked.transport);
     let f = |i: usize, j: usize| {
         let r = tr.row_start[i] as usize..tr.row_start[i + 1] as usize;
@@ -481,7 +486,7 @@ fn polygon_is_reciprocal_on_the_cornell_box() {
 
 #[test]
 fn all_pairs_methods_refuse_large_scenes() {
-    let mut c = config(Method::Polygon, 48.0); // ≈ 6 × 48² = 13 800 texels
+    let mut c = config(FormFactors::Polygon, 48.0); // ≈ 6 × 48² = 13 800 texels
     c.transport.validity = false;
     let started = Instant::now();
     let error = compute(&fixture("furnace.gltf"), &c, &NoProgress)
@@ -504,7 +509,7 @@ fn closed_box_lets_no_ray_out() {
         .write_gltf(&path)
         .unwrap();
     for tpu in [8.0, 16.0, 32.0] {
-        let mut c = config(Method::MonteCarlo, tpu);
+        let mut c = config(FormFactors::MonteCarlo, tpu);
         c.transport.gather_rays = 256;
         let baked = compute(&path, &c, &NoProgress).unwrap();
         let escaped: f32 = baked.transport.escape.iter().sum();

@@ -1,19 +1,20 @@
-//! Hierarchical radiosity (`Method::Hierarchical`): analytic furnace, agreement with the Monte
+//! Hierarchical radiosity (`Technique::Hierarchical`): analytic furnace, agreement with the Monte
 //! Carlo method, link growth with texel count, determinism.
 
 use std::path::Path;
 
 use glam::Vec3;
-use lightbake::config::Method;
+use lightbake::config::Technique;
+use lightbake::solve::hierarchical::{self, Stats};
 use lightbake::trace::Tracer;
-use lightbake::transport::hierarchical::{self, Stats};
+use lightbake::transport::Surfaces;
 use lightbake::{BakeConfig, NoProgress, atlas, compute, metrics, scene, texels};
 
 use crate::util::{fixture, quick};
 
 fn hierarchical_config() -> BakeConfig {
     let mut config = quick();
-    config.transport.method = Method::Hierarchical;
+    config.technique = Technique::Hierarchical;
     config.transport.gather_rays = 256;
     config.solve.tolerance = 1e-5;
     config
@@ -60,7 +61,7 @@ fn cornell_box_agrees_with_monte_carlo() {
     config.atlas.texels_per_unit = 16.0;
     config.solve.tolerance = 1e-4;
     let h = compute(&fixture("cornell_box.gltf"), &config, &NoProgress).unwrap();
-    config.transport.method = Method::MonteCarlo;
+    config.technique = Technique::DEFAULT;
     let mc = compute(&fixture("cornell_box.gltf"), &config, &NoProgress).unwrap();
     assert_eq!(h.lightmap.len(), mc.lightmap.len());
     assert!(
@@ -86,15 +87,14 @@ fn solve_at(path: &Path, texels_per_unit: f32) -> (usize, Stats) {
     let at = atlas::build(&sc, &source, &config.atlas).unwrap();
     let tx = texels::build(&sc, &at).unwrap();
     let tracer = Tracer::new(&sc);
-    let (_, solution, stats) = hierarchical::solve_with_stats(
-        &sc,
-        &tx,
-        &tracer,
-        &config.transport,
-        &config.solve,
-        &NoProgress,
-    )
-    .unwrap();
+    let surfaces = Surfaces {
+        scene: &sc,
+        texels: &tx,
+        tracer: &tracer,
+    };
+    let (_, solution, stats) =
+        hierarchical::solve_with_stats(surfaces, &config.transport, &config.solve, &NoProgress)
+            .unwrap();
     assert!(solution.irradiance.iter().all(|h| h.is_finite()));
     (tx.len(), stats)
 }

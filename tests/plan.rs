@@ -3,8 +3,7 @@
 
 use std::process::Command;
 
-use lightbake::config::{Method, Solver};
-use lightbake::plan::{AutoParams, Keep};
+use lightbake::config::{AutoParams, FormFactors, Keep, RowSolver, Technique};
 use lightbake::reference::{self, ReferenceParams};
 use lightbake::trace::Tracer;
 use lightbake::{BakeConfig, NoProgress, metrics};
@@ -32,7 +31,7 @@ fn reaches_its_target_on_the_cornell_box() {
         plan.predicted_error.unwrap() <= 0.75 * target + 1e-6,
         "{plan:?}"
     );
-    assert_eq!(baked.config.transport.method, Method::MonteCarlo);
+    assert_eq!(baked.config.technique.method(), "montecarlo");
     assert_eq!(baked.config.solve.tolerance, target / 10.0);
 
     let tracer = Tracer::new(&baked.scene);
@@ -87,7 +86,7 @@ fn keeps_what_the_user_fixed() {
     let mut preset = BakeConfig::draft();
     preset.transport.gather_rays = 48;
     preset.transport.light_samples = 7;
-    preset.solve.solver = Solver::GaussSeidel;
+    preset.technique = Technique::stored(FormFactors::MonteCarlo, RowSolver::GaussSeidel);
     preset.solve.tolerance = 1e-3;
     preset.atlas.texels_per_unit = 5.0;
     let keep = Keep {
@@ -110,10 +109,16 @@ fn keeps_what_the_user_fixed() {
             c.atlas.texels_per_unit,
             c.transport.gather_rays,
             c.transport.light_samples,
-            c.solve.solver,
+            c.technique,
             c.solve.tolerance
         ),
-        (5.0, 48, 7, Solver::GaussSeidel, 1e-3)
+        (
+            5.0,
+            48,
+            7,
+            Technique::stored(FormFactors::MonteCarlo, RowSolver::GaussSeidel),
+            1e-3
+        )
     );
     assert!(baked.plan.unwrap().pilot_noise.is_none(), "no pilot needed");
 }
@@ -208,8 +213,9 @@ fn emitter_and_unlit_texels_cast_fewer_rays() {
     let baked = lightbake::compute(&fixture("cornell_box.gltf"), &config, &NoProgress).unwrap();
     let k = baked.config.transport.gather_rays;
     let rays = baked
-        .config
-        .transport
+        .plan
+        .as_ref()
+        .expect("a plan")
         .texel_rays
         .as_ref()
         .expect("per-texel rays");

@@ -5,23 +5,29 @@
 use std::path::Path;
 
 use glam::Vec3;
-use lightbake::config::Solver;
+use lightbake::config::{FormFactors, RowSolver, Technique};
 use lightbake::progress::CollectWarnings;
 use lightbake::scene::MAX_ALBEDO;
 use lightbake::{BakeConfig, Baked, NoProgress, compute, metrics};
 
 use crate::util::{fixture, quick, scratch};
 
-const SOLVERS: [(&str, Solver); 4] = [
-    ("jacobi", Solver::Jacobi),
-    ("gauss-seidel", Solver::GaussSeidel),
-    ("southwell", Solver::Southwell),
-    ("gather", Solver::Gather),
+const SOLVERS: [(&str, Technique); 4] = [
+    ("jacobi", Technique::DEFAULT),
+    (
+        "gauss-seidel",
+        Technique::stored(FormFactors::MonteCarlo, RowSolver::GaussSeidel),
+    ),
+    (
+        "southwell",
+        Technique::stored(FormFactors::MonteCarlo, RowSolver::Southwell),
+    ),
+    ("gather", Technique::Gather),
 ];
 
-fn run(path: &Path, config: &BakeConfig, solver: Solver) -> Baked {
+fn run(path: &Path, config: &BakeConfig, solver: Technique) -> Baked {
     let mut config = config.clone();
-    config.solve.solver = solver;
+    config.technique = solver;
     let baked = compute(path, &config, &NoProgress)
         .unwrap_or_else(|e| panic!("{solver:?} on {}: {e}", path.display()));
     let last = baked.solution.history.last().map_or(0.0, |i| i.seconds);
@@ -86,7 +92,7 @@ fn solvers_agree_on_the_cornell_box() {
     let path = fixture("cornell_box.gltf");
     let mut config = quick();
     config.solve.tolerance = 1e-5;
-    let reference = run(&path, &config, Solver::Jacobi);
+    let reference = run(&path, &config, Technique::DEFAULT);
     let mean = |l: &[Vec3]| l.iter().copied().sum::<Vec3>() / l.len() as f32;
     for (name, solver) in &SOLVERS[1..] {
         let baked = run(&path, &config, *solver);
@@ -95,7 +101,7 @@ fn solvers_agree_on_the_cornell_box() {
         let mean_err =
             (mean(&baked.lightmap) - mean(&reference.lightmap)).abs() / mean(&reference.lightmap);
         eprintln!("cornell: {name} vs jacobi: L1 {err:.2e}, mean {mean_err}");
-        let (l1_limit, mean_limit) = if *solver == Solver::Gather {
+        let (l1_limit, mean_limit) = if *solver == Technique::Gather {
             (0.05, Vec3::splat(0.01))
         } else {
             (1e-4, Vec3::splat(1e-4))

@@ -29,8 +29,7 @@ use std::process::Command;
 use std::time::{Duration, Instant};
 
 use glam::Vec3;
-use lightbake::config::{Method, Solver};
-use lightbake::plan::{AutoParams, Keep};
+use lightbake::config::{AutoParams, FormFactors, Keep, RowSolver, Technique};
 use lightbake::{BakeConfig, NoProgress, metrics};
 use plotters::prelude::*;
 
@@ -39,8 +38,7 @@ mod stability;
 /// One bake configuration of the sweep.
 #[derive(Clone, Debug)]
 struct Setting {
-    method: Method,
-    solver: Solver,
+    technique: Technique,
     rays: u32,
     light_samples: u32,
     tolerance: f32,
@@ -53,7 +51,7 @@ impl Setting {
     fn label(&self) -> String {
         match self.auto {
             Some(_) => "automatic choice".into(),
-            None => format!("{}/{}", method_name(self.method), solver_name(self.solver)),
+            None => self.technique.to_string(),
         }
     }
 }
@@ -70,7 +68,7 @@ struct Measured {
     peak_mib: f64,
     history: Vec<f32>,
     /// For automatic runs: method, solver, rays and light samples chosen.
-    chosen: Option<(Method, Solver, u32, u32)>,
+    chosen: Option<(Technique, u32, u32)>,
     error: Option<String>,
 }
 
@@ -83,42 +81,6 @@ struct Row {
     rmse: f32,
     p95: f32,
     max: f32,
-}
-
-fn method_name(m: Method) -> &'static str {
-    match m {
-        Method::MonteCarlo => "montecarlo",
-        Method::Point => "point",
-        Method::Polygon => "polygon",
-        Method::Hierarchical => "hierarchical",
-    }
-}
-
-fn solver_name(s: Solver) -> &'static str {
-    match s {
-        Solver::Jacobi => "jacobi",
-        Solver::GaussSeidel => "gauss-seidel",
-        Solver::Southwell => "southwell",
-        Solver::Gather => "gather",
-    }
-}
-
-fn parse_method(s: &str) -> Method {
-    match s {
-        "point" => Method::Point,
-        "polygon" => Method::Polygon,
-        "hierarchical" => Method::Hierarchical,
-        _ => Method::MonteCarlo,
-    }
-}
-
-fn parse_solver(s: &str) -> Solver {
-    match s {
-        "gauss-seidel" => Solver::GaussSeidel,
-        "southwell" => Solver::Southwell,
-        "gather" => Solver::Gather,
-        _ => Solver::Jacobi,
-    }
 }
 
 /// A fixture scene and the texel density it is measured at (fixed per scene, so every run and
@@ -213,9 +175,8 @@ fn settings(scene: &Scene, quick: bool) -> Vec<Setting> {
     } else {
         &[16, 64, 256, 1024]
     };
-    let s = |method, solver, rays: u32| Setting {
-        method,
-        solver,
+    let s = |technique, rays: u32| Setting {
+        technique,
         rays,
         light_samples: (rays / 4).max(4),
         tolerance: 1e-4,
@@ -223,38 +184,44 @@ fn settings(scene: &Scene, quick: bool) -> Vec<Setting> {
     };
     for &k in rays {
         if !(scene.montecarlo_only && k < 64) {
-            out.push(s(Method::MonteCarlo, Solver::Jacobi, k));
+            out.push(s(Technique::DEFAULT, k));
         }
     }
     if scene.montecarlo_only {
         for target in [0.04, 0.02] {
             out.push(Setting {
                 auto: Some(target),
-                ..s(Method::MonteCarlo, Solver::Jacobi, 256)
+                ..s(Technique::DEFAULT, 256)
             });
         }
         return out;
     }
-    for solver in [Solver::GaussSeidel, Solver::Southwell] {
-        out.push(s(Method::MonteCarlo, solver, 256));
+    for solver in [RowSolver::GaussSeidel, RowSolver::Southwell] {
+        out.push(s(Technique::stored(FormFactors::MonteCarlo, solver), 256));
     }
     for &k in &rays[..rays.len() - 1] {
-        out.push(s(Method::MonteCarlo, Solver::Gather, k));
+        out.push(s(Technique::Gather, k));
     }
     for &k in rays {
-        out.push(s(Method::Hierarchical, Solver::Jacobi, k));
+        out.push(s(Technique::Hierarchical, k));
     }
     if scene.all_pairs {
         for &k in &rays[..2] {
-            out.push(s(Method::Polygon, Solver::Jacobi, k));
+            out.push(s(
+                Technique::stored(FormFactors::Polygon, RowSolver::Jacobi),
+                k,
+            ));
         }
-        out.push(s(Method::Point, Solver::Jacobi, 64));
+        out.push(s(
+            Technique::stored(FormFactors::Point, RowSolver::Jacobi),
+            64,
+        ));
     }
     // The automatic choice at the presets' targets (draft 8%, medium 4%, high 2%).
     for target in [0.08, 0.04, 0.02] {
         out.push(Setting {
             auto: Some(target),
-            ..s(Method::MonteCarlo, Solver::Jacobi, 256)
+            ..s(Technique::DEFAULT, 256)
         });
     }
     out
@@ -263,10 +230,9 @@ fn settings(scene: &Scene, quick: bool) -> Vec<Setting> {
 fn config(scene_tpu: f32, setting: &Setting) -> BakeConfig {
     let mut c = BakeConfig::medium();
     c.atlas.texels_per_unit = scene_tpu;
-    c.transport.method = setting.method;
+    c.technique = setting.technique;
     c.transport.gather_rays = setting.rays;
     c.transport.light_samples = setting.light_samples;
-    c.solve.solver = setting.solver;
     c.solve.tolerance = setting.tolerance;
     if let Some(target_error) = setting.auto {
         // The density stays the scene's, so the reference shares the texels.
@@ -298,12 +264,7 @@ fn child(args: &[String]) {
     };
     let auto = method == "auto";
     let setting = Setting {
-        method: if auto {
-            Method::MonteCarlo
-        } else {
-            parse_method(method)
-        },
-        solver: parse_solver(solver),
+        technique: Technique::from_names(if auto { "montecarlo" } else { method }, solver).unwrap(),
         rays: rays.parse().unwrap(),
         light_samples: light.parse().unwrap(),
         tolerance: if auto { 1e-4 } else { tol.parse().unwrap() },
@@ -342,8 +303,8 @@ fn child(args: &[String]) {
                 baked.solution.converged,
                 peak_mib(),
                 history.join(","),
-                method_name(c.transport.method),
-                solver_name(c.solve.solver),
+                c.technique.method(),
+                c.technique.solver(),
                 // Automatic runs: rays per texel in all, the reused pilot bakes included.
                 baked
                     .plan
@@ -366,9 +327,9 @@ fn run_child(scene: &Scene, setting: &Setting, values: &Path) -> Measured {
             if setting.auto.is_some() {
                 "auto"
             } else {
-                method_name(setting.method)
+                setting.technique.method()
             },
-            solver_name(setting.solver),
+            setting.technique.solver(),
             &setting.rays.to_string(),
             &setting.light_samples.to_string(),
             &setting.auto.unwrap_or(setting.tolerance).to_string(),
@@ -402,8 +363,7 @@ fn run_child(scene: &Scene, setting: &Setting, values: &Path) -> Measured {
         chosen: f.get(9).and_then(|c| {
             let c: Vec<&str> = c.split(' ').collect();
             Some((
-                parse_method(c.first()?),
-                parse_solver(c.get(1)?),
+                Technique::from_names(c.first()?, c.get(1)?).ok()?,
                 c.get(2)?.parse().ok()?,
                 c.get(3)?.parse().ok()?,
             ))
@@ -661,7 +621,7 @@ fn chart_residuals(path: &Path, rows: &[&Row]) -> Result<(), Box<dyn std::error:
             .collect();
         chart
             .draw_series(LineSeries::new(pts, color.stroke_width(2)))?
-            .label(format!("{} {}", row.scene, solver_name(row.setting.solver)))
+            .label(format!("{} {}", row.scene, row.setting.technique.solver()))
             .legend(move |(x, y)| PathElement::new([(x, y), (x + 18, y)], color.stroke_width(2)));
     }
     chart
@@ -722,8 +682,8 @@ fn pareto_rows(rows: &[Row], noise: f32) -> String {
             target * 100.0,
             format_args!(
                 "{}/{}",
-                method_name(a.setting.method),
-                solver_name(a.setting.solver)
+                a.setting.technique.method(),
+                a.setting.technique.solver()
             ),
             a.setting.rays,
             a.setting.light_samples,
@@ -784,16 +744,15 @@ fn main() {
         let pt = path_tracer_curve(&scene, &reference, quick);
         let mut scene_rows = Vec::new();
         for setting in settings(&scene, quick) {
-            if !methods.is_empty() && !methods.contains(&method_name(setting.method)) {
+            if !methods.is_empty() && !methods.contains(&setting.technique.method()) {
                 continue;
             }
             let values = work.join("values.bin");
             let _ = std::fs::remove_file(&values);
             let measured = run_child(&scene, &setting, &values);
             let mut setting = setting;
-            if let (Some(_), Some((method, solver, rays, light))) = (setting.auto, measured.chosen)
-            {
-                (setting.method, setting.solver, setting.rays) = (method, solver, rays);
+            if let (Some(_), Some((technique, rays, light))) = (setting.auto, measured.chosen) {
+                (setting.technique, setting.rays) = (technique, rays);
                 setting.light_samples = light;
             }
             let (rmse, p95, max) = if measured.error.is_none() {
@@ -896,7 +855,7 @@ fn main() {
     let residual_rows: Vec<&Row> = rows
         .iter()
         .filter(|r| {
-            r.setting.method == Method::MonteCarlo
+            r.setting.technique.is_monte_carlo()
                 && r.setting.auto.is_none()
                 && r.setting.rays == 256
                 && r.measured.error.is_none()
@@ -928,15 +887,15 @@ fn main() {
             0.0
         };
         let method = match r.setting.auto {
-            Some(t) => format!("auto {:.0}% → {}", t * 100.0, method_name(r.setting.method)),
-            None => method_name(r.setting.method).to_string(),
+            Some(t) => format!("auto {:.0}% → {}", t * 100.0, r.setting.technique.method()),
+            None => r.setting.technique.method().to_string(),
         };
         let _ = writeln!(
             csv,
             "{},{},{},{},{},{:.4},{},{},{:.3},{:.1},{},{:e},{},{:.5},{:.5},{:.5},{}",
             r.scene,
             method,
-            solver_name(r.setting.solver),
+            r.setting.technique.solver(),
             r.setting.rays,
             r.setting.light_samples,
             m.seconds,
@@ -958,7 +917,7 @@ fn main() {
                 "| {} | {} | {} | {} | — | — | — | — | — | refused: {} | | |",
                 r.scene,
                 method,
-                solver_name(r.setting.solver),
+                r.setting.technique.solver(),
                 r.setting.rays,
                 e.chars().take(60).collect::<String>()
             );
@@ -968,7 +927,7 @@ fn main() {
                 "| {} | {} | {} | {} | {:.2} | {:.1} | {:.1} | {:.0} | {}{} | {:.2}% | {:.1}% | {:.0}% |",
                 r.scene,
                 method,
-                solver_name(r.setting.solver),
+                r.setting.technique.solver(),
                 r.setting.rays,
                 m.seconds,
                 mrays,

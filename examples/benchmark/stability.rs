@@ -6,7 +6,7 @@ use std::path::Path;
 use std::time::Instant;
 
 use glam::Vec3;
-use lightbake::config::{Method, Solver};
+use lightbake::config::{FormFactors, RowSolver, Technique};
 use lightbake::transport::kernel::point_to_point;
 use lightbake::{BakeConfig, Baked, NoProgress, metrics};
 
@@ -71,7 +71,7 @@ fn point_singularity(dir: &Path) -> Case {
     let path = furnace_file(dir, 0.9);
     let mut c = BakeConfig::draft();
     c.atlas.texels_per_unit = 16.0;
-    c.transport.method = Method::Point;
+    c.technique = Technique::stored(FormFactors::Point, RowSolver::Jacobi);
     c.solve.tolerance = 1e-5;
     let effect = match bake(&path, &c) {
         Ok((b, seconds)) => {
@@ -119,26 +119,26 @@ fn high_albedo(dir: &Path) -> Vec<Case> {
     let path = furnace_file(dir, 0.99);
     let mut cells = Vec::new();
     for solver in [
-        Solver::Jacobi,
-        Solver::GaussSeidel,
-        Solver::Southwell,
-        Solver::Gather,
+        Technique::DEFAULT,
+        Technique::stored(FormFactors::MonteCarlo, RowSolver::GaussSeidel),
+        Technique::stored(FormFactors::MonteCarlo, RowSolver::Southwell),
+        Technique::Gather,
     ] {
         let mut c = BakeConfig::draft();
         c.atlas.texels_per_unit = 8.0;
         c.transport.gather_rays = 64;
         c.transport.light_samples = 16;
-        c.solve.solver = solver;
+        c.technique = solver;
         c.solve.tolerance = 1e-4;
         cells.push(match bake(&path, &c) {
             Ok((b, s)) => format!(
                 "{}: {} sweeps{}, worst texel {:.2}%, {s:.1}s",
-                lightbake::plan::solver_name(solver),
+                solver.solver(),
                 b.solution.history.len(),
                 if b.solution.converged { "" } else { " (cap)" },
                 metrics::max_relative_deviation(&b.lightmap, 100.0) * 100.0
             ),
-            Err(e) => format!("{solver:?}: {e}"),
+            Err(e) => format!("{}: {e}", solver.solver()),
         });
     }
     out.push(Case {

@@ -27,7 +27,7 @@ fn main() -> lightbake::Result<()> {
     config.transport.light_samples = k / 8;
     config.solve.tolerance = 1e-5;
     if args.get(4).map(String::as_str) == Some("hierarchical") {
-        config.transport.method = lightbake::config::Method::Hierarchical;
+        config.technique = lightbake::config::Technique::Hierarchical;
     }
     config.transport.validity = std::env::var_os("NO_VALIDITY").is_none();
     let baked = compute(&path, &config, &NoProgress)?;

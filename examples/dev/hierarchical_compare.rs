@@ -8,14 +8,14 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use glam::Vec3;
-use lightbake::config::Method;
+use lightbake::config::Technique;
 use lightbake::testing::cpu_seconds;
 use lightbake::{BakeConfig, NoProgress, compute, metrics};
 
-fn config(tpu: f32, method: Method, k: u32) -> BakeConfig {
+fn config(tpu: f32, method: Technique, k: u32) -> BakeConfig {
     let mut c = BakeConfig::medium();
     c.atlas.texels_per_unit = tpu;
-    c.transport.method = method;
+    c.technique = method;
     c.transport.gather_rays = k;
     c.transport.light_samples = (k / 4).max(4);
     c
@@ -44,7 +44,7 @@ fn main() -> lightbake::Result<()> {
             .collect()
     } else {
         let t = Instant::now();
-        let mc = compute(&path, &config(tpu, Method::MonteCarlo, 1024), &NoProgress)?;
+        let mc = compute(&path, &config(tpu, Technique::DEFAULT, 1024), &NoProgress)?;
         eprintln!("Monte Carlo K=1024: {:.1}s", t.elapsed().as_secs_f64());
         let v: Vec<f32> = mc.lightmap.iter().flat_map(|v| v.to_array()).collect();
         std::fs::write(
@@ -59,9 +59,9 @@ fn main() -> lightbake::Result<()> {
         let t = Instant::now();
         let cpu = cpu_seconds();
         let method = if std::env::var("LB_METHOD").is_ok_and(|m| m == "mc") {
-            Method::MonteCarlo
+            Technique::DEFAULT
         } else {
-            Method::Hierarchical
+            Technique::Hierarchical
         };
         let h = compute(&path, &config(tpu, method, k), &NoProgress)?;
         let (wall, cpu) = (t.elapsed().as_secs_f64(), cpu_seconds() - cpu);

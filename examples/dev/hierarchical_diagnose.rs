@@ -9,7 +9,7 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use glam::Vec2;
-use lightbake::config::Method;
+use lightbake::config::Technique;
 use lightbake::trace::Tracer;
 use lightbake::transport::hierarchical::links::{self, Refiner};
 use lightbake::transport::hierarchical::tree::Tree;
@@ -36,7 +36,7 @@ fn main() -> lightbake::Result<()> {
     config.atlas.texels_per_unit = tpu;
     config.transport.gather_rays = k;
     config.transport.light_samples = 16;
-    config.transport.method = Method::Hierarchical;
+    config.technique = Technique::Hierarchical;
     config.solve.tolerance = 1e-5;
 
     // 1. The solved lightmap against the furnace answer (ρ and Le from the first texel).

@@ -7,9 +7,10 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use glam::Vec3;
-use lightbake::config::Method;
+use lightbake::config::Technique;
+use lightbake::solve::hierarchical;
 use lightbake::trace::Tracer;
-use lightbake::transport::hierarchical;
+use lightbake::transport::Surfaces;
 use lightbake::{BakeConfig, NoProgress, atlas, compute, metrics, scene, texels};
 
 fn main() -> lightbake::Result<()> {
@@ -33,23 +34,26 @@ fn main() -> lightbake::Result<()> {
     for tpu in densities {
         let mut config = BakeConfig::medium();
         config.atlas.texels_per_unit = tpu;
-        config.transport.method = Method::Hierarchical;
+        config.technique = Technique::Hierarchical;
         let (sc, source) = scene::load(&path)?;
         let at = atlas::build(&sc, &source, &config.atlas)?;
         let tx = texels::build(&sc, &at)?;
         let tracer = Tracer::new(&sc);
         let t = Instant::now();
+        let surfaces = Surfaces {
+            scene: &sc,
+            texels: &tx,
+            tracer: &tracer,
+        };
         let (transport, solution, stats) = hierarchical::solve_with_stats(
-            &sc,
-            &tx,
-            &tracer,
+            surfaces,
             &config.transport,
             &config.solve,
             &NoProgress,
         )?;
         let seconds = t.elapsed().as_secs_f64();
         // The Monte Carlo method at the same texels.
-        config.transport.method = Method::MonteCarlo;
+        config.technique = Technique::DEFAULT;
         let mc = compute(&path, &config, &NoProgress)?;
         let (h, m) = (&solution.irradiance, &mc.solution.irradiance);
         // Over the channel sums, as grey values (as tests/hierarchical.rs).

@@ -11,8 +11,7 @@ use anyhow::{Context, Result};
 use clap::{Parser, Subcommand, ValueEnum};
 use glam::Vec3;
 use lightbake::BakeConfig;
-use lightbake::config::{Method, Solver, UvMode};
-use lightbake::plan::{AutoParams, Keep};
+use lightbake::config::{AutoParams, Keep, Technique, UvMode};
 use progress::Bars;
 
 #[derive(Parser)]
@@ -57,6 +56,7 @@ enum UvArg {
     Existing,
 }
 
+/// The names are [`Technique::METHODS`].
 #[derive(Clone, Copy, ValueEnum)]
 enum MethodArg {
     /// Monte Carlo hemisphere gathering with explicit light sampling: the general default.
@@ -69,6 +69,7 @@ enum MethodArg {
     Hierarchical,
 }
 
+/// The names are [`Technique::SOLVERS`].
 #[derive(Clone, Copy, ValueEnum)]
 enum SolverArg {
     /// Parallel sweeps from the previous iterate.
@@ -79,6 +80,38 @@ enum SolverArg {
     Southwell,
     /// Matrix-free: re-cast gathering rays every bounce, store no rows.
     Gather,
+}
+
+/// The atlas options, shared by `bake` and `reference` so their texels line up.
+#[derive(clap::Args)]
+struct AtlasArgs {
+    /// Lightmap texels per world unit (metre) [default: from --quality: 8 / 16 / 32, adjusted
+    /// to keep the texel count within the preset's budget for the scene's surface area].
+    #[arg(long)]
+    texels_per_unit: Option<f32>,
+    /// Largest page side in texels; more pages are made when charts do not fit.
+    #[arg(long, default_value_t = 1024)]
+    max_page_size: u32,
+    /// Empty texels between charts, filled by dilation.
+    #[arg(long, default_value_t = 2)]
+    padding: u32,
+    /// Where lightmap UVs come from.
+    #[arg(long, value_enum, default_value = "auto")]
+    uv: UvArg,
+}
+
+impl AtlasArgs {
+    /// The preset of `quality` with these atlas options.
+    fn config(&self, quality: Quality) -> BakeConfig {
+        let mut c = quality.preset();
+        if let Some(t) = self.texels_per_unit {
+            c.atlas.texels_per_unit = t;
+        }
+        c.atlas.max_page_size = self.max_page_size;
+        c.atlas.padding = self.padding;
+        c.atlas.uv = self.uv.mode();
+        c
+    }
 }
 
 #[derive(clap::Args)]
@@ -102,19 +135,8 @@ struct BakeArgs {
     /// Use the preset's settings as they are: no pilot, no automatic choice.
     #[arg(long, conflicts_with_all = ["target_error", "explain"])]
     no_auto: bool,
-    /// Lightmap texels per world unit (metre) [default: from --quality: 8 / 16 / 32, adjusted
-    /// to keep the texel count within the preset's budget for the scene's surface area].
-    #[arg(long)]
-    texels_per_unit: Option<f32>,
-    /// Largest page side in texels; more pages are made when charts do not fit.
-    #[arg(long, default_value_t = 1024)]
-    max_page_size: u32,
-    /// Empty texels between charts, filled by dilation.
-    #[arg(long, default_value_t = 2)]
-    padding: u32,
-    /// Where lightmap UVs come from.
-    #[arg(long, value_enum, default_value = "auto")]
-    uv: UvArg,
+    #[command(flatten)]
+    atlas: AtlasArgs,
     /// Gathering rays per texel (form factors) [default: chosen by a pilot bake for the target
     /// error; with --no-auto from --quality: 64 / 256 / 1024].
     #[arg(long)]
@@ -126,7 +148,9 @@ struct BakeArgs {
     /// Uniform sky radiance R,G,B (W/sr/m²) for rays leaving the scene.
     #[arg(long, value_parser = parse_rgb, default_value = "0,0,0")]
     sky: Vec3,
-    /// How form factors between texels are computed [default: chosen; montecarlo].
+    /// How form factors between texels are computed [default: chosen; montecarlo]. The
+    /// hierarchical method takes no other solver than jacobi, the gather solver no other
+    /// method than montecarlo.
     #[arg(long, value_enum)]
     method: Option<MethodArg>,
     /// Solver for the radiosity system [default: chosen; jacobi, or gather when the stored
@@ -165,12 +189,32 @@ struct BakeArgs {
     /// Seed of the random sample streams (output depends on it, never on --threads).
     #[arg(long, default_value_t = 0)]
     seed: u64,
+    #[command(flatten)]
+    run: RunArgs,
+}
+
+/// Threads and verbosity, shared by `bake` and `reference`.
+#[derive(clap::Args)]
+struct RunArgs {
     /// Worker threads [default: all cores].
     #[arg(long)]
     threads: Option<usize>,
     /// No progress bars and no summary; warnings and errors still go to stderr.
     #[arg(short, long)]
     quiet: bool,
+}
+
+impl RunArgs {
+    /// Starts the worker threads (before any parallel work).
+    fn start_threads(&self) -> Result<()> {
+        if let Some(n) = self.threads {
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(n.max(1))
+                .build_global()
+                .with_context(|| format!("cannot start {n} threads"))?;
+        }
+        Ok(())
+    }
 }
 
 fn parse_rgb(s: &str) -> Result<Vec3, String> {
@@ -187,23 +231,40 @@ fn parse_rgb(s: &str) -> Result<Vec3, String> {
     }
 }
 
-impl BakeArgs {
-    fn config(&self) -> BakeConfig {
-        let mut c = match self.quality {
+impl Quality {
+    fn preset(self) -> BakeConfig {
+        match self {
             Quality::Draft => BakeConfig::draft(),
             Quality::Medium => BakeConfig::medium(),
             Quality::High => BakeConfig::high(),
-        };
-        if let Some(t) = self.texels_per_unit {
-            c.atlas.texels_per_unit = t;
         }
-        c.atlas.max_page_size = self.max_page_size;
-        c.atlas.padding = self.padding;
-        c.atlas.uv = match self.uv {
+    }
+
+    /// The error the automatic choice aims at.
+    fn target_error(self) -> f32 {
+        AutoParams::for_preset(&value_name(self)).unwrap_or(0.04)
+    }
+}
+
+impl UvArg {
+    fn mode(self) -> UvMode {
+        match self {
             UvArg::Auto => UvMode::Auto,
             UvArg::Unwrap => UvMode::Unwrap,
             UvArg::Existing => UvMode::Existing,
-        };
+        }
+    }
+}
+
+/// The name clap parses and prints for a value.
+fn value_name(v: impl ValueEnum) -> String {
+    v.to_possible_value()
+        .map_or_else(String::new, |p| p.get_name().to_string())
+}
+
+impl BakeArgs {
+    fn config(&self) -> Result<BakeConfig> {
+        let mut c = self.atlas.config(self.quality);
         if let Some(r) = self.rays {
             c.transport.gather_rays = r;
         }
@@ -213,21 +274,15 @@ impl BakeArgs {
         c.transport.sky = self.sky;
         c.transport.indirect_only = self.indirect_only;
         c.transport.seed = self.seed;
-        if let Some(m) = self.method {
-            c.transport.method = match m {
-                MethodArg::Montecarlo => Method::MonteCarlo,
-                MethodArg::Point => Method::Point,
-                MethodArg::Polygon => Method::Polygon,
-                MethodArg::Hierarchical => Method::Hierarchical,
-            };
-        }
-        if let Some(s) = self.solver {
-            c.solve.solver = match s {
-                SolverArg::Jacobi => Solver::Jacobi,
-                SolverArg::GaussSeidel => Solver::GaussSeidel,
-                SolverArg::Southwell => Solver::Southwell,
-                SolverArg::Gather => Solver::Gather,
-            };
+        if self.method.is_some() || self.solver.is_some() {
+            // The flag not given keeps the preset's part (the automatic choice may change it).
+            let method = self
+                .method
+                .map_or_else(|| c.technique.method().to_string(), value_name);
+            let solver = self
+                .solver
+                .map_or_else(|| c.technique.solver().to_string(), value_name);
+            c.technique = Technique::from_names(&method, &solver)?;
         }
         if let Some(t) = self.tolerance {
             c.solve.tolerance = t;
@@ -239,18 +294,10 @@ impl BakeArgs {
         c.transport.validity = !self.no_validity;
         c.transport.denoise = !self.no_denoise;
         if !self.no_auto {
-            let preset = match self.quality {
-                Quality::Draft => "draft",
-                Quality::Medium => "medium",
-                Quality::High => "high",
-            };
             c.auto = Some(AutoParams {
-                target_error: self
-                    .target_error
-                    .or(AutoParams::for_preset(preset))
-                    .unwrap_or(0.04),
+                target_error: self.target_error.unwrap_or(self.quality.target_error()),
                 keep: Keep {
-                    texels_per_unit: self.texels_per_unit.is_some(),
+                    texels_per_unit: self.atlas.texels_per_unit.is_some(),
                     method: self.method.is_some(),
                     solver: self.solver.is_some(),
                     rays: self.rays.is_some(),
@@ -260,13 +307,14 @@ impl BakeArgs {
             });
         }
         c.output.seams = !self.no_seams;
-        c
+        Ok(c)
     }
 }
 
 fn bake(args: &BakeArgs) -> Result<()> {
-    let config = args.config();
-    let bars = Bars::new(args.quiet);
+    args.run.start_threads()?;
+    let config = args.config()?;
+    let bars = Bars::new(args.run.quiet);
     let report = lightbake::bake(&args.scene, &args.output, &config, &bars)
         .with_context(|| format!("baking {} failed", args.scene.display()))?;
     if args.explain
@@ -280,7 +328,7 @@ fn bake(args: &BakeArgs) -> Result<()> {
             println!("  - {reason}");
         }
     }
-    if !args.quiet {
+    if !args.run.quiet {
         println!("{}", report.summary());
         if let Some(gltf) = report.files.first() {
             println!("wrote {}", gltf.display());
@@ -294,17 +342,7 @@ fn main() -> ExitCode {
     let result = match &cli.command {
         Command::Render(args) => render::run(args),
         Command::Reference(args) => reference::run(args),
-        Command::Bake(args) => {
-            if let Some(n) = args.threads
-                && let Err(e) = rayon::ThreadPoolBuilder::new()
-                    .num_threads(n.max(1))
-                    .build_global()
-            {
-                eprintln!("error: cannot start {n} threads: {e}");
-                return ExitCode::FAILURE;
-            }
-            bake(args)
-        }
+        Command::Bake(args) => bake(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -6,7 +6,7 @@ use std::time::Duration;
 
 use anyhow::{Context, Result, bail};
 use glam::Vec3;
-use lightbake::config::UvMode;
+use lightbake::config::{AutoParams, Keep};
 use lightbake::lightmap::{self, LightmapPages};
 use lightbake::output::{self, Staging};
 use lightbake::reference::{self, ReferenceParams};
@@ -15,7 +15,7 @@ use lightbake::{BakeConfig, Progress, texels};
 
 use super::progress::Bars;
 use super::render::{ViewArgs, check_image_path};
-use super::{Quality, UvArg, parse_rgb};
+use super::{AtlasArgs, Quality, RunArgs, parse_rgb};
 
 /// Writes `<stem>_reference<k>.exr` (mean `H/π`, dilated like bake pages) and
 /// `<stem>_reference<k>_stderr.exr` (its per-texel standard error) for every page; with
@@ -41,21 +41,12 @@ pub struct Args {
     /// Exposure of a --view PNG in stops (ignored for EXR).
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     exposure: f32,
-    /// Preset whose texel density the reference uses (match the bake's).
+    /// Preset whose texel density the reference uses (match the bake's): adjusted for the
+    /// scene's surface area exactly as `lightbake bake` adjusts it (without --no-auto).
     #[arg(long, value_enum, default_value = "medium")]
     quality: Quality,
-    /// Lightmap texels per world unit [default: from --quality: 8 / 16 / 32].
-    #[arg(long)]
-    texels_per_unit: Option<f32>,
-    /// Largest page side in texels.
-    #[arg(long, default_value_t = 1024)]
-    max_page_size: u32,
-    /// Empty texels between charts.
-    #[arg(long, default_value_t = 2)]
-    padding: u32,
-    /// Where lightmap UVs come from.
-    #[arg(long, value_enum, default_value = "auto")]
-    uv: UvArg,
+    #[command(flatten)]
+    atlas: AtlasArgs,
     /// Paths per texel (per pixel with --view) at most; standard error shrinks like 1/√N.
     #[arg(long, default_value_t = 1024)]
     spp: u32,
@@ -86,19 +77,15 @@ pub struct Args {
     /// Seed of the random paths (output depends on it, never on --threads).
     #[arg(long, default_value_t = 0)]
     seed: u64,
-    /// Worker threads [default: all cores].
-    #[arg(long)]
-    threads: Option<usize>,
-    /// No progress bars and no summary; warnings and errors still go to stderr.
-    #[arg(short, long)]
-    quiet: bool,
+    #[command(flatten)]
+    run: RunArgs,
 }
 
 const AFTER_HELP: &str = "\
 Writes <stem>_reference<k>.exr (H/π per texel, dilated like bake pages) and
 <stem>_reference<k>_stderr.exr (its standard error) per page. The texels are a bake's when the
 scene and the atlas options (--quality, --texels-per-unit, --max-page-size, --padding, --uv,
---no-validity) are the same; give --sky and --indirect-only as the bake did. Tracing stops at
+--no-validity) are the same (the density is adjusted to the scene's size as bake adjusts it); give --sky and --indirect-only as the bake did. Tracing stops at
 --spp paths per texel, at --target-error (relative RMS standard error √(Σσ²/Σμ²)), or after
 --time seconds, whichever comes first.
 
@@ -112,26 +99,20 @@ error. Rays that leave the scene see --sky (give render the same --background).
 
 impl Args {
     fn config(&self) -> BakeConfig {
-        let mut c = match self.quality {
-            Quality::Draft => BakeConfig::draft(),
-            Quality::Medium => BakeConfig::medium(),
-            Quality::High => BakeConfig::high(),
-        };
-        if let Some(t) = self.texels_per_unit {
-            c.atlas.texels_per_unit = t;
-        }
-        c.atlas.max_page_size = self.max_page_size;
-        c.atlas.padding = self.padding;
-        c.atlas.uv = match self.uv {
-            UvArg::Auto => UvMode::Auto,
-            UvArg::Unwrap => UvMode::Unwrap,
-            UvArg::Existing => UvMode::Existing,
-        };
+        let mut c = self.atlas.config(self.quality);
         c.transport.sky = self.sky;
         c.transport.indirect_only = self.indirect_only;
         c.transport.validity = !self.no_validity;
         c.transport.seed = self.seed;
         c.output.float = self.float;
+        // The density a bake's automatic choice gives (nothing else of it applies here).
+        c.auto = Some(AutoParams {
+            target_error: self.quality.target_error(),
+            keep: Keep {
+                texels_per_unit: self.atlas.texels_per_unit.is_some(),
+                ..Keep::default()
+            },
+        });
         c
     }
 
@@ -153,12 +134,7 @@ impl Args {
 }
 
 pub fn run(args: &Args) -> Result<()> {
-    if let Some(n) = args.threads {
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(n.max(1))
-            .build_global()
-            .with_context(|| format!("cannot start {n} threads"))?;
-    }
+    args.run.start_threads()?;
     let config = args.config();
     let params = args.params(&config)?;
     if args.view {
@@ -167,7 +143,7 @@ pub fn run(args: &Args) -> Result<()> {
     if args.camera.any() {
         bail!("--camera, --eye, --target, --fov and --size need --view");
     }
-    let bars = Bars::new(args.quiet);
+    let bars = Bars::new(args.run.quiet);
     let computed = reference::compute(&args.scene, &config, &params, &bars)
         .with_context(|| format!("tracing a reference for {} failed", args.scene.display()))?;
     let (texels, r) = (&computed.texels, &computed.reference);
@@ -197,7 +173,7 @@ pub fn run(args: &Args) -> Result<()> {
         bail!("aborted");
     }
     let files = staging.commit()?;
-    if !args.quiet {
+    if !args.run.quiet {
         println!("{}", r.summary());
         println!("wrote {} file(s) to {}", files.len(), args.output.display());
     }
@@ -207,7 +183,7 @@ pub fn run(args: &Args) -> Result<()> {
 /// `--view`: a path-traced image and its standard error.
 fn view(args: &Args, config: &BakeConfig, params: &ReferenceParams) -> Result<()> {
     check_image_path(&args.output)?;
-    let bars = Bars::new(args.quiet);
+    let bars = Bars::new(args.run.quiet);
     let p = reference::prepare(&args.scene, config, &bars)
         .with_context(|| format!("loading {} failed", args.scene.display()))?;
     let cameras = gltf_cameras(&p.source.json);
@@ -256,7 +232,7 @@ fn view(args: &Args, config: &BakeConfig, params: &ReferenceParams) -> Result<()
             .save(path, args.exposure)
             .with_context(|| format!("writing {} failed", path.display()))?;
     }
-    if !args.quiet {
+    if !args.run.quiet {
         println!("{}", v.summary());
         println!(
             "wrote {} and {}",

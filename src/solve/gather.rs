@@ -39,51 +39,46 @@ use std::time::Instant;
 use glam::Vec3;
 use rayon::prelude::*;
 
-use super::{Iteration, Solution};
+use super::{Solution, Stopping};
 use crate::config::{SolveParams, TransportParams};
 use crate::lights::Emitters;
 use crate::sampling::{Rng, cosine_hemisphere, frame, hammersley};
-use crate::scene::Scene;
-use crate::texels::{NO_TEXEL, Texels};
-use crate::trace::Tracer;
-use crate::transport::Transport;
-use crate::transport::montecarlo::{ChunkRows, Context};
+use crate::texels::NO_TEXEL;
+use crate::transport::montecarlo::{CHUNK, Context};
+use crate::transport::{Surfaces, Transport};
 use crate::{Error, Progress, Result};
 
-/// Texels per parallel work item (fixed, so sums do not depend on the thread count).
-const CHUNK: usize = 128;
-
+/// Solves without stored rows (see the module doc); the returned [`Transport`] holds
+/// `direct`, `escape` and `rays`, and empty rows.
 pub fn solve(
-    scene: &Scene,
-    texels: &Texels,
-    tracer: &Tracer,
+    surfaces: Surfaces,
     transport_params: &TransportParams,
     params: &SolveParams,
     progress: &dyn Progress,
 ) -> Result<(Transport, Solution)> {
+    let texels = surfaces.texels;
     let n = texels.len();
     let start = Instant::now();
-    let emitters = Emitters::new(scene, texels);
+    let emitters = Emitters::new(surfaces.scene, texels);
     let ctx = Context {
-        scene,
-        texels,
-        tracer,
+        surfaces,
         params: transport_params,
         emitters: &emitters,
+        texel_rays: None,
     };
-    let mut transport = direct_pass(&ctx, progress)?;
+    // Direct light, sky fraction and rays with the Monte Carlo method's own code and seeds.
+    let mut transport = ctx.rows(progress, true)?;
 
     let mut h = transport.direct.clone();
     let mut dh = transport.direct.clone();
     let mut reflected = vec![Vec3::ZERO; n];
     let mut solution = Solution::default();
-    let mut previous_residual = f32::INFINITY;
     let aborted = AtomicBool::new(false);
-    progress.begin("solve", params.max_iterations as u64);
-    for bounce in 1..=params.max_iterations {
-        if progress.aborted() {
-            return Err(Error::Aborted);
-        }
+    let history = &mut solution.history;
+    let mut stopping = Stopping::begin(("gather", "bounces"), params, history, start, progress);
+    let mut bounce = 0;
+    while stopping.next()? {
+        bounce += 1;
         reflected
             .par_iter_mut()
             .zip(&dh)
@@ -122,91 +117,23 @@ pub fn solve(
             .collect::<Vec<_>>()
             .iter()
             .fold((0.0, 0.0), |(c, t), (dc, dt)| (c + dc, t + dt));
-
-        // The stopping rule of `super::solve`, on the bounce as the update.
-        let residual = if total > 0.0 {
-            (change / total) as f32
-        } else {
-            0.0
-        };
-        let ratio = if previous_residual.is_finite() && previous_residual > 0.0 {
-            (residual / previous_residual).min(0.999)
-        } else {
-            0.5
-        };
-        previous_residual = residual;
-        let error_estimate = residual * ratio / (1.0 - ratio);
-        solution.history.push(Iteration {
-            residual,
-            error_estimate,
-            seconds: start.elapsed().as_secs_f64(),
-        });
-        progress.advance(1);
-        if !residual.is_finite() {
-            return Err(Error::Option(format!(
-                "the gather solver diverged (residual {residual}) after {} bounces",
-                solution.history.len()
-            )));
-        }
-        if error_estimate < params.tolerance && solution.history.len() >= 2 || residual == 0.0 {
+        // The stopping rule of the stored-row solvers, on the bounce as the update.
+        if stopping.sweep(change, total)? {
             solution.converged = true;
             break;
         }
     }
-    progress.end();
+    stopping.end();
     debug_assert!(h.iter().all(|v| v.is_finite()));
     solution.irradiance = h;
     Ok((transport, solution))
-}
-
-/// Direct light, sky fraction and rays of every texel, with the Monte Carlo method's own code
-/// and seeds; its rows are dropped texel by texel (memory O(K) per chunk).
-fn direct_pass(ctx: &Context, progress: &dyn Progress) -> Result<Transport> {
-    let n = ctx.texels.len();
-    let aborted = AtomicBool::new(false);
-    progress.begin("transport", n as u64);
-    let chunks: Vec<ChunkRows> = (0..n.div_ceil(CHUNK))
-        .into_par_iter()
-        .map(|c| {
-            let mut out = ChunkRows::default();
-            if aborted.load(Ordering::Relaxed) || progress.aborted() {
-                aborted.store(true, Ordering::Relaxed);
-                return out;
-            }
-            let range = c * CHUNK..((c + 1) * CHUNK).min(n);
-            let mut hits: Vec<u32> = Vec::with_capacity(ctx.params.gather_rays as usize);
-            for i in range.clone() {
-                ctx.texel_row(i, &mut hits, &mut out);
-                out.col.clear();
-                out.f.clear();
-            }
-            progress.advance(range.len() as u64);
-            out
-        })
-        .collect();
-    progress.end();
-    if aborted.load(Ordering::Relaxed) {
-        return Err(Error::Aborted);
-    }
-    let mut t = Transport {
-        row_start: vec![0; n + 1],
-        escape: Vec::with_capacity(n),
-        direct: Vec::with_capacity(n),
-        ..Transport::default()
-    };
-    for c in chunks {
-        t.escape.extend(c.escape);
-        t.direct.extend(c.direct);
-        t.rays += c.rays;
-    }
-    Ok(t)
 }
 
 /// One bounce at texel `i`: the mean reflected radiosity seen by K cosine rays, from the same
 /// footprint points and ray pattern as the Monte Carlo rows, rotated afresh for `bounce`.
 #[inline]
 fn gather(ctx: &Context, i: usize, bounce: u32, reflected: &[Vec3]) -> Vec3 {
-    let texels = ctx.texels;
+    let Surfaces { texels, tracer, .. } = ctx.surfaces;
     let n = texels.normal[i];
     let (tx, ty) = frame(n);
     let k = ctx.params.gather_rays;
@@ -218,7 +145,7 @@ fn gather(ctx: &Context, i: usize, bounce: u32, reflected: &[Vec3]) -> Vec3 {
         let local = cosine_hemisphere(hammersley(s, k, shift));
         let dir = tx * local.x + ty * local.y + n * local.z;
         let origin = ctx.footprint_point(i, rng.next_vec2());
-        let Some(hit) = ctx.tracer.closest(origin, dir, f32::INFINITY) else {
+        let Some(hit) = tracer.closest(origin, dir, f32::INFINITY) else {
             continue; // the sky is in H_direct
         };
         if !hit.front {
@@ -234,14 +161,9 @@ fn gather(ctx: &Context, i: usize, bounce: u32, reflected: &[Vec3]) -> Vec3 {
 
 #[cfg(test)]
 mod tests {
-    use crate::config::{BakeConfig, Solver};
+    use crate::config::{BakeConfig, Technique};
+    use crate::solve::tests::fixture;
     use crate::{NoProgress, compute};
-
-    fn fixture(name: &str) -> std::path::PathBuf {
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("fixtures")
-            .join(name)
-    }
 
     /// Same direct light as the stored Monte Carlo transport, no rows, deterministic.
     #[test]
@@ -250,7 +172,7 @@ mod tests {
         c.transport.gather_rays = 32;
         c.transport.light_samples = 8;
         let stored = compute(&fixture("cornell_box.gltf"), &c, &NoProgress).unwrap();
-        c.solve.solver = Solver::Gather;
+        c.technique = Technique::Gather;
         let a = compute(&fixture("cornell_box.gltf"), &c, &NoProgress).unwrap();
         let b = compute(&fixture("cornell_box.gltf"), &c, &NoProgress).unwrap();
         assert_eq!(a.transport.direct, stored.transport.direct);

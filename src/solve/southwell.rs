@@ -35,7 +35,7 @@
 //! | `tolerance`      | from the preset    | stop when the error estimate falls below it         |
 //! | `max_iterations` | 10 000             | cap on batches of n shots (n = texels)             |
 //!
-//! One [`Iteration`] is recorded per batch of `n` shots ("a sweep's worth").
+//! One [`Iteration`](super::Iteration) is recorded per batch of `n` shots ("a sweep's worth").
 //!
 //! When to use it: the first shots give a usable picture soonest (with [`ambient`] for display),
 //! and it needs fewer sweep-equivalents than Gauss–Seidel when light is concentrated (a small
@@ -51,11 +51,11 @@ use std::time::Instant;
 
 use glam::{DVec3, Vec3};
 
-use super::{Iteration, Solution};
+use super::{Solution, Stopping};
 use crate::config::SolveParams;
 use crate::texels::Texels;
 use crate::transport::Transport;
-use crate::{Error, Progress, Result};
+use crate::{Progress, Result};
 
 /// Heap entries per texel before the heap is rebuilt from the current powers.
 const HEAP_SLACK: usize = 4;
@@ -317,31 +317,17 @@ pub fn solve(
     let start = Instant::now();
     let mut state = Progressive::new(transport, texels);
     let mut solution = Solution::default();
-    progress.begin("solve", params.max_iterations as u64);
-    for _ in 0..params.max_iterations {
-        if progress.aborted() {
-            return Err(Error::Aborted);
-        }
+    let history = &mut solution.history;
+    let mut stopping = Stopping::begin(("southwell", "batches"), params, history, start, progress);
+    while stopping.next()? {
         let shots = state.shoot(n);
         let (residual, error_estimate) = state.take_tally();
-        solution.history.push(Iteration {
-            residual,
-            error_estimate,
-            seconds: start.elapsed().as_secs_f64(),
-        });
-        progress.advance(1);
-        if !error_estimate.is_finite() {
-            return Err(Error::Option(format!(
-                "the southwell solver diverged (error estimate {error_estimate}) after {} batches",
-                solution.history.len()
-            )));
-        }
-        if error_estimate < params.tolerance || shots < n {
+        if stopping.record(residual, error_estimate)? || shots < n {
             solution.converged = true;
             break;
         }
     }
-    progress.end();
+    stopping.end();
     solution.irradiance = if solution.converged {
         state.irradiance()
     } else {
@@ -354,14 +340,9 @@ pub fn solve(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::config::{BakeConfig, Solver};
+    use crate::config::{BakeConfig, FormFactors, RowSolver, Technique};
+    use crate::solve::tests::fixture;
     use crate::{NoProgress, compute};
-
-    fn fixture(name: &str) -> std::path::PathBuf {
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("fixtures")
-            .join(name)
-    }
 
     fn config() -> BakeConfig {
         let mut c = BakeConfig::draft();
@@ -369,16 +350,6 @@ mod tests {
         c.transport.light_samples = 16;
         c.solve.tolerance = 1e-5;
         c
-    }
-
-    /// Σ|a − b| / Σ|b| over all texels and channels.
-    fn relative_l1(a: &[Vec3], b: &[Vec3]) -> f32 {
-        let diff: f32 = a
-            .iter()
-            .zip(b)
-            .map(|(a, b)| (*a - *b).abs().element_sum())
-            .sum();
-        diff / b.iter().map(|b| b.abs().element_sum()).sum::<f32>()
     }
 
     #[test]
@@ -401,16 +372,22 @@ mod tests {
     #[test]
     fn agrees_with_gauss_seidel_and_is_deterministic() {
         let mut c = config();
-        c.solve.solver = Solver::GaussSeidel;
+        c.technique = Technique::stored(FormFactors::MonteCarlo, RowSolver::GaussSeidel);
         let baked = compute(&fixture("cornell_box.gltf"), &c, &NoProgress).unwrap();
-        c.solve.solver = Solver::Southwell;
-        let a =
-            super::super::solve(&baked.transport, &baked.texels, &c.solve, &NoProgress).unwrap();
-        let b =
-            super::super::solve(&baked.transport, &baked.texels, &c.solve, &NoProgress).unwrap();
+        let southwell = |t| {
+            super::super::solve(
+                t,
+                &baked.texels,
+                RowSolver::Southwell,
+                &c.solve,
+                &NoProgress,
+            )
+        };
+        let a = southwell(&baked.transport).unwrap();
+        let b = southwell(&baked.transport).unwrap();
         assert!(a.converged);
         assert_eq!(a.irradiance, b.irradiance);
-        let err = relative_l1(&a.irradiance, &baked.solution.irradiance);
+        let err = crate::metrics::relative_l1(&a.irradiance, &baked.solution.irradiance);
         assert!(err < 1e-4, "southwell vs gauss-seidel: {err}");
     }
 
@@ -424,8 +401,8 @@ mod tests {
             let n = baked.texels.len();
             for shots in [n / 4, n, 4 * n] {
                 state.shoot(shots);
-                let plain = relative_l1(&state.irradiance(), converged);
-                let shown = relative_l1(&state.display(), converged);
+                let plain = crate::metrics::relative_l1(&state.irradiance(), converged);
+                let shown = crate::metrics::relative_l1(&state.display(), converged);
                 assert!(
                     shown < plain,
                     "{name}: after {shots} more shots ambient gives {shown}, without {plain}"

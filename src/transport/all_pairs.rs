@@ -15,18 +15,15 @@
 //! kernel's approximation error (overlapping footprints of partly covered texels, the point
 //! kernel near corners).
 
-use std::sync::atomic::{AtomicBool, Ordering};
-
 use glam::{Vec2, Vec3};
-use rayon::prelude::*;
 
-use super::Transport;
+use super::rows::{self, ChunkRows};
+use super::{Surfaces, Transport};
 use crate::config::TransportParams;
 use crate::lights::punctual_irradiance;
 use crate::sampling::Rng;
 use crate::scene::Scene;
 use crate::texels::Texels;
-use crate::trace::Tracer;
 use crate::{Error, Progress, Result};
 
 /// Above this many texels the all-pairs methods refuse to run.
@@ -45,28 +42,15 @@ pub trait PairKernel: Sync {
     fn f_ij(&self, i: usize, j: usize, rng: &mut Rng, rays: &mut u64) -> f32;
 }
 
-/// Rows of one chunk of receivers, concatenated in order afterwards.
-#[derive(Default)]
-struct ChunkRows {
-    row_len: Vec<u32>,
-    col: Vec<u32>,
-    f: Vec<f32>,
-    escape: Vec<f32>,
-    direct: Vec<Vec3>,
-    rays: u64,
-}
-
 /// Builds every row with `kernel`; `method` names it in errors.
 pub fn build(
-    scene: &Scene,
-    texels: &Texels,
-    tracer: &Tracer,
+    surfaces: Surfaces,
     params: &TransportParams,
     progress: &dyn Progress,
     method: &str,
     kernel: &impl PairKernel,
 ) -> Result<Transport> {
-    let n = texels.len();
+    let n = surfaces.texels.len();
     if n > MAX_TEXELS {
         return Err(Error::Option(format!(
             "the {method} method computes all N² texel pairs and is limited to {MAX_TEXELS} texels; \
@@ -74,65 +58,28 @@ pub fn build(
              `--method montecarlo` or `--method hierarchical`"
         )));
     }
-    let aborted = AtomicBool::new(false);
-    progress.begin("transport", n as u64);
-    let chunks: Vec<ChunkRows> = (0..n.div_ceil(CHUNK))
-        .into_par_iter()
-        .map(|c| {
-            let mut out = ChunkRows::default();
-            if aborted.load(Ordering::Relaxed) || progress.aborted() {
-                aborted.store(true, Ordering::Relaxed);
-                return out;
-            }
-            let range = c * CHUNK..((c + 1) * CHUNK).min(n);
-            for i in range.clone() {
-                row(scene, texels, tracer, params, kernel, i, &mut out);
-            }
-            progress.advance(range.len() as u64);
-            out
-        })
-        .collect();
-    progress.end();
-    if aborted.load(Ordering::Relaxed) {
-        return Err(Error::Aborted);
-    }
-
-    let entries: usize = chunks.iter().map(|c| c.col.len()).sum();
-    let mut t = Transport {
-        row_start: Vec::with_capacity(n + 1),
-        col: Vec::with_capacity(entries),
-        f: Vec::with_capacity(entries),
-        escape: Vec::with_capacity(n),
-        direct: Vec::with_capacity(n),
-        rays: 0,
-        rows_carry_emission: true,
-    };
-    t.row_start.push(0);
-    for c in chunks {
-        let mut start = *t.row_start.last().unwrap();
-        for len in c.row_len {
-            start += len;
-            t.row_start.push(start);
+    let mut t = rows::build(n, CHUNK, "transport", progress, |range, out| {
+        for i in range {
+            row(surfaces, params, kernel, i, out);
         }
-        t.col.extend(c.col);
-        t.f.extend(c.f);
-        t.escape.extend(c.escape);
-        t.direct.extend(c.direct);
-        t.rays += c.rays;
-    }
+    })?;
+    t.rows_carry_emission = true;
     Ok(t)
 }
 
 /// Row `i`: non-zero `F_ij` straight into the chunk's arrays, then direct light.
 fn row(
-    scene: &Scene,
-    texels: &Texels,
-    tracer: &Tracer,
+    surfaces: Surfaces,
     params: &TransportParams,
     kernel: &impl PairKernel,
     i: usize,
     out: &mut ChunkRows,
 ) {
+    let Surfaces {
+        scene,
+        texels,
+        tracer,
+    } = surfaces;
     let mut rng = Rng::new(params.seed, i as u64, PURPOSE_PAIRS);
     let start = out.col.len();
     let mut sum = 0.0f64;
@@ -171,13 +118,7 @@ fn row(
         out.rays += (g * g) as u64 * scene.lights.len() as u64;
     }
     let direct = punctual + params.sky * (std::f32::consts::PI * escape);
-    out.row_len.push((out.col.len() - start) as u32);
-    out.escape.push(escape);
-    out.direct.push(if direct.is_finite() {
-        direct
-    } else {
-        Vec3::ZERO
-    });
+    out.end_row(start, escape, direct);
 }
 
 /// Covered fraction of texel `i`'s footprint parallelogram.

@@ -14,20 +14,36 @@
 //! through `H_direct`, where it is estimated with explicit light sampling (small bright emitters
 //! are otherwise missed) combined with the gathering rays by multiple importance sampling.
 
+//!
+//! [`build`] makes stored rows with the chosen [`FormFactors`]; the matrix-free gather solver
+//! and the hierarchical solver (in [`crate::solve`]) use the pieces here — the Monte Carlo
+//! method's per-texel gathering, the [`hierarchical`] links — without storing texel rows.
+//! Every method builds its rows with one driver (`rows.rs`): parallel chunks of receivers,
+//! concatenated in order.
+
 mod all_pairs;
 pub mod hierarchical;
 pub mod kernel;
-pub(crate) mod montecarlo;
+pub mod montecarlo;
 mod point;
 mod polygon;
+pub(crate) mod rows;
 
 use glam::Vec3;
 
-use crate::config::{Method, TransportParams};
+use crate::config::{FormFactors, TransportParams};
 use crate::scene::Scene;
 use crate::texels::Texels;
 use crate::trace::Tracer;
 use crate::{Progress, Result};
+
+/// What every transport method reads: the scene, its texels and the tracer over the scene.
+#[derive(Clone, Copy)]
+pub struct Surfaces<'a> {
+    pub scene: &'a Scene,
+    pub texels: &'a Texels,
+    pub tracer: &'a Tracer,
+}
 
 /// Form factors and direct light of every texel.
 #[derive(Clone, Debug, Default)]
@@ -84,23 +100,20 @@ impl Transport {
     }
 }
 
-/// Computes form factors with the method `params` names, and direct light, for every texel.
+/// Stored rows of form factors and direct light for every texel. `texel_rays` (indexed like
+/// the texels) gives a texel fewer gathering rays than `params.gather_rays` (Monte Carlo rows
+/// only; see [`crate::plan`]); `None` casts `gather_rays` everywhere.
 pub fn build(
-    scene: &Scene,
-    texels: &Texels,
-    tracer: &Tracer,
+    surfaces: Surfaces,
+    form_factors: FormFactors,
     params: &TransportParams,
+    texel_rays: Option<&[u32]>,
     progress: &dyn Progress,
 ) -> Result<Transport> {
-    let transport = match params.method {
-        Method::MonteCarlo => montecarlo::build(scene, texels, tracer, params, progress)?,
-        Method::Point => point::build(scene, texels, tracer, params, progress)?,
-        Method::Polygon => polygon::build(scene, texels, tracer, params, progress)?,
-        Method::Hierarchical => {
-            return Err(crate::Error::Option(
-                "the hierarchical method solves its own system: call transport::hierarchical::solve".into(),
-            ));
-        }
+    let transport = match form_factors {
+        FormFactors::MonteCarlo => montecarlo::build(surfaces, params, texel_rays, progress)?,
+        FormFactors::Point => point::build(surfaces, params, progress)?,
+        FormFactors::Polygon => polygon::build(surfaces, params, progress)?,
     };
     #[cfg(debug_assertions)]
     transport.validate();

@@ -19,131 +19,84 @@
 //! small K, and visibility is sampled (thin occluders between texels may be missed by few rays).
 
 use std::f32::consts::PI;
-use std::sync::atomic::{AtomicBool, Ordering};
 
 use glam::{Vec2, Vec3};
-use rayon::prelude::*;
 
-use super::Transport;
+use super::rows::{self, ChunkRows};
+use super::{Surfaces, Transport};
 use crate::config::TransportParams;
 use crate::lights::{Emitters, punctual_irradiance, triangle_point};
-use crate::sampling::{
-    Rng, cosine_hemisphere, frame, hammersley, power_weight, triangle_point as sample_triangle,
-};
-use crate::scene::Scene;
-use crate::texels::{NO_TEXEL, Texels};
-use crate::trace::Tracer;
-use crate::{Error, Progress, Result};
+use crate::sampling::{Rng, cosine_hemisphere, frame, hammersley, power_weight};
+use crate::texels::NO_TEXEL;
+use crate::{Progress, Result};
 
 /// Texels per parallel work item (one progress tick each).
-const CHUNK: usize = 128;
+pub(crate) const CHUNK: usize = 128;
 /// Jittered points per texel for punctual lights.
 const PUNCTUAL_GRID: u32 = 2;
 
-/// Rows of one chunk of texels, concatenated in order afterwards.
-#[derive(Default)]
-pub(crate) struct ChunkRows {
-    pub(crate) row_len: Vec<u32>,
-    pub(crate) col: Vec<u32>,
-    pub(crate) f: Vec<f32>,
-    pub(crate) escape: Vec<f32>,
-    pub(crate) direct: Vec<Vec3>,
-    pub(crate) rays: u64,
-}
-
+/// Monte Carlo rows for every texel; `texel_rays` as in [`super::build`].
 pub fn build(
-    scene: &Scene,
-    texels: &Texels,
-    tracer: &Tracer,
+    surfaces: Surfaces,
     params: &TransportParams,
+    texel_rays: Option<&[u32]>,
     progress: &dyn Progress,
 ) -> Result<Transport> {
-    let n = texels.len();
-    let emitters = Emitters::new(scene, texels);
+    let emitters = Emitters::new(surfaces.scene, surfaces.texels);
     let ctx = Context {
-        scene,
-        texels,
-        tracer,
+        surfaces,
         params,
         emitters: &emitters,
+        texel_rays,
     };
-    let aborted = AtomicBool::new(false);
-    progress.begin("transport", n as u64);
-    let chunks: Vec<ChunkRows> = (0..n.div_ceil(CHUNK))
-        .into_par_iter()
-        .map(|c| {
-            let mut out = ChunkRows::default();
-            if aborted.load(Ordering::Relaxed) || progress.aborted() {
-                aborted.store(true, Ordering::Relaxed);
-                return out;
-            }
-            let range = c * CHUNK..((c + 1) * CHUNK).min(n);
-            let mut hits: Vec<u32> = Vec::with_capacity(params.gather_rays as usize);
-            for i in range.clone() {
-                ctx.texel_row(i, &mut hits, &mut out);
-            }
-            progress.advance(range.len() as u64);
-            out
-        })
-        .collect();
-    progress.end();
-    if aborted.load(Ordering::Relaxed) {
-        return Err(Error::Aborted);
-    }
-
-    let entries: usize = chunks.iter().map(|c| c.col.len()).sum();
-    let mut t = Transport {
-        row_start: Vec::with_capacity(n + 1),
-        col: Vec::with_capacity(entries),
-        f: Vec::with_capacity(entries),
-        escape: Vec::with_capacity(n),
-        direct: Vec::with_capacity(n),
-        rays: 0,
-        rows_carry_emission: false,
-    };
-    t.row_start.push(0);
-    for c in chunks {
-        let mut start = *t.row_start.last().unwrap();
-        for len in c.row_len {
-            start += len;
-            t.row_start.push(start);
-        }
-        t.col.extend(c.col);
-        t.f.extend(c.f);
-        t.escape.extend(c.escape);
-        t.direct.extend(c.direct);
-        t.rays += c.rays;
-    }
-    Ok(t)
+    ctx.rows(progress, false)
 }
 
+/// What gathering reads: the surfaces, the options, the emitters to sample and the per-texel
+/// rays.
 pub(crate) struct Context<'a> {
-    pub(crate) scene: &'a Scene,
-    pub(crate) texels: &'a Texels,
-    pub(crate) tracer: &'a Tracer,
+    pub(crate) surfaces: Surfaces<'a>,
     pub(crate) params: &'a TransportParams,
     pub(crate) emitters: &'a Emitters,
+    pub(crate) texel_rays: Option<&'a [u32]>,
 }
 
 impl Context<'_> {
+    /// Every texel's row; with `direct_only` the rows are dropped as they are made (only direct
+    /// light, sky fraction and rays remain: memory O(K) per chunk).
+    pub(crate) fn rows(&self, progress: &dyn Progress, direct_only: bool) -> Result<Transport> {
+        let n = self.surfaces.texels.len();
+        rows::build(n, CHUNK, "transport", progress, |range, out| {
+            let mut hits: Vec<u32> = Vec::with_capacity(self.params.gather_rays as usize);
+            for i in range {
+                let start = out.col.len();
+                self.texel_row(i, &mut hits, out);
+                if direct_only {
+                    out.forget_row(start);
+                }
+            }
+        })
+    }
+
     /// A point of texel `i`'s footprint ([`Texels::footprint_point`]) for `u ∈ [0,1)²`,
     /// lifted off the surface by the ray epsilon.
     #[inline]
     pub(crate) fn footprint_point(&self, i: usize, u: Vec2) -> Vec3 {
-        self.texels.footprint_point(i, u) + self.texels.normal[i] * self.tracer.epsilon
+        let Surfaces { texels, tracer, .. } = self.surfaces;
+        texels.footprint_point(i, u) + texels.normal[i] * tracer.epsilon
     }
 
     /// Gathers row `i` into `out` (`hits` is scratch space).
     pub(crate) fn texel_row(&self, i: usize, hits: &mut Vec<u32>, out: &mut ChunkRows) {
-        let texels = self.texels;
+        let Surfaces {
+            scene,
+            texels,
+            tracer,
+        } = self.surfaces;
         let n = texels.normal[i];
         let (tx, ty) = frame(n);
         let p = self.params;
-        let k = p
-            .texel_rays
-            .as_ref()
-            .map_or(p.gather_rays, |r| r.0[i])
-            .max(1);
+        let k = self.texel_rays.map_or(p.gather_rays, |r| r[i]).max(1);
         let l = if self.emitters.is_empty() || p.light_samples == 0 {
             0
         } else if k == p.gather_rays {
@@ -164,7 +117,7 @@ impl Context<'_> {
             let local = cosine_hemisphere(hammersley(s, k, shift));
             let dir = tx * local.x + ty * local.y + n * local.z;
             let origin = self.footprint_point(i, rng.next_vec2());
-            let Some(hit) = self.tracer.closest(origin, dir, f32::INFINITY) else {
+            let Some(hit) = tracer.closest(origin, dir, f32::INFINITY) else {
                 escaped += 1;
                 continue;
             };
@@ -180,7 +133,7 @@ impl Context<'_> {
             if le.max_element() > 0.0 {
                 let p_gather = local.z / PI;
                 let pdf_area = self.emitters.pdf_area[hit.triangle as usize];
-                let (_, n_l) = triangle_point(self.scene, hit.triangle, hit.bary);
+                let (_, n_l) = triangle_point(scene, hit.triangle, hit.bary);
                 let cos_l = -n_l.dot(dir);
                 let p_light = if cos_l > 0.0 {
                     pdf_area * hit.t * hit.t / cos_l
@@ -197,40 +150,32 @@ impl Context<'_> {
         let light_shift = rng.next_vec2();
         for s in 0..l {
             let u = hammersley(s, l, light_shift);
-            let (tri, u0) = self.emitters.pick_stratified(u.x);
-            let bary = sample_triangle(Vec2::new(u0, u.y));
-            let (y, n_l) = triangle_point(self.scene, tri, bary);
             let origin = self.footprint_point(i, rng.next_vec2());
-            let to = y - origin;
-            let r2 = to.length_squared();
-            if r2 <= 0.0 {
+            let Some(x) = self
+                .emitters
+                .sample_from((scene, texels, tracer), origin, n, u)
+            else {
                 continue;
-            }
-            let dir = to / r2.sqrt();
-            let (cos_i, cos_l) = (n.dot(dir), -n_l.dot(dir));
-            if cos_i <= 0.0 || cos_l <= 0.0 || self.tracer.occluded(origin, y) {
-                continue;
-            }
-            let le = texels.emission[texels.texel_at(tri, bary) as usize];
-            let p_light = self.emitters.pdf_area[tri as usize] * r2 / cos_l;
-            let p_gather = cos_i / PI;
-            emitted += le * (cos_i * power_weight(lf * p_light, kf * p_gather));
+            };
+            let p_light = x.pdf_area * x.r2 / x.cos_l;
+            let p_gather = x.cos_i / PI;
+            emitted += x.le * (x.cos_i * power_weight(lf * p_light, kf * p_gather));
         }
 
         // Punctual lights at stratified footprint points.
         let mut punctual = Vec3::ZERO;
         let mut shadow_rays = 0u64;
-        if !self.scene.lights.is_empty() {
+        if !scene.lights.is_empty() {
             let g = PUNCTUAL_GRID;
             for s in 0..g * g {
                 let u = (Vec2::new((s % g) as f32, (s / g) as f32) + rng.next_vec2()) / g as f32;
                 let p = self.footprint_point(i, u);
-                for light in &self.scene.lights {
-                    punctual += punctual_irradiance(light, p, n, self.tracer);
+                for light in &scene.lights {
+                    punctual += punctual_irradiance(light, p, n, tracer);
                 }
             }
             punctual /= (g * g) as f32;
-            shadow_rays = (g * g) as u64 * self.scene.lights.len() as u64;
+            shadow_rays = (g * g) as u64 * scene.lights.len() as u64;
         }
 
         let escape = escaped as f32 / kf;
@@ -245,13 +190,7 @@ impl Context<'_> {
             out.col.push(run[0]);
             out.f.push(run.len() as f32 / kf);
         }
-        out.row_len.push((out.col.len() - before) as u32);
-        out.escape.push(escape);
-        out.direct.push(if direct.is_finite() {
-            direct
-        } else {
-            Vec3::ZERO
-        });
+        out.end_row(before, escape, direct);
         out.rays += k as u64 + l as u64 + shadow_rays;
     }
 }

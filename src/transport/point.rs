@@ -25,25 +25,23 @@
 //! all-pairs (N² time and up to N² row storage), binary visibility per pair (hard shadow
 //! edges at texel resolution), approximate near field.
 
-use super::Transport;
 use super::all_pairs::{self, PairKernel};
 use super::kernel::{point_to_disk_bound, point_to_point};
+use super::{Surfaces, Transport};
 use crate::config::TransportParams;
 use crate::sampling::Rng;
-use crate::scene::Scene;
 use crate::texels::Texels;
 use crate::trace::Tracer;
 use crate::{Progress, Result};
 
 pub fn build(
-    scene: &Scene,
-    texels: &Texels,
-    tracer: &Tracer,
+    surfaces: Surfaces,
     params: &TransportParams,
     progress: &dyn Progress,
 ) -> Result<Transport> {
+    let Surfaces { texels, tracer, .. } = surfaces;
     let kernel = CuredPoint { texels, tracer };
-    all_pairs::build(scene, texels, tracer, params, progress, "point", &kernel)
+    all_pairs::build(surfaces, params, progress, "point", &kernel)
 }
 
 struct CuredPoint<'a> {

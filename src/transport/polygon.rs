@@ -27,23 +27,25 @@
 
 use glam::{Vec2, Vec3};
 
-use super::Transport;
 use super::all_pairs::{self, Footprint, PairKernel};
 use super::kernel::point_to_polygon;
+use super::{Surfaces, Transport};
 use crate::config::TransportParams;
 use crate::sampling::Rng;
-use crate::scene::Scene;
 use crate::texels::Texels;
 use crate::trace::Tracer;
 use crate::{Progress, Result};
 
 pub fn build(
-    scene: &Scene,
-    texels: &Texels,
-    tracer: &Tracer,
+    surfaces: Surfaces,
     params: &TransportParams,
     progress: &dyn Progress,
 ) -> Result<Transport> {
+    let Surfaces {
+        scene,
+        texels,
+        tracer,
+    } = surfaces;
     let footprints: Vec<Footprint> = (0..texels.len())
         .map(|j| Footprint::of(scene, texels, j))
         .collect();
@@ -59,7 +61,7 @@ pub fn build(
         footprints,
         grid: visibility_grid(params.light_samples),
     };
-    all_pairs::build(scene, texels, tracer, params, progress, "polygon", &kernel)
+    all_pairs::build(surfaces, params, progress, "polygon", &kernel)
 }
 
 /// Shadow rays per side of the visibility grid for `light_samples` (S = grid²).

@@ -1,4 +1,11 @@
 //! [`bake`]: the whole pipeline, file in, files out.
+//!
+//! [`prepare`] (scene → tracer → atlas → texels, shared with the reference), then
+//! [`compute`] (the automatic choice with its pilot runs in [`pilot`], light transport and its
+//! solution through the one dispatch of [`light`], denoise, pages), then [`write`].
+
+pub mod light;
+pub mod pilot;
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -10,6 +17,7 @@ use crate::lightmap::{self, LightmapPages};
 use crate::output::{self, PageFiles, Staging};
 use crate::plan::{self, Plan};
 use crate::trace::Tracer;
+use crate::transport::Surfaces;
 use crate::{Error, Progress, Result, atlas, scene, solve, texels, transport};
 
 /// Wall time of one pipeline stage.
@@ -118,8 +126,44 @@ pub fn bake(
     write(baked, input, out_dir, config, progress)
 }
 
-/// Runs every stage up to the dilated pages, in memory.
-pub fn compute(input: &Path, config: &BakeConfig, progress: &dyn Progress) -> Result<Baked> {
+/// The stages before light transport, shared by a bake and the reference (so their texels
+/// cannot drift apart).
+pub struct Prepared {
+    pub scene: scene::Scene,
+    pub source: scene::Source,
+    pub tracer: Tracer,
+    pub atlas: atlas::Atlas,
+    pub texels: texels::Texels,
+    /// Texel sample points moved out of geometry, and texels with none outside it.
+    pub validity: texels::validity::ValidityReport,
+    /// `config` with the automatic texel density applied.
+    pub config: BakeConfig,
+    /// The automatic choice so far (the density), when `config.auto` asks for one.
+    pub plan: Option<Plan>,
+    pub stages: Vec<StageTime>,
+}
+
+impl Prepared {
+    /// What light transport reads.
+    pub fn surfaces(&self) -> Surfaces<'_> {
+        Surfaces {
+            scene: &self.scene,
+            texels: &self.texels,
+            tracer: &self.tracer,
+        }
+    }
+}
+
+fn timed(stages: &mut Vec<StageTime>, stage: &'static str, start: Instant) {
+    stages.push(StageTime {
+        stage,
+        seconds: start.elapsed().as_secs_f64(),
+    });
+}
+
+/// Loads `input` and builds the tracer, then (after the automatic density choice and a memory
+/// check) the atlas and the texels, with sample points moved out of geometry.
+pub fn prepare(input: &Path, config: &BakeConfig, progress: &dyn Progress) -> Result<Prepared> {
     config.validate()?;
     let mut config = config.clone();
     let mut plan = config.auto.map(|a| Plan {
@@ -127,12 +171,6 @@ pub fn compute(input: &Path, config: &BakeConfig, progress: &dyn Progress) -> Re
         ..Default::default()
     });
     let mut stages = Vec::new();
-    let mut timed = |stage: &'static str, start: Instant| {
-        stages.push(StageTime {
-            stage,
-            seconds: start.elapsed().as_secs_f64(),
-        })
-    };
 
     let t = Instant::now();
     let (scene, source) = scene::load(input)?;
@@ -146,9 +184,13 @@ pub fn compute(input: &Path, config: &BakeConfig, progress: &dyn Progress) -> Re
         ));
     }
     if scene.triangles.is_empty() {
-        return Err(Error::invalid(input, "the scene has no triangles to bake"));
+        return Err(Error::invalid(input, "the scene has no triangles"));
     }
-    timed("load", t);
+    timed(&mut stages, "load", t);
+
+    let t = Instant::now();
+    let tracer = Tracer::new(&scene);
+    timed(&mut stages, "bvh", t);
 
     if let (Some(plan), Some(auto)) = (&mut plan, config.auto) {
         plan::choose_density(&scene, &mut config, plan, &auto.keep);
@@ -156,17 +198,13 @@ pub fn compute(input: &Path, config: &BakeConfig, progress: &dyn Progress) -> Re
     check_memory(&scene, input, &config)?;
     let t = Instant::now();
     let atlas = atlas::build(&scene, &source, &config.atlas)?;
-    timed("atlas", t);
+    timed(&mut stages, "atlas", t);
     check_aborted(progress)?;
 
     let t = Instant::now();
     let mut texels = texels::build(&scene, &atlas)?;
-    timed("texels", t);
+    timed(&mut stages, "texels", t);
     check_aborted(progress)?;
-
-    let t = Instant::now();
-    let tracer = Tracer::new(&scene);
-    timed("bvh", t);
 
     let t = Instant::now();
     let validity = if config.transport.validity {
@@ -178,28 +216,47 @@ pub fn compute(input: &Path, config: &BakeConfig, progress: &dyn Progress) -> Re
     } else {
         Default::default()
     };
-    timed("validity", t);
+    timed(&mut stages, "validity", t);
+
+    Ok(Prepared {
+        scene,
+        source,
+        tracer,
+        atlas,
+        texels,
+        validity,
+        config,
+        plan,
+        stages,
+    })
+}
+
+/// Runs every stage up to the dilated pages, in memory.
+pub fn compute(input: &Path, config: &BakeConfig, progress: &dyn Progress) -> Result<Baked> {
+    let prepared = prepare(input, config, progress)?;
+    let surfaces = prepared.surfaces();
+    let (mut config, mut plan, mut stages) = (
+        prepared.config.clone(),
+        prepared.plan.clone(),
+        prepared.stages.clone(),
+    );
 
     let mut pilot = None;
     if let (Some(plan), Some(auto)) = (&mut plan, config.auto) {
         let t = Instant::now();
-        pilot = plan::choose_transport(
-            &scene,
-            &texels,
-            &tracer,
-            &mut config,
-            plan,
-            &auto.keep,
-            progress,
-        )?;
+        pilot = pilot::choose_transport(surfaces, &mut config, plan, &auto.keep, progress)?;
         config.validate()?;
-        timed("plan", t);
+        timed(&mut stages, "plan", t);
     }
 
     let t = Instant::now();
     // With a plan, the pilot bakes are part of the result (a ray-weighted mean).
-    let (transport, solution, gather_rays, light_samples) =
-        plan::final_bake(&scene, &texels, &tracer, &config, pilot, progress)?;
+    let pilot::FinalBake {
+        transport,
+        solution,
+        gather_rays,
+        light_samples,
+    } = pilot::final_bake(surfaces, &config, plan.as_ref(), pilot, progress)?;
     if !solution.converged {
         progress.warn(&format!(
             "the solver stopped on the iteration cap ({}) at residual {:.2e}, above the tolerance {:.1e}",
@@ -208,7 +265,15 @@ pub fn compute(input: &Path, config: &BakeConfig, progress: &dyn Progress) -> Re
             config.solve.tolerance
         ));
     }
-    timed("transport+solve", t);
+    timed(&mut stages, "transport+solve", t);
+    let Prepared {
+        scene,
+        source,
+        atlas,
+        texels,
+        validity,
+        ..
+    } = prepared;
 
     let t = Instant::now();
     // A texel stores H/π; indirect-only leaves out light that arrived without a bounce.
@@ -218,7 +283,7 @@ pub fn compute(input: &Path, config: &BakeConfig, progress: &dyn Progress) -> Re
         .zip(&transport.direct)
         .map(|(h, d)| if config.transport.indirect_only { (*h - *d).max(Vec3::ZERO) } else { *h } / std::f32::consts::PI)
         .collect();
-    if config.transport.denoise && config.transport.method == crate::config::Method::MonteCarlo {
+    if config.transport.denoise && config.technique.is_monte_carlo() {
         let noise_model = TransportParams {
             gather_rays,
             light_samples,
@@ -226,18 +291,18 @@ pub fn compute(input: &Path, config: &BakeConfig, progress: &dyn Progress) -> Re
         };
         lightmap::denoise::denoise_bake(&texels, &transport, &mut lightmap, &noise_model);
     }
-    timed("denoise", t);
+    timed(&mut stages, "denoise", t);
     let t = Instant::now();
     texels::validity::fill_invalid(&texels, &mut lightmap);
     let mut pages = LightmapPages::from_texels(&texels, &lightmap);
     lightmap::dilate(&mut pages, config.atlas.padding.max(2) * 2);
-    timed("dilate", t);
+    timed(&mut stages, "dilate", t);
     let t = Instant::now();
     let seams = config
         .output
         .seams
         .then(|| lightmap::seams::stitch_bake(&scene, &atlas, &mut pages, &Default::default()));
-    timed("seams", t);
+    timed(&mut stages, "seams", t);
 
     Ok(Baked {
         scene,
@@ -310,10 +375,7 @@ pub fn write(
     let mut files = staging.commit()?;
     // The glTF (or .glb) first, then pages in order.
     files.sort_by_key(|p| !matches!(p.extension().and_then(|e| e.to_str()), Some("gltf" | "glb")));
-    stages.push(StageTime {
-        stage: "write",
-        seconds: t.elapsed().as_secs_f64(),
-    });
+    timed(&mut stages, "write", t);
 
     Ok(BakeReport {
         triangles: scene.triangles.len(),

@@ -1,0 +1,43 @@
+//! The one place a transport meets its solver: light transport and its solution for a
+//! [`Technique`]. Stored rows are built by [`transport::build`] and iterated by
+//! [`solve::solve`]; the matrix-free gatherer and the hierarchy make their transport as they
+//! solve ([`solve::gather`], [`solve::hierarchical`]).
+
+use crate::config::{SolveParams, Technique, TransportParams};
+use crate::solve::{self, Solution};
+use crate::transport::{self, Surfaces, Transport};
+use crate::{Progress, Result};
+
+/// The transport of one bake and its solution.
+#[derive(Clone, Debug)]
+pub struct Lit {
+    pub transport: Transport,
+    pub solution: Solution,
+}
+
+/// Light transport and its solution with `technique`; `texel_rays` as in [`transport::build`].
+pub fn transport_and_solve(
+    surfaces: Surfaces,
+    technique: Technique,
+    params: &TransportParams,
+    texel_rays: Option<&[u32]>,
+    solve: &SolveParams,
+    progress: &dyn Progress,
+) -> Result<Lit> {
+    let (transport, solution) = match technique {
+        Technique::Stored {
+            form_factors,
+            solver,
+        } => {
+            let t = transport::build(surfaces, form_factors, params, texel_rays, progress)?;
+            let s = solve::solve(&t, surfaces.texels, solver, solve, progress)?;
+            (t, s)
+        }
+        Technique::Gather => solve::gather::solve(surfaces, params, solve, progress)?,
+        Technique::Hierarchical => solve::hierarchical::solve(surfaces, params, solve, progress)?,
+    };
+    Ok(Lit {
+        transport,
+        solution,
+    })
+}

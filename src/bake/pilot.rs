@@ -1,0 +1,266 @@
+//! Pilot runs of the automatic choice ([`crate::plan`]) and the final bake that reuses them.
+//!
+//! The pilot bakes the texels twice with [`PILOT_RAYS`] gathering rays and independent seeds
+//! (again at 4× when the plan asks for a second pilot); the plan turns the measured noise into
+//! rays. The final lightmap is the ray-weighted mean of the last pilot pair and, unless they
+//! suffice, one more bake at the chosen rays.
+
+use std::time::Instant;
+
+use glam::Vec3;
+
+use super::light::{Lit, transport_and_solve};
+use crate::config::{BakeConfig, FormFactors, Keep, SolveParams, Technique, TransportParams};
+use crate::plan::{self, PILOT_RAYS, Plan};
+use crate::solve::Solution;
+use crate::texels::Texels;
+use crate::transport::{Surfaces, Transport};
+use crate::{NoProgress, Progress, Result, metrics};
+
+/// Step 2 onwards of the automatic choice, once texels and the tracer exist: method, rays
+/// (measured by the pilot), light samples, solver, tolerance and per-texel rays. Returns the
+/// pilot bakes for [`final_bake`] to reuse.
+pub fn choose_transport(
+    surfaces: Surfaces,
+    config: &mut BakeConfig,
+    plan: &mut Plan,
+    keep: &Keep,
+    progress: &dyn Progress,
+) -> Result<Option<PilotRuns>> {
+    let texels = surfaces.texels;
+    let n = texels.len();
+    let e = plan.target_error;
+    let mut pilot = None;
+    plan::choose_method(config, plan, keep);
+    let emitters = texels.emission.iter().any(|l| l.max_element() > 0.0);
+    let sampled =
+        emitters || config.transport.sky.max_element() > 0.0 || !surfaces.scene.lights.is_empty();
+    let monte_carlo = config.technique.is_monte_carlo();
+    if monte_carlo && !keep.rays && n > 0 && sampled {
+        progress.begin("pilot", 2);
+        let start = Instant::now();
+        let tolerance = (e / 10.0).min(1e-3);
+        let bake = |k| PilotRuns::bake(surfaces, &config.transport, k, tolerance);
+        let mut runs = bake(PILOT_RAYS)?;
+        let first = runs.noise(texels, config.transport.indirect_only);
+        let mut rays = runs.rays();
+        progress.advance(1);
+        let mut second = None;
+        if plan::needs_second_pilot(first, e) {
+            plan.discarded_rays = runs.rays();
+            runs = bake(4 * PILOT_RAYS)?;
+            second = Some(runs.noise(texels, config.transport.indirect_only));
+            rays += runs.rays();
+        }
+        progress.advance(1);
+        progress.end();
+        plan.pilot_seconds = start.elapsed().as_secs_f64();
+        plan.pilot_rays = rays;
+        runs.enough = plan::choose_rays(config, plan, first, second);
+        pilot = Some(runs);
+    } else if monte_carlo && !keep.rays {
+        plan::keep_rays_unmeasured(config, plan);
+    }
+    plan::choose_light_samples(config, plan, keep, emitters);
+    plan::choose_solver(n, config, plan, keep);
+    plan::choose_tolerance(config, plan, keep);
+    let stored_monte_carlo = matches!(
+        config.technique,
+        Technique::Stored {
+            form_factors: FormFactors::MonteCarlo,
+            ..
+        }
+    );
+    if let Some(runs) = &pilot
+        && !runs.enough
+        && stored_monte_carlo
+        && !keep.rays
+    {
+        let irradiance: Vec<&[Vec3]> = runs
+            .runs
+            .iter()
+            .map(|r| r.solution.irradiance.as_slice())
+            .collect();
+        plan::choose_texel_rays(texels, &irradiance, config.transport.gather_rays, plan);
+    }
+    plan.finish(config);
+    Ok(pilot)
+}
+
+/// Two Monte Carlo bakes of the same texels with independent seeds: their difference measures
+/// the noise, and their mean is kept for the final bake ([`final_bake`]).
+pub struct PilotRuns {
+    /// Gathering rays (and light samples) of each run.
+    pub gather_rays: u32,
+    pub light_samples: u32,
+    pub runs: Vec<Lit>,
+    /// True when the runs alone reach the target: no further bake is needed.
+    pub enough: bool,
+}
+
+impl PilotRuns {
+    fn bake(
+        surfaces: Surfaces,
+        transport: &TransportParams,
+        k: u32,
+        tolerance: f32,
+    ) -> Result<PilotRuns> {
+        let solve_params = SolveParams {
+            tolerance,
+            max_iterations: 10_000,
+        };
+        let light_samples = (k / 4).max(4);
+        let runs = (0..2u64)
+            .map(|stream| {
+                let params = TransportParams {
+                    gather_rays: k,
+                    light_samples,
+                    seed: transport.seed ^ 0x9E37_79B9_7F4A_7C15u64.wrapping_mul(stream + 1),
+                    ..transport.clone()
+                };
+                let technique = Technique::DEFAULT;
+                transport_and_solve(
+                    surfaces,
+                    technique,
+                    &params,
+                    None,
+                    &solve_params,
+                    &NoProgress,
+                )
+            })
+            .collect::<Result<Vec<_>>>()?;
+        Ok(PilotRuns {
+            gather_rays: k,
+            light_samples,
+            runs,
+            enough: false,
+        })
+    }
+
+    fn rays(&self) -> u64 {
+        self.runs.iter().map(|r| r.transport.rays).sum()
+    }
+
+    /// Relative RMS noise of one run (of what the lightmap stores).
+    fn noise(&self, texels: &Texels, indirect_only: bool) -> f32 {
+        let values = |r: &Lit| -> Vec<Vec3> {
+            r.solution
+                .irradiance
+                .iter()
+                .zip(&r.transport.direct)
+                .map(|(h, d)| {
+                    if indirect_only {
+                        (*h - *d).max(Vec3::ZERO)
+                    } else {
+                        *h
+                    }
+                })
+                .collect()
+        };
+        metrics::relative_noise(
+            &values(&self.runs[0]),
+            &values(&self.runs[1]),
+            &texels.invalid,
+        )
+    }
+}
+
+/// The result of [`final_bake`].
+pub struct FinalBake {
+    /// The last run's rows, with the combined direct light and every run's rays.
+    pub transport: Transport,
+    /// The combined solution.
+    pub solution: Solution,
+    /// Effective gathering rays and light samples per texel (all runs together), for the
+    /// denoiser's noise model.
+    pub gather_rays: u32,
+    pub light_samples: u32,
+}
+
+/// The final bake of `config`, reusing the pilot: the result is the mean of the pilot runs and
+/// (unless they are enough) one more bake at `config`'s rays, weighted by gathering rays — each
+/// run's variance falls as 1/K, so this is the least-variance combination.
+pub fn final_bake(
+    surfaces: Surfaces,
+    config: &BakeConfig,
+    plan: Option<&Plan>,
+    pilot: Option<PilotRuns>,
+    progress: &dyn Progress,
+) -> Result<FinalBake> {
+    let (k, l) = (config.transport.gather_rays, config.transport.light_samples);
+    let texel_rays = plan
+        .and_then(|p| p.texel_rays.as_ref())
+        .map(|r| r.0.as_slice());
+    let bake = || {
+        transport_and_solve(
+            surfaces,
+            config.technique,
+            &config.transport,
+            texel_rays,
+            &config.solve,
+            progress,
+        )
+    };
+    let Some(pilot) = pilot else {
+        let Lit {
+            transport,
+            solution,
+        } = bake()?;
+        return Ok(FinalBake {
+            transport,
+            solution,
+            gather_rays: k,
+            light_samples: l,
+        });
+    };
+    let mut runs: Vec<(f32, Lit)> = pilot
+        .runs
+        .into_iter()
+        .map(|r| (pilot.gather_rays as f32, r))
+        .collect();
+    let (mut k_total, mut l_total) = (2 * pilot.gather_rays, 2 * pilot.light_samples);
+    if !pilot.enough {
+        runs.push((k as f32, bake()?));
+        k_total += k;
+        l_total += l;
+    }
+    // Per texel, each run weighs by the rays it cast there (fewer where `texel_rays` cut them).
+    let n = surfaces.texels.len();
+    let last = runs.len() - 1;
+    let weight = |run: usize, w: f32, i: usize| match texel_rays {
+        Some(r) if run == last && !pilot.enough => r[i] as f32,
+        _ => w,
+    };
+    let (mut h, mut direct) = (vec![Vec3::ZERO; n], vec![Vec3::ZERO; n]);
+    let (mut rays, mut converged) = (0, true);
+    for i in 0..n {
+        let total: f32 = runs
+            .iter()
+            .enumerate()
+            .map(|(r, run)| weight(r, run.0, i))
+            .sum();
+        for (r, (w, run)) in runs.iter().enumerate() {
+            let w = weight(r, *w, i) / total;
+            h[i] += run.solution.irradiance[i] * w;
+            direct[i] += run.transport.direct[i] * w;
+        }
+    }
+    for (_, run) in &runs {
+        rays += run.transport.rays;
+        converged &= run.solution.converged;
+    }
+    let Lit {
+        mut transport,
+        mut solution,
+    } = runs.pop().map(|(_, run)| run).unwrap();
+    transport.direct = direct;
+    transport.rays = rays;
+    solution.irradiance = h;
+    solution.converged = converged;
+    Ok(FinalBake {
+        transport,
+        solution,
+        gather_rays: k_total,
+        light_samples: l_total,
+    })
+}

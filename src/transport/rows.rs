@@ -1,0 +1,103 @@
+//! The one row builder every transport method uses: receivers in fixed-size chunks built in
+//! parallel (one progress tick and abort check per chunk), then concatenated in order into
+//! compressed sparse rows. Chunk boundaries never depend on the thread count, so neither do
+//! the rows.
+
+use std::ops::Range;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+use glam::Vec3;
+use rayon::prelude::*;
+
+use super::Transport;
+use crate::{Error, Progress, Result};
+
+/// Rows of one chunk of receivers, concatenated in order afterwards.
+#[derive(Default)]
+pub(crate) struct ChunkRows {
+    pub(crate) row_len: Vec<u32>,
+    pub(crate) col: Vec<u32>,
+    pub(crate) f: Vec<f32>,
+    pub(crate) escape: Vec<f32>,
+    pub(crate) direct: Vec<Vec3>,
+    pub(crate) rays: u64,
+}
+
+impl ChunkRows {
+    /// Ends the row begun when `col` held `start` entries: its length, escape and direct light.
+    pub(crate) fn end_row(&mut self, start: usize, escape: f32, direct: Vec3) {
+        self.row_len.push((self.col.len() - start) as u32);
+        self.escape.push(escape);
+        self.direct.push(if direct.is_finite() {
+            direct
+        } else {
+            Vec3::ZERO
+        });
+    }
+
+    /// Drops the entries of the row begun at `start` (its escape and direct light stay): for
+    /// the solvers that store no rows.
+    pub(crate) fn forget_row(&mut self, start: usize) {
+        self.col.truncate(start);
+        self.f.truncate(start);
+        if let Some(len) = self.row_len.last_mut() {
+            *len = 0;
+        }
+    }
+}
+
+/// Builds the rows of `n` receivers: `rows(range, out)` appends one row per receiver of
+/// `range`, in order, to `out`. `stage` names the progress stage.
+pub(crate) fn build(
+    n: usize,
+    chunk: usize,
+    stage: &str,
+    progress: &dyn Progress,
+    rows: impl Fn(Range<usize>, &mut ChunkRows) + Sync,
+) -> Result<Transport> {
+    let aborted = AtomicBool::new(false);
+    progress.begin(stage, n as u64);
+    let chunks: Vec<ChunkRows> = (0..n.div_ceil(chunk))
+        .into_par_iter()
+        .map(|c| {
+            let mut out = ChunkRows::default();
+            if aborted.load(Ordering::Relaxed) || progress.aborted() {
+                aborted.store(true, Ordering::Relaxed);
+                return out;
+            }
+            let range = c * chunk..((c + 1) * chunk).min(n);
+            rows(range.clone(), &mut out);
+            progress.advance(range.len() as u64);
+            out
+        })
+        .collect();
+    progress.end();
+    if aborted.load(Ordering::Relaxed) {
+        return Err(Error::Aborted);
+    }
+
+    let entries: usize = chunks.iter().map(|c| c.col.len()).sum();
+    let mut t = Transport {
+        row_start: Vec::with_capacity(n + 1),
+        col: Vec::with_capacity(entries),
+        f: Vec::with_capacity(entries),
+        escape: Vec::with_capacity(n),
+        direct: Vec::with_capacity(n),
+        rays: 0,
+        rows_carry_emission: false,
+    };
+    t.row_start.push(0);
+    for c in chunks {
+        let mut start = *t.row_start.last().unwrap();
+        for len in c.row_len {
+            start += len;
+            t.row_start.push(start);
+        }
+        t.col.extend(c.col);
+        t.f.extend(c.f);
+        t.escape.extend(c.escape);
+        t.direct.extend(c.direct);
+        t.rays += c.rays;
+    }
+    Ok(t)
+}
