@@ -26,10 +26,10 @@ use std::path::{Component, Path};
 
 use serde_json::{Map, Value, json};
 
-use super::Staging;
 use super::gltf_out_accessor::{
     Elements, FLOAT, Layout, UNSIGNED_INT, UNSIGNED_SHORT, read_accessor,
 };
+use super::{Staging, glb};
 use crate::atlas::{Atlas, InstanceUv};
 use crate::scene::{Scene, Source};
 use crate::{Error, Result};
@@ -763,7 +763,7 @@ impl<'a> Document<'a> {
         };
         if glb {
             let json = serialize(&self.json, false)?;
-            staging.write(&format!("{stem}.glb"), &glb_container(json, self.bin))
+            staging.write(&format!("{stem}.glb"), &glb::container(json, self.bin))
         } else {
             if !self.bin.is_empty() {
                 staging.write(&bin_name, &self.bin)?;
@@ -813,27 +813,6 @@ fn object_entry<'v>(value: &'v mut Value, key: &str) -> &'v mut Map<String, Valu
         *entry = json!({});
     }
     entry.as_object_mut().expect("just made an object")
-}
-
-/// A GLB v2 container: header, JSON chunk padded with spaces, BIN chunk padded with zeros.
-fn glb_container(mut json: Vec<u8>, mut bin: Vec<u8>) -> Vec<u8> {
-    json.resize(json.len().next_multiple_of(4), b' ');
-    bin.resize(bin.len().next_multiple_of(4), 0);
-    let bin_chunk = if bin.is_empty() { 0 } else { 8 + bin.len() };
-    let total = 12 + 8 + json.len() + bin_chunk;
-    let mut out = Vec::with_capacity(total);
-    out.extend_from_slice(b"glTF");
-    out.extend_from_slice(&2u32.to_le_bytes());
-    out.extend_from_slice(&(total as u32).to_le_bytes());
-    out.extend_from_slice(&(json.len() as u32).to_le_bytes());
-    out.extend_from_slice(b"JSON");
-    out.extend_from_slice(&json);
-    if !bin.is_empty() {
-        out.extend_from_slice(&(bin.len() as u32).to_le_bytes());
-        out.extend_from_slice(b"BIN\0");
-        out.extend_from_slice(&bin);
-    }
-    out
 }
 
 /// Percent-encodes a relative file path for a glTF uri (RFC 3986 unreserved characters and `/`

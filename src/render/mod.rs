@@ -261,28 +261,10 @@ impl RenderScene {
 const PIXEL_STREAM: u64 = 0x7265_6e64; // "rend"
 
 impl Image {
-    /// 8-bit sRGB PNG. Tone mapping: scale by `2^exposure`, then a soft shoulder that is the
-    /// identity below [`SHOULDER`] and rolls off exponentially towards 1 above it (continuous
-    /// with slope 1, so mid-tones stay true and highlights keep some detail instead of
-    /// clipping), then the sRGB transfer function.
+    /// 8-bit sRGB PNG, tone-mapped as [`output::png`] describes (scale by `2^exposure`, then a
+    /// soft shoulder that keeps mid-tones true and highlights some detail).
     pub fn to_png(&self, exposure: f32) -> Result<Vec<u8>> {
-        let scale = exposure.exp2();
-        let bytes: Vec<u8> = self
-            .rgb
-            .iter()
-            .flat_map(|v| (*v * scale).to_array().map(|c| encode_srgb(tone_map(c))))
-            .collect();
-        let mut png = Vec::new();
-        use image::ImageEncoder;
-        image::codecs::png::PngEncoder::new(&mut png)
-            .write_image(
-                &bytes,
-                self.width,
-                self.height,
-                image::ExtendedColorType::Rgb8,
-            )
-            .map_err(|e| Error::io("<png>", std::io::Error::other(e.to_string())))?;
-        Ok(png)
+        output::write_png_image(&self.rgb, self.width, self.height, exposure)
     }
 
     /// Writes `path` as a linear 32-bit float OpenEXR (`.exr`) or a tone-mapped PNG (any other
@@ -297,58 +279,11 @@ impl Image {
                 let png = self.to_png(exposure)?;
                 std::fs::write(path, png).map_err(|e| Error::io(path, e))
             }
-            Some("exr") => {
-                let w = self.width as usize;
-                exr::prelude::write_rgb_file(path, w, self.height as usize, |x, y| {
-                    let v = self.rgb[y * w + x];
-                    (v.x, v.y, v.z)
-                })
-                .map_err(|e| Error::io(path, std::io::Error::other(e.to_string())))
-            }
+            Some("exr") => output::write_exr_image(path, &self.rgb, self.width, self.height),
             _ => Err(Error::Option(format!(
                 "{}: the image must end in .png or .exr",
                 path.display()
             ))),
         }
-    }
-}
-
-/// Where the tone curve leaves the identity.
-pub const SHOULDER: f32 = 0.8;
-
-/// Identity up to [`SHOULDER`], then `k + (1−k)(1 − e^{−(x−k)/(1−k)})` → 1 (C¹ at `k`).
-pub fn tone_map(x: f32) -> f32 {
-    if x.is_nan() || x <= 0.0 {
-        0.0
-    } else if x <= SHOULDER {
-        x
-    } else {
-        let k = SHOULDER;
-        k + (1.0 - k) * (1.0 - (-(x - k) / (1.0 - k)).exp())
-    }
-}
-
-fn encode_srgb(linear: f32) -> u8 {
-    let x = linear.clamp(0.0, 1.0);
-    let s = if x <= 0.003_130_8 {
-        12.92 * x
-    } else {
-        1.055 * x.powf(1.0 / 2.4) - 0.055
-    };
-    (s * 255.0 + 0.5) as u8
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn tone_curve_is_identity_then_smooth_and_bounded() {
-        assert_eq!(tone_map(0.5), 0.5);
-        assert_eq!(tone_map(f32::NAN), 0.0);
-        let k = SHOULDER;
-        assert!((tone_map(k + 1e-4) - (k + 1e-4)).abs() < 1e-6);
-        assert!(tone_map(100.0) <= 1.0 && tone_map(100.0) > 0.99);
-        assert!(tone_map(2.0) > tone_map(1.5));
     }
 }

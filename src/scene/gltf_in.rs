@@ -1342,30 +1342,6 @@ mod tests {
         }
     }
 
-    /// A GLB container: header, JSON chunk (space padded), BIN chunk (zero padded).
-    fn glb(json: &Value, bin: &[u8]) -> Vec<u8> {
-        let mut json = serde_json::to_vec(json).unwrap();
-        while !json.len().is_multiple_of(4) {
-            json.push(b' ');
-        }
-        let mut bin = bin.to_vec();
-        while !bin.len().is_multiple_of(4) {
-            bin.push(0);
-        }
-        let total = 12 + 8 + json.len() + 8 + bin.len();
-        let mut out = Vec::with_capacity(total);
-        out.extend_from_slice(b"glTF");
-        out.extend_from_slice(&2u32.to_le_bytes());
-        out.extend_from_slice(&(total as u32).to_le_bytes());
-        out.extend_from_slice(&(json.len() as u32).to_le_bytes());
-        out.extend_from_slice(b"JSON");
-        out.extend_from_slice(&json);
-        out.extend_from_slice(&(bin.len() as u32).to_le_bytes());
-        out.extend_from_slice(b"BIN\0");
-        out.extend_from_slice(&bin);
-        out
-    }
-
     #[test]
     fn glb_loads_like_gltf() {
         let (bin, meshes) = triangle_mesh(None);
@@ -1381,7 +1357,12 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         // Detected by magic, not by extension.
         let path = dir.path().join("scene.gltf");
-        std::fs::write(&path, glb(&glb_doc, &bin.bytes)).unwrap();
+        let json = serde_json::to_vec(&glb_doc).unwrap();
+        std::fs::write(
+            &path,
+            crate::output::glb::container(json, bin.bytes.clone()),
+        )
+        .unwrap();
         let (scene, source) = load(&path).unwrap();
         assert!(source.is_glb);
         assert_eq!(source.json, glb_doc);
