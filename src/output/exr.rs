@@ -105,14 +105,21 @@ pub fn read_exr(path: &Path) -> Result<Page> {
 }
 
 /// Writes a rendered image (linear RGB radiance, row-major, row 0 at the top) to `path` as a
-/// 32-bit float OpenEXR file.
+/// 32-bit float OpenEXR file (the exr crate's default encoding: RLE, 64 × 64 tiles).
+///
+/// Tiles are compressed and written one after the other: compressed in parallel, they were
+/// written in whatever order they finished, so the same image gave different bytes.
 pub fn write_exr_image(path: &Path, rgb: &[Vec3], width: u32, height: u32) -> Result<()> {
     let w = width as usize;
-    exr::prelude::write_rgb_file(path, w, height as usize, |x, y| {
-        let v = rgb[y * w + x];
+    let pixels = SpecificChannels::rgb(|p: ExrVec2<usize>| {
+        let v = rgb[p.y() * w + p.x()];
         (v.x, v.y, v.z)
-    })
-    .map_err(|e| Error::io(path, std::io::Error::other(e.to_string())))
+    });
+    Image::from_channels((w, height as usize), pixels)
+        .write()
+        .non_parallel()
+        .to_file(path)
+        .map_err(|e| Error::io(path, exr_to_io(e)))
 }
 
 #[cfg(test)]
@@ -195,6 +202,30 @@ mod tests {
         let b = write_exr(&test_page(), false, Path::new("a.gltf")).unwrap();
         assert_eq!(a, b);
         assert!(a.windows(9).any(|w| w == b"lightbake"));
+    }
+
+    #[test]
+    fn rendered_images_read_back_exactly_and_give_the_same_bytes_every_time() {
+        // 300 × 200 pixels: 5 × 4 tiles, enough for parallel compression to reorder them.
+        let (width, height) = (300, 200);
+        let rgb: Vec<Vec3> = (0..width * height)
+            .map(|i| Vec3::new(i as f32, (i % 7) as f32 * 0.25, 1.0 / (1 + i) as f32))
+            .collect();
+        let dir = tempfile::tempdir().unwrap();
+        let write = |name: &str| {
+            let path = dir.path().join(name);
+            write_exr_image(&path, &rgb, width, height).unwrap();
+            path
+        };
+        let first = write("a.exr");
+        let back = read_exr(&first).unwrap();
+        assert_eq!((back.width, back.height), (width, height));
+        assert_eq!(back.rgb, rgb);
+        let bytes = std::fs::read(&first).unwrap();
+        for k in 0..16 {
+            let again = std::fs::read(write(&format!("{k}.exr"))).unwrap();
+            assert!(again == bytes, "write {k} gave other bytes");
+        }
     }
 
     #[test]

@@ -1064,6 +1064,7 @@ mod tests {
             back_of: None,
             back: None,
             has_uv1: false,
+            lightmap: None,
         }
     }
 

@@ -24,12 +24,13 @@
 //! | `seed` | 0 | random streams are seeded by (seed, pixel) |
 //!
 //! Input: a glTF written by `lightbake bake`: every baked primitive has `TEXCOORD_1` and
-//! `extras.lightmap = {"exr", "page"}`; the EXR pages hold `H/π`. Scenes without any lightmap are
+//! `extras.lightmap = {"exr", "page"}`; the EXR pages hold `H/π`. The scene loader resolves
+//! everything the renderer reads — each instance's EXR page, each material's specular
+//! parameters ([`scene::Surface`]), the cameras — so this module never looks at glTF JSON. Scenes without any lightmap are
 //! refused. Limits: no alpha, no texture transforms, punctual lights are invisible (their light
 //! is in the lightmap), and the baker treated glass and mirrors as Lambertian (ρ = baseColor),
 //! so shadows behind glass are as dark as behind any opaque object of that colour.
 
-mod camera;
 mod shade;
 
 use std::collections::HashMap;
@@ -38,12 +39,14 @@ use std::path::{Path, PathBuf};
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 
-pub use camera::{Camera, GltfCamera, gltf_cameras, select};
-pub use shade::{GLOSSY_MAX_ROUGHNESS, MIRROR_ROUGHNESS, Surface};
+/// The loader resolves the document's cameras into [`Scene::cameras`]; the renderer's callers
+/// choose among them with these.
+pub use crate::scene::{Camera, GltfCamera, select};
+pub use shade::{GLOSSY_MAX_ROUGHNESS, MIRROR_ROUGHNESS};
 
 use crate::lightmap::Page;
 use crate::sampling::Rng;
-use crate::scene::{self, Scene, Source};
+use crate::scene::{self, Scene};
 use crate::trace::Tracer;
 use crate::{Error, Result, output};
 
@@ -75,22 +78,17 @@ impl Default for RenderOptions {
     }
 }
 
-/// A baked scene ready to render: geometry, BVH, lightmap pages and specular parameters.
+/// A baked scene ready to render: geometry, materials and cameras (all resolved by the loader),
+/// BVH and lightmap pages.
 pub struct RenderScene {
     pub path: PathBuf,
     pub scene: Scene,
-    pub source: Source,
     pub tracer: Tracer,
-    /// Decoded EXR pages (one per distinct `extras.lightmap` file and page).
+    /// Decoded EXR pages (one per distinct `extras.lightmap` file).
     pub pages: Vec<Page>,
     /// Page of each scene instance (`None`: the primitive has no lightmap and shades black
     /// apart from its emission).
     pub instance_page: Vec<Option<u32>>,
-    /// Specular parameters of each scene material.
-    pub surfaces: Vec<Surface>,
-    pub cameras: Vec<GltfCamera>,
-    /// World bounding box of all triangles.
-    pub bounds: (Vec3, Vec3),
 }
 
 /// A rendered image: linear RGB radiance, row 0 at the top.
@@ -108,22 +106,18 @@ pub struct Image {
 impl RenderScene {
     /// Loads a baked glTF/GLB and the EXR pages its primitives reference.
     pub fn load(path: &Path) -> Result<RenderScene> {
-        let (scene, source) = scene::load(path)?;
-        let dir = path.parent().unwrap_or(Path::new(""));
+        let (scene, _) = scene::load(path)?;
         let mut pages = Vec::new();
-        let mut page_of_file: HashMap<String, u32> = HashMap::new();
+        let mut page_of_file: HashMap<&Path, u32> = HashMap::new();
         let mut instance_page = Vec::with_capacity(scene.instances.len());
         for inst in &scene.instances {
-            let prim =
-                &source.json["meshes"][inst.mesh as usize]["primitives"][inst.primitive as usize];
-            let uri = prim["extras"]["lightmap"]["exr"].as_str();
-            let page = match uri {
-                Some(uri) if inst.has_uv1 => Some(match page_of_file.get(uri) {
+            let page = match &inst.lightmap {
+                Some(file) if inst.has_uv1 => Some(match page_of_file.get(file.as_path()) {
                     Some(&k) => k,
                     None => {
-                        pages.push(output::read_exr(&dir.join(uri))?);
+                        pages.push(output::read_exr(file)?);
                         let k = pages.len() as u32 - 1;
-                        page_of_file.insert(uri.to_owned(), k);
+                        page_of_file.insert(file, k);
                         k
                     }
                 }),
@@ -138,29 +132,13 @@ impl RenderScene {
                  bake the scene first with `lightbake bake`",
             ));
         }
-        let surfaces = scene
-            .materials
-            .iter()
-            .map(|m| Surface::from_json(m, &source.json))
-            .collect();
-        let bounds = scene
-            .positions
-            .iter()
-            .fold((Vec3::MAX, Vec3::MIN), |(lo, hi), &p| {
-                (lo.min(p), hi.max(p))
-            });
         let tracer = Tracer::new(&scene);
-        let cameras = gltf_cameras(&source.json);
         Ok(RenderScene {
             path: path.to_owned(),
             scene,
-            source,
             tracer,
             pages,
             instance_page,
-            surfaces,
-            cameras,
-            bounds,
         })
     }
 
@@ -173,9 +151,12 @@ impl RenderScene {
     /// view framing the scene when it has none.
     pub fn camera(&self, selector: Option<&str>, aspect: f32) -> Result<Camera> {
         match selector {
-            Some(s) => Ok(select(&self.cameras, s)?.camera),
-            None => Ok(self.cameras.first().map_or_else(
-                || Camera::framing(self.bounds.0, self.bounds.1, 45f32.to_radians(), aspect),
+            Some(s) => Ok(select(&self.scene.cameras, s)?.camera),
+            None => Ok(self.scene.cameras.first().map_or_else(
+                || {
+                    let (lo, hi) = self.scene.bounds();
+                    Camera::framing(lo, hi, 45f32.to_radians(), aspect)
+                },
                 |c| c.camera,
             )),
         }
