@@ -900,6 +900,23 @@ mod tests {
         glb: bool,
     }
 
+    /// Indexed, with both texture coordinate sets, single-sided, written as `.gltf`.
+    const FULL: Variant = Variant {
+        indexed: true,
+        uv1: true,
+        texcoord0: true,
+        double_sided: false,
+        glb: false,
+    };
+    /// Every choice of [`FULL`] the other way.
+    const BARE: Variant = Variant {
+        indexed: false,
+        uv1: false,
+        texcoord0: false,
+        double_sided: true,
+        glb: true,
+    };
+
     /// Source vertex `v` of the quad primitive (non-indexed: the triangles' corners in order).
     fn corner_of(variant: Variant, v: usize) -> usize {
         if variant.indexed {
@@ -1300,35 +1317,24 @@ mod tests {
     #[test]
     fn pages_split_primitives_and_instanced_meshes_are_duplicated() {
         let dir = tempfile::tempdir().unwrap();
-        let variant = Variant {
-            indexed: true,
-            uv1: true,
-            texcoord0: true,
-            double_sided: false,
-            glb: false,
-        };
+        let variant = FULL;
         let (file, _, _, atlas) = write_quad(dir.path(), variant);
         let (document, buffers, json) = open(&file);
         check_untouched(&json);
 
-        let node_a = check_node(
-            variant,
-            &document,
-            &buffers,
-            &json,
-            0,
-            &[&atlas.instances[0]],
-        );
-        assert_eq!(node_a, [0, 1], "one primitive per page");
-        let node_b = check_node(
-            variant,
-            &document,
-            &buffers,
-            &json,
-            1,
-            &[&atlas.instances[1]],
-        );
-        assert_eq!(node_b, [0]);
+        // Node k places instance k.
+        let pages_of_node = |k: usize| {
+            check_node(
+                variant,
+                &document,
+                &buffers,
+                &json,
+                k,
+                &[&atlas.instances[k]],
+            )
+        };
+        assert_eq!(pages_of_node(0), [0, 1], "one primitive per page");
+        assert_eq!(pages_of_node(1), [0]);
         assert_eq!(json["nodes"][0]["mesh"], json!(0));
         assert_eq!(json["nodes"][1]["mesh"], json!(1));
         assert_eq!(json["meshes"][1]["name"], json!("Quad (node 1)"));
@@ -1385,13 +1391,7 @@ mod tests {
     #[test]
     fn glb_double_sided_non_indexed_without_texcoord0() {
         let dir = tempfile::tempdir().unwrap();
-        let variant = Variant {
-            indexed: false,
-            uv1: false,
-            texcoord0: false,
-            double_sided: true,
-            glb: true,
-        };
+        let variant = BARE;
         let (file, source, _, atlas) = write_quad(dir.path(), variant);
         let bytes = fs::read(&file).unwrap();
         assert_eq!(&bytes[..4], b"glTF");
@@ -1434,13 +1434,7 @@ mod tests {
     #[test]
     fn missing_images_and_bad_atlases_are_errors() {
         let dir = tempfile::tempdir().unwrap();
-        let variant = Variant {
-            indexed: true,
-            uv1: true,
-            texcoord0: true,
-            double_sided: false,
-            glb: false,
-        };
+        let variant = FULL;
         let mut source = quad_source(dir.path(), variant);
         let (scene, mut atlas) = quad_scene(variant);
         let mut staging = Staging::new(&dir.path().join("out"), &[]).unwrap();
@@ -1498,25 +1492,7 @@ mod tests {
             return;
         };
         let dir = tempfile::tempdir().unwrap();
-        for (k, variant) in [
-            Variant {
-                indexed: true,
-                uv1: true,
-                texcoord0: true,
-                double_sided: false,
-                glb: false,
-            },
-            Variant {
-                indexed: false,
-                uv1: false,
-                texcoord0: false,
-                double_sided: true,
-                glb: true,
-            },
-        ]
-        .into_iter()
-        .enumerate()
-        {
+        for (k, variant) in [FULL, BARE].into_iter().enumerate() {
             let (file, ..) = write_quad(&dir.path().join(k.to_string()), variant);
             let run = std::process::Command::new("node")
                 .arg(root.join(".ci/validate.js"))
