@@ -10,7 +10,8 @@
 //! Each stage is a plain data type in and a plain data type out; the module tree follows it:
 //!
 //! ```text
-//!  input.gltf ─ scene::load ──▶ Scene + Source        world-space triangles, materials, lights
+//!  input.gltf ─ scene::load ──▶ Scene + Source        world-space triangles, materials, lights,
+//!                                                     cameras (all a renderer needs)
 //!   ─ plan::choose_density ──▶ BakeConfig            texel density for the scene's area (auto)
 //!            ─ atlas::build ──▶ Atlas                 xatlas charts + pages, or input TEXCOORD_1
 //!           ─ texels::build ──▶ Texels                one radiosity patch per covered texel
@@ -23,7 +24,8 @@
 //!     ─ lightmap::denoise  ──▶ H/π per texel         edge-aware, Monte Carlo only
 //! ─ LightmapPages::from_texels ▶ LightmapPages         H/π per texel, dilated into the gutters
 //!         ─ lightmap::seams ──▶ LightmapPages         UV seams stitched (least squares)
-//!                  ─ output ──▶ .exr + .png pages, .gltf/.bin or .glb
+//!                  ─ output ──▶ .exr + .png pages, .gltf/.bin or .glb (every file format
+//!                                                     lightbake writes: exr, png, rgbm, glb, gltf)
 //! ```
 //!
 //! [`bake`] chains the stages; build tools that want the intermediate data call them directly.
@@ -31,7 +33,8 @@
 //! the matrix-free gather solver); `plan::final_bake` wraps it to reuse the pilot's bakes.
 //! Beside the pipeline: [`reference`](mod@reference) (the path tracer every accuracy figure is measured
 //! against, at texels or through a camera) and [`render`] (lightmapped views with a ray-traced
-//! specular layer).
+//! specular layer; it reads only the [`scene::Scene`] and the EXR pages its instances name,
+//! never glTF JSON).
 //!
 //! ## Conventions
 //!
