@@ -1404,24 +1404,13 @@ mod tests {
         assert!(json["buffers"][0].get("uri").is_none());
 
         // Node A: front pages 0 and 1, then the back face on page 1 with reversed winding.
-        let node_a = check_node(
-            variant,
-            &document,
-            &buffers,
-            &json,
-            0,
-            &[&atlas.instances[0], &atlas.instances[1]],
-        );
-        assert_eq!(node_a, [0, 1, 1]);
-        let node_b = check_node(
-            variant,
-            &document,
-            &buffers,
-            &json,
-            1,
-            &[&atlas.instances[2], &atlas.instances[3]],
-        );
-        assert_eq!(node_b, [0, 0]);
+        // Node k places instances 2k (front) and 2k + 1 (back).
+        let pages_of_node = |k: usize| {
+            let uvs = [&atlas.instances[2 * k], &atlas.instances[2 * k + 1]];
+            check_node(variant, &document, &buffers, &json, k, &uvs)
+        };
+        assert_eq!(pages_of_node(0), [0, 1, 1]);
+        assert_eq!(pages_of_node(1), [0, 0]);
         let material = |p: usize| json["meshes"][0]["primitives"][p]["material"].clone();
         assert_eq!(
             material(1),
