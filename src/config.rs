@@ -212,7 +212,7 @@ pub struct OutputParams {
     pub float: bool,
     /// Exposure (in stops) of the tone-mapped PNG previews.
     pub preview_exposure: f32,
-    /// Also write each page as an 8-bit RGBM PNG (`lightmap::rgbm`, range 8).
+    /// Also write each page as an 8-bit RGBM PNG (`output::rgbm`, range 8).
     pub rgbm: bool,
     /// Stitch UV seams after dilation (`lightmap::seams`): least squares on the texels along
     /// chart cuts through smooth surfaces, so both sides filter to the same value.

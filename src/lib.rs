@@ -10,7 +10,8 @@
 //! Each stage is a plain data type in and a plain data type out; the module tree follows it:
 //!
 //! ```text
-//!  input.gltf ─ scene::load ──▶ Scene + Source        world-space triangles, materials, lights
+//!  input.gltf ─ scene::load ──▶ Scene + Source        world-space triangles, materials, lights,
+//!                                                     cameras (all a renderer needs)
 //!             Tracer::new   ──▶ Tracer                obvhs CWBVH: closest hit, occlusion
 //!   ─ plan::choose_density ──▶ BakeConfig            texel density for the scene's area (auto)
 //!            ─ atlas::build ──▶ Atlas                 xatlas charts + pages, or input TEXCOORD_1
@@ -26,7 +27,8 @@
 //!     ─ lightmap::denoise  ──▶ H/π per texel         edge-aware, Monte Carlo only
 //! ─ LightmapPages::from_texels ▶ LightmapPages         H/π per texel, dilated into the gutters
 //!         ─ lightmap::seams ──▶ LightmapPages         UV seams stitched (least squares)
-//!                  ─ output ──▶ .exr + .png pages, .gltf/.bin or .glb
+//!                  ─ output ──▶ .exr + .png pages, .gltf/.bin or .glb (every file format
+//!                                                     lightbake writes: exr, png, rgbm, glb, gltf)
 //! ```
 //!
 //! [`bake`] chains the stages ([`prepare`], [`compute`], [`write()`]); build tools that want the
@@ -52,7 +54,8 @@
 //!
 //! Beside the pipeline: [`reference`](mod@reference) (the path tracer every accuracy figure is measured
 //! against, at texels or through a camera), [`render`] (lightmapped views with a ray-traced
-//! specular layer) and [`metrics`] (the error measures of every accuracy figure).
+//! specular layer; it reads only the [`scene::Scene`] and the EXR pages its instances name,
+//! never glTF JSON) and [`metrics`] (the error measures of every accuracy figure).
 //!
 //! ## Conventions
 //!

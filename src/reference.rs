@@ -160,6 +160,17 @@ pub enum Stop {
     TimeLimit,
 }
 
+impl Stop {
+    /// The reason in words, for summaries.
+    pub fn reason(self) -> &'static str {
+        match self {
+            Stop::MaxSamples => "sample cap",
+            Stop::TargetError => "target error reached",
+            Stop::TimeLimit => "time limit",
+        }
+    }
+}
+
 /// Reference estimate per texel (indexed like [`Texels`]).
 #[derive(Clone, Debug)]
 pub struct Reference {
@@ -180,21 +191,25 @@ pub struct Reference {
 impl Reference {
     /// One line: samples, rays, speed, error, time.
     pub fn summary(&self) -> String {
-        let why = match self.stop {
-            Stop::MaxSamples => "sample cap",
-            Stop::TargetError => "target error reached",
-            Stop::TimeLimit => "time limit",
-        };
         format!(
-            "{} texels, {} samples per texel, {:.2} M rays ({:.2} M rays/s), relative RMS standard error {:.2}% ({why}), {:.2}s",
+            "{} texels, {} samples per texel, {}",
             self.mean.len(),
             self.samples,
-            self.rays as f64 * 1e-6,
-            self.rays as f64 * 1e-6 / self.seconds.max(1e-9),
-            self.rms_rel_error * 100.0,
-            self.seconds
+            cost_and_error(self.rays, self.seconds, self.rms_rel_error, self.stop)
         )
     }
+}
+
+/// The end of a summary line, the same for texels and pixels: rays, speed, error, time.
+fn cost_and_error(rays: u64, seconds: f64, rms_rel_error: f32, stop: Stop) -> String {
+    format!(
+        "{:.2} M rays ({:.2} M rays/s), relative RMS standard error {:.2}% ({}), {:.2}s",
+        rays as f64 * 1e-6,
+        rays as f64 * 1e-6 / seconds.max(1e-9),
+        rms_rel_error * 100.0,
+        stop.reason(),
+        seconds
+    )
 }
 
 /// A texel's footprint point for `u ∈ [0,1)²`, on the surface (not lifted off it). Partly
@@ -255,6 +270,30 @@ pub fn trace(
     params: &ReferenceParams,
     progress: &dyn Progress,
 ) -> Result<Reference> {
+    let sample = |paths: &Paths, i, sample, rays: &mut u64| paths.sample(i, sample, rays);
+    trace_items(
+        (scene, texels, tracer),
+        texels.len(),
+        params,
+        progress,
+        "reference",
+        &sample,
+    )
+}
+
+/// One estimate for item `i` (a texel or a pixel), sample `k`, counting its rays.
+pub(crate) type ItemSample<'s> = dyn Fn(&Paths, usize, u32, &mut u64) -> Vec3 + Sync + 's;
+
+/// The texel and camera modes' common part: checks `params`, sets up the paths through the
+/// scene (emitters for next-event estimation), runs [`run_passes`] over `n` items and times it.
+pub(crate) fn trace_items(
+    (scene, texels, tracer): (&scene::Scene, &Texels, &Tracer),
+    n: usize,
+    params: &ReferenceParams,
+    progress: &dyn Progress,
+    stage: &str,
+    sample: &ItemSample,
+) -> Result<Reference> {
     params.validate()?;
     let start = Instant::now();
     let emitters = Emitters::new(scene, texels);
@@ -265,45 +304,24 @@ pub fn trace(
         emitters: &emitters,
         params,
     };
-    let run = run_passes(
-        texels.len(),
-        params,
-        progress,
-        "reference",
-        &|i, sample, rays| paths.sample(i, sample, rays),
-    )?;
-    Ok(Reference {
-        rms_rel_error: run.rms_rel_error,
-        mean: run.mean,
-        std_error: run.std_error,
-        samples: run.samples,
-        rays: run.rays,
-        seconds: start.elapsed().as_secs_f64(),
-        stop: run.stop,
-    })
-}
-
-/// What [`run_passes`] gives back.
-pub(crate) struct Run {
-    pub mean: Vec<Vec3>,
-    pub std_error: Vec<Vec3>,
-    pub samples: u32,
-    pub rays: u64,
-    pub rms_rel_error: f32,
-    pub stop: Stop,
+    let mut estimate = run_passes(n, params, progress, stage, &|i, k, rays| {
+        sample(&paths, i, k, rays)
+    })?;
+    estimate.seconds = start.elapsed().as_secs_f64();
+    Ok(estimate)
 }
 
 /// Adds `sample(item, k, &mut rays)` for `k = 0, 1, …` to the running sums of every one of `n`
 /// items (texels or pixels), a pass of `params.samples_per_pass` at a time, until a stopping
 /// rule of `params` holds. Items are split into fixed chunks and every sample draws its own
-/// random stream, so the sums do not depend on the thread count.
-pub(crate) fn run_passes(
+/// random stream, so the sums do not depend on the thread count. `seconds` is its own time.
+fn run_passes(
     n: usize,
     params: &ReferenceParams,
     progress: &dyn Progress,
     stage: &str,
     sample: &(dyn Fn(usize, u32, &mut u64) -> Vec3 + Sync),
-) -> Result<Run> {
+) -> Result<Reference> {
     let start = Instant::now();
     let mut sums = vec![Sums::default(); n];
     let (mut samples, mut rays) = (0u32, 0u64);
@@ -361,11 +379,12 @@ pub(crate) fn run_passes(
     if stop == Stop::MaxSamples && params.target_rel_error.is_some_and(|t| rms <= t) {
         stop = Stop::TargetError;
     }
-    Ok(Run {
+    Ok(Reference {
         mean,
         std_error,
         samples,
         rays,
+        seconds: start.elapsed().as_secs_f64(),
         rms_rel_error: rms,
         stop,
     })

@@ -730,22 +730,8 @@ impl GltfBuilder {
     /// A binary `.glb`: JSON chunk (space-padded) and BIN chunk (zero-padded).
     pub fn to_glb_bytes(&self) -> Vec<u8> {
         let (json, bin) = self.to_gltf_json();
-        let mut json = serde_json::to_vec(&json).expect("a JSON value always serialises");
-        while !json.len().is_multiple_of(4) {
-            json.push(b' ');
-        }
-        let total = 12 + 8 + json.len() + 8 + bin.len();
-        let mut glb = Vec::with_capacity(total);
-        glb.extend_from_slice(b"glTF");
-        glb.extend_from_slice(&2u32.to_le_bytes());
-        glb.extend_from_slice(&(total as u32).to_le_bytes());
-        glb.extend_from_slice(&(json.len() as u32).to_le_bytes());
-        glb.extend_from_slice(b"JSON");
-        glb.extend_from_slice(&json);
-        glb.extend_from_slice(&(bin.len() as u32).to_le_bytes());
-        glb.extend_from_slice(b"BIN\0");
-        glb.extend_from_slice(&bin);
-        glb
+        let json = serde_json::to_vec(&json).expect("a JSON value always serialises");
+        crate::output::glb::container(json, bin)
     }
 
     pub fn write_gltf(&self, path: impl AsRef<Path>) -> Result<()> {

@@ -200,12 +200,7 @@ impl Tracer {
         };
         let tris: Vec<Triangle> = ids.iter().map(|&t| tri(t)).collect();
 
-        let (lo, hi) = scene
-            .positions
-            .iter()
-            .fold((Vec3::MAX, Vec3::MIN), |(lo, hi), &p| {
-                (lo.min(p), hi.max(p))
-            });
+        let (lo, hi) = scene.bounds();
         let extent = if scene.positions.is_empty() {
             1.0
         } else {
@@ -468,6 +463,7 @@ mod tests {
                 back_of,
                 back: None,
                 has_uv1: false,
+                lightmap: None,
             });
         };
         add(Vec3::Z, [0, 1, 2], None);
@@ -555,6 +551,7 @@ mod tests {
             back_of: None,
             back: None,
             has_uv1: false,
+            lightmap: None,
         });
         s.materials.push(Material::default());
         let tracer = Tracer::new(&s);

@@ -6,7 +6,7 @@ use std::path::Path;
 
 use glam::{Quat, Vec3};
 use lightbake::testing::{self, Face, Geometry, GltfBuilder, Material};
-use lightbake::{BakeConfig, Baked, NoProgress, compute, lightmap::rgbm, metrics, write};
+use lightbake::{BakeConfig, Baked, NoProgress, compute, metrics, output::rgbm, write};
 
 use crate::util::{fixture, scratch};
 

@@ -1228,6 +1228,7 @@ pub(super) mod tests {
                 back_of: None,
                 back: None,
                 has_uv1: part.uv1.is_some(),
+                lightmap: None,
             });
         };
         for part in parts {

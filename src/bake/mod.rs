@@ -365,7 +365,7 @@ pub fn write(
             &output::write_png_preview(page, config.output.preview_exposure)?,
         )?;
         if config.output.rgbm {
-            let png = lightmap::rgbm::write_png(page, lightmap::rgbm::DEFAULT_RANGE)?;
+            let png = output::write_rgbm_png(page, output::rgbm::DEFAULT_RANGE)?;
             staging.write(&format!("{stem}_lightmap{k}_rgbm.png"), &png)?;
         }
         page_files.push(files);

@@ -10,7 +10,7 @@ use lightbake::config::{AutoParams, Keep};
 use lightbake::lightmap::{self, LightmapPages};
 use lightbake::output::{self, Staging};
 use lightbake::reference::{self, ReferenceParams};
-use lightbake::render::{Image, gltf_cameras};
+use lightbake::render::Image;
 use lightbake::{BakeConfig, Progress, texels};
 
 use super::progress::Bars;
@@ -186,15 +186,7 @@ fn view(args: &Args, config: &BakeConfig, params: &ReferenceParams) -> Result<()
     let bars = Bars::new(args.run.quiet);
     let p = reference::prepare(&args.scene, config, &bars)
         .with_context(|| format!("loading {} failed", args.scene.display()))?;
-    let cameras = gltf_cameras(&p.source.json);
-    let bounds = p
-        .scene
-        .positions
-        .iter()
-        .fold((Vec3::MAX, Vec3::MIN), |(lo, hi), &x| {
-            (lo.min(x), hi.max(x))
-        });
-    let (camera, width, height) = args.camera.resolve(&cameras, bounds)?;
+    let (camera, width, height) = args.camera.resolve(&p.scene)?;
     let v = reference::trace_view(
         &p.scene, &p.texels, &p.tracer, &camera, width, height, params, &bars,
     )

@@ -6,7 +6,8 @@ use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use glam::Vec3;
-use lightbake::render::{Camera, GltfCamera, RenderOptions, RenderScene, select};
+use lightbake::render::{Camera, RenderOptions, RenderScene, select};
+use lightbake::scene::Scene;
 
 use crate::parse_rgb;
 
@@ -72,13 +73,10 @@ impl ViewArgs {
             || self.size.is_some()
     }
 
-    /// The camera and image size these options choose among the document's `cameras`; a view
-    /// framing `bounds` when there is no camera and no eye.
-    pub fn resolve(
-        &self,
-        cameras: &[GltfCamera],
-        bounds: (Vec3, Vec3),
-    ) -> Result<(Camera, u32, u32)> {
+    /// The camera and image size these options choose among the scene's cameras; a view
+    /// framing the whole scene when it has no camera and there is no eye.
+    pub fn resolve(&self, scene: &Scene) -> Result<(Camera, u32, u32)> {
+        let (cameras, bounds) = (&scene.cameras, scene.bounds());
         let fov = self.fov.map(f32::to_radians);
         let framing = |aspect: f32| Camera::framing(bounds.0, bounds.1, 45f32.to_radians(), aspect);
         let mut camera = match (self.eye, self.target, &self.camera) {
@@ -153,7 +151,7 @@ pub fn run(args: &Args) -> Result<()> {
         );
     }
 
-    let (camera, width, height) = args.view.resolve(&scene.cameras, scene.bounds)?;
+    let (camera, width, height) = args.view.resolve(&scene.scene)?;
     let options = RenderOptions {
         width,
         height,

@@ -5,7 +5,6 @@
 
 pub mod denoise;
 mod dilate;
-pub mod rgbm;
 pub mod seams;
 
 use glam::Vec3;

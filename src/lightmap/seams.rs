@@ -617,6 +617,7 @@ mod tests {
                 back_of: None,
                 back: None,
                 has_uv1: false,
+                lightmap: None,
             }],
             materials: vec![Material::default()],
             ..Scene::default()

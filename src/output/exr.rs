@@ -1,4 +1,4 @@
-//! Page encoding: OpenEXR (the HDR lightmap a renderer uses) and a PNG preview (for eyes).
+//! OpenEXR: lightmap pages (the HDR lightmap a renderer uses) and rendered images.
 //!
 //! EXR pages hold channels R, G, B of linear `H/π`, half float by default or 32-bit float on
 //! request, ZIP-compressed scanlines in increasing order (so the bytes do not depend on how
@@ -14,7 +14,6 @@ use exr::prelude::{
     f16,
 };
 use glam::Vec3;
-use image::{ExtendedColorType, ImageEncoder};
 
 use crate::lightmap::Page;
 use crate::{Error, Result};
@@ -105,64 +104,28 @@ pub fn read_exr(path: &Path) -> Result<Page> {
     })
 }
 
-/// Encodes an 8-bit sRGB PNG preview of a page.
+/// Writes a rendered image (linear RGB radiance, row-major, row 0 at the top) to `path` as a
+/// 32-bit float OpenEXR file (the exr crate's default encoding: RLE, 64 × 64 tiles).
 ///
-/// Tone mapping is deliberately plain: scale by `2^exposure`, clip to [0, 1], apply the sRGB
-/// transfer function. Unlike Reinhard `x/(1+x)` it keeps mid-tones true (a lightmap value of
-/// 0.5 looks like 0.5), at the cost of clipping highlights — lower the exposure to see them.
-/// Invalid texels (never solved nor dilated) are black.
-pub fn write_png_preview(page: &Page, exposure: f32) -> Result<Vec<u8>> {
-    let scale = exposure.exp2();
-    let mut srgb = Vec::with_capacity(page.rgb.len() * 3);
-    for (v, &valid) in page.rgb.iter().zip(&page.valid) {
-        let v = if valid { *v * scale } else { Vec3::ZERO };
-        srgb.extend(v.to_array().map(encode_srgb));
-    }
-    let mut png = Vec::new();
-    image::codecs::png::PngEncoder::new(&mut png)
-        .write_image(&srgb, page.width, page.height, ExtendedColorType::Rgb8)
-        .map_err(|e| Error::io("<png preview>", std::io::Error::other(e.to_string())))?;
-    Ok(png)
-}
-
-/// Linear value → 8-bit sRGB, clipped (NaN → 0).
-fn encode_srgb(linear: f32) -> u8 {
-    let x = if linear.is_nan() {
-        0.0
-    } else {
-        linear.clamp(0.0, 1.0)
-    };
-    let encoded = if x <= 0.003_130_8 {
-        12.92 * x
-    } else {
-        1.055 * x.powf(1.0 / 2.4) - 0.055
-    };
-    (encoded * 255.0 + 0.5) as u8
+/// Tiles are compressed and written one after the other: compressed in parallel, they were
+/// written in whatever order they finished, so the same image gave different bytes.
+pub fn write_exr_image(path: &Path, rgb: &[Vec3], width: u32, height: u32) -> Result<()> {
+    let w = width as usize;
+    let pixels = SpecificChannels::rgb(|p: ExrVec2<usize>| {
+        let v = rgb[p.y() * w + p.x()];
+        (v.x, v.y, v.z)
+    });
+    Image::from_channels((w, height as usize), pixels)
+        .write()
+        .non_parallel()
+        .to_file(path)
+        .map_err(|e| Error::io(path, exr_to_io(e)))
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    /// A 3 × 2 page whose texels are all different, with one invalid texel.
-    fn test_page() -> Page {
-        let rgb = vec![
-            Vec3::new(0.123, 5.5, 1000.0),
-            Vec3::new(0.0, 1.0, 2.0),
-            Vec3::new(7.25, 0.001, 0.5),
-            Vec3::new(3.0, 3.0, 3.0),
-            Vec3::new(0.75, 0.0625, 42.0),
-            Vec3::new(9.0, 9.0, 9.0),
-        ];
-        let mut valid = vec![true; 6];
-        valid[3] = false;
-        Page {
-            width: 3,
-            height: 2,
-            rgb,
-            valid,
-        }
-    }
+    use crate::output::test_page;
 
     fn round_trip(float: bool) -> Page {
         let dir = tempfile::tempdir().unwrap();
@@ -242,6 +205,30 @@ mod tests {
     }
 
     #[test]
+    fn rendered_images_read_back_exactly_and_give_the_same_bytes_every_time() {
+        // 300 × 200 pixels: 5 × 4 tiles, enough for parallel compression to reorder them.
+        let (width, height) = (300, 200);
+        let rgb: Vec<Vec3> = (0..width * height)
+            .map(|i| Vec3::new(i as f32, (i % 7) as f32 * 0.25, 1.0 / (1 + i) as f32))
+            .collect();
+        let dir = tempfile::tempdir().unwrap();
+        let write = |name: &str| {
+            let path = dir.path().join(name);
+            write_exr_image(&path, &rgb, width, height).unwrap();
+            path
+        };
+        let first = write("a.exr");
+        let back = read_exr(&first).unwrap();
+        assert_eq!((back.width, back.height), (width, height));
+        assert_eq!(back.rgb, rgb);
+        let bytes = std::fs::read(&first).unwrap();
+        for k in 0..16 {
+            let again = std::fs::read(write(&format!("{k}.exr"))).unwrap();
+            assert!(again == bytes, "write {k} gave other bytes");
+        }
+    }
+
+    #[test]
     fn read_errors_name_the_file() {
         let dir = tempfile::tempdir().unwrap();
         let missing = dir.path().join("missing.exr");
@@ -256,42 +243,5 @@ mod tests {
         let error = read_exr(&garbage).unwrap_err();
         assert!(matches!(error, Error::Invalid { .. }), "{error}");
         assert!(error.to_string().contains("garbage.exr"));
-    }
-
-    #[test]
-    fn png_preview_has_the_page_size_and_srgb_values() {
-        let page = Page {
-            width: 4,
-            height: 2,
-            rgb: vec![
-                Vec3::new(1.0, 0.0, 0.5),
-                Vec3::splat(0.25),
-                Vec3::splat(8.0),
-                Vec3::splat(-1.0),
-                Vec3::splat(0.5),
-                Vec3::splat(0.5),
-                Vec3::splat(0.5),
-                Vec3::splat(0.5),
-            ],
-            valid: vec![true, true, true, true, true, false, true, true],
-        };
-        let png = write_png_preview(&page, 1.0).unwrap();
-        let decoded = image::load_from_memory(&png).unwrap().to_rgb8();
-        assert_eq!(decoded.dimensions(), (4, 2));
-        // Exposure +1 doubles: 0.5 → 1.0 → 255, 0.25 → 0.5 → sRGB 0.7354 → 188.
-        assert_eq!(decoded.get_pixel(0, 0).0, [255, 0, 255]);
-        assert_eq!(decoded.get_pixel(1, 0).0, [188, 188, 188]);
-        assert_eq!(decoded.get_pixel(2, 0).0, [255, 255, 255]);
-        assert_eq!(decoded.get_pixel(3, 0).0, [0, 0, 0]);
-        assert_eq!(
-            decoded.get_pixel(1, 1).0,
-            [0, 0, 0],
-            "invalid texels are black"
-        );
-        assert_eq!(write_png_preview(&page, 1.0).unwrap(), png);
-        let darker = image::load_from_memory(&write_png_preview(&page, 0.0).unwrap())
-            .unwrap()
-            .to_rgb8();
-        assert_eq!(darker.get_pixel(0, 1).0, [188, 188, 188]);
     }
 }

@@ -26,10 +26,10 @@ use std::path::{Component, Path};
 
 use serde_json::{Map, Value, json};
 
-use super::Staging;
 use super::gltf_out_accessor::{
     Elements, FLOAT, Layout, UNSIGNED_INT, UNSIGNED_SHORT, read_accessor,
 };
+use super::{Staging, glb};
 use crate::atlas::{Atlas, InstanceUv};
 use crate::scene::{Scene, Source};
 use crate::{Error, Result};
@@ -763,7 +763,7 @@ impl<'a> Document<'a> {
         };
         if glb {
             let json = serialize(&self.json, false)?;
-            staging.write(&format!("{stem}.glb"), &glb_container(json, self.bin))
+            staging.write(&format!("{stem}.glb"), &glb::container(json, self.bin))
         } else {
             if !self.bin.is_empty() {
                 staging.write(&bin_name, &self.bin)?;
@@ -813,27 +813,6 @@ fn object_entry<'v>(value: &'v mut Value, key: &str) -> &'v mut Map<String, Valu
         *entry = json!({});
     }
     entry.as_object_mut().expect("just made an object")
-}
-
-/// A GLB v2 container: header, JSON chunk padded with spaces, BIN chunk padded with zeros.
-fn glb_container(mut json: Vec<u8>, mut bin: Vec<u8>) -> Vec<u8> {
-    json.resize(json.len().next_multiple_of(4), b' ');
-    bin.resize(bin.len().next_multiple_of(4), 0);
-    let bin_chunk = if bin.is_empty() { 0 } else { 8 + bin.len() };
-    let total = 12 + 8 + json.len() + bin_chunk;
-    let mut out = Vec::with_capacity(total);
-    out.extend_from_slice(b"glTF");
-    out.extend_from_slice(&2u32.to_le_bytes());
-    out.extend_from_slice(&(total as u32).to_le_bytes());
-    out.extend_from_slice(&(json.len() as u32).to_le_bytes());
-    out.extend_from_slice(b"JSON");
-    out.extend_from_slice(&json);
-    if !bin.is_empty() {
-        out.extend_from_slice(&(bin.len() as u32).to_le_bytes());
-        out.extend_from_slice(b"BIN\0");
-        out.extend_from_slice(&bin);
-    }
-    out
 }
 
 /// Percent-encodes a relative file path for a glTF uri (RFC 3986 unreserved characters and `/`
@@ -920,6 +899,23 @@ mod tests {
         double_sided: bool,
         glb: bool,
     }
+
+    /// Indexed, with both texture coordinate sets, single-sided, written as `.gltf`.
+    const FULL: Variant = Variant {
+        indexed: true,
+        uv1: true,
+        texcoord0: true,
+        double_sided: false,
+        glb: false,
+    };
+    /// Every choice of [`FULL`] the other way.
+    const BARE: Variant = Variant {
+        indexed: false,
+        uv1: false,
+        texcoord0: false,
+        double_sided: true,
+        glb: true,
+    };
 
     /// Source vertex `v` of the quad primitive (non-indexed: the triangles' corners in order).
     fn corner_of(variant: Variant, v: usize) -> usize {
@@ -1085,6 +1081,7 @@ mod tests {
             back_of: None,
             back: None,
             has_uv1: false,
+            lightmap: None,
         }
     }
 
@@ -1320,35 +1317,24 @@ mod tests {
     #[test]
     fn pages_split_primitives_and_instanced_meshes_are_duplicated() {
         let dir = tempfile::tempdir().unwrap();
-        let variant = Variant {
-            indexed: true,
-            uv1: true,
-            texcoord0: true,
-            double_sided: false,
-            glb: false,
-        };
+        let variant = FULL;
         let (file, _, _, atlas) = write_quad(dir.path(), variant);
         let (document, buffers, json) = open(&file);
         check_untouched(&json);
 
-        let node_a = check_node(
-            variant,
-            &document,
-            &buffers,
-            &json,
-            0,
-            &[&atlas.instances[0]],
-        );
-        assert_eq!(node_a, [0, 1], "one primitive per page");
-        let node_b = check_node(
-            variant,
-            &document,
-            &buffers,
-            &json,
-            1,
-            &[&atlas.instances[1]],
-        );
-        assert_eq!(node_b, [0]);
+        // Node k places instance k.
+        let pages_of_node = |k: usize| {
+            check_node(
+                variant,
+                &document,
+                &buffers,
+                &json,
+                k,
+                &[&atlas.instances[k]],
+            )
+        };
+        assert_eq!(pages_of_node(0), [0, 1], "one primitive per page");
+        assert_eq!(pages_of_node(1), [0]);
         assert_eq!(json["nodes"][0]["mesh"], json!(0));
         assert_eq!(json["nodes"][1]["mesh"], json!(1));
         assert_eq!(json["meshes"][1]["name"], json!("Quad (node 1)"));
@@ -1405,13 +1391,7 @@ mod tests {
     #[test]
     fn glb_double_sided_non_indexed_without_texcoord0() {
         let dir = tempfile::tempdir().unwrap();
-        let variant = Variant {
-            indexed: false,
-            uv1: false,
-            texcoord0: false,
-            double_sided: true,
-            glb: true,
-        };
+        let variant = BARE;
         let (file, source, _, atlas) = write_quad(dir.path(), variant);
         let bytes = fs::read(&file).unwrap();
         assert_eq!(&bytes[..4], b"glTF");
@@ -1424,24 +1404,13 @@ mod tests {
         assert!(json["buffers"][0].get("uri").is_none());
 
         // Node A: front pages 0 and 1, then the back face on page 1 with reversed winding.
-        let node_a = check_node(
-            variant,
-            &document,
-            &buffers,
-            &json,
-            0,
-            &[&atlas.instances[0], &atlas.instances[1]],
-        );
-        assert_eq!(node_a, [0, 1, 1]);
-        let node_b = check_node(
-            variant,
-            &document,
-            &buffers,
-            &json,
-            1,
-            &[&atlas.instances[2], &atlas.instances[3]],
-        );
-        assert_eq!(node_b, [0, 0]);
+        // Node k places instances 2k (front) and 2k + 1 (back).
+        let pages_of_node = |k: usize| {
+            let uvs = [&atlas.instances[2 * k], &atlas.instances[2 * k + 1]];
+            check_node(variant, &document, &buffers, &json, k, &uvs)
+        };
+        assert_eq!(pages_of_node(0), [0, 1, 1]);
+        assert_eq!(pages_of_node(1), [0, 0]);
         let material = |p: usize| json["meshes"][0]["primitives"][p]["material"].clone();
         assert_eq!(
             material(1),
@@ -1454,13 +1423,7 @@ mod tests {
     #[test]
     fn missing_images_and_bad_atlases_are_errors() {
         let dir = tempfile::tempdir().unwrap();
-        let variant = Variant {
-            indexed: true,
-            uv1: true,
-            texcoord0: true,
-            double_sided: false,
-            glb: false,
-        };
+        let variant = FULL;
         let mut source = quad_source(dir.path(), variant);
         let (scene, mut atlas) = quad_scene(variant);
         let mut staging = Staging::new(&dir.path().join("out"), &[]).unwrap();
@@ -1518,25 +1481,7 @@ mod tests {
             return;
         };
         let dir = tempfile::tempdir().unwrap();
-        for (k, variant) in [
-            Variant {
-                indexed: true,
-                uv1: true,
-                texcoord0: true,
-                double_sided: false,
-                glb: false,
-            },
-            Variant {
-                indexed: false,
-                uv1: false,
-                texcoord0: false,
-                double_sided: true,
-                glb: true,
-            },
-        ]
-        .into_iter()
-        .enumerate()
-        {
+        for (k, variant) in [FULL, BARE].into_iter().enumerate() {
             let (file, ..) = write_quad(&dir.path().join(k.to_string()), variant);
             let run = std::process::Command::new("node")
                 .arg(root.join(".ci/validate.js"))

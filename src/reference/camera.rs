@@ -30,15 +30,11 @@
 //! count, and the stopping rules (`max_samples`, `target_rel_error` over pixels, `time_limit`)
 //! are those of the texel mode.
 
-use std::time::Instant;
-
 use glam::{Vec2, Vec3};
 
-use super::{Paths, ReferenceParams, SEED_SALT, Stop, run_passes};
-use crate::lights::Emitters;
-use crate::render::Camera;
+use super::{ItemSample, Paths, ReferenceParams, SEED_SALT, Stop, cost_and_error, trace_items};
 use crate::sampling::Rng;
-use crate::scene::Scene;
+use crate::scene::{Camera, Scene};
 use crate::texels::Texels;
 use crate::trace::{Hit, Tracer};
 use crate::{Error, Progress, Result};
@@ -70,20 +66,12 @@ pub struct View {
 impl View {
     /// One line: size, samples, rays, speed, error, time.
     pub fn summary(&self) -> String {
-        let why = match self.stop {
-            Stop::MaxSamples => "sample cap",
-            Stop::TargetError => "target error reached",
-            Stop::TimeLimit => "time limit",
-        };
         format!(
-            "{}x{} pixels, {} paths per pixel, {:.2} M rays ({:.2} M rays/s), relative RMS standard error {:.2}% ({why}), {:.2}s",
+            "{}x{} pixels, {} paths per pixel, {}",
             self.width,
             self.height,
             self.samples,
-            self.rays as f64 * 1e-6,
-            self.rays as f64 * 1e-6 / self.seconds.max(1e-9),
-            self.rms_rel_error * 100.0,
-            self.seconds
+            cost_and_error(self.rays, self.seconds, self.rms_rel_error, self.stop)
         )
     }
 }
@@ -101,23 +89,13 @@ pub fn trace_view(
     params: &ReferenceParams,
     progress: &dyn Progress,
 ) -> Result<View> {
-    params.validate()?;
     if width == 0 || height == 0 {
         return Err(Error::Option(format!(
             "image size {width}×{height} must be positive"
         )));
     }
-    let start = Instant::now();
-    let emitters = Emitters::new(scene, texels);
-    let paths = Paths {
-        scene,
-        texels,
-        tracer,
-        emitters: &emitters,
-        params,
-    };
     let aspect = width as f32 / height as f32;
-    let pixel_sample = |i: usize, sample: u32, rays: &mut u64| {
+    let pixel_sample: &ItemSample = &|paths, i, sample, rays| {
         let (x, y) = ((i % width as usize) as f32, (i / width as usize) as f32);
         let mut rng = Rng::new(params.seed ^ SEED_SALT ^ VIEW_SALT, i as u64, sample as u64);
         let jitter = rng.next_vec2();
@@ -126,11 +104,18 @@ pub fn trace_view(
             1.0 - 2.0 * (y + jitter.y) / height as f32,
         );
         let dir = camera.direction(ndc, aspect);
-        let l = radiance(&paths, camera.eye, dir, &mut rng, rays);
+        let l = radiance(paths, camera.eye, dir, &mut rng, rays);
         if l.is_finite() { l } else { Vec3::ZERO }
     };
     let n = width as usize * height as usize;
-    let run = run_passes(n, params, progress, "reference view", &pixel_sample)?;
+    let run = trace_items(
+        (scene, texels, tracer),
+        n,
+        params,
+        progress,
+        "reference view",
+        pixel_sample,
+    )?;
     Ok(View {
         width,
         height,
@@ -138,7 +123,7 @@ pub fn trace_view(
         std_error: run.std_error,
         samples: run.samples,
         rays: run.rays,
-        seconds: start.elapsed().as_secs_f64(),
+        seconds: run.seconds,
         rms_rel_error: run.rms_rel_error,
         stop: run.stop,
     })

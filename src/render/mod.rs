@@ -24,12 +24,13 @@
 //! | `seed` | 0 | random streams are seeded by (seed, pixel) |
 //!
 //! Input: a glTF written by `lightbake bake`: every baked primitive has `TEXCOORD_1` and
-//! `extras.lightmap = {"exr", "page"}`; the EXR pages hold `H/π`. Scenes without any lightmap are
+//! `extras.lightmap = {"exr", "page"}`; the EXR pages hold `H/π`. The scene loader resolves
+//! everything the renderer reads — each instance's EXR page, each material's specular
+//! parameters ([`scene::Surface`]), the cameras — so this module never looks at glTF JSON. Scenes without any lightmap are
 //! refused. Limits: no alpha, no texture transforms, punctual lights are invisible (their light
 //! is in the lightmap), and the baker treated glass and mirrors as Lambertian (ρ = baseColor),
 //! so shadows behind glass are as dark as behind any opaque object of that colour.
 
-mod camera;
 mod shade;
 
 use std::collections::HashMap;
@@ -38,12 +39,14 @@ use std::path::{Path, PathBuf};
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 
-pub use camera::{Camera, GltfCamera, gltf_cameras, select};
-pub use shade::{GLOSSY_MAX_ROUGHNESS, MIRROR_ROUGHNESS, Surface};
+/// The loader resolves the document's cameras into [`Scene::cameras`]; the renderer's callers
+/// choose among them with these.
+pub use crate::scene::{Camera, GltfCamera, select};
+pub use shade::{GLOSSY_MAX_ROUGHNESS, MIRROR_ROUGHNESS};
 
 use crate::lightmap::Page;
 use crate::sampling::Rng;
-use crate::scene::{self, Scene, Source};
+use crate::scene::{self, Scene};
 use crate::trace::Tracer;
 use crate::{Error, Result, output};
 
@@ -75,22 +78,17 @@ impl Default for RenderOptions {
     }
 }
 
-/// A baked scene ready to render: geometry, BVH, lightmap pages and specular parameters.
+/// A baked scene ready to render: geometry, materials and cameras (all resolved by the loader),
+/// BVH and lightmap pages.
 pub struct RenderScene {
     pub path: PathBuf,
     pub scene: Scene,
-    pub source: Source,
     pub tracer: Tracer,
-    /// Decoded EXR pages (one per distinct `extras.lightmap` file and page).
+    /// Decoded EXR pages (one per distinct `extras.lightmap` file).
     pub pages: Vec<Page>,
     /// Page of each scene instance (`None`: the primitive has no lightmap and shades black
     /// apart from its emission).
     pub instance_page: Vec<Option<u32>>,
-    /// Specular parameters of each scene material.
-    pub surfaces: Vec<Surface>,
-    pub cameras: Vec<GltfCamera>,
-    /// World bounding box of all triangles.
-    pub bounds: (Vec3, Vec3),
 }
 
 /// A rendered image: linear RGB radiance, row 0 at the top.
@@ -108,22 +106,18 @@ pub struct Image {
 impl RenderScene {
     /// Loads a baked glTF/GLB and the EXR pages its primitives reference.
     pub fn load(path: &Path) -> Result<RenderScene> {
-        let (scene, source) = scene::load(path)?;
-        let dir = path.parent().unwrap_or(Path::new(""));
+        let (scene, _) = scene::load(path)?;
         let mut pages = Vec::new();
-        let mut page_of_file: HashMap<String, u32> = HashMap::new();
+        let mut page_of_file: HashMap<&Path, u32> = HashMap::new();
         let mut instance_page = Vec::with_capacity(scene.instances.len());
         for inst in &scene.instances {
-            let prim =
-                &source.json["meshes"][inst.mesh as usize]["primitives"][inst.primitive as usize];
-            let uri = prim["extras"]["lightmap"]["exr"].as_str();
-            let page = match uri {
-                Some(uri) if inst.has_uv1 => Some(match page_of_file.get(uri) {
+            let page = match &inst.lightmap {
+                Some(file) if inst.has_uv1 => Some(match page_of_file.get(file.as_path()) {
                     Some(&k) => k,
                     None => {
-                        pages.push(output::read_exr(&dir.join(uri))?);
+                        pages.push(output::read_exr(file)?);
                         let k = pages.len() as u32 - 1;
-                        page_of_file.insert(uri.to_owned(), k);
+                        page_of_file.insert(file, k);
                         k
                     }
                 }),
@@ -138,29 +132,13 @@ impl RenderScene {
                  bake the scene first with `lightbake bake`",
             ));
         }
-        let surfaces = scene
-            .materials
-            .iter()
-            .map(|m| Surface::from_json(m, &source.json))
-            .collect();
-        let bounds = scene
-            .positions
-            .iter()
-            .fold((Vec3::MAX, Vec3::MIN), |(lo, hi), &p| {
-                (lo.min(p), hi.max(p))
-            });
         let tracer = Tracer::new(&scene);
-        let cameras = gltf_cameras(&source.json);
         Ok(RenderScene {
             path: path.to_owned(),
             scene,
-            source,
             tracer,
             pages,
             instance_page,
-            surfaces,
-            cameras,
-            bounds,
         })
     }
 
@@ -173,9 +151,12 @@ impl RenderScene {
     /// view framing the scene when it has none.
     pub fn camera(&self, selector: Option<&str>, aspect: f32) -> Result<Camera> {
         match selector {
-            Some(s) => Ok(select(&self.cameras, s)?.camera),
-            None => Ok(self.cameras.first().map_or_else(
-                || Camera::framing(self.bounds.0, self.bounds.1, 45f32.to_radians(), aspect),
+            Some(s) => Ok(select(&self.scene.cameras, s)?.camera),
+            None => Ok(self.scene.cameras.first().map_or_else(
+                || {
+                    let (lo, hi) = self.scene.bounds();
+                    Camera::framing(lo, hi, 45f32.to_radians(), aspect)
+                },
                 |c| c.camera,
             )),
         }
@@ -261,28 +242,10 @@ impl RenderScene {
 const PIXEL_STREAM: u64 = 0x7265_6e64; // "rend"
 
 impl Image {
-    /// 8-bit sRGB PNG. Tone mapping: scale by `2^exposure`, then a soft shoulder that is the
-    /// identity below [`SHOULDER`] and rolls off exponentially towards 1 above it (continuous
-    /// with slope 1, so mid-tones stay true and highlights keep some detail instead of
-    /// clipping), then the sRGB transfer function.
+    /// 8-bit sRGB PNG, tone-mapped as [`output::png`] describes (scale by `2^exposure`, then a
+    /// soft shoulder that keeps mid-tones true and highlights some detail).
     pub fn to_png(&self, exposure: f32) -> Result<Vec<u8>> {
-        let scale = exposure.exp2();
-        let bytes: Vec<u8> = self
-            .rgb
-            .iter()
-            .flat_map(|v| (*v * scale).to_array().map(|c| encode_srgb(tone_map(c))))
-            .collect();
-        let mut png = Vec::new();
-        use image::ImageEncoder;
-        image::codecs::png::PngEncoder::new(&mut png)
-            .write_image(
-                &bytes,
-                self.width,
-                self.height,
-                image::ExtendedColorType::Rgb8,
-            )
-            .map_err(|e| Error::io("<png>", std::io::Error::other(e.to_string())))?;
-        Ok(png)
+        output::write_png_image(&self.rgb, self.width, self.height, exposure)
     }
 
     /// Writes `path` as a linear 32-bit float OpenEXR (`.exr`) or a tone-mapped PNG (any other
@@ -297,58 +260,11 @@ impl Image {
                 let png = self.to_png(exposure)?;
                 std::fs::write(path, png).map_err(|e| Error::io(path, e))
             }
-            Some("exr") => {
-                let w = self.width as usize;
-                exr::prelude::write_rgb_file(path, w, self.height as usize, |x, y| {
-                    let v = self.rgb[y * w + x];
-                    (v.x, v.y, v.z)
-                })
-                .map_err(|e| Error::io(path, std::io::Error::other(e.to_string())))
-            }
+            Some("exr") => output::write_exr_image(path, &self.rgb, self.width, self.height),
             _ => Err(Error::Option(format!(
                 "{}: the image must end in .png or .exr",
                 path.display()
             ))),
         }
-    }
-}
-
-/// Where the tone curve leaves the identity.
-pub const SHOULDER: f32 = 0.8;
-
-/// Identity up to [`SHOULDER`], then `k + (1−k)(1 − e^{−(x−k)/(1−k)})` → 1 (C¹ at `k`).
-pub fn tone_map(x: f32) -> f32 {
-    if x.is_nan() || x <= 0.0 {
-        0.0
-    } else if x <= SHOULDER {
-        x
-    } else {
-        let k = SHOULDER;
-        k + (1.0 - k) * (1.0 - (-(x - k) / (1.0 - k)).exp())
-    }
-}
-
-fn encode_srgb(linear: f32) -> u8 {
-    let x = linear.clamp(0.0, 1.0);
-    let s = if x <= 0.003_130_8 {
-        12.92 * x
-    } else {
-        1.055 * x.powf(1.0 / 2.4) - 0.055
-    };
-    (s * 255.0 + 0.5) as u8
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn tone_curve_is_identity_then_smooth_and_bounded() {
-        assert_eq!(tone_map(0.5), 0.5);
-        assert_eq!(tone_map(f32::NAN), 0.0);
-        let k = SHOULDER;
-        assert!((tone_map(k + 1e-4) - (k + 1e-4)).abs() < 1e-6);
-        assert!(tone_map(100.0) <= 1.0 && tone_map(100.0) > 0.99);
-        assert!(tone_map(2.0) > tone_map(1.5));
     }
 }

@@ -37,11 +37,10 @@
 //! treated glass as an opaque Lambertian surface.
 
 use glam::{Vec2, Vec3};
-use serde_json::Value;
 
 use super::{RenderOptions, RenderScene};
 use crate::sampling::{Rng, frame, hammersley};
-use crate::scene::Material;
+use crate::scene::Surface;
 use crate::trace::Hit;
 
 /// Roughness at or below which reflection is one perfect mirror ray.
@@ -51,79 +50,9 @@ pub const GLOSSY_MAX_ROUGHNESS: f32 = 0.5;
 /// Single-sided opaque faces hit from behind are skipped, as a rasteriser culls them.
 const MAX_BACK_FACE_SKIPS: u32 = 8;
 
-/// The specular parameters of a material (glTF metallic-roughness and extensions).
-#[derive(Clone, Debug, PartialEq)]
-pub struct Surface {
-    pub metallic: f32,
-    pub roughness: f32,
-    /// KHR_materials_transmission `transmissionFactor`.
-    pub transmission: f32,
-    /// KHR_materials_ior (1.5 by default).
-    pub ior: f32,
-    /// KHR_materials_specular `specularFactor` and `specularColorFactor`.
-    pub specular: f32,
-    pub specular_color: Vec3,
-    /// Absorption coefficient σ per world unit (KHR_materials_volume), zero when clear.
-    pub attenuation: Vec3,
-}
-
-impl Default for Surface {
-    /// glTF's defaults: metallic 1, roughness 1 (fully rough, so no specular layer).
-    fn default() -> Self {
-        Surface {
-            metallic: 1.0,
-            roughness: 1.0,
-            transmission: 0.0,
-            ior: 1.5,
-            specular: 1.0,
-            specular_color: Vec3::ONE,
-            attenuation: Vec3::ZERO,
-        }
-    }
-}
-
-impl Surface {
-    /// Reads material `material.source` of the glTF JSON (defaults where absent). Textures of
-    /// these factors (metallicRoughnessTexture, …) are not sampled.
-    pub fn from_json(material: &Material, json: &Value) -> Surface {
-        let mut s = Surface::default();
-        let Some(index) = material.source else {
-            return s;
-        };
-        let m = &json["materials"][index as usize];
-        let f = |v: &Value, default: f32| v.as_f64().map_or(default, |x| x as f32);
-        let rgb = |v: &Value, default: Vec3| {
-            let a = v.as_array().filter(|a| a.len() >= 3);
-            a.map_or(default, |a| {
-                Vec3::new(f(&a[0], 0.0), f(&a[1], 0.0), f(&a[2], 0.0))
-            })
-        };
-        let pbr = &m["pbrMetallicRoughness"];
-        s.metallic = f(&pbr["metallicFactor"], 1.0).clamp(0.0, 1.0);
-        s.roughness = f(&pbr["roughnessFactor"], 1.0).clamp(0.0, 1.0);
-        let ext = &m["extensions"];
-        s.transmission = f(
-            &ext["KHR_materials_transmission"]["transmissionFactor"],
-            0.0,
-        )
-        .clamp(0.0, 1.0);
-        s.ior = f(&ext["KHR_materials_ior"]["ior"], 1.5).max(1.0);
-        let spec = &ext["KHR_materials_specular"];
-        s.specular = f(&spec["specularFactor"], 1.0).clamp(0.0, 1.0);
-        s.specular_color = rgb(&spec["specularColorFactor"], Vec3::ONE).max(Vec3::ZERO);
-        let volume = &ext["KHR_materials_volume"];
-        let distance = f(&volume["attenuationDistance"], f32::INFINITY);
-        let color = rgb(&volume["attenuationColor"], Vec3::ONE).clamp(Vec3::splat(1e-6), Vec3::ONE);
-        if distance.is_finite() && distance > 0.0 {
-            s.attenuation = -Vec3::new(color.x.ln(), color.y.ln(), color.z.ln()) / distance;
-        }
-        s
-    }
-
-    /// Has a specular layer worth tracing.
-    pub fn is_specular(&self) -> bool {
-        self.roughness <= GLOSSY_MAX_ROUGHNESS
-    }
+/// Has a specular layer worth tracing.
+fn is_specular(surface: &Surface) -> bool {
+    surface.roughness <= GLOSSY_MAX_ROUGHNESS
 }
 
 pub(super) struct Shader<'a> {
@@ -155,7 +84,7 @@ impl<'a> Shader<'a> {
         };
         let scene = &self.scene.scene;
         let sp = scene.surface_point(hit.triangle, hit.bary);
-        let surface = &self.scene.surfaces[sp.material as usize];
+        let surface = &scene.materials[sp.material as usize].surface;
         let base = scene.base_color(sp.material, sp.uv0);
         let emission = if hit.front {
             scene.emission(sp.material, sp.uv0)
@@ -164,7 +93,7 @@ impl<'a> Shader<'a> {
         };
         let l_d = base * self.lightmap(sp.instance, sp.uv1);
         let tree = self.options.specular && depth < self.options.max_depth;
-        if !tree || !surface.is_specular() {
+        if !tree || !is_specular(surface) {
             return l_d + emission;
         }
 
@@ -291,7 +220,12 @@ impl<'a> Shader<'a> {
             let mut hit = self.scene.tracer.closest(o, dir, f32::INFINITY)?;
             let instance = self.scene.scene.triangle_instance[hit.triangle as usize];
             let material = self.scene.scene.instances[instance as usize].material;
-            if hit.front || self.scene.surfaces[material as usize].transmission > 0.0 {
+            if hit.front
+                || self.scene.scene.materials[material as usize]
+                    .surface
+                    .transmission
+                    > 0.0
+            {
                 hit.t += travelled;
                 return Some(hit);
             }
@@ -338,37 +272,11 @@ fn smith_g1(cos: f32, alpha: f32) -> f32 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use serde_json::json;
 
     #[test]
     fn schlick_goes_from_f0_to_one() {
         let f0 = Vec3::splat(0.04);
         assert!((schlick(f0, 1.0) - f0).length() < 1e-7);
         assert!((schlick(f0, 0.0) - Vec3::ONE).length() < 1e-7);
-    }
-
-    #[test]
-    fn surfaces_read_the_extensions() {
-        let json = json!({ "materials": [{
-            "pbrMetallicRoughness": { "metallicFactor": 0.0, "roughnessFactor": 0.1 },
-            "extensions": {
-                "KHR_materials_transmission": { "transmissionFactor": 0.9 },
-                "KHR_materials_ior": { "ior": 1.33 },
-                "KHR_materials_volume": { "attenuationColor": [0.5, 1.0, 1.0], "attenuationDistance": 2.0 }
-            }
-        }]});
-        let m = Material {
-            source: Some(0),
-            ..Material::default()
-        };
-        let s = Surface::from_json(&m, &json);
-        assert_eq!((s.metallic, s.roughness, s.transmission), (0.0, 0.1, 0.9));
-        assert!((s.ior - 1.33).abs() < 1e-6);
-        assert!((s.attenuation.x - 0.5f32.ln().abs() / 2.0).abs() < 1e-6);
-        assert_eq!(s.attenuation.y, 0.0);
-        assert_eq!(
-            Surface::from_json(&Material::default(), &json),
-            Surface::default()
-        );
     }
 }

@@ -9,10 +9,10 @@ mod textures;
 use std::path::{Path, PathBuf};
 
 use base64::Engine as _;
-use glam::{Mat3, Mat4, Vec2, Vec3};
+use glam::{Mat3, Mat4, Quat, Vec2, Vec3};
 use gltf::mesh::{Mode, Semantic};
 
-use super::{Instance, Light, LightKind, Scene, Source};
+use super::{Camera, GltfCamera, Instance, Light, LightKind, Scene, Source};
 use crate::{Error, Result};
 
 /// Extensions that may appear in `extensionsRequired`; anything else changes geometry or
@@ -50,6 +50,7 @@ pub fn load(path: &Path) -> Result<(Scene, Source)> {
 
     let mut loader = Loader {
         files: &files,
+        json: &json,
         document: &document,
         buffers: &buffers,
         scene: Scene::default(),
@@ -57,7 +58,7 @@ pub fn load(path: &Path) -> Result<(Scene, Source)> {
     };
     loader.load_scene()?;
     let mut scene = loader.scene;
-    textures::add_materials(&files, &document, &buffers, &mut scene)?;
+    textures::add_materials(&files, &document, &json, &buffers, &mut scene)?;
     if json_list_contains(&json, "extensionsUsed", "KHR_texture_transform") {
         warn(
             &mut scene,
@@ -245,6 +246,8 @@ fn warn(scene: &mut Scene, message: impl Into<String>) {
 /// Walks the scene graph and gathers geometry and lights.
 struct Loader<'a> {
     files: &'a Files<'a>,
+    /// The document as parsed, for what the gltf crate does not expose (`extras`).
+    json: &'a serde_json::Value,
     document: &'a gltf::Document,
     buffers: &'a [Vec<u8>],
     scene: Scene,
@@ -300,12 +303,14 @@ impl Loader<'_> {
         let mut visited = vec![false; document.nodes().len()];
         // Depth-first, children in document order; a stack rather than recursion so deep
         // hierarchies cannot overflow.
-        let mut stack: Vec<(gltf::Node, Mat4)> = gltf_scene
+        // Each entry carries the parent's world transform twice: as the gltf crate composes it
+        // (geometry, lights) and as glam composes it (cameras, see `camera_matrix`).
+        let mut stack: Vec<(gltf::Node, Mat4, Mat4)> = gltf_scene
             .nodes()
-            .map(|node| (node, Mat4::IDENTITY))
+            .map(|node| (node, Mat4::IDENTITY, Mat4::IDENTITY))
             .collect();
         stack.reverse();
-        while let Some((node, parent)) = stack.pop() {
+        while let Some((node, parent, camera_parent)) = stack.pop() {
             if std::mem::replace(&mut visited[node.index()], true) {
                 let message = format!(
                     "{} is reached twice from the scene (a cycle or a node with two parents)",
@@ -326,8 +331,12 @@ impl Loader<'_> {
             if let Some(light) = node.light() {
                 self.add_light(&light, &placement);
             }
+            let camera_world = camera_parent * camera_matrix(node.transform());
+            if let Some(camera) = node.camera() {
+                self.add_camera(&node, &camera, camera_world);
+            }
             let first_child = stack.len();
-            stack.extend(node.children().map(|child| (child, world)));
+            stack.extend(node.children().map(|child| (child, world, camera_world)));
             stack[first_child..].reverse();
         }
         Ok(())
@@ -554,6 +563,11 @@ impl Loader<'_> {
         scene
             .triangle_instance
             .extend(std::iter::repeat_n(instance, kept.len()));
+        // A baked file names each primitive's EXR page; the renderer reads it.
+        let extras = &self.json["meshes"][mesh.index()]["primitives"][primitive.index()]["extras"];
+        let lightmap = extras["lightmap"]["exr"]
+            .as_str()
+            .map(|uri| self.files.dir.join(percent_decode(uri)));
         scene.instances.push(Instance {
             node: node.index() as u32,
             mesh: mesh.index() as u32,
@@ -565,6 +579,7 @@ impl Loader<'_> {
             back_of: None,
             back: None,
             has_uv1,
+            lightmap,
         });
         Ok(instance)
     }
@@ -634,6 +649,38 @@ impl Loader<'_> {
             intensity: intensity.max(Vec3::ZERO),
             range: light.range().filter(|r| *r > 0.0),
         });
+    }
+
+    /// A perspective camera placed by `node`; orthographic ones are skipped (a pinhole renderer
+    /// cannot show them).
+    fn add_camera(&mut self, node: &gltf::Node, camera: &gltf::Camera, world: Mat4) {
+        let gltf::camera::Projection::Perspective(perspective) = camera.projection() else {
+            return;
+        };
+        let name = camera.name().or(node.name());
+        self.scene.cameras.push(GltfCamera {
+            name: name.map(str::to_owned),
+            index: camera.index(),
+            camera: Camera::from_world(world, perspective.yfov(), perspective.aspect_ratio()),
+        });
+    }
+}
+
+/// A node's local transform for placing cameras: glam's composition of the unit rotation, or
+/// the matrix. It rounds differently from the gltf crate's `matrix()` (which places geometry);
+/// cameras have always been placed this way, and rendered views stay bit-identical with it.
+fn camera_matrix(transform: gltf::scene::Transform) -> Mat4 {
+    match transform {
+        gltf::scene::Transform::Matrix { matrix } => Mat4::from_cols_array_2d(&matrix),
+        gltf::scene::Transform::Decomposed {
+            translation,
+            rotation,
+            scale,
+        } => Mat4::from_scale_rotation_translation(
+            Vec3::from(scale),
+            Quat::from_array(rotation).normalize(),
+            Vec3::from(translation),
+        ),
     }
 }
 
@@ -735,7 +782,7 @@ fn vertex_normals(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::scene::Wrap;
+    use crate::scene::{Surface, Wrap, select};
     use serde_json::{Value, json};
     use std::f32::consts::FRAC_1_SQRT_2;
 
@@ -1132,6 +1179,86 @@ mod tests {
     }
 
     #[test]
+    fn surfaces_read_the_extensions() {
+        let (bin, _) = triangle_mesh(None);
+        let doc = bin.document(json!({
+            "scenes": [{"nodes": [0]}],
+            "nodes": [{"mesh": 0}],
+            "meshes": [{"primitives": [
+                {"attributes": {"POSITION": 0}, "material": 0},
+                {"attributes": {"POSITION": 0}},
+            ]}],
+            "materials": [{
+                "pbrMetallicRoughness": { "metallicFactor": 0.0, "roughnessFactor": 0.1 },
+                "extensions": {
+                    "KHR_materials_transmission": { "transmissionFactor": 0.9 },
+                    "KHR_materials_ior": { "ior": 1.33 },
+                    "KHR_materials_volume": { "attenuationColor": [0.5, 1.0, 1.0], "attenuationDistance": 2.0 }
+                }
+            }],
+        }));
+        let scene = load_ok(&doc);
+        let s = &scene.materials[0].surface;
+        assert_eq!((s.metallic, s.roughness, s.transmission), (0.0, 0.1, 0.9));
+        assert!((s.ior - 1.33).abs() < 1e-6);
+        assert!((s.attenuation.x - 0.5f32.ln().abs() / 2.0).abs() < 1e-6);
+        assert_eq!(s.attenuation.y, 0.0);
+        // glTF's default material.
+        assert_eq!(scene.materials[1].source, None);
+        assert_eq!(scene.materials[1].surface, Surface::default());
+    }
+
+    #[test]
+    fn node_transforms_place_cameras() {
+        let (bin, _) = triangle_mesh(None);
+        let doc = bin.document(json!({
+            "scene": 0,
+            "scenes": [{ "nodes": [0] }],
+            "nodes": [
+                { "translation": [1.0, 0.0, 0.0], "children": [1, 2] },
+                { "name": "cam", "translation": [0.0, 2.0, 0.0], "camera": 0 },
+                { "camera": 1 }
+            ],
+            "cameras": [
+                { "type": "perspective", "perspective": { "yfov": 0.5, "znear": 0.1 } },
+                { "type": "orthographic", "orthographic": { "xmag": 1.0, "ymag": 1.0, "znear": 0.1, "zfar": 10.0 } }
+            ]
+        }));
+        let cameras = load_ok(&doc).cameras;
+        assert_eq!(cameras.len(), 1, "orthographic cameras are skipped");
+        let c = &select(&cameras, "cam").unwrap().camera;
+        assert!((c.eye - Vec3::new(1.0, 2.0, 0.0)).length() < 1e-6);
+        assert!((c.forward + Vec3::Z).length() < 1e-6);
+        assert!(select(&cameras, "0").is_ok() && select(&cameras, "7").is_err());
+    }
+
+    #[test]
+    fn lightmap_references_of_a_baked_file_are_resolved() {
+        let (bin, _) = triangle_mesh(None);
+        let lightmap = json!({"lightmap": {"exr": "my%20scene_lightmap0.exr", "page": 0}});
+        let doc = bin.document(json!({
+            "scenes": [{"nodes": [0]}],
+            "nodes": [{"mesh": 0}],
+            "meshes": [{"primitives": [
+                {"attributes": {"POSITION": 0}, "extras": lightmap, "material": 0},
+                {"attributes": {"POSITION": 0}},
+            ]}],
+            "materials": [{"doubleSided": true}],
+        }));
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("scene.gltf");
+        std::fs::write(&path, serde_json::to_vec(&doc).unwrap()).unwrap();
+        let scene = load(&path).unwrap().0;
+        let expected = Some(dir.path().join("my scene_lightmap0.exr"));
+        assert_eq!(scene.instances[0].lightmap, expected);
+        assert_eq!(
+            scene.instances[1].lightmap, expected,
+            "the back face shares the page"
+        );
+        assert_eq!(scene.instances[2].lightmap, None);
+    }
+
+    #[test]
     fn punctual_lights_are_placed_in_world_space() {
         let (bin, meshes) = triangle_mesh(None);
         let s = FRAC_1_SQRT_2;
@@ -1342,30 +1469,6 @@ mod tests {
         }
     }
 
-    /// A GLB container: header, JSON chunk (space padded), BIN chunk (zero padded).
-    fn glb(json: &Value, bin: &[u8]) -> Vec<u8> {
-        let mut json = serde_json::to_vec(json).unwrap();
-        while !json.len().is_multiple_of(4) {
-            json.push(b' ');
-        }
-        let mut bin = bin.to_vec();
-        while !bin.len().is_multiple_of(4) {
-            bin.push(0);
-        }
-        let total = 12 + 8 + json.len() + 8 + bin.len();
-        let mut out = Vec::with_capacity(total);
-        out.extend_from_slice(b"glTF");
-        out.extend_from_slice(&2u32.to_le_bytes());
-        out.extend_from_slice(&(total as u32).to_le_bytes());
-        out.extend_from_slice(&(json.len() as u32).to_le_bytes());
-        out.extend_from_slice(b"JSON");
-        out.extend_from_slice(&json);
-        out.extend_from_slice(&(bin.len() as u32).to_le_bytes());
-        out.extend_from_slice(b"BIN\0");
-        out.extend_from_slice(&bin);
-        out
-    }
-
     #[test]
     fn glb_loads_like_gltf() {
         let (bin, meshes) = triangle_mesh(None);
@@ -1381,7 +1484,12 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         // Detected by magic, not by extension.
         let path = dir.path().join("scene.gltf");
-        std::fs::write(&path, glb(&glb_doc, &bin.bytes)).unwrap();
+        let json = serde_json::to_vec(&glb_doc).unwrap();
+        std::fs::write(
+            &path,
+            crate::output::glb::container(json, bin.bytes.clone()),
+        )
+        .unwrap();
         let (scene, source) = load(&path).unwrap();
         assert!(source.is_glb);
         assert_eq!(source.json, glb_doc);

@@ -1,14 +1,19 @@
-//! Stage 1 — `Scene`: the glTF input resolved into world-space triangles, materials and lights.
+//! Stage 1 — `Scene`: the glTF input resolved into world-space triangles, materials, lights and
+//! cameras.
 //!
 //! The loader ([`load`]) resolves every input quirk (node transforms, instancing, strips and fans,
 //! missing normals, emissive strength, sRGB textures, double-sided materials) so later stages never
-//! look at glTF. It also keeps the untouched input document ([`Source`]) for the output writer.
+//! look at glTF. It resolves what the renderer needs too — each material's specular parameters
+//! ([`Surface`]), each instance's lightmap page (`extras.lightmap` of a baked file) and the
+//! document's cameras — so `render` never reads glTF either. It also keeps the untouched input
+//! document ([`Source`]) for the output writer.
 //!
 //! Double-sided surfaces: each face of a `doubleSided` primitive receives its own light (a wall
 //! between a lit and a dark room), so the loader emits a second, flipped instance (`back_of`) with
 //! reversed winding and negated normals. It gets its own lightmap charts and is written to the
 //! output glTF as an extra single-sided primitive.
 
+mod camera;
 mod gltf_in;
 
 use std::ops::Range;
@@ -16,6 +21,7 @@ use std::path::PathBuf;
 
 use glam::{Vec2, Vec3};
 
+pub use camera::{Camera, GltfCamera, select};
 pub use gltf_in::load;
 
 /// Reflectance is clamped to this: ρ = 1 (glTF's default white) in a closed room would make
@@ -42,6 +48,8 @@ pub struct Scene {
     pub materials: Vec<Material>,
     pub textures: Vec<Texture>,
     pub lights: Vec<Light>,
+    /// Every perspective camera placed by a node of the scene, in node traversal order.
+    pub cameras: Vec<GltfCamera>,
     /// Counts of what the loader skipped or changed (the CLI reports them).
     pub stats: LoadStats,
 }
@@ -69,6 +77,9 @@ pub struct Instance {
     pub back: Option<u32>,
     /// The primitive has a `TEXCOORD_1` of its own.
     pub has_uv1: bool,
+    /// The EXR page named by the primitive's `extras.lightmap.exr` (a baked scene; resolved
+    /// against the glTF file's folder), for the renderer.
+    pub lightmap: Option<PathBuf>,
 }
 
 /// A material as the light transport sees it (linear RGB).
@@ -86,6 +97,8 @@ pub struct Material {
     /// Index into [`Scene::textures`], sampled through `TEXCOORD_0`.
     pub emissive_texture: Option<u32>,
     pub double_sided: bool,
+    /// What the renderer's specular layer needs; the bake treats every surface as Lambertian.
+    pub surface: Surface,
 }
 
 impl Default for Material {
@@ -99,6 +112,39 @@ impl Default for Material {
             emission: Vec3::ZERO,
             emissive_texture: None,
             double_sided: false,
+            surface: Surface::default(),
+        }
+    }
+}
+
+/// The specular parameters of a material (glTF metallic-roughness and extensions). Textures of
+/// these factors (metallicRoughnessTexture, …) are not sampled.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Surface {
+    pub metallic: f32,
+    pub roughness: f32,
+    /// KHR_materials_transmission `transmissionFactor`.
+    pub transmission: f32,
+    /// KHR_materials_ior (1.5 by default).
+    pub ior: f32,
+    /// KHR_materials_specular `specularFactor` and `specularColorFactor`.
+    pub specular: f32,
+    pub specular_color: Vec3,
+    /// Absorption coefficient σ per world unit (KHR_materials_volume), zero when clear.
+    pub attenuation: Vec3,
+}
+
+impl Default for Surface {
+    /// glTF's defaults: metallic 1, roughness 1 (fully rough, so no specular layer).
+    fn default() -> Self {
+        Surface {
+            metallic: 1.0,
+            roughness: 1.0,
+            transmission: 0.0,
+            ior: 1.5,
+            specular: 1.0,
+            specular_color: Vec3::ONE,
+            attenuation: Vec3::ZERO,
         }
     }
 }
@@ -256,6 +302,15 @@ impl Scene {
             Some(t) => factor * self.textures[t as usize].sample(uv),
             None => factor,
         }
+    }
+
+    /// World bounding box `(lo, hi)` of all vertices (`(Vec3::MAX, Vec3::MIN)` when empty).
+    pub fn bounds(&self) -> (Vec3, Vec3) {
+        self.positions
+            .iter()
+            .fold((Vec3::MAX, Vec3::MIN), |(lo, hi), &p| {
+                (lo.min(p), hi.max(p))
+            })
     }
 
     /// Emission is anywhere in the scene (an emissive material or a light).

@@ -728,6 +728,7 @@ mod tests {
                 back_of: None,
                 back: None,
                 has_uv1: false,
+                lightmap: None,
             }],
             materials: vec![material],
             textures,

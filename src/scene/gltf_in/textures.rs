@@ -1,19 +1,22 @@
-//! Materials and their textures: base colour and emission, sRGB-decoded to linear RGB.
+//! Materials and their textures: base colour and emission, sRGB-decoded to linear RGB, and the
+//! specular parameters the renderer needs ([`Surface`]).
 
 use std::collections::BTreeMap;
 
 use glam::Vec3;
+use serde_json::Value;
 
 use super::{Files, warn};
 use crate::Result;
 use crate::scene::MAX_ALBEDO;
-use crate::scene::{Material, Scene, Texture, Wrap};
+use crate::scene::{Material, Scene, Surface, Texture, Wrap};
 
 /// Appends one [`Material`] per glTF material, in document order, plus glTF's default material
 /// when some instance has none. Only materials that instances use get their textures decoded.
 pub(super) fn add_materials(
     files: &Files,
     document: &gltf::Document,
+    json: &Value,
     buffers: &[Vec<u8>],
     scene: &mut Scene,
 ) -> Result<()> {
@@ -48,6 +51,7 @@ pub(super) fn add_materials(
             emission: (Vec3::from(material.emissive_factor()) * strength).max(Vec3::ZERO),
             emissive_texture: None,
             double_sided: material.double_sided(),
+            surface: surface(&json["materials"][index]),
         };
         if used[index] {
             let label = |slot: &str| format!("material {index} {slot}");
@@ -65,6 +69,39 @@ pub(super) fn add_materials(
         scene.materials.push(Material::default());
     }
     Ok(())
+}
+
+/// The specular parameters of glTF material `m` (its JSON: the gltf crate is built without the
+/// extensions read here), glTF's defaults where absent.
+fn surface(m: &Value) -> Surface {
+    let mut s = Surface::default();
+    let f = |v: &Value, default: f32| v.as_f64().map_or(default, |x| x as f32);
+    let rgb = |v: &Value, default: Vec3| {
+        let a = v.as_array().filter(|a| a.len() >= 3);
+        a.map_or(default, |a| {
+            Vec3::new(f(&a[0], 0.0), f(&a[1], 0.0), f(&a[2], 0.0))
+        })
+    };
+    let pbr = &m["pbrMetallicRoughness"];
+    s.metallic = f(&pbr["metallicFactor"], 1.0).clamp(0.0, 1.0);
+    s.roughness = f(&pbr["roughnessFactor"], 1.0).clamp(0.0, 1.0);
+    let ext = &m["extensions"];
+    s.transmission = f(
+        &ext["KHR_materials_transmission"]["transmissionFactor"],
+        0.0,
+    )
+    .clamp(0.0, 1.0);
+    s.ior = f(&ext["KHR_materials_ior"]["ior"], 1.5).max(1.0);
+    let spec = &ext["KHR_materials_specular"];
+    s.specular = f(&spec["specularFactor"], 1.0).clamp(0.0, 1.0);
+    s.specular_color = rgb(&spec["specularColorFactor"], Vec3::ONE).max(Vec3::ZERO);
+    let volume = &ext["KHR_materials_volume"];
+    let distance = f(&volume["attenuationDistance"], f32::INFINITY);
+    let color = rgb(&volume["attenuationColor"], Vec3::ONE).clamp(Vec3::splat(1e-6), Vec3::ONE);
+    if distance.is_finite() && distance > 0.0 {
+        s.attenuation = -Vec3::new(color.x.ln(), color.y.ln(), color.z.ln()) / distance;
+    }
+    s
 }
 
 /// Decodes each image once and stores each (image, sampler) pair once in `scene.textures`.

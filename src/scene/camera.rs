@@ -1,11 +1,11 @@
-//! Pinhole cameras: from a glTF camera node, from eye/target/field of view, or framing a box.
+//! Pinhole cameras: from a glTF camera node (the loader resolves them into
+//! [`Scene::cameras`](super::Scene::cameras)), from eye/target/field of view, or framing a box.
 //!
 //! A camera looks along its −Z axis with +Y up (the glTF convention). `yfov` is the vertical
 //! field of view; the horizontal one follows from the image aspect ratio (glTF says the
 //! viewport's aspect wins over the camera's `aspectRatio`, which only suggests an image size).
 
-use glam::{Mat4, Quat, Vec2, Vec3};
-use serde_json::Value;
+use glam::{Mat4, Vec2, Vec3};
 
 use crate::{Error, Result};
 
@@ -79,7 +79,8 @@ impl Camera {
     }
 }
 
-/// A perspective camera of the glTF document, placed by its node.
+/// A perspective camera of the glTF document, placed by its node (orthographic cameras are
+/// skipped: a pinhole renderer cannot show them).
 #[derive(Clone, Debug)]
 pub struct GltfCamera {
     /// The camera's name, else its node's name.
@@ -87,57 +88,6 @@ pub struct GltfCamera {
     /// Index into the document's `cameras`.
     pub index: usize,
     pub camera: Camera,
-}
-
-/// Every perspective camera placed by a node of the default scene, in node traversal order.
-/// Orthographic cameras are skipped (a pinhole renderer cannot show them).
-pub fn gltf_cameras(json: &Value) -> Vec<GltfCamera> {
-    let mut out = Vec::new();
-    let nodes = json["nodes"].as_array().map(Vec::as_slice).unwrap_or(&[]);
-    let scene = json["scene"].as_u64().unwrap_or(0) as usize;
-    let roots: Vec<usize> = json["scenes"][scene]["nodes"]
-        .as_array()
-        .map(|r| r.iter().filter_map(|n| n.as_u64()).map(|n| n as usize))
-        .into_iter()
-        .flatten()
-        .collect();
-    let mut stack: Vec<(usize, Mat4, u32)> = roots
-        .iter()
-        .rev()
-        .map(|&n| (n, Mat4::IDENTITY, 0))
-        .collect();
-    while let Some((n, parent, depth)) = stack.pop() {
-        let Some(node) = nodes.get(n) else { continue };
-        // A cycle in a malformed file must not hang the renderer.
-        if depth > 256 {
-            continue;
-        }
-        let world = parent * local_matrix(node);
-        if let Some(c) = node["camera"].as_u64() {
-            let camera = &json["cameras"][c as usize];
-            let p = &camera["perspective"];
-            if let Some(yfov) = p["yfov"].as_f64() {
-                let name = camera["name"].as_str().or(node["name"].as_str());
-                out.push(GltfCamera {
-                    name: name.map(str::to_owned),
-                    index: c as usize,
-                    camera: Camera::from_world(
-                        world,
-                        yfov as f32,
-                        p["aspectRatio"].as_f64().map(|a| a as f32),
-                    ),
-                });
-            }
-        }
-        let children = node["children"]
-            .as_array()
-            .map(Vec::as_slice)
-            .unwrap_or(&[]);
-        for child in children.iter().rev().filter_map(Value::as_u64) {
-            stack.push((child as usize, world, depth + 1));
-        }
-    }
-    out
 }
 
 /// Picks a camera by name (camera or node name) or by index into the document's `cameras`.
@@ -163,49 +113,9 @@ pub fn select<'a>(cameras: &'a [GltfCamera], selector: &str) -> Result<&'a GltfC
     })
 }
 
-fn local_matrix(node: &Value) -> Mat4 {
-    let floats = |key: &str| -> Option<Vec<f32>> {
-        let a = node[key].as_array()?;
-        a.iter().map(|x| x.as_f64().map(|x| x as f32)).collect()
-    };
-    if let Some(m) = floats("matrix").filter(|m| m.len() == 16) {
-        return Mat4::from_cols_slice(&m);
-    }
-    let t = floats("translation")
-        .filter(|t| t.len() == 3)
-        .map_or(Vec3::ZERO, |t| Vec3::from_slice(&t));
-    let r = floats("rotation")
-        .filter(|r| r.len() == 4)
-        .map_or(Quat::IDENTITY, |r| Quat::from_slice(&r).normalize());
-    let s = floats("scale")
-        .filter(|s| s.len() == 3)
-        .map_or(Vec3::ONE, |s| Vec3::from_slice(&s));
-    Mat4::from_scale_rotation_translation(s, r, t)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-    use serde_json::json;
-
-    #[test]
-    fn node_transforms_place_cameras() {
-        let json = json!({
-            "scene": 0,
-            "scenes": [{ "nodes": [0] }],
-            "nodes": [
-                { "translation": [1.0, 0.0, 0.0], "children": [1] },
-                { "name": "cam", "translation": [0.0, 2.0, 0.0], "camera": 0 }
-            ],
-            "cameras": [{ "type": "perspective", "perspective": { "yfov": 0.5, "znear": 0.1 } }]
-        });
-        let cameras = gltf_cameras(&json);
-        assert_eq!(cameras.len(), 1);
-        let c = &select(&cameras, "cam").unwrap().camera;
-        assert!((c.eye - Vec3::new(1.0, 2.0, 0.0)).length() < 1e-6);
-        assert!((c.forward + Vec3::Z).length() < 1e-6);
-        assert!(select(&cameras, "0").is_ok() && select(&cameras, "7").is_err());
-    }
 
     #[test]
     fn directions_span_the_field_of_view() {

@@ -27,14 +27,13 @@
 //! |-----------|---------|------------------------------------------------------------------|
 //! | `range`   | [`DEFAULT_RANGE`] = 8 | largest value stored; the dark-end step is `range/255²` |
 //!
-//! The bake writes `<stem>_lightmap<k>_rgbm.png` per page with `--rgbm` (range 8). Invalid
+//! The bake writes `<stem>_lightmap<k>_rgbm.png` per page with `--rgbm` (range 8), through
+//! [`super::png::write_rgbm_png`]. Invalid
 //! (never solved nor dilated) and non-finite texels are stored as black.
 
 use glam::Vec3;
-use image::{ExtendedColorType, ImageEncoder};
 
-use super::Page;
-use crate::{Error, Result};
+use crate::lightmap::Page;
 
 /// The range the bake encodes with: lightmaps of interiors lit to ordinary brightness stay
 /// below 8; brighter texels clamp.
@@ -88,23 +87,11 @@ pub fn decode(rgba: &[u8], width: u32, height: u32, range: f32) -> Page {
     }
 }
 
-/// A page as an RGBM PNG (8-bit RGBA, linear, see the module docs).
-pub fn write_png(page: &Page, range: f32) -> Result<Vec<u8>> {
-    let mut png = Vec::new();
-    image::codecs::png::PngEncoder::new(&mut png)
-        .write_image(
-            &encode(page, range),
-            page.width,
-            page.height,
-            ExtendedColorType::Rgba8,
-        )
-        .map_err(|e| Error::io("<rgbm png>", std::io::Error::other(e.to_string())))?;
-    Ok(png)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::output::png::write_rgbm_png;
+    use crate::output::test_page;
 
     /// The bound of the module docs: `(max(v) + range/255) / 510` per channel.
     fn bound(v: Vec3, range: f32) -> f32 {
@@ -183,25 +170,12 @@ mod tests {
 
     #[test]
     fn png_decodes_to_the_page_within_the_bound() {
-        let rgb = vec![
-            Vec3::new(0.123, 5.5, 1.0),
-            Vec3::new(0.0, 1.0, 2.0),
-            Vec3::new(7.25, 0.001, 0.5),
-            Vec3::new(3.0, 3.0, 3.0),
-            Vec3::new(0.75, 0.0625, 42.0),
-            Vec3::new(1.0, 1.0, 1.0),
-        ];
-        let page = Page {
-            width: 3,
-            height: 2,
-            valid: vec![true, true, true, true, true, false],
-            rgb: rgb.clone(),
-        };
-        let png = write_png(&page, DEFAULT_RANGE).unwrap();
+        let page = test_page();
+        let png = write_rgbm_png(&page, DEFAULT_RANGE).unwrap();
         let image = image::load_from_memory(&png).unwrap().to_rgba8();
         assert_eq!(image.dimensions(), (3, 2));
         let back = decode(image.as_raw(), 3, 2, DEFAULT_RANGE);
-        for (k, (d, v)) in back.rgb.iter().zip(&rgb).enumerate() {
+        for (k, (d, v)) in back.rgb.iter().zip(&page.rgb).enumerate() {
             let v = if page.valid[k] {
                 v.min(Vec3::splat(DEFAULT_RANGE))
             } else {
