@@ -323,35 +323,21 @@ pub fn compute(input: &Path, config: &BakeConfig, progress: &dyn Progress) -> Re
 
 /// Writes a computed bake: EXR + PNG pages and the glTF, atomically.
 pub fn write(
-    baked: Baked,
+    mut baked: Baked,
     input: &Path,
     out_dir: &Path,
     config: &BakeConfig,
     progress: &dyn Progress,
 ) -> Result<BakeReport> {
-    let Baked {
-        scene,
-        source,
-        atlas,
-        texels,
-        transport,
-        solution,
-        pages,
-        validity,
-        plan,
-        seams,
-        mut stages,
-        ..
-    } = baked;
     let t = Instant::now();
     let stem = input
         .file_stem()
         .and_then(|s| s.to_str())
         .unwrap_or("scene")
         .to_string();
-    let mut staging = Staging::new(out_dir, &protected_files(input, &source))?;
-    let mut page_files = Vec::with_capacity(pages.pages.len());
-    for (k, page) in pages.pages.iter().enumerate() {
+    let mut staging = Staging::new(out_dir, &protected_files(input, &baked.source))?;
+    let mut page_files = Vec::with_capacity(baked.pages.pages.len());
+    for (k, page) in baked.pages.pages.iter().enumerate() {
         let files = PageFiles {
             exr: format!("{stem}_lightmap{k}.exr"),
             png: format!("{stem}_lightmap{k}.png"),
@@ -370,26 +356,33 @@ pub fn write(
         }
         page_files.push(files);
     }
-    output::write_gltf(&scene, &source, &atlas, &page_files, &mut staging, &stem)?;
+    output::write_gltf(
+        &baked.scene,
+        &baked.source,
+        &baked.atlas,
+        &page_files,
+        &mut staging,
+        &stem,
+    )?;
     check_aborted(progress)?;
     let mut files = staging.commit()?;
     // The glTF (or .glb) first, then pages in order.
     files.sort_by_key(|p| !matches!(p.extension().and_then(|e| e.to_str()), Some("gltf" | "glb")));
-    timed(&mut stages, "write", t);
+    timed(&mut baked.stages, "write", t);
 
     Ok(BakeReport {
-        triangles: scene.triangles.len(),
-        texels: texels.len(),
-        pages: pages.pages.len(),
+        triangles: baked.scene.triangles.len(),
+        texels: baked.texels.len(),
+        pages: baked.pages.pages.len(),
         // Every ray cast, the pilot bakes that are not part of the result included.
-        rays: transport.rays + plan.as_ref().map_or(0, |p| p.discarded_rays),
-        iterations: solution.history.len(),
-        residual: solution.residual(),
-        converged: solution.converged,
-        validity,
-        plan,
-        seams,
-        stages,
+        rays: baked.transport.rays + baked.plan.as_ref().map_or(0, |p| p.discarded_rays),
+        iterations: baked.solution.history.len(),
+        residual: baked.solution.residual(),
+        converged: baked.solution.converged,
+        validity: baked.validity,
+        plan: baked.plan,
+        seams: baked.seams,
+        stages: baked.stages,
         files,
     })
 }

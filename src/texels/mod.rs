@@ -4,7 +4,7 @@
 //! (or partly covered) gets the area-weighted average of what covers it: position, normal,
 //! albedo and emission, and the world area actually covered.
 
-pub mod cuts;
+mod cuts;
 mod raster;
 pub mod validity;
 
@@ -13,6 +13,7 @@ use glam::{Vec2, Vec3};
 use crate::atlas::PageSize;
 use crate::scene::MAX_ALBEDO;
 
+pub use cuts::Cuts;
 pub use raster::build;
 
 /// No texel at this page position.
@@ -44,7 +45,7 @@ pub struct Texels {
     /// Fraction of the footprint that sample points jitter over: 1, or the candidate cell
     /// (1/G of a side) around a sample point that validity moved out of geometry, so gathering
     /// rays do not start back inside it, narrowed further to stay clear of a wall that divides
-    /// the texel ([`cuts`]). Empty means 1 everywhere.
+    /// the texel ([`Cuts`]). Empty means 1 everywhere.
     pub jitter: Vec<f32>,
     /// Per page, row-major `width × height`: texel id or [`NO_TEXEL`].
     pub index: Vec<Vec<u32>>,
@@ -56,8 +57,8 @@ pub struct Texels {
     /// Texels whose footprint has no point outside geometry (ascending ids; see
     /// [`validity`]): solved, but their lightmap value is filled from valid neighbours.
     pub invalid: Vec<u32>,
-    /// Texels another surface divides: which texel serves each part of them ([`cuts`]).
-    pub cuts: cuts::Cuts,
+    /// Texels another surface divides: which texel serves each part of them ([`Cuts`]).
+    pub cuts: Cuts,
 }
 
 impl Texels {
@@ -70,7 +71,7 @@ impl Texels {
 
     /// The texel a surface hit on triangle `t` at barycentrics (`u`, `v`) lands in
     /// (`p = (1−u−v)·p0 + u·p1 + v·p2`), or [`NO_TEXEL`] for triangles with no texels. A hit
-    /// on the far side of a wall that divides its texel reads the neighbour there ([`cuts`]).
+    /// on the far side of a wall that divides its texel reads the neighbour there ([`Cuts`]).
     #[inline]
     pub fn texel_at(&self, t: u32, bary: Vec2) -> u32 {
         let [a, b, c] = self.triangle_uv[t as usize];
