@@ -12,12 +12,24 @@ use glam::{Vec2, Vec3};
 
 use crate::atlas::PageSize;
 use crate::scene::MAX_ALBEDO;
+use crate::trace::{Hit, Tracer};
 
 pub use cuts::Cuts;
 pub use raster::build;
 
 /// No texel at this page position.
 pub const NO_TEXEL: u32 = u32::MAX;
+
+/// Where a ray from a surface ends ([`Texels::ray_end`]).
+#[derive(Clone, Copy, Debug)]
+pub enum RayEnd {
+    /// It left the scene: it sees the sky.
+    Escaped,
+    /// On the back of a single-sided surface, or on a surface without texels.
+    Absorbed,
+    /// On the front of a surface, in texel `j`.
+    Texel(Hit, u32),
+}
 
 /// The radiosity patches, structure of arrays indexed by texel id.
 #[derive(Clone, Debug, Default)]
@@ -86,6 +98,22 @@ impl Texels {
             self.cuts.resolve(id, p - Vec2::new(x as f32, y as f32))
         } else {
             self.triangle_texel[t as usize]
+        }
+    }
+
+    /// Where the ray from `origin` along `dir` ends: the sky, an absorbing surface, or a texel.
+    /// Transport, gathering and the reference follow their rays through this one function.
+    #[inline]
+    pub fn ray_end(&self, tracer: &Tracer, origin: Vec3, dir: Vec3) -> RayEnd {
+        let Some(hit) = tracer.closest(origin, dir, f32::INFINITY) else {
+            return RayEnd::Escaped;
+        };
+        if !hit.front {
+            return RayEnd::Absorbed; // the back of a single-sided surface absorbs
+        }
+        match self.texel_at(hit.triangle, hit.bary) {
+            NO_TEXEL => RayEnd::Absorbed,
+            j => RayEnd::Texel(hit, j),
         }
     }
 
