@@ -403,7 +403,9 @@ impl Loader<'_> {
                 warn(&mut self.scene, format!("{label}: {reason}"));
                 continue;
             }
-            let data = guarded(self.files, &label, || self.read_primitive(&primitive, &label))??;
+            let data = guarded(self.files, &label, || {
+                self.read_primitive(&primitive, &label)
+            })??;
             let material = primitive
                 .material()
                 .index()
@@ -455,6 +457,11 @@ impl Loader<'_> {
                     .map(Vec3::from)
                     .collect();
                 same_length(normals.len(), "NORMAL")?;
+                // Passed on, a NaN normal would reach the output file (the validator refuses it).
+                if let Some(bad) = normals.iter().position(|n| !n.is_finite()) {
+                    let message = format!("{label}: NORMAL {bad} is not finite");
+                    return Err(self.files.invalid(message));
+                }
                 Some(normals)
             }
         };
@@ -518,7 +525,7 @@ impl Loader<'_> {
             .collect();
         // Flipped bits in a float's exponent give coordinates far outside any scene; the atlas
         // and the BVH builder cannot take them (obvhs panics), so they are refused here.
-        let beyond = |p: &Vec3| !(p.abs().max_element() <= MAX_COORDINATE);
+        let beyond = |p: &Vec3| !p.is_finite() || p.abs().max_element() > MAX_COORDINATE;
         if let Some(k) = world_positions.iter().position(beyond) {
             let message = format!(
                 "{label}: POSITION {k} is at {} under {}, beyond ±{MAX_COORDINATE:e} units (damaged data?)",
@@ -526,14 +533,6 @@ impl Loader<'_> {
                 node_label(node)
             );
             return Err(self.files.invalid(message));
-        }
-        if let Some(normals) = &data.normals {
-            let bad = normals.iter().filter(|n| !n.is_finite()).count();
-            if bad > 0 {
-                let message =
-                    format!("{label}: {bad} NORMAL values are not finite; face normals used there");
-                warn(&mut self.scene, message);
-            }
         }
 
         let scene = &mut self.scene;
@@ -648,7 +647,9 @@ impl Loader<'_> {
             _ => [0.0; 2],
         };
         if !color.is_finite() || numbers.iter().chain(&cone).any(|x| !x.is_finite()) {
-            return Err(self.files.invalid(format!("{label}: a value is not finite")));
+            return Err(self
+                .files
+                .invalid(format!("{label}: a value is not finite")));
         }
         let kind = match light.kind() {
             Kind::Point => LightKind::Point,
@@ -1596,6 +1597,20 @@ mod tests {
         let warnings = scene.stats.warnings.join("\n");
         assert!(warnings.contains("image 2 cannot be decoded"), "{warnings}");
         assert!(warnings.contains("TEXCOORD_1"), "{warnings}");
+    }
+
+    #[test]
+    fn a_panic_in_the_gltf_crate_becomes_an_error_naming_the_element() {
+        let files = Files {
+            gltf_path: Path::new("scene.gltf"),
+            dir: Path::new(""),
+        };
+        let panics = || -> u32 { panic!("index out of bounds") };
+        let text = message(guarded(&files, "mesh 0 primitive 0", panics).unwrap_err());
+        assert!(
+            text.contains("scene.gltf: mesh 0 primitive 0") && text.contains("index out of bounds"),
+            "{text}"
+        );
     }
 
     #[test]

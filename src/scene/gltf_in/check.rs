@@ -34,7 +34,12 @@ pub(super) fn mesh_references(files: &Files, json: &Value) -> Result<()> {
         for (p, primitive) in primitives.iter().enumerate() {
             let mut references: Vec<(String, &Value)> = Vec::new();
             let attributes = primitive.get("attributes").and_then(Value::as_object);
-            references.extend(attributes.into_iter().flatten().map(|(k, v)| (k.clone(), v)));
+            references.extend(
+                attributes
+                    .into_iter()
+                    .flatten()
+                    .map(|(k, v)| (k.clone(), v)),
+            );
             references.extend(primitive.get("indices").map(|v| ("indices".to_string(), v)));
             let targets = primitive.get("targets").and_then(Value::as_array);
             for (t, target) in targets.into_iter().flatten().enumerate() {
@@ -119,7 +124,10 @@ pub(super) fn byte_ranges(files: &Files, document: &gltf::Document) -> Result<()
             let view = indices.view();
             let range = Range {
                 offset: indices.offset() as u64,
-                stride: view.stride().map_or(index_size, |s| s as u64).max(index_size),
+                stride: view
+                    .stride()
+                    .map_or(index_size, |s| s as u64)
+                    .max(index_size),
                 count: sparse_count,
                 element: index_size,
             };
@@ -186,23 +194,21 @@ pub(super) fn attribute_types(
     for (semantic, accessor) in primitive.attributes() {
         let (data, dims) = (accessor.data_type(), accessor.dimensions());
         let name = semantic.to_string();
+        let texcoord_data = matches!(data, DataType::F32 | DataType::U8 | DataType::U16);
         match semantic {
-            Semantic::Positions | Semantic::Normals => {
-                if data != DataType::F32 || dims != Dimensions::Vec3 {
-                    let message = format!(
-                        "{label} {name} is {data:?} {dims:?}; only float VEC3 is supported (no KHR_mesh_quantization)"
-                    );
-                    return Err(Error::unsupported(files.gltf_path, message));
-                }
+            Semantic::Positions | Semantic::Normals
+                if data != DataType::F32 || dims != Dimensions::Vec3 =>
+            {
+                let message = format!(
+                    "{label} {name} is {data:?} {dims:?}; only float VEC3 is supported (no KHR_mesh_quantization)"
+                );
+                return Err(Error::unsupported(files.gltf_path, message));
             }
-            Semantic::TexCoords(_) => {
-                let data_ok = matches!(data, DataType::F32 | DataType::U8 | DataType::U16);
-                if !data_ok || dims != Dimensions::Vec2 {
-                    let message = format!(
-                        "{label} {name} is {data:?} {dims:?}; glTF requires VEC2 of float, unsigned byte or unsigned short"
-                    );
-                    return Err(files.invalid(message));
-                }
+            Semantic::TexCoords(_) if !texcoord_data || dims != Dimensions::Vec2 => {
+                let message = format!(
+                    "{label} {name} is {data:?} {dims:?}; glTF requires VEC2 of float, unsigned byte or unsigned short"
+                );
+                return Err(files.invalid(message));
             }
             _ => {}
         }
@@ -251,7 +257,10 @@ pub(super) fn texture_transforms(json: &Value) -> Vec<String> {
 }
 
 fn texture_transform_problem(transform: &Value) -> Option<&'static str> {
-    let pair = |v: &Value| v.as_array().is_some_and(|a| a.len() == 2 && a.iter().all(Value::is_number));
+    let pair = |v: &Value| {
+        v.as_array()
+            .is_some_and(|a| a.len() == 2 && a.iter().all(Value::is_number))
+    };
     let Some(t) = transform.as_object() else {
         return Some("not an object");
     };
