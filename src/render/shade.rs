@@ -238,7 +238,9 @@ impl<'a> Shader<'a> {
 
     /// Bilinear lookup of `H/π` at `uv1` (see [`crate::lightmap::Page::bilinear`]).
     fn lightmap(&self, instance: u32, uv: Vec2) -> Vec3 {
-        self.scene.page(instance).map_or(Vec3::ZERO, |p| p.bilinear(uv))
+        self.scene
+            .page(instance)
+            .map_or(Vec3::ZERO, |p| p.bilinear(uv))
     }
 }
 
