@@ -9,6 +9,7 @@ mod form_factors;
 mod hierarchical;
 mod pipeline;
 mod plan;
+mod points;
 mod quality;
 mod reference;
 mod render;
