@@ -65,8 +65,7 @@ fn main() {
 
         let out = tempfile::tempdir().expect("temp dir");
         let used = baked.config.clone();
-        let report =
-            lightbake::write(baked, input, out.path(), &used, &NoProgress).expect("write");
+        let report = lightbake::write(baked, input, out.path(), &used, &NoProgress).expect("write");
         let render = RenderScene::load(&report.files[0]).expect("load the bake");
         let (point_ref, traced) =
             points::compute(input, &config, &params, n, &NoProgress).expect("point reference");

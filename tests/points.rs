@@ -113,3 +113,50 @@ fn hidden_points_are_left_out() {
     assert_eq!(r.points.len(), 2000);
     assert!(r.hidden > 0, "no hidden points");
 }
+
+/// The Cornell box at draft quality: the point figure is finite and within a generous bound,
+/// and at least the texel figure (both with the references' noise taken out): what a renderer
+/// shows between texel centres only adds resolution error to the texels' own.
+#[test]
+fn cornell_box_point_error_includes_the_texel_error() {
+    let input = fixture("cornell_box.gltf");
+    let config = BakeConfig::draft();
+    let baked = lightbake::compute(&input, &config, &NoProgress).unwrap();
+    let tracer = Tracer::new(&baked.scene);
+    let texel_ref = reference::trace(
+        &baked.scene,
+        &baked.texels,
+        &tracer,
+        &params(512),
+        &NoProgress,
+    )
+    .unwrap();
+    let invalid = &baked.texels.invalid;
+    let texel = metrics::without_noise(
+        metrics::rmse_over_mean(&baked.lightmap, &texel_ref.mean, invalid),
+        metrics::noise_over_mean(&texel_ref.std_error, &texel_ref.mean, invalid),
+    );
+
+    let dir = scratch();
+    let used = baked.config.clone();
+    let report = lightbake::write(baked, &input, dir.path(), &used, &NoProgress).unwrap();
+    let render = RenderScene::load(&report.files[0]).unwrap();
+    let (r, _) = points::compute(&input, &config, &params(512), 1024, &NoProgress).unwrap();
+    let c = points::compare(&render, &r);
+    println!(
+        "cornell draft: texel {:.2}%\n{}",
+        texel * 100.0,
+        c.summary()
+    );
+    assert_eq!(c.unmatched, 0);
+    assert!(
+        c.rmse_without_noise.is_finite() && c.rmse_without_noise < 0.15,
+        "{}",
+        c.summary()
+    );
+    assert!(
+        c.rmse_without_noise >= texel,
+        "point {} < texel {texel}",
+        c.rmse_without_noise
+    );
+}
