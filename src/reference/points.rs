@@ -104,7 +104,7 @@ pub fn draw(scene: &Scene, tracer: &Tracer, n: usize, seed: u64) -> Result<Point
             area
         })
         .collect();
-    if !(area > 0.0) {
+    if area <= 0.0 || !area.is_finite() {
         return Err(Error::Option(
             "the scene has no surface to draw points on".into(),
         ));
