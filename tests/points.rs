@@ -21,8 +21,9 @@ fn params(samples: u32) -> ReferenceParams {
 
 /// A point light of 10 W/sr 2 m above a black floor: `H/π = I cos³θ / (π d²)` at every point,
 /// from the path tracer (within 4 standard errors; next-event estimation of a point light
-/// over a black floor has none, so 1e-4 relative is float slack) and from a draft bake read as
-/// a renderer reads it (bilinear lookup).
+/// over a black floor has none, and the path starts one ray offset, 4e-4 m, above the floor,
+/// which changes `cos θ/d²` by up to 3e-4 relative: 1e-3 is that slack) and from a draft bake
+/// read as a renderer reads it (bilinear lookup).
 #[test]
 fn point_light_points_match_the_closed_form() {
     let (intensity, light) = (10.0f32, Vec3::new(0.0, 2.0, 0.0));
@@ -42,7 +43,7 @@ fn point_light_points_match_the_closed_form() {
         .collect();
     for ((m, se), e) in r.mean.iter().zip(&r.std_error).zip(&expected) {
         assert!(
-            (*m - *e).abs().max_element() <= 4.0 * se.max_element() + 1e-4 * e.x,
+            (*m - *e).abs().max_element() <= 4.0 * se.max_element() + 1e-3 * e.x,
             "path-traced {m} vs closed form {e} (standard error {se})"
         );
     }

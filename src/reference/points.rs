@@ -286,7 +286,7 @@ impl PointReference {
             };
             r.points.push(Point {
                 position: Vec3::new(x, y, z),
-                normal: Vec3::new(nx, ny, nz).normalize_or_zero(),
+                normal: Vec3::new(nx, ny, nz),
             });
             r.mean.push(Vec3::new(r_, g, b));
             r.std_error.push(Vec3::new(sr, sg, sb));
