@@ -7,10 +7,9 @@ use glam::Vec3;
 use lightbake::reference::ReferenceParams;
 use lightbake::reference::points::{self, PointReference};
 use lightbake::render::RenderScene;
-use lightbake::trace::Tracer;
-use lightbake::{BakeConfig, NoProgress, metrics, reference};
+use lightbake::{BakeConfig, NoProgress, metrics};
 
-use crate::util::{fixture, scratch};
+use crate::util::{fixture, scratch, texel_reference};
 
 fn params(samples: u32) -> ReferenceParams {
     ReferenceParams {
@@ -123,15 +122,7 @@ fn cornell_box_point_error_includes_the_texel_error() {
     let input = fixture("cornell_box.gltf");
     let config = BakeConfig::draft();
     let baked = lightbake::compute(&input, &config, &NoProgress).unwrap();
-    let tracer = Tracer::new(&baked.scene);
-    let texel_ref = reference::trace(
-        &baked.scene,
-        &baked.texels,
-        &tracer,
-        &params(512),
-        &NoProgress,
-    )
-    .unwrap();
+    let texel_ref = texel_reference(&baked, 512);
     let invalid = &baked.texels.invalid;
     let texel = metrics::without_noise(
         metrics::rmse_over_mean(&baked.lightmap, &texel_ref.mean, invalid),
