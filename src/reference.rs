@@ -67,6 +67,7 @@ use crate::trace::Tracer;
 use crate::{Error, Progress, Result, atlas, scene};
 
 mod camera;
+pub mod points;
 
 pub use crate::bake::{Prepared, prepare};
 pub use camera::{View, trace_view};

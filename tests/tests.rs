@@ -10,6 +10,7 @@ mod hardening;
 mod hierarchical;
 mod pipeline;
 mod plan;
+mod points;
 mod quality;
 mod reference;
 mod render;

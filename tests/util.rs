@@ -40,3 +40,20 @@ pub fn list_files(dir: &std::path::Path) -> Vec<String> {
     out.sort();
     out
 }
+
+/// The path-traced reference at a bake's own texels, `samples` paths per texel.
+pub fn texel_reference(baked: &lightbake::Baked, samples: u32) -> lightbake::reference::Reference {
+    let params = lightbake::reference::ReferenceParams {
+        max_samples: samples,
+        ..Default::default()
+    };
+    let tracer = lightbake::trace::Tracer::new(&baked.scene);
+    lightbake::reference::trace(
+        &baked.scene,
+        &baked.texels,
+        &tracer,
+        &params,
+        &lightbake::NoProgress,
+    )
+    .unwrap()
+}

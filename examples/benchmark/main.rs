@@ -17,6 +17,12 @@
 //! - relative RMSE `sqrt(mean((x−r)²)) / mean(r)` (`rmse_over_mean`);
 //! - p95 and max of `|x−r| / (r + 0.05·mean(r))` (the floor keeps dark texels from dominating).
 //!
+//! The point figure (`point_rmse`, issue 12) is what a renderer shows: each bake is written, read
+//! back as `lightbake render` reads it (`TEXCOORD_1`, bilinear lookup in the EXR pages) and
+//! compared with path-traced `H/π` at random points on visible surfaces
+//! (`lightbake::reference::points`, one point reference per scene): the same relative RMSE,
+//! but between texel centres too, so it includes resolution error the texel figure cannot see.
+//!
 //! The reference's own noise (its RMS standard error, relative to `mean(r)`: `noise_over_mean`)
 //! is drawn as a dashed line: errors below it cannot be told apart from zero. The headline table
 //! ("time to reach 5%, 2%, 1%") subtracts it in quadrature, `sqrt(rmse² − noise²)`
@@ -30,6 +36,8 @@ use std::time::{Duration, Instant};
 
 use glam::Vec3;
 use lightbake::config::{AutoParams, FormFactors, Keep, RowSolver, Technique};
+use lightbake::reference::points::{self, PointReference};
+use lightbake::render::RenderScene;
 use lightbake::{BakeConfig, NoProgress, metrics};
 use plotters::prelude::*;
 
@@ -69,6 +77,8 @@ struct Measured {
     history: Vec<f32>,
     /// For automatic runs: method, solver, rays and light samples chosen.
     chosen: Option<(Technique, u32, u32)>,
+    /// Relative RMSE of the written bake at the scene's reference points (NaN if not measured).
+    point_rmse: f32,
     error: Option<String>,
 }
 
@@ -257,9 +267,10 @@ fn peak_mib() -> f64 {
         .map_or(0.0, |kb| kb / 1024.0)
 }
 
-/// Child mode: bake once, write the lightmap values as raw f32 to `values`, print one line.
+/// Child mode: bake once, write the lightmap values as raw f32 to `values`, write the bake and
+/// compare it with the point reference `points`, print one line.
 fn child(args: &[String]) {
-    let [scene, tpu, method, solver, rays, light, tol, values] = args else {
+    let [scene, tpu, method, solver, rays, light, tol, values, points] = args else {
         panic!("child arguments: {args:?}")
     };
     let auto = method == "auto";
@@ -275,6 +286,7 @@ fn child(args: &[String]) {
     match lightbake::compute(Path::new(scene), &config, &NoProgress) {
         Ok(baked) => {
             let seconds = start.elapsed().as_secs_f64();
+            let peak = peak_mib(); // the bake's, before writing and reading it back
             let bytes: Vec<u8> = baked
                 .lightmap
                 .iter()
@@ -293,24 +305,25 @@ fn child(args: &[String]) {
                 .iter()
                 .map(|i| format!("{:e}", i.residual))
                 .collect();
-            let c = &baked.config;
+            let c = baked.config.clone();
+            let (transport_rays, solution) = (baked.transport.rays, baked.solution.clone());
+            let total_rays = (baked.plan.as_ref())
+                .and_then(|p| p.total_rays)
+                .unwrap_or(c.transport.gather_rays);
+            let point_rmse = point_rmse(baked, Path::new(scene), Path::new(points));
             println!(
-                "ok\t{seconds}\t{}\t{}\t{}\t{}\t{}\t{}\t{}\t{} {} {} {}",
+                "ok\t{seconds}\t{}\t{}\t{}\t{}\t{}\t{}\t{}\t{} {} {} {}\t{point_rmse}",
                 stages.join(" "),
-                baked.transport.rays,
-                baked.solution.history.len(),
-                baked.solution.residual(),
-                baked.solution.converged,
-                peak_mib(),
+                transport_rays,
+                solution.history.len(),
+                solution.residual(),
+                solution.converged,
+                peak,
                 history.join(","),
                 c.technique.method(),
                 c.technique.solver(),
                 // Automatic runs: rays per texel in all, the reused pilot bakes included.
-                baked
-                    .plan
-                    .as_ref()
-                    .and_then(|p| p.total_rays)
-                    .unwrap_or(c.transport.gather_rays),
+                total_rays,
                 c.transport.light_samples
             );
         }
@@ -318,7 +331,20 @@ fn child(args: &[String]) {
     }
 }
 
-fn run_child(scene: &Scene, setting: &Setting, values: &Path) -> Measured {
+/// Writes `baked` next to the point reference `points`, reads it back as a renderer does and
+/// returns its relative RMSE at the reference points.
+fn point_rmse(baked: lightbake::Baked, input: &Path, points: &Path) -> f32 {
+    let out = points.with_extension("bake");
+    let _ = std::fs::remove_dir_all(&out);
+    let config = baked.config.clone();
+    let report = lightbake::write(baked, input, &out, &config, &NoProgress).expect("write");
+    let render = RenderScene::load(&report.files[0]).expect("read the bake back");
+    let text = std::fs::read_to_string(points).expect("point reference");
+    let reference = PointReference::from_csv(&text, points).expect("point reference");
+    points::compare(&render, &reference).rmse
+}
+
+fn run_child(scene: &Scene, setting: &Setting, values: &Path, points: &Path) -> Measured {
     let output = Command::new(std::env::current_exe().unwrap())
         .arg("--child")
         .args([
@@ -334,6 +360,7 @@ fn run_child(scene: &Scene, setting: &Setting, values: &Path) -> Measured {
             &setting.light_samples.to_string(),
             &setting.auto.unwrap_or(setting.tolerance).to_string(),
             values.to_str().unwrap(),
+            points.to_str().unwrap(),
         ])
         .output()
         .expect("run child");
@@ -348,6 +375,7 @@ fn run_child(scene: &Scene, setting: &Setting, values: &Path) -> Measured {
         );
         return Measured {
             error: Some(message),
+            point_rmse: f32::NAN,
             ..Default::default()
         };
     }
@@ -368,6 +396,7 @@ fn run_child(scene: &Scene, setting: &Setting, values: &Path) -> Measured {
                 c.get(3)?.parse().ok()?,
             ))
         }),
+        point_rmse: f.get(10).and_then(|p| p.parse().ok()).unwrap_or(f32::NAN),
         error: None,
     }
 }
@@ -430,6 +459,26 @@ fn reference(scene: &Scene, quick: bool) -> Ref {
         invalid,
         position: computed.texels.position,
     }
+}
+
+/// The scene's point reference (see the module docs), written to `<work>/points_<scene>.csv`
+/// for the children; returns the file and its relative noise.
+fn point_reference(scene: &Scene, work: &Path, quick: bool) -> (PathBuf, f32) {
+    let mut config = BakeConfig::medium();
+    config.atlas.texels_per_unit = scene.texels_per_unit;
+    let params = lightbake::reference::ReferenceParams {
+        samples_per_pass: 32,
+        max_samples: 4096,
+        target_rel_error: Some(if quick { 0.01 } else { 0.005 }),
+        time_limit: Some(Duration::from_secs(scene.reference_seconds / 2)),
+        ..Default::default()
+    };
+    let n = if quick { 1024 } else { 4096 };
+    let (r, _) =
+        points::compute(&scene.path, &config, &params, n, &NoProgress).expect("point reference");
+    let path = work.join(format!("points_{}.csv", scene.name));
+    std::fs::write(&path, r.to_csv()).expect("write the point reference");
+    (path, metrics::noise_over_mean(&r.std_error, &r.mean, &[]))
 }
 
 /// The path tracer itself at increasing sample counts, for the "same error, how much faster"
@@ -741,6 +790,8 @@ fn main() {
             noise * 100.0,
             reference.seconds
         );
+        let (points, point_noise) = point_reference(&scene, &work, quick);
+        eprintln!("   point reference noise {:.2}%", point_noise * 100.0);
         let pt = path_tracer_curve(&scene, &reference, quick);
         let mut scene_rows = Vec::new();
         for setting in settings(&scene, quick) {
@@ -749,7 +800,7 @@ fn main() {
             }
             let values = work.join("values.bin");
             let _ = std::fs::remove_file(&values);
-            let measured = run_child(&scene, &setting, &values);
+            let measured = run_child(&scene, &setting, &values, &points);
             let mut setting = setting;
             if let (Some(_), Some((technique, rays, light))) = (setting.auto, measured.chosen) {
                 (setting.technique, setting.rays) = (technique, rays);
@@ -761,11 +812,12 @@ fn main() {
                 (f32::NAN, f32::NAN, f32::NAN)
             };
             eprintln!(
-                "   {:<26} K={:<5} {:>8.2}s  rmse {:>6.2}%  {}",
+                "   {:<26} K={:<5} {:>8.2}s  rmse {:>6.2}%  points {:>6.2}%  {}",
                 setting.label(),
                 setting.rays,
                 measured.seconds,
                 rmse * 100.0,
+                measured.point_rmse * 100.0,
                 measured.error.as_deref().unwrap_or("")
             );
             scene_rows.push(Row {
@@ -868,15 +920,15 @@ fn main() {
 
     // CSV and Markdown.
     let mut csv = String::from(
-        "scene,method,solver,rays_per_texel,light_samples,seconds,stages,rays,mrays_per_s,peak_mib,iterations,residual,converged,rel_rmse,p95_rel,max_rel,error\n",
+        "scene,method,solver,rays_per_texel,light_samples,seconds,stages,rays,mrays_per_s,peak_mib,iterations,residual,converged,rel_rmse,p95_rel,max_rel,point_rel_rmse,error\n",
     );
     let _ = writeln!(
         md,
-        "| scene | method | solver | K | time (s) | rays (M) | Mrays/s | peak MiB | iterations | rel. RMSE | p95 | max |"
+        "| scene | method | solver | K | time (s) | rays (M) | Mrays/s | peak MiB | iterations | rel. RMSE | p95 | max | point RMSE |"
     );
     let _ = writeln!(
         md,
-        "|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
+        "|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
     );
     for r in &rows {
         let m = &r.measured;
@@ -892,7 +944,7 @@ fn main() {
         };
         let _ = writeln!(
             csv,
-            "{},{},{},{},{},{:.4},{},{},{:.3},{:.1},{},{:e},{},{:.5},{:.5},{:.5},{}",
+            "{},{},{},{},{},{:.4},{},{},{:.3},{:.1},{},{:e},{},{:.5},{:.5},{:.5},{:.5},{}",
             r.scene,
             method,
             r.setting.technique.solver(),
@@ -909,12 +961,13 @@ fn main() {
             r.rmse,
             r.p95,
             r.max,
+            m.point_rmse,
             m.error.as_deref().unwrap_or("").replace(',', ";")
         );
         if let Some(e) = &m.error {
             let _ = writeln!(
                 md,
-                "| {} | {} | {} | {} | — | — | — | — | — | refused: {} | | |",
+                "| {} | {} | {} | {} | — | — | — | — | — | refused: {} | | | |",
                 r.scene,
                 method,
                 r.setting.technique.solver(),
@@ -924,7 +977,7 @@ fn main() {
         } else {
             let _ = writeln!(
                 md,
-                "| {} | {} | {} | {} | {:.2} | {:.1} | {:.1} | {:.0} | {}{} | {:.2}% | {:.1}% | {:.0}% |",
+                "| {} | {} | {} | {} | {:.2} | {:.1} | {:.1} | {:.0} | {}{} | {:.2}% | {:.1}% | {:.0}% | {:.2}% |",
                 r.scene,
                 method,
                 r.setting.technique.solver(),
@@ -937,7 +990,8 @@ fn main() {
                 if m.converged { "" } else { " (cap)" },
                 r.rmse * 100.0,
                 r.p95 * 100.0,
-                r.max * 100.0
+                r.max * 100.0,
+                m.point_rmse * 100.0
             );
         }
     }

@@ -1,5 +1,6 @@
 //! The `lightbake` command line: flags → [`BakeConfig`], progress bars, one-line summary.
 
+mod compare;
 mod progress;
 mod reference;
 mod render;
@@ -32,8 +33,11 @@ enum Command {
     /// Render a camera view of a baked scene (lightmap × albedo, optional specular layer).
     Render(render::Args),
     /// Path-trace reference lightmaps at the same texels as a bake (the accuracy yardstick), or
-    /// with --view a reference image of a camera view.
+    /// with --view a reference image of a camera view, or with --points N a point reference
+    /// (H/π at random points on visible surfaces, for `compare`).
     Reference(reference::Args),
+    /// Compare a baked scene, read as a renderer reads it, with a point reference.
+    Compare(compare::Args),
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -343,6 +347,7 @@ fn main() -> ExitCode {
         Command::Render(args) => render::run(args),
         Command::Reference(args) => reference::run(args),
         Command::Bake(args) => bake(args),
+        Command::Compare(args) => compare::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -36,6 +36,10 @@ pub struct Args {
     /// instead of the texels.
     #[arg(long)]
     view: bool,
+    /// Path-trace N random points on visible surfaces instead of the texels; -o is a CSV file
+    /// for `lightbake compare`.
+    #[arg(long, value_name = "N", conflicts_with = "view")]
+    points: Option<usize>,
     #[command(flatten)]
     camera: ViewArgs,
     /// Exposure of a --view PNG in stops (ignored for EXR).
@@ -47,7 +51,7 @@ pub struct Args {
     quality: Quality,
     #[command(flatten)]
     atlas: AtlasArgs,
-    /// Paths per texel (per pixel with --view) at most; standard error shrinks like 1/√N.
+    /// Paths per texel (per pixel with --view, per point with --points) at most; standard error shrinks like 1/√N.
     #[arg(long, default_value_t = 1024)]
     spp: u32,
     /// Paths per texel between stopping checks.
@@ -95,7 +99,14 @@ baseColor × (path-traced H/π) + emission, --spp paths per pixel. Writes the im
 radiance, .png tone-mapped like render) and <image stem>_stderr.<ext>, its per-pixel standard
 error. Compare it with `lightbake render` without --specular: the difference is the lightmap's
 error. Rays that leave the scene see --sky (give render the same --background).
-  lightbake reference scene.gltf --view --camera NAME --size 256x256 --spp 1024 -o ref.exr";
+  lightbake reference scene.gltf --view --camera NAME --size 256x256 --spp 1024 -o ref.exr
+
+With --points N, -o is a CSV file: N points drawn area-weighted on the input scene's surfaces
+(points whose face looks into geometry are left out and counted), each with the path-traced
+H/π there and its standard error: `#` comment lines, the header x,y,z,nx,ny,nz,r,g,b,se_r,se_g,se_b,
+one row per point (world position, unit normal, H/π, standard error). Compare bakes with it:
+  lightbake reference scene.gltf --points 4096 --spp 4096 --target-error 0.01 -o points.csv
+  lightbake compare baked/scene.gltf --points points.csv";
 
 impl Args {
     fn config(&self) -> BakeConfig {
@@ -139,6 +150,9 @@ pub fn run(args: &Args) -> Result<()> {
     let params = args.params(&config)?;
     if args.view {
         return view(args, &config, &params);
+    }
+    if let Some(n) = args.points {
+        return points(args, n, &config, &params);
     }
     if args.camera.any() {
         bail!("--camera, --eye, --target, --fov and --size need --view");
@@ -234,6 +248,36 @@ fn view(args: &Args, config: &BakeConfig, params: &ReferenceParams) -> Result<()
             args.output.display(),
             stderr_path.display()
         );
+    }
+    Ok(())
+}
+
+/// `--points`: a point reference file.
+fn points(args: &Args, n: usize, config: &BakeConfig, params: &ReferenceParams) -> Result<()> {
+    if n == 0 {
+        bail!("--points must be at least 1");
+    }
+    let bars = Bars::new(args.run.quiet);
+    let (points, traced) = reference::points::compute(&args.scene, config, params, n, &bars)
+        .with_context(|| format!("tracing points of {} failed", args.scene.display()))?;
+    if bars.aborted() {
+        bail!("aborted");
+    }
+    std::fs::write(&args.output, points.to_csv())
+        .with_context(|| format!("writing {} failed", args.output.display()))?;
+    if !args.run.quiet {
+        println!(
+            "{} points ({} hidden points left out), {} paths per point, {:.2} M rays, \
+             relative RMS standard error {:.2}% ({}), {:.2}s",
+            points.points.len(),
+            points.hidden,
+            traced.samples,
+            traced.rays as f64 * 1e-6,
+            traced.rms_rel_error * 100.0,
+            traced.stop.reason(),
+            traced.seconds
+        );
+        println!("wrote {}", args.output.display());
     }
     Ok(())
 }

@@ -142,6 +142,11 @@ impl RenderScene {
         })
     }
 
+    /// The lightmap page of scene instance `instance`, if it has one.
+    pub fn page(&self, instance: u32) -> Option<&Page> {
+        self.instance_page[instance as usize].map(|k| &self.pages[k as usize])
+    }
+
     /// Instances that have no lightmap (they render black apart from emission).
     pub fn unlit_instances(&self) -> usize {
         self.instance_page.iter().filter(|p| p.is_none()).count()

@@ -236,23 +236,11 @@ impl<'a> Shader<'a> {
         None
     }
 
-    /// Bilinear lookup of `H/π` at `uv1`, clamped to the page (dilation filled the gutters).
+    /// Bilinear lookup of `H/π` at `uv1` (see [`crate::lightmap::Page::bilinear`]).
     fn lightmap(&self, instance: u32, uv: Vec2) -> Vec3 {
-        let Some(page) = self.scene.instance_page[instance as usize] else {
-            return Vec3::ZERO;
-        };
-        let page = &self.scene.pages[page as usize];
-        let (w, h) = (page.width as i64, page.height as i64);
-        let x = uv.x * w as f32 - 0.5;
-        let y = uv.y * h as f32 - 0.5;
-        let (x0, y0) = (x.floor(), y.floor());
-        let (fx, fy) = (x - x0, y - y0);
-        let fetch =
-            |xi: i64, yi: i64| page.rgb[(yi.clamp(0, h - 1) * w + xi.clamp(0, w - 1)) as usize];
-        let (x0, y0) = (x0 as i64, y0 as i64);
-        let top = fetch(x0, y0).lerp(fetch(x0 + 1, y0), fx);
-        let bottom = fetch(x0, y0 + 1).lerp(fetch(x0 + 1, y0 + 1), fx);
-        top.lerp(bottom, fy)
+        self.scene
+            .page(instance)
+            .map_or(Vec3::ZERO, |p| p.bilinear(uv))
     }
 }
 

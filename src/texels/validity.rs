@@ -135,20 +135,8 @@ fn probe_texel(
     let (du, dv) = (texels.du[i], texels.dv[i]);
     let full = du.cross(dv).length();
     let reach = (REACH * full.sqrt()).max(8.0 * tracer.epsilon);
-    let (tx, ty) = frame(n);
     let shift = Rng::new(seed, i as u64, PURPOSE).next_vec2();
-    let back_hits = |p: Vec3| -> u32 {
-        let origin = p + n * tracer.epsilon;
-        (0..rays)
-            .filter(|&k| {
-                let local = cosine_hemisphere(hammersley(k, rays, shift));
-                let dir = tx * local.x + ty * local.y + n * local.z;
-                tracer
-                    .closest(origin, dir, reach)
-                    .is_some_and(|hit| !hit.front && hit.t <= reach)
-            })
-            .count() as u32
-    };
+    let back_hits = |p: Vec3| back_hits(tracer, p, n, rays, shift, reach);
 
     let centroid = texels.position[i];
     let at_centroid = back_hits(centroid);
@@ -179,6 +167,24 @@ fn probe_texel(
     }
     let moved = (best.0 < at_centroid).then_some(best.2);
     (moved, best.0 > limit)
+}
+
+/// How many of `rays` cosine-distributed probe rays (Hammersley points shifted by `shift`) from
+/// the surface point `p` with normal `n` (lifted here by the ray epsilon) hit a back face within
+/// `reach`: the inside-geometry test of texels, and of the points of
+/// [`crate::reference::points`].
+pub fn back_hits(tracer: &Tracer, p: Vec3, n: Vec3, rays: u32, shift: Vec2, reach: f32) -> u32 {
+    let (tx, ty) = frame(n);
+    let origin = p + n * tracer.epsilon;
+    (0..rays)
+        .filter(|&k| {
+            let local = cosine_hemisphere(hammersley(k, rays, shift));
+            let dir = tx * local.x + ty * local.y + n * local.z;
+            tracer
+                .closest(origin, dir, reach)
+                .is_some_and(|hit| !hit.front && hit.t <= reach)
+        })
+        .count() as u32
 }
 
 /// Replaces the values of invalid texels by the mean of their valid page neighbours (8-connected,
