@@ -468,3 +468,66 @@ fn renders_match_the_reference_path_tracer() {
         assert!(!check(&wrong.rgb, &label), "{label} passed the check");
     }
 }
+
+/// Issue 13: the bake writes a double-sided wall as two coplanar single-sided primitives (front
+/// and back). `render` must cull the one seen from behind, as glTF's `"doubleSided": false`
+/// asks; without culling the two z-fight and whole triangles of the wall show the other room.
+///
+/// The two-room scene's wall is seen from each room (the frame holds only wall, no doorway) and
+/// compared with a path-traced image of the same camera: each side shows its own lightmap (the
+/// means agree), the lit side has no dark pixel and the dark side no bright one.
+#[test]
+fn a_split_double_sided_wall_shows_each_side_its_own_lightmap() {
+    const SIZE: u32 = 24;
+    let dir = scratch();
+    let baked = bake_scene(dir.path(), &lightbake::testing::two_rooms(), |_| {});
+    let scene = RenderScene::load(&baked).unwrap();
+    let prepared =
+        reference::prepare(&dir.path().join("scene.gltf"), &quick(), &NoProgress).unwrap();
+    let params = ReferenceParams {
+        max_samples: 256,
+        samples_per_pass: 64,
+        ..ReferenceParams::like(&quick())
+    };
+    let target = Vec3::new(0.0, 1.0, 0.7);
+    let mut means = Vec::new();
+    for (side, eye_x) in [("lit side (room A)", -1.0f32), ("dark side (room B)", 1.0)] {
+        let camera = Camera::look_at(Vec3::new(eye_x, 1.0, 0.7), target, 30f32.to_radians());
+        let image = scene.render(&camera, &options(SIZE, false)).unwrap();
+        let view = reference::trace_view(
+            &prepared.scene,
+            &prepared.texels,
+            &prepared.tracer,
+            &camera,
+            SIZE,
+            SIZE,
+            &params,
+            &NoProgress,
+        )
+        .unwrap();
+        let luminance = |v: &Vec3| v.dot(Vec3::splat(1.0 / 3.0));
+        let mean = |rgb: &[Vec3]| rgb.iter().map(luminance).sum::<f32>() / rgb.len() as f32;
+        let (render_mean, reference_mean) = (mean(&image.rgb), mean(&view.mean));
+        let (lo, hi) = image
+            .rgb
+            .iter()
+            .map(luminance)
+            .fold((f32::MAX, 0f32), |(lo, hi), l| (lo.min(l), hi.max(l)));
+        println!(
+            "{side}: render mean {render_mean:.4} (pixels {lo:.4}..{hi:.4}), reference mean {reference_mean:.4}"
+        );
+        assert!(
+            (render_mean / reference_mean - 1.0).abs() < 0.15,
+            "{side}: the render's mean is not the path-traced one"
+        );
+        assert!(
+            lo > 0.5 * reference_mean && hi < 2.0 * reference_mean,
+            "{side}: pixels from {lo} to {hi} around a mean of {reference_mean}"
+        );
+        means.push(render_mean);
+    }
+    assert!(
+        means[0] > 4.0 * means[1],
+        "the lit side is not brighter: {means:?}"
+    );
+}

@@ -27,7 +27,8 @@
 //! `extras.lightmap = {"exr", "page"}`; the EXR pages hold `H/π`. The scene loader resolves
 //! everything the renderer reads — each instance's EXR page, each material's specular
 //! parameters ([`scene::Surface`]), the cameras — so this module never looks at glTF JSON. Scenes without any lightmap are
-//! refused. Limits: no alpha, no texture transforms, punctual lights are invisible (their light
+//! refused. As glTF asks, back faces of single-sided materials are culled (rays pass through
+//! them); the bake writes a double-sided surface as two single-sided primitives back to back. Limits: no alpha, no texture transforms, punctual lights are invisible (their light
 //! is in the lightmap), and the baker treated glass and mirrors as Lambertian (ρ = baseColor),
 //! so shadows behind glass are as dark as behind any opaque object of that colour.
 
@@ -89,6 +90,11 @@ pub struct RenderScene {
     /// Page of each scene instance (`None`: the primitive has no lightmap and shades black
     /// apart from its emission).
     pub instance_page: Vec<Option<u32>>,
+    /// Per scene triangle: its back face is culled (glTF's `"doubleSided": false`; a baked
+    /// double-sided wall is two such primitives, back to back, which would z-fight otherwise).
+    /// Transmissive surfaces are kept: a single-sided one bounds a volume, and its back face
+    /// is where rays leave the glass.
+    pub cull_back: Vec<bool>,
 }
 
 /// A rendered image: linear RGB radiance, row 0 at the top.
@@ -133,12 +139,21 @@ impl RenderScene {
             ));
         }
         let tracer = Tracer::new(&scene);
+        let cull_back = scene
+            .triangle_instance
+            .iter()
+            .map(|&i| {
+                let material = &scene.materials[scene.instances[i as usize].material as usize];
+                !material.double_sided && material.surface.transmission == 0.0
+            })
+            .collect();
         Ok(RenderScene {
             path: path.to_owned(),
             scene,
             tracer,
             pages,
             instance_page,
+            cull_back,
         })
     }
 
