@@ -531,3 +531,75 @@ fn a_split_double_sided_wall_shows_each_side_its_own_lightmap() {
         "the lit side is not brighter: {means:?}"
     );
 }
+
+/// Issue 13: adaptive sampling against uniform sampling at the same mean samples per pixel, on
+/// the Cornell view (emitter included) against a path-traced image, over 4×4 pixel blocks.
+///
+/// | 64×64, 16 spp           | relative RMSE (4×4 blocks) | rays   |
+/// |-------------------------|----------------------------|--------|
+/// | uniform                 | see the test output        |        |
+#[test]
+fn adaptive_sampling_beats_uniform_sampling_at_equal_cost() {
+    const SIZE: u32 = 64;
+    let dir = scratch();
+    let input = fixture("cornell_box.gltf");
+    let config = lightbake::BakeConfig::high();
+    bake(&input, dir.path(), &config, &NoProgress).unwrap();
+    let scene = RenderScene::load(&dir.path().join("cornell_box.gltf")).unwrap();
+    let camera = scene.camera(None, 1.0).unwrap();
+    let prepared = reference::prepare(&input, &config, &NoProgress).unwrap();
+    let params = ReferenceParams {
+        max_samples: 512,
+        samples_per_pass: 64,
+        ..ReferenceParams::like(&config)
+    };
+    let view = reference::trace_view(
+        &prepared.scene,
+        &prepared.texels,
+        &prepared.tracer,
+        &camera,
+        SIZE,
+        SIZE,
+        &params,
+        &NoProgress,
+    )
+    .unwrap();
+    println!("reference view: {}", view.summary());
+    let everything = vec![false; (SIZE * SIZE) as usize];
+    let mut results = Vec::new();
+    for (label, spp, adaptive) in [
+        ("uniform, 16 spp", 16, false),
+        ("adaptive, 16 spp", 16, true),
+        ("uniform, 64 spp", 64, false),
+    ] {
+        let o = RenderOptions {
+            spp,
+            adaptive,
+            ..options(SIZE, false)
+        };
+        let start = std::time::Instant::now();
+        let image = scene.render(&camera, &o).unwrap();
+        let seconds = start.elapsed().as_secs_f64();
+        let (rmse, noise) = image_error(
+            SIZE,
+            &image.rgb,
+            &view.mean,
+            &view.std_error,
+            &everything,
+            4,
+        );
+        println!(
+            "{label}: relative RMSE {:.2}% over 4×4 blocks (reference noise {:.2}%), {} rays, {seconds:.3}s",
+            rmse * 100.0,
+            noise * 100.0,
+            image.rays
+        );
+        results.push((rmse, image.rays));
+    }
+    let (uniform, adaptive) = (results[0], results[1]);
+    assert!(adaptive.1 <= uniform.1, "adaptive sampling cast more rays");
+    assert!(
+        adaptive.0 < 0.75 * uniform.0,
+        "adaptive sampling is not clearly better"
+    );
+}
