@@ -15,14 +15,19 @@
 //! samples missed. Pixels whose score is above `MIN_CONTRAST` × the image's mean luminance,
 //! highest first (ties by pixel index, so the choice is deterministic), get `REFINE_FACTOR × spp`
 //! more samples each until the remaining budget of `(spp − first pass) × pixels` is spent. A
-//! refined pixel averages all its samples; a render never costs more samples than a uniform one.
+//! refined pixel averages all its samples; a render never costs more samples than a uniform one,
+//! and usually fewer.
 
 use glam::Vec3;
 
 use super::{RenderOptions, Samples};
 
-/// A refined pixel gets this many times the mean samples per pixel.
-const REFINE_FACTOR: u32 = 4;
+/// A refined pixel gets this many times the mean samples per pixel. On a 256×256 Cornell view
+/// at 16 spp (4×4-block error against a path-traced image whose own noise is 0.38%): uniform
+/// 0.91%; factor 2: 0.47% with 29% fewer rays (the contrast floor leaves flat pixels alone);
+/// 4: 0.42% and 8: 0.40%, both spending the whole budget. 2 is faster than uniform sampling
+/// and almost as accurate as the others.
+const REFINE_FACTOR: u32 = 2;
 /// Pixels changing less than this fraction of the image's mean luminance are left as they are.
 const MIN_CONTRAST: f32 = 0.02;
 
