@@ -6,7 +6,7 @@ use glam::{Vec2, Vec3};
 
 use crate::sampling::{sample_cdf, triangle_point as sample_triangle};
 use crate::scene::{Light, LightKind, Scene};
-use crate::texels::Texels;
+use crate::texels::{NO_TEXEL, Texels};
 use crate::trace::Tracer;
 
 /// Irradiance (W/m²) at `p` (normal `n`, origin already offset) from one punctual light.
@@ -152,7 +152,8 @@ impl Emitters {
     }
 
     /// The light sample `u ∈ [0,1)²` (stratified: [`Emitters::pick_stratified`]) seen from `x`
-    /// with normal `n`: `None` when either side faces away or the shadow ray is blocked.
+    /// with normal `n`: `None` when [`Emitters::sample_at`] finds none or the shadow ray is
+    /// blocked.
     #[inline]
     pub fn sample_from(
         &self,
@@ -163,30 +164,66 @@ impl Emitters {
     ) -> Option<LightSample> {
         let (tri, u0) = self.pick_stratified(u.x);
         let bary = sample_triangle(Vec2::new(u0, u.y));
-        let (y, n_l) = triangle_point(scene, tri, bary);
-        let to = y - x;
+        let sample = self.sample_at((scene, texels), x, n, tri, bary)?;
+        (!tracer.occluded(x, sample.point)).then_some(sample)
+    }
+
+    /// The point at barycentrics `bary` of emissive triangle `tri` as a light sample seen from
+    /// `x` with normal `n`, visibility not tested (the caller traces the shadow ray to
+    /// [`LightSample::point`]): `None` when either side faces away or the point has no texel.
+    #[inline]
+    pub fn sample_at(
+        &self,
+        (scene, texels): (&Scene, &Texels),
+        x: Vec3,
+        n: Vec3,
+        tri: u32,
+        bary: Vec2,
+    ) -> Option<LightSample> {
+        let (point, n_l) = triangle_point(scene, tri, bary);
+        let to = point - x;
         let r2 = to.length_squared();
         if r2 <= 0.0 {
             return None;
         }
         let dir = to / r2.sqrt();
         let (cos_i, cos_l) = (n.dot(dir), -n_l.dot(dir));
-        if cos_i <= 0.0 || cos_l <= 0.0 || tracer.occluded(x, y) {
+        if cos_i <= 0.0 || cos_l <= 0.0 {
+            return None;
+        }
+        let j = texels.texel_at(tri, bary);
+        if j == NO_TEXEL {
             return None;
         }
         Some(LightSample {
-            le: texels.emission[texels.texel_at(tri, bary) as usize],
+            point,
+            le: texels.emission[j as usize],
             cos_i,
             cos_l,
             r2,
             pdf_area: self.pdf_area[tri as usize],
         })
     }
+
+    /// Solid-angle density with which light sampling picks the point of emissive triangle `tri`
+    /// (geometric normal `n_l`) that a ray along unit `dir` hits at `distance`: the light half
+    /// of the MIS weight of a gathered hit. 0 when the ray sees the triangle's back.
+    #[inline]
+    pub fn pdf_toward(&self, tri: u32, n_l: Vec3, dir: Vec3, distance: f32) -> f32 {
+        let cos_l = -n_l.dot(dir);
+        if cos_l > 0.0 {
+            self.pdf_area[tri as usize] * distance * distance / cos_l
+        } else {
+            0.0
+        }
+    }
 }
 
-/// An unoccluded light sample ([`Emitters::sample_from`]).
+/// A light sample ([`Emitters::sample_at`], unoccluded if from [`Emitters::sample_from`]).
 #[derive(Clone, Copy, Debug)]
 pub struct LightSample {
+    /// The point on the emitter.
+    pub point: Vec3,
     /// Emitted radiance of the texel sampled.
     pub le: Vec3,
     /// Cosines at the receiver and at the emitter.
@@ -196,6 +233,14 @@ pub struct LightSample {
     pub r2: f32,
     /// Area density of the sample on its triangle.
     pub pdf_area: f32,
+}
+
+impl LightSample {
+    /// Solid-angle density of the sample, seen from the receiver.
+    #[inline]
+    pub fn pdf_solid_angle(&self) -> f32 {
+        self.pdf_area * self.r2 / self.cos_l
+    }
 }
 
 pub fn triangle_area(scene: &Scene, tri: &[u32; 3]) -> f32 {

@@ -62,7 +62,7 @@ use crate::lights::{Emitters, punctual_irradiance, triangle_point};
 use crate::sampling::{
     Rng, cosine_hemisphere, frame, power_weight, triangle_point as sample_triangle,
 };
-use crate::texels::{NO_TEXEL, Texels};
+use crate::texels::{RayEnd, Texels};
 use crate::trace::Tracer;
 use crate::{Error, Progress, Result, atlas, scene};
 
@@ -171,45 +171,46 @@ impl Stop {
     }
 }
 
-/// Reference estimate per texel (indexed like [`Texels`]).
+/// A reference estimate per item: per texel (indexed like [`Texels`]) from [`trace`], per pixel
+/// from [`trace_view`] ([`View::pixels`]).
 #[derive(Clone, Debug)]
 pub struct Reference {
-    /// Estimated `H/π`.
+    /// Estimated `H/π` per texel, radiance per pixel.
     pub mean: Vec<Vec3>,
     /// Standard error of `mean`, per channel.
     pub std_error: Vec<Vec3>,
-    /// Paths per texel (the same for every texel).
+    /// Paths per item (the same for every item).
     pub samples: u32,
-    /// Rays cast (closest hits and shadow rays).
+    /// Rays cast (closest hits and shadow rays; primary rays too for pixels).
     pub rays: u64,
     pub seconds: f64,
-    /// Relative RMS standard error over texels (see [`rms_rel_error`]).
+    /// Relative RMS standard error over items, `√(Σσ²/Σμ²)` (see [`rms_rel_error`]).
     pub rms_rel_error: f32,
     pub stop: Stop,
 }
 
 impl Reference {
-    /// One line: samples, rays, speed, error, time.
+    /// One line for texels: samples, rays, speed, error, time.
     pub fn summary(&self) -> String {
         format!(
             "{} texels, {} samples per texel, {}",
             self.mean.len(),
             self.samples,
-            cost_and_error(self.rays, self.seconds, self.rms_rel_error, self.stop)
+            self.cost_and_error()
         )
     }
-}
 
-/// The end of a summary line, the same for texels and pixels: rays, speed, error, time.
-fn cost_and_error(rays: u64, seconds: f64, rms_rel_error: f32, stop: Stop) -> String {
-    format!(
-        "{:.2} M rays ({:.2} M rays/s), relative RMS standard error {:.2}% ({}), {:.2}s",
-        rays as f64 * 1e-6,
-        rays as f64 * 1e-6 / seconds.max(1e-9),
-        rms_rel_error * 100.0,
-        stop.reason(),
-        seconds
-    )
+    /// The end of a summary line, the same for texels and pixels: rays, speed, error, time.
+    fn cost_and_error(&self) -> String {
+        format!(
+            "{:.2} M rays ({:.2} M rays/s), relative RMS standard error {:.2}% ({}), {:.2}s",
+            self.rays as f64 * 1e-6,
+            self.rays as f64 * 1e-6 / self.seconds.max(1e-9),
+            self.rms_rel_error * 100.0,
+            self.stop.reason(),
+            self.seconds
+        )
+    }
 }
 
 /// A texel's footprint point for `u ∈ [0,1)²`, on the surface (not lifted off it). Partly
@@ -462,31 +463,22 @@ impl Paths<'_> {
             let dir = tx * local.x + ty * local.y + n * local.z;
             beta *= rho;
             *rays += 1;
-            let Some(hit) = self.tracer.closest(x, dir, f32::INFINITY) else {
-                if counts {
-                    l += beta * self.params.sky;
+            let (hit, j) = match t.ray_end(self.tracer, x, dir) {
+                RayEnd::Texel(hit, j) => (hit, j),
+                RayEnd::Escaped => {
+                    if counts {
+                        l += beta * self.params.sky;
+                    }
+                    break;
                 }
-                break;
+                RayEnd::Absorbed => break,
             };
-            if !hit.front {
-                break; // the back of a single-sided surface absorbs
-            }
-            let j = t.texel_at(hit.triangle, hit.bary);
-            if j == NO_TEXEL {
-                break;
-            }
             let (p, n_hit) = triangle_point(self.scene, hit.triangle, hit.bary);
             let le = t.emission[j as usize];
             if counts && le.max_element() > 0.0 {
                 // MIS weight of the cosine-sampled hit against light sampling of this point.
                 let p_bsdf = local.z / PI;
-                let pdf_area = self.emitters.pdf_area[hit.triangle as usize];
-                let cos_l = -n_hit.dot(dir);
-                let p_light = if pdf_area > 0.0 && cos_l > 0.0 {
-                    pdf_area * hit.t * hit.t / cos_l
-                } else {
-                    0.0
-                };
+                let p_light = self.emitters.pdf_toward(hit.triangle, n_hit, dir, hit.t);
                 let w = if p_light > 0.0 {
                     p_bsdf * power_weight(p_bsdf, p_light)
                 } else {
@@ -525,28 +517,18 @@ impl Paths<'_> {
         }
         let tri = self.emitters.pick(rng.next_f32());
         let bary = sample_triangle(rng.next_vec2());
-        let (y, n_l) = triangle_point(self.scene, tri, bary);
-        let to = y - x;
-        let r2 = to.length_squared();
-        if r2 <= 0.0 {
+        let Some(y) = self
+            .emitters
+            .sample_at((self.scene, self.texels), x, n, tri, bary)
+        else {
             return e;
-        }
-        let dir = to / r2.sqrt();
-        let (cos_i, cos_l) = (n.dot(dir), -n_l.dot(dir));
-        if cos_i <= 0.0 || cos_l <= 0.0 {
-            return e;
-        }
-        let j = self.texels.texel_at(tri, bary);
-        if j == NO_TEXEL {
-            return e;
-        }
+        };
         *rays += 1;
-        if self.tracer.occluded(x, y) {
+        if self.tracer.occluded(x, y.point) {
             return e;
         }
-        let p_light = self.emitters.pdf_area[tri as usize] * r2 / cos_l;
-        let p_bsdf = cos_i / PI;
-        e + self.texels.emission[j as usize] * (cos_i * power_weight(p_light, p_bsdf))
+        let p_bsdf = y.cos_i / PI;
+        e + y.le * (y.cos_i * power_weight(y.pdf_solid_angle(), p_bsdf))
     }
 }
 

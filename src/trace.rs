@@ -52,7 +52,7 @@ use obvhs::{
     triangle::Triangle,
 };
 
-use crate::scene::Scene;
+use crate::scene::{MAX_COORDINATE, Scene};
 
 /// A triangle whose bounding box is padded: CWBVH nodes quantise child boxes relative to the
 /// parent's extent, and a scene that is flat along an axis (a single floor) has zero extent
@@ -189,6 +189,10 @@ impl Tracer {
             }
             ids.extend(inst.triangles.clone());
         }
+        // The loader refuses coordinates beyond `MAX_COORDINATE`; a scene built by hand may
+        // still hold them, and obvhs' builder panics on them: such triangles stay out of the BVH.
+        let in_range = |v: &u32| scene.positions[*v as usize].abs().max_element() <= MAX_COORDINATE;
+        ids.retain(|&t| scene.triangles[t as usize].iter().all(in_range));
         let tri = |t: u32| {
             let [a, b, c] = scene.triangles[t as usize];
             let p = |v: u32| Vec3A::from(scene.positions[v as usize]);
@@ -207,6 +211,7 @@ impl Tracer {
             (hi - lo)
                 .max_element()
                 .max(hi.abs().max(lo.abs()).max_element())
+                .min(2.0 * MAX_COORDINATE)
         };
         // 1e-5 of the scene size, but never within 4x of obvhs' fixed 1e-4 clamp.
         let epsilon = (extent * 1e-5).max(4e-4);

@@ -147,7 +147,7 @@ fn two_rooms_room_b_is_lit_only_through_the_doorway() {
 
 /// Hits just beside the zero-thickness partition (2 cm, less than half a texel) on the floor,
 /// the ceiling and the side walls, whose texels run on under it, read a texel whose sample
-/// point is on the hit's side of the wall ([`lightbake::texels::cuts`]); without that, about
+/// point is on the hit's side of the wall ([`lightbake::texels::Cuts`]); without that, about
 /// half read the other room's texel.
 #[test]
 fn hits_beside_a_zero_thickness_wall_read_the_texel_on_their_side() {

@@ -202,17 +202,18 @@ fn camera_view_is_deterministic_across_thread_counts() {
         })
     };
     let (a, b) = (run(1, 0), run(2, 0));
-    assert_eq!((a.width, a.height, a.mean.len()), (20, 16, 320));
-    assert_eq!(a.mean, b.mean);
-    assert_eq!(a.std_error, b.std_error);
-    assert_eq!(a.rays, b.rays);
-    assert_ne!(a.mean, run(2, 1).mean);
+    assert_eq!((a.width, a.height, a.pixels.mean.len()), (20, 16, 320));
+    assert_eq!(a.pixels.mean, b.pixels.mean);
+    assert_eq!(a.pixels.std_error, b.pixels.std_error);
+    assert_eq!(a.pixels.rays, b.pixels.rays);
+    assert_ne!(a.pixels.mean, run(2, 1).pixels.mean);
     assert!(
-        a.mean
+        a.pixels
+            .mean
             .iter()
             .all(|v| v.is_finite() && v.min_element() >= 0.0)
     );
-    assert!(a.rms_rel_error > 0.0 && a.samples == 8);
+    assert!(a.pixels.rms_rel_error > 0.0 && a.pixels.samples == 8);
 
     // Looking straight up at the light from below.
     let up = lightbake::render::Camera::look_at(
@@ -237,7 +238,7 @@ fn camera_view_is_deterministic_across_thread_counts() {
         .iter()
         .map(|m| m.emission)
         .fold(Vec3::ZERO, Vec3::max);
-    for (m, se) in v.mean.iter().zip(&v.std_error) {
+    for (m, se) in v.pixels.mean.iter().zip(&v.pixels.std_error) {
         let reflected = *m - le;
         assert!(
             reflected.min_element() >= -4.0 * se.max_element()

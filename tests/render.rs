@@ -457,7 +457,14 @@ fn renders_match_the_reference_path_tracer() {
     let check = |rgb: &[Vec3], label: &str| -> bool {
         let mut ok = true;
         for (block, tol) in [(1u32, 0.025f64), (2, 0.02)] {
-            let (rmse, noise) = image_error(SIZE, rgb, &view.mean, &view.std_error, &skip, block);
+            let (rmse, noise) = image_error(
+                SIZE,
+                rgb,
+                &view.pixels.mean,
+                &view.pixels.std_error,
+                &skip,
+                block,
+            );
             let bound = (1.5 * noise * noise + tol * tol).sqrt();
             println!(
                 "{label}, {block}×{block} blocks: relative RMSE {:.2}%, reference noise {:.2}%, bound {:.2}%",
@@ -473,7 +480,7 @@ fn renders_match_the_reference_path_tracer() {
         check(&image.rgb, "render"),
         "the render does not match the reference"
     );
-    assert!(view.rms_rel_error < 0.03, "reference too noisy");
+    assert!(view.pixels.rms_rel_error < 0.03, "reference too noisy");
     for scale in [1.2, 1.05] {
         with_lightmaps(&mut scene, scale);
         let wrong = scene.render(&camera, &o).unwrap();

@@ -6,6 +6,7 @@ mod analytic;
 mod cli;
 mod denoise;
 mod form_factors;
+mod hardening;
 mod hierarchical;
 mod pipeline;
 mod plan;

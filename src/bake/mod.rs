@@ -122,8 +122,62 @@ pub fn bake(
     progress: &dyn Progress,
 ) -> Result<BakeReport> {
     refuse_overwriting_input(input, out_dir)?;
-    let baked = compute(input, config, progress)?;
+    config.validate()?;
+    let t = Instant::now();
+    let (scene, source) = load(input, progress)?;
+    if scene.triangles.is_empty() {
+        return pass_through(&source, input, out_dir, progress, t);
+    }
+    let prepared = prepare_loaded(scene, source, input, config, progress, t)?;
+    let baked = compute_prepared(prepared, progress)?;
     write(baked, input, out_dir, config, progress)
+}
+
+/// A valid scene with nothing to bake (only points or lines, or only zero-area triangles) is
+/// written through without lightmaps, with a warning: a build step bakes every level, and such
+/// a level is not an error. The glTF goes out as a bake writes it (buffers merged into
+/// `<stem>.bin`, external images copied), so what references it finds the same files.
+fn pass_through(
+    source: &scene::Source,
+    input: &Path,
+    out_dir: &Path,
+    progress: &dyn Progress,
+    load_start: Instant,
+) -> Result<BakeReport> {
+    let mut stages = Vec::new();
+    timed(&mut stages, "load", load_start);
+    progress.warn(&format!(
+        "{}: nothing to bake (no triangle with an area): written through without lightmaps",
+        input.display()
+    ));
+    let t = Instant::now();
+    let nothing = scene::Scene::default();
+    let no_atlas = atlas::Atlas {
+        pages: Vec::new(),
+        instances: Vec::new(),
+        texels_per_unit: 0.0,
+        reused_input_uvs: false,
+    };
+    let stem = output_stem(input);
+    let mut staging = Staging::new(out_dir, &protected_files(input, source))?;
+    output::write_gltf(&nothing, source, &no_atlas, &[], &mut staging, &stem)?;
+    check_aborted(progress)?;
+    let files = commit(staging)?;
+    timed(&mut stages, "write", t);
+    Ok(BakeReport {
+        triangles: 0,
+        texels: 0,
+        pages: 0,
+        rays: 0,
+        iterations: 0,
+        residual: 0.0,
+        converged: true,
+        validity: Default::default(),
+        plan: None,
+        seams: None,
+        stages,
+        files,
+    })
 }
 
 /// The stages before light transport, shared by a bake and the reference (so their texels
@@ -165,28 +219,45 @@ fn timed(stages: &mut Vec<StageTime>, stage: &'static str, start: Instant) {
 /// check) the atlas and the texels, with sample points moved out of geometry.
 pub fn prepare(input: &Path, config: &BakeConfig, progress: &dyn Progress) -> Result<Prepared> {
     config.validate()?;
+    let t = Instant::now();
+    let (scene, source) = load(input, progress)?;
+    if scene.triangles.is_empty() {
+        return Err(Error::invalid(input, "the scene has no triangles"));
+    }
+    prepare_loaded(scene, source, input, config, progress, t)
+}
+
+/// Loads `input` and hands the loader's warnings to `progress`.
+fn load(input: &Path, progress: &dyn Progress) -> Result<(scene::Scene, scene::Source)> {
+    let (scene, source) = scene::load(input)?;
+    for w in &scene.stats.warnings {
+        progress.warn(w);
+    }
+    Ok((scene, source))
+}
+
+/// [`prepare`] from a loaded scene with triangles (loading began at `load_start`).
+fn prepare_loaded(
+    scene: scene::Scene,
+    source: scene::Source,
+    input: &Path,
+    config: &BakeConfig,
+    progress: &dyn Progress,
+    load_start: Instant,
+) -> Result<Prepared> {
     let mut config = config.clone();
     let mut plan = config.auto.map(|a| Plan {
         target_error: a.target_error,
         ..Default::default()
     });
     let mut stages = Vec::new();
-
-    let t = Instant::now();
-    let (scene, source) = scene::load(input)?;
-    for w in &scene.stats.warnings {
-        progress.warn(w);
-    }
     if !scene.has_light_sources() && config.transport.sky.max_element() <= 0.0 {
         progress.warn(&format!(
             "{}: the scene has no lights, no emissive materials and no sky: the lightmap will be black",
             input.display()
         ));
     }
-    if scene.triangles.is_empty() {
-        return Err(Error::invalid(input, "the scene has no triangles"));
-    }
-    timed(&mut stages, "load", t);
+    timed(&mut stages, "load", load_start);
 
     let t = Instant::now();
     let tracer = Tracer::new(&scene);
@@ -233,7 +304,11 @@ pub fn prepare(input: &Path, config: &BakeConfig, progress: &dyn Progress) -> Re
 
 /// Runs every stage up to the dilated pages, in memory.
 pub fn compute(input: &Path, config: &BakeConfig, progress: &dyn Progress) -> Result<Baked> {
-    let prepared = prepare(input, config, progress)?;
+    compute_prepared(prepare(input, config, progress)?, progress)
+}
+
+/// [`compute`] from the prepared stages.
+fn compute_prepared(prepared: Prepared, progress: &dyn Progress) -> Result<Baked> {
     let surfaces = prepared.surfaces();
     let (mut config, mut plan, mut stages) = (
         prepared.config.clone(),
@@ -323,35 +398,17 @@ pub fn compute(input: &Path, config: &BakeConfig, progress: &dyn Progress) -> Re
 
 /// Writes a computed bake: EXR + PNG pages and the glTF, atomically.
 pub fn write(
-    baked: Baked,
+    mut baked: Baked,
     input: &Path,
     out_dir: &Path,
     config: &BakeConfig,
     progress: &dyn Progress,
 ) -> Result<BakeReport> {
-    let Baked {
-        scene,
-        source,
-        atlas,
-        texels,
-        transport,
-        solution,
-        pages,
-        validity,
-        plan,
-        seams,
-        mut stages,
-        ..
-    } = baked;
     let t = Instant::now();
-    let stem = input
-        .file_stem()
-        .and_then(|s| s.to_str())
-        .unwrap_or("scene")
-        .to_string();
-    let mut staging = Staging::new(out_dir, &protected_files(input, &source))?;
-    let mut page_files = Vec::with_capacity(pages.pages.len());
-    for (k, page) in pages.pages.iter().enumerate() {
+    let stem = output_stem(input);
+    let mut staging = Staging::new(out_dir, &protected_files(input, &baked.source))?;
+    let mut page_files = Vec::with_capacity(baked.pages.pages.len());
+    for (k, page) in baked.pages.pages.iter().enumerate() {
         let files = PageFiles {
             exr: format!("{stem}_lightmap{k}.exr"),
             png: format!("{stem}_lightmap{k}.png"),
@@ -370,28 +427,50 @@ pub fn write(
         }
         page_files.push(files);
     }
-    output::write_gltf(&scene, &source, &atlas, &page_files, &mut staging, &stem)?;
+    output::write_gltf(
+        &baked.scene,
+        &baked.source,
+        &baked.atlas,
+        &page_files,
+        &mut staging,
+        &stem,
+    )?;
     check_aborted(progress)?;
-    let mut files = staging.commit()?;
-    // The glTF (or .glb) first, then pages in order.
-    files.sort_by_key(|p| !matches!(p.extension().and_then(|e| e.to_str()), Some("gltf" | "glb")));
-    timed(&mut stages, "write", t);
+    let files = commit(staging)?;
+    timed(&mut baked.stages, "write", t);
 
     Ok(BakeReport {
-        triangles: scene.triangles.len(),
-        texels: texels.len(),
-        pages: pages.pages.len(),
+        triangles: baked.scene.triangles.len(),
+        texels: baked.texels.len(),
+        pages: baked.pages.pages.len(),
         // Every ray cast, the pilot bakes that are not part of the result included.
-        rays: transport.rays + plan.as_ref().map_or(0, |p| p.discarded_rays),
-        iterations: solution.history.len(),
-        residual: solution.residual(),
-        converged: solution.converged,
-        validity,
-        plan,
-        seams,
-        stages,
+        rays: baked.transport.rays + baked.plan.as_ref().map_or(0, |p| p.discarded_rays),
+        iterations: baked.solution.history.len(),
+        residual: baked.solution.residual(),
+        converged: baked.solution.converged,
+        validity: baked.validity,
+        plan: baked.plan,
+        seams: baked.seams,
+        stages: baked.stages,
         files,
     })
+}
+
+/// The output files' stem: the input's.
+fn output_stem(input: &Path) -> String {
+    input
+        .file_stem()
+        .and_then(|s| s.to_str())
+        .unwrap_or("scene")
+        .to_string()
+}
+
+/// Moves the staged files into place; returns them, the glTF (or .glb) first, then pages in
+/// order.
+fn commit(staging: Staging) -> Result<Vec<PathBuf>> {
+    let mut files = staging.commit()?;
+    files.sort_by_key(|p| !matches!(p.extension().and_then(|e| e.to_str()), Some("gltf" | "glb")));
+    Ok(files)
 }
 
 /// Fails early (before any work) when the output would replace the input file itself.

@@ -212,13 +212,16 @@ fn view(args: &Args, config: &BakeConfig, params: &ReferenceParams) -> Result<()
             .unwrap_or("exr");
         args.output.with_file_name(format!("{stem}_stderr.{ext}"))
     };
-    for (path, rgb) in [(&args.output, &v.mean), (&stderr_path, &v.std_error)] {
+    for (path, rgb) in [
+        (&args.output, &v.pixels.mean),
+        (&stderr_path, &v.pixels.std_error),
+    ] {
         let image = Image {
             width,
             height,
             rgb: rgb.clone(),
             nonfinite: 0,
-            rays: v.rays,
+            rays: v.pixels.rays,
         };
         image
             .save(path, args.exposure)

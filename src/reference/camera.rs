@@ -32,7 +32,7 @@
 
 use glam::{Vec2, Vec3};
 
-use super::{ItemSample, Paths, ReferenceParams, SEED_SALT, Stop, cost_and_error, trace_items};
+use super::{ItemSample, Paths, Reference, ReferenceParams, SEED_SALT, trace_items};
 use crate::sampling::Rng;
 use crate::scene::{Camera, Scene};
 use crate::texels::Texels;
@@ -44,23 +44,14 @@ const VIEW_SALT: u64 = 0x5649_4557; // "VIEW"
 /// Back faces of single-sided surfaces skipped along a primary ray (as the renderer culls them).
 const MAX_BACK_FACE_SKIPS: u32 = 8;
 
-/// A path-traced camera image, row 0 at the top.
+/// A path-traced camera image.
 #[derive(Clone, Debug)]
 pub struct View {
     pub width: u32,
     pub height: u32,
-    /// Mean radiance per pixel (linear RGB).
-    pub mean: Vec<Vec3>,
-    /// Standard error of `mean` per pixel and channel.
-    pub std_error: Vec<Vec3>,
-    /// Samples (paths) per pixel.
-    pub samples: u32,
-    /// Rays cast (primary, closest hits and shadow rays).
-    pub rays: u64,
-    pub seconds: f64,
-    /// Relative RMS standard error over pixels, `√(Σσ²/Σμ²)` ([`super::rms_rel_error`]).
-    pub rms_rel_error: f32,
-    pub stop: Stop,
+    /// Radiance per pixel (linear RGB), row 0 at the top, with its standard error and the
+    /// run's samples per pixel, rays (primary, closest hits and shadow rays), time and stop.
+    pub pixels: Reference,
 }
 
 impl View {
@@ -70,8 +61,8 @@ impl View {
             "{}x{} pixels, {} paths per pixel, {}",
             self.width,
             self.height,
-            self.samples,
-            cost_and_error(self.rays, self.seconds, self.rms_rel_error, self.stop)
+            self.pixels.samples,
+            self.pixels.cost_and_error()
         )
     }
 }
@@ -108,7 +99,7 @@ pub fn trace_view(
         if l.is_finite() { l } else { Vec3::ZERO }
     };
     let n = width as usize * height as usize;
-    let run = trace_items(
+    let pixels = trace_items(
         (scene, texels, tracer),
         n,
         params,
@@ -119,13 +110,7 @@ pub fn trace_view(
     Ok(View {
         width,
         height,
-        mean: run.mean,
-        std_error: run.std_error,
-        samples: run.samples,
-        rays: run.rays,
-        seconds: run.seconds,
-        rms_rel_error: run.rms_rel_error,
-        stop: run.stop,
+        pixels,
     })
 }
 

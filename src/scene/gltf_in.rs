@@ -4,6 +4,7 @@
 //! Buffers and images are read here rather than through `gltf::import`, so that a missing file
 //! is reported by name and an undecodable image only costs a warning.
 
+mod check;
 mod textures;
 
 use std::path::{Path, PathBuf};
@@ -12,7 +13,7 @@ use base64::Engine as _;
 use glam::{Mat3, Mat4, Quat, Vec2, Vec3};
 use gltf::mesh::{Mode, Semantic};
 
-use super::{Camera, GltfCamera, Instance, Light, LightKind, Scene, Source};
+use super::{Camera, GltfCamera, Instance, Light, LightKind, MAX_COORDINATE, Scene, Source};
 use crate::{Error, Result};
 
 /// Extensions that may appear in `extensionsRequired`; anything else changes geometry or
@@ -37,15 +38,19 @@ pub fn load(path: &Path) -> Result<(Scene, Source)> {
         (parse_json(path, &bytes)?, None)
     };
     check_version_and_extensions(path, &json)?;
-
-    let root: gltf::json::Root = serde_json::from_value(json.clone())
-        .map_err(|e| Error::invalid(path, format!("not a valid glTF document: {e}")))?;
-    let document = gltf::Document::from_json(root).map_err(|e| invalid_gltf(path, e))?;
-
     let files = Files {
         gltf_path: path,
         dir: path.parent().unwrap_or(Path::new("")),
     };
+    check::mesh_references(&files, &json)?;
+
+    let root: gltf::json::Root = serde_json::from_value(json.clone())
+        .map_err(|e| Error::invalid(path, format!("not a valid glTF document: {e}")))?;
+    let document = guarded(&files, "validating the document", || {
+        gltf::Document::from_json(root)
+    })?
+    .map_err(|e| invalid_gltf(path, e))?;
+    check::byte_ranges(&files, &document)?;
     let buffers = load_buffers(&files, &document, blob)?;
 
     let mut loader = Loader {
@@ -64,6 +69,9 @@ pub fn load(path: &Path) -> Result<(Scene, Source)> {
             &mut scene,
             "KHR_texture_transform is ignored: textures are sampled untransformed",
         );
+    }
+    for problem in check::texture_transforms(&json) {
+        warn(&mut scene, problem);
     }
 
     #[cfg(debug_assertions)]
@@ -116,6 +124,19 @@ impl Files<'_> {
             self.invalid(format!("{what} {problem}: {}: {e}", file.display()))
         })
     }
+}
+
+/// Runs third-party code that the checks in [`check`] should have made safe. A panic that
+/// slips past them becomes an error naming `what`, not the end of the build step (exit 101).
+fn guarded<T>(files: &Files, what: &str, run: impl FnOnce() -> T) -> Result<T> {
+    std::panic::catch_unwind(std::panic::AssertUnwindSafe(run)).map_err(|panic| {
+        let detail = panic
+            .downcast_ref::<&str>()
+            .map(|s| s.to_string())
+            .or_else(|| panic.downcast_ref::<String>().cloned())
+            .unwrap_or_default();
+        files.invalid(format!("{what}: the glTF reader failed ({detail})"))
+    })
 }
 
 /// Standard base64, tolerant of missing padding (some exporters drop it).
@@ -329,7 +350,7 @@ impl Loader<'_> {
                 self.add_mesh(&node, &mesh, &placement)?;
             }
             if let Some(light) = node.light() {
-                self.add_light(&light, &placement);
+                self.add_light(&light, &placement)?;
             }
             let camera_world = camera_parent * camera_matrix(node.transform());
             if let Some(camera) = node.camera() {
@@ -382,7 +403,9 @@ impl Loader<'_> {
                 warn(&mut self.scene, format!("{label}: {reason}"));
                 continue;
             }
-            let data = self.read_primitive(&primitive, &label)?;
+            let data = guarded(self.files, &label, || {
+                self.read_primitive(&primitive, &label)
+            })??;
             let material = primitive
                 .material()
                 .index()
@@ -404,27 +427,7 @@ impl Loader<'_> {
                 .invalid(format!("{label}: {what} reads outside its buffer"))
         };
 
-        for (semantic, name) in [
-            (Semantic::Positions, "POSITION"),
-            (Semantic::Normals, "NORMAL"),
-        ] {
-            if let Some(accessor) = primitive.get(&semantic) {
-                check_float_vec3(self.files, &accessor, &format!("{label} {name}"))?;
-            }
-        }
-        // An empty accessor would make the gltf crate's reader underflow.
-        let has_empty_accessor = primitive.attributes().any(|(_, a)| a.count() == 0)
-            || primitive.indices().is_some_and(|a| a.count() == 0);
-        if has_empty_accessor {
-            let (positions, triangles) = (Vec::new(), Vec::new());
-            return Ok(PrimitiveData {
-                positions,
-                normals: None,
-                uv0: None,
-                uv1: None,
-                triangles,
-            });
-        }
+        check::attribute_types(self.files, primitive, label)?;
 
         let positions: Vec<Vec3> = reader
             .read_positions()
@@ -454,6 +457,11 @@ impl Loader<'_> {
                     .map(Vec3::from)
                     .collect();
                 same_length(normals.len(), "NORMAL")?;
+                // Passed on, a NaN normal would reach the output file (the validator refuses it).
+                if let Some(bad) = normals.iter().position(|n| !n.is_finite()) {
+                    let message = format!("{label}: NORMAL {bad} is not finite");
+                    return Err(self.files.invalid(message));
+                }
                 Some(normals)
             }
         };
@@ -515,9 +523,13 @@ impl Loader<'_> {
             .iter()
             .map(|&p| placement.world.transform_point3(p))
             .collect();
-        if world_positions.iter().any(|p| !p.is_finite()) {
+        // Flipped bits in a float's exponent give coordinates far outside any scene; the atlas
+        // and the BVH builder cannot take them (obvhs panics), so they are refused here.
+        let beyond = |p: &Vec3| !p.is_finite() || p.abs().max_element() > MAX_COORDINATE;
+        if let Some(k) = world_positions.iter().position(beyond) {
             let message = format!(
-                "{label}: world position overflows under {}",
+                "{label}: POSITION {k} is at {} under {}, beyond ±{MAX_COORDINATE:e} units (damaged data?)",
+                world_positions[k],
                 node_label(node)
             );
             return Err(self.files.invalid(message));
@@ -616,39 +628,76 @@ impl Loader<'_> {
         scene.instances[front as usize].back = Some(back);
     }
 
-    fn add_light(&mut self, light: &gltf::khr_lights_punctual::Light, placement: &Placement) {
+    /// A KHR_lights_punctual light. Values outside the extension's "must" ranges are clamped
+    /// with a warning (baking can go on); numbers too large for f32 are errors.
+    fn add_light(
+        &mut self,
+        light: &gltf::khr_lights_punctual::Light,
+        placement: &Placement,
+    ) -> Result<()> {
         use gltf::khr_lights_punctual::Kind;
-        let kind = match light.kind() {
-            Kind::Point => LightKind::Point,
-            Kind::Directional => LightKind::Directional,
+        let label = format!("light {}", light.index());
+        let color = Vec3::from(light.color());
+        let numbers = [light.intensity(), light.range().unwrap_or(1.0)];
+        let cone = match light.kind() {
             Kind::Spot {
                 inner_cone_angle,
                 outer_cone_angle,
-            } => LightKind::Spot {
-                inner_cone_angle,
-                outer_cone_angle,
-            },
+            } => [inner_cone_angle, outer_cone_angle],
+            _ => [0.0; 2],
         };
+        if !color.is_finite() || numbers.iter().chain(&cone).any(|x| !x.is_finite()) {
+            return Err(self
+                .files
+                .invalid(format!("{label}: a value is not finite")));
+        }
+        let kind = match light.kind() {
+            Kind::Point => LightKind::Point,
+            Kind::Directional => LightKind::Directional,
+            Kind::Spot { .. } => {
+                let [inner, outer] = cone;
+                let outer_cone_angle = outer.clamp(0.0, std::f32::consts::FRAC_PI_2);
+                let inner_cone_angle = inner.clamp(0.0, outer_cone_angle);
+                if !(0.0 <= inner && inner < outer && outer <= std::f32::consts::FRAC_PI_2) {
+                    let message = format!(
+                        "{label}: spot cone angles inner {inner}, outer {outer} break 0 ≤ inner < outer ≤ π/2; clamped to inner {inner_cone_angle}, outer {outer_cone_angle}"
+                    );
+                    warn(&mut self.scene, message);
+                }
+                LightKind::Spot {
+                    inner_cone_angle,
+                    outer_cone_angle,
+                }
+            }
+        };
+        if color.min_element() < 0.0 || color.max_element() > 1.0 {
+            let message = format!("{label}: color {color} is outside [0, 1]; clamped");
+            warn(&mut self.scene, message);
+        }
+        if light.intensity() < 0.0 {
+            warn(
+                &mut self.scene,
+                format!("{label}: negative intensity clamped to zero"),
+            );
+        }
+        let range = light.range();
+        if range.is_some_and(|r| r <= 0.0) {
+            let message = format!("{label}: range must be positive; the light has no range limit");
+            warn(&mut self.scene, message);
+        }
         let direction = placement
             .world
             .transform_vector3(Vec3::NEG_Z)
             .normalize_or(Vec3::NEG_Z);
-        let intensity = Vec3::from(light.color()) * light.intensity();
-        if intensity.min_element() < 0.0 {
-            let message = format!(
-                "light {}: negative intensity clamped to zero",
-                light.index()
-            );
-            warn(&mut self.scene, message);
-        }
         self.scene.lights.push(Light {
             name: light.name().map(str::to_string),
             kind,
             position: placement.world.transform_point3(Vec3::ZERO),
             direction,
-            intensity: intensity.max(Vec3::ZERO),
-            range: light.range().filter(|r| *r > 0.0),
+            intensity: color.clamp(Vec3::ZERO, Vec3::ONE) * light.intensity().max(0.0),
+            range: range.filter(|r| *r > 0.0),
         });
+        Ok(())
     }
 
     /// A perspective camera placed by `node`; orthographic ones are skipped (a pinhole renderer
@@ -696,21 +745,6 @@ fn mesh_label(mesh: &gltf::Mesh) -> String {
         Some(name) => format!("mesh {} '{name}'", mesh.index()),
         None => format!("mesh {}", mesh.index()),
     }
-}
-
-/// The gltf crate reads POSITION and NORMAL as f32 whatever the component type, so quantized
-/// attributes (KHR_mesh_quantization) must be refused rather than misread.
-fn check_float_vec3(files: &Files, accessor: &gltf::Accessor, what: &str) -> Result<()> {
-    use gltf::accessor::{DataType, Dimensions};
-    if accessor.data_type() == DataType::F32 && accessor.dimensions() == Dimensions::Vec3 {
-        return Ok(());
-    }
-    let message = format!(
-        "{what} is {:?} {:?}; only float VEC3 is supported (no KHR_mesh_quantization)",
-        accessor.data_type(),
-        accessor.dimensions()
-    );
-    Err(Error::unsupported(files.gltf_path, message))
 }
 
 /// Converts an index sequence to a triangle list, as the glTF spec (§3.7.2.1) orders strips
@@ -1563,6 +1597,20 @@ mod tests {
         let warnings = scene.stats.warnings.join("\n");
         assert!(warnings.contains("image 2 cannot be decoded"), "{warnings}");
         assert!(warnings.contains("TEXCOORD_1"), "{warnings}");
+    }
+
+    #[test]
+    fn a_panic_in_the_gltf_crate_becomes_an_error_naming_the_element() {
+        let files = Files {
+            gltf_path: Path::new("scene.gltf"),
+            dir: Path::new(""),
+        };
+        let panics = || -> u32 { panic!("index out of bounds") };
+        let text = message(guarded(&files, "mesh 0 primitive 0", panics).unwrap_err());
+        assert!(
+            text.contains("scene.gltf: mesh 0 primitive 0") && text.contains("index out of bounds"),
+            "{text}"
+        );
     }
 
     #[test]

@@ -28,6 +28,10 @@ pub use gltf_in::load;
 /// the radiosity series diverge; 0.99 keeps it convergent (about 100 bounces carry the light).
 pub const MAX_ALBEDO: f32 = 0.99;
 
+/// Largest world coordinate magnitude the loader accepts (units). Real scenes stay far below
+/// it; beyond it lies damaged data (a flipped exponent bit), which the BVH cannot take.
+pub const MAX_COORDINATE: f32 = 1e7;
+
 /// World-space geometry, materials and lights of the default scene.
 #[derive(Clone, Debug, Default)]
 pub struct Scene {

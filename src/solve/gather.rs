@@ -43,7 +43,7 @@ use super::{Solution, Stopping};
 use crate::config::{SolveParams, TransportParams};
 use crate::lights::Emitters;
 use crate::sampling::{Rng, cosine_hemisphere, frame, hammersley};
-use crate::texels::NO_TEXEL;
+use crate::texels::RayEnd;
 use crate::transport::montecarlo::{CHUNK, Context};
 use crate::transport::{Surfaces, Transport};
 use crate::{Error, Progress, Result};
@@ -145,14 +145,8 @@ fn gather(ctx: &Context, i: usize, bounce: u32, reflected: &[Vec3]) -> Vec3 {
         let local = cosine_hemisphere(hammersley(s, k, shift));
         let dir = tx * local.x + ty * local.y + n * local.z;
         let origin = ctx.footprint_point(i, rng.next_vec2());
-        let Some(hit) = tracer.closest(origin, dir, f32::INFINITY) else {
-            continue; // the sky is in H_direct
-        };
-        if !hit.front {
-            continue; // the back of a single-sided surface absorbs
-        }
-        let j = texels.texel_at(hit.triangle, hit.bary);
-        if j != NO_TEXEL {
+        // The sky is in H_direct.
+        if let RayEnd::Texel(_, j) = texels.ray_end(tracer, origin, dir) {
             sum += reflected[j as usize];
         }
     }

@@ -2,7 +2,7 @@
 //! Smits, Arvo & Greenberg 1994), on lightmap texels.
 //!
 //! Per colour channel, for every node `p` of a quadtree over each page's texel grid
-//! (see [`tree`](crate::transport::hierarchical::tree)), and for every texel `i` with ancestors `a ∋ i`:
+//! (see `transport/hierarchical/tree.rs`), and for every texel `i` with ancestors `a ∋ i`:
 //!
 //! ```text
 //!   G_p = Σ_{links p←q} F_pq · B_q                 gathered at the level of the link
@@ -43,8 +43,8 @@
 //! |------------------|------------------|--------------------------------------------------------|
 //! | `gather_rays` K  | 256              | η = 1/√K: links ∝ 1/η, error ∝ η                        |
 //! | `light_samples`  | 64               | shadow rays per texel to small emitters                 |
-//! | [`KERNEL_SAMPLES`](crate::transport::hierarchical::links::KERNEL_SAMPLES) | 16      | kernel samples per link (no rays)                       |
-//! | [`SAMPLES`](crate::transport::hierarchical::links::SAMPLES) | 4              | shadow rays per accepted link                           |
+//! | `links::KERNEL_SAMPLES` | 16      | kernel samples per link (no rays)                       |
+//! | `links::SAMPLES` | 4              | shadow rays per accepted link                           |
 //! | `tolerance`      | 1e-4             | stopping rule as in [`crate::solve`]                    |
 //!
 //! When to use: large scenes and dense lightmaps, where rows of K entries per texel do not fit
@@ -122,7 +122,7 @@ struct State<'a> {
     texels: &'a Texels,
     direct: &'a [Vec3],
     emitted: &'a [Vec3],
-    /// Per-texel correction of the pushed irradiance ([`Refiner::row_scale`](crate::transport::hierarchical::links::Refiner::row_scale)).
+    /// Per-texel correction of the pushed irradiance (`links::Refiner::row_scale`).
     scale: Vec<f32>,
     h: Vec<Vec3>,
     b: Vec<Vec3>,

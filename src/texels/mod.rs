@@ -4,7 +4,7 @@
 //! (or partly covered) gets the area-weighted average of what covers it: position, normal,
 //! albedo and emission, and the world area actually covered.
 
-pub mod cuts;
+mod cuts;
 mod raster;
 pub mod validity;
 
@@ -12,11 +12,24 @@ use glam::{Vec2, Vec3};
 
 use crate::atlas::PageSize;
 use crate::scene::MAX_ALBEDO;
+use crate::trace::{Hit, Tracer};
 
+pub use cuts::Cuts;
 pub use raster::build;
 
 /// No texel at this page position.
 pub const NO_TEXEL: u32 = u32::MAX;
+
+/// Where a ray from a surface ends ([`Texels::ray_end`]).
+#[derive(Clone, Copy, Debug)]
+pub enum RayEnd {
+    /// It left the scene: it sees the sky.
+    Escaped,
+    /// On the back of a single-sided surface, or on a surface without texels.
+    Absorbed,
+    /// On the front of a surface, in texel `j`.
+    Texel(Hit, u32),
+}
 
 /// The radiosity patches, structure of arrays indexed by texel id.
 #[derive(Clone, Debug, Default)]
@@ -44,7 +57,7 @@ pub struct Texels {
     /// Fraction of the footprint that sample points jitter over: 1, or the candidate cell
     /// (1/G of a side) around a sample point that validity moved out of geometry, so gathering
     /// rays do not start back inside it, narrowed further to stay clear of a wall that divides
-    /// the texel ([`cuts`]). Empty means 1 everywhere.
+    /// the texel ([`Cuts`]). Empty means 1 everywhere.
     pub jitter: Vec<f32>,
     /// Per page, row-major `width × height`: texel id or [`NO_TEXEL`].
     pub index: Vec<Vec<u32>>,
@@ -56,8 +69,8 @@ pub struct Texels {
     /// Texels whose footprint has no point outside geometry (ascending ids; see
     /// [`validity`]): solved, but their lightmap value is filled from valid neighbours.
     pub invalid: Vec<u32>,
-    /// Texels another surface divides: which texel serves each part of them ([`cuts`]).
-    pub cuts: cuts::Cuts,
+    /// Texels another surface divides: which texel serves each part of them ([`Cuts`]).
+    pub cuts: Cuts,
 }
 
 impl Texels {
@@ -70,7 +83,7 @@ impl Texels {
 
     /// The texel a surface hit on triangle `t` at barycentrics (`u`, `v`) lands in
     /// (`p = (1−u−v)·p0 + u·p1 + v·p2`), or [`NO_TEXEL`] for triangles with no texels. A hit
-    /// on the far side of a wall that divides its texel reads the neighbour there ([`cuts`]).
+    /// on the far side of a wall that divides its texel reads the neighbour there ([`Cuts`]).
     #[inline]
     pub fn texel_at(&self, t: u32, bary: Vec2) -> u32 {
         let [a, b, c] = self.triangle_uv[t as usize];
@@ -85,6 +98,22 @@ impl Texels {
             self.cuts.resolve(id, p - Vec2::new(x as f32, y as f32))
         } else {
             self.triangle_texel[t as usize]
+        }
+    }
+
+    /// Where the ray from `origin` along `dir` ends: the sky, an absorbing surface, or a texel.
+    /// Transport, gathering and the reference follow their rays through this one function.
+    #[inline]
+    pub fn ray_end(&self, tracer: &Tracer, origin: Vec3, dir: Vec3) -> RayEnd {
+        let Some(hit) = tracer.closest(origin, dir, f32::INFINITY) else {
+            return RayEnd::Escaped;
+        };
+        if !hit.front {
+            return RayEnd::Absorbed; // the back of a single-sided surface absorbs
+        }
+        match self.texel_at(hit.triangle, hit.bary) {
+            NO_TEXEL => RayEnd::Absorbed,
+            j => RayEnd::Texel(hit, j),
         }
     }
 

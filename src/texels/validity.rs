@@ -32,7 +32,7 @@
 //!
 //! When to use: always (it costs `R` rays per texel, `R·(1 + G²)` for texels near back faces).
 //! Limits: only single-sided solids are detected — a zero-thickness double-sided wall has no
-//! back side; [`fix`] hands texels such a wall divides to [`cuts`] next. Solids deeper than `REACH`
+//! back side; [`fix`] hands texels such a wall divides to `cuts.rs` next. Solids deeper than `REACH`
 //! texels leave their inner texels black but valid (never visible). A moved texel's gathering
 //! rays jitter within the candidate cell around its new point (`Texels::jitter` = 1/G), not
 //! over the whole footprint, which would start some of them back inside the solid.
@@ -80,12 +80,12 @@ pub struct ValidityReport {
     pub moved: usize,
     /// Texels with no valid point (listed in [`Texels::invalid`]).
     pub invalid: usize,
-    /// Texels another surface divides (a wall standing on them; see [`cuts`]).
+    /// Texels another surface divides (a wall standing on them; see [`Cuts`](super::Cuts)).
     pub divided: usize,
 }
 
 /// Moves sample points out of geometry, records invalid texels in `texels.invalid`, then keeps
-/// the samples of texels another surface divides on one side ([`cuts::divide`]).
+/// the samples of texels another surface divides on one side (`cuts::divide`).
 pub fn fix(
     texels: &mut Texels,
     scene: &Scene,

@@ -23,8 +23,10 @@
 
 mod all_pairs;
 pub mod hierarchical;
+// Public on purpose: the form-factor kernels and Howell's closed forms are the yardsticks of
+// anyone checking form factors (the analytic tests, the benchmark's stability study).
 pub mod kernel;
-pub mod montecarlo;
+pub(crate) mod montecarlo;
 mod point;
 mod polygon;
 pub(crate) mod rows;

@@ -27,7 +27,7 @@ use super::{Surfaces, Transport};
 use crate::config::TransportParams;
 use crate::lights::{Emitters, punctual_irradiance, triangle_point};
 use crate::sampling::{Rng, cosine_hemisphere, frame, hammersley, power_weight};
-use crate::texels::NO_TEXEL;
+use crate::texels::RayEnd;
 use crate::{Progress, Result};
 
 /// Texels per parallel work item (one progress tick each).
@@ -117,29 +117,20 @@ impl Context<'_> {
             let local = cosine_hemisphere(hammersley(s, k, shift));
             let dir = tx * local.x + ty * local.y + n * local.z;
             let origin = self.footprint_point(i, rng.next_vec2());
-            let Some(hit) = tracer.closest(origin, dir, f32::INFINITY) else {
-                escaped += 1;
-                continue;
+            let (hit, j) = match texels.ray_end(tracer, origin, dir) {
+                RayEnd::Texel(hit, j) => (hit, j),
+                RayEnd::Escaped => {
+                    escaped += 1;
+                    continue;
+                }
+                RayEnd::Absorbed => continue,
             };
-            if !hit.front {
-                continue; // the back of a single-sided surface absorbs
-            }
-            let j = texels.texel_at(hit.triangle, hit.bary);
-            if j == NO_TEXEL {
-                continue;
-            }
             hits.push(j);
             let le = texels.emission[j as usize];
             if le.max_element() > 0.0 {
                 let p_gather = local.z / PI;
-                let pdf_area = self.emitters.pdf_area[hit.triangle as usize];
                 let (_, n_l) = triangle_point(scene, hit.triangle, hit.bary);
-                let cos_l = -n_l.dot(dir);
-                let p_light = if cos_l > 0.0 {
-                    pdf_area * hit.t * hit.t / cos_l
-                } else {
-                    0.0
-                };
+                let p_light = self.emitters.pdf_toward(hit.triangle, n_l, dir, hit.t);
                 emitted += le * (local.z * power_weight(kf * p_gather, lf * p_light));
             }
         }
@@ -157,9 +148,8 @@ impl Context<'_> {
             else {
                 continue;
             };
-            let p_light = x.pdf_area * x.r2 / x.cos_l;
             let p_gather = x.cos_i / PI;
-            emitted += x.le * (x.cos_i * power_weight(lf * p_light, kf * p_gather));
+            emitted += x.le * (x.cos_i * power_weight(lf * x.pdf_solid_angle(), kf * p_gather));
         }
 
         // Punctual lights at stratified footprint points.

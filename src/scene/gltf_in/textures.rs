@@ -42,13 +42,29 @@ pub(super) fn add_materials(
             );
             warn(scene, message);
         }
+        let emissive = Vec3::from(material.emissive_factor());
         let strength = material.emissive_strength().unwrap_or(1.0);
+        if ![r, g, b, strength].iter().all(|x| x.is_finite()) || !emissive.is_finite() {
+            let message = format!("material {index}: a colour factor or strength is not finite");
+            return Err(files.invalid(message));
+        }
+        if emissive.min_element() < 0.0 || emissive.max_element() > 1.0 {
+            let message =
+                format!("material {index}: emissiveFactor {emissive} is outside [0, 1]; clamped");
+            warn(scene, message);
+        }
+        if strength < 0.0 {
+            let message = format!(
+                "material {index}: KHR_materials_emissive_strength {strength} is negative; clamped to 0"
+            );
+            warn(scene, message);
+        }
         let mut converted = Material {
             name: material.name().map(str::to_string),
             source: Some(index as u32),
             base_color: Vec3::new(r, g, b).max(Vec3::ZERO),
             base_color_texture: None,
-            emission: (Vec3::from(material.emissive_factor()) * strength).max(Vec3::ZERO),
+            emission: emissive.clamp(Vec3::ZERO, Vec3::ONE) * strength.max(0.0),
             emissive_texture: None,
             double_sided: material.double_sided(),
             surface: surface(&json["materials"][index]),

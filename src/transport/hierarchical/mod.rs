@@ -1,6 +1,6 @@
 //! Hierarchical radiosity (Hanrahan, Salzman & Aupperle 1991; clusters after Smits, Arvo &
 //! Greenberg 1994): the links between nodes of a quadtree over each page's texel grid
-//! ([`tree`]), and the direct light. [`crate::solve::hierarchical`] iterates them; its doc
+//! (`tree.rs`), and the direct light. [`crate::solve::hierarchical`] iterates them; its doc
 //! is the method's manual (equations, parameters, measurements).
 //!
 //! Links are refined only where the transferred power `F_pq · B_q · A_p` exceeds
@@ -13,7 +13,7 @@
 //! next to a wall sees more of the wall than its block does). After each refinement every
 //! texel's inherited links are re-evaluated at its own centre (kernels only, times the link's
 //! visible fraction) and the pushed irradiance is scaled by `R*_i / R_i`, the ratio of that
-//! row sum to the hierarchy's ([`links::Refiner::row_scale`]). A uniform radiosity (the
+//! row sum to the hierarchy's (`links::Refiner::row_scale`). A uniform radiosity (the
 //! furnace) is then exact per texel; the spread of light over a row's sources stays the
 //! nodes'.
 //!
@@ -25,8 +25,18 @@
 //! the sky is not black. With `indirect_only` the first bounce of large emitters therefore
 //! stays in the lightmap.
 
+// Internals of the refinement: public only to the developer diagnostics in examples/dev
+// (feature `testing`).
+#[cfg(feature = "testing")]
+#[doc(hidden)]
 pub mod links;
+#[cfg(not(feature = "testing"))]
+pub(crate) mod links;
+#[cfg(feature = "testing")]
+#[doc(hidden)]
 pub mod tree;
+#[cfg(not(feature = "testing"))]
+pub(crate) mod tree;
 
 use std::f32::consts::PI;
 
@@ -64,7 +74,7 @@ impl Hierarchy {
     }
 
     /// The links of refinement `pass` from the radiosity `b` of every node, and each texel's
-    /// row scale ([`Refiner::row_scale`]). Pass 0 (from direct light) adds the mean radiosity
+    /// row scale (`Refiner::row_scale`). Pass 0 (from direct light) adds the mean radiosity
     /// as an ambient guess and refines 4× coarser: it only guesses `B` for the oracle of
     /// pass 1.
     pub fn link(
