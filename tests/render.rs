@@ -512,7 +512,7 @@ fn a_split_double_sided_wall_shows_each_side_its_own_lightmap() {
         let view = reference_view(&prepared, &quick(), &camera, SIZE, 256);
         let luminance = |v: &Vec3| v.dot(Vec3::splat(1.0 / 3.0));
         let mean = |rgb: &[Vec3]| rgb.iter().map(luminance).sum::<f32>() / rgb.len() as f32;
-        let (render_mean, reference_mean) = (mean(&image.rgb), mean(&view.mean));
+        let (render_mean, reference_mean) = (mean(&image.rgb), mean(&view.pixels.mean));
         let (lo, hi) = image
             .rgb
             .iter()
@@ -578,8 +578,8 @@ fn adaptive_sampling_beats_uniform_sampling_at_equal_cost() {
         let (rmse, noise) = image_error(
             SIZE,
             &image.rgb,
-            &view.mean,
-            &view.std_error,
+            &view.pixels.mean,
+            &view.pixels.std_error,
             &everything,
             4,
         );
