@@ -270,30 +270,48 @@ impl Tracer {
         if self.triangles.is_empty() {
             return None;
         }
-        self.traverse::<Closest>(make_ray(origin, dir, tmax))
+        self.traverse(Closest { cull_back: &[] }, make_ray(origin, dir, tmax))
+    }
+
+    /// [`Tracer::closest`] for a viewer: a ray that meets single-sided triangle `t` from behind
+    /// passes through it when `cull_back[t]` (indexed by scene triangle), as a rasteriser culls
+    /// back faces. Triangles with a back-face copy are never culled (a hit from behind lands on
+    /// the copy, seen from its front).
+    #[inline]
+    pub fn closest_culling(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        tmax: f32,
+        cull_back: &[bool],
+    ) -> Option<Hit> {
+        if self.triangles.is_empty() {
+            return None;
+        }
+        self.traverse(Closest { cull_back }, make_ray(origin, dir, tmax))
     }
 
     /// Runs the traversal `T` on `ray`, compiled for x86-64-v3 when this CPU has it (see the
     /// module docs).
     #[inline(always)]
-    fn traverse<T: Traversal>(&self, ray: Ray) -> T::Output {
+    fn traverse<T: Traversal>(&self, traversal: T, ray: Ray) -> T::Output {
         #[cfg(target_arch = "x86_64")]
         if self.wide_isa {
             // SAFETY: `Tracer::new` checked that this CPU has the enabled features.
-            return unsafe { self.traverse_x86_64_v3::<T>(ray) };
+            return unsafe { self.traverse_x86_64_v3(traversal, ray) };
         }
-        T::run(self, ray)
+        traversal.run(self, ray)
     }
 
     /// [`Tracer::traverse`] compiled for x86-64-v3 (`T::run` is inlined here, always).
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx,avx2,bmi1,bmi2,lzcnt,popcnt")]
-    unsafe fn traverse_x86_64_v3<T: Traversal>(&self, ray: Ray) -> T::Output {
-        T::run(self, ray)
+    unsafe fn traverse_x86_64_v3<T: Traversal>(&self, traversal: T, ray: Ray) -> T::Output {
+        traversal.run(self, ray)
     }
 
     #[inline(always)]
-    fn closest_ray(&self, mut ray: Ray) -> Option<Hit> {
+    fn closest_ray(&self, mut ray: Ray, cull_back: &[bool]) -> Option<Hit> {
         // obvhs' `ray_traverse`, written out so the hit keeps its barycentric numerators and
         // determinant (no second triangle test for the barycentrics).
         let tmax = ray.tmax;
@@ -308,7 +326,7 @@ impl Tracer {
             {
                 let id = state.primitive_id;
                 let (t, n, d) = intersect_full(&self.triangles[id as usize], &ray);
-                if t < ray.tmax {
+                if t < ray.tmax && !(d < 0.0 && self.culled(id, cull_back)) {
                     (best, num, det) = (id, n, d);
                     ray.tmax = t;
                 }
@@ -334,10 +352,19 @@ impl Tracer {
         })
     }
 
+    /// BVH triangle `id` is single-sided and `cull_back` culls its back face.
+    #[inline(always)]
+    fn culled(&self, id: u32, cull_back: &[bool]) -> bool {
+        !cull_back.is_empty() && {
+            let prim = self.prims[id as usize];
+            prim.back == u32::MAX && cull_back[prim.front as usize]
+        }
+    }
+
     /// True when the ray hits anything (stops at the first hit found).
     #[inline]
     fn any_hit(&self, ray: Ray) -> bool {
-        self.traverse::<AnyHit>(ray)
+        self.traverse(AnyHit, ray)
     }
 
     /// obvhs' `ray_traverse_miss` (negated), written out so it inlines into both variants.
@@ -392,17 +419,20 @@ impl Tracer {
 /// unlike a closure, is inlined into the x86-64-v3 build whatever the traversal's size.
 trait Traversal {
     type Output;
-    fn run(tracer: &Tracer, ray: Ray) -> Self::Output;
+    fn run(self, tracer: &Tracer, ray: Ray) -> Self::Output;
 }
 
-/// [`Tracer::closest_ray`].
-struct Closest;
+/// [`Tracer::closest_ray`]; back faces culled as [`Tracer::closest_culling`] says (none when
+/// `cull_back` is empty).
+struct Closest<'a> {
+    cull_back: &'a [bool],
+}
 
-impl Traversal for Closest {
+impl Traversal for Closest<'_> {
     type Output = Option<Hit>;
     #[inline(always)]
-    fn run(tracer: &Tracer, ray: Ray) -> Option<Hit> {
-        tracer.closest_ray(ray)
+    fn run(self, tracer: &Tracer, ray: Ray) -> Option<Hit> {
+        tracer.closest_ray(ray, self.cull_back)
     }
 }
 
@@ -412,7 +442,7 @@ struct AnyHit;
 impl Traversal for AnyHit {
     type Output = bool;
     #[inline(always)]
-    fn run(tracer: &Tracer, ray: Ray) -> bool {
+    fn run(self, tracer: &Tracer, ray: Ray) -> bool {
         tracer.any_hit_ray(ray)
     }
 }
@@ -511,6 +541,35 @@ mod tests {
             .closest(Vec3::new(0.2, 0.3, -1.0), Vec3::Z, f32::INFINITY)
             .unwrap();
         assert!(hit.front && hit.triangle == 1);
+    }
+
+    #[test]
+    fn culled_back_faces_are_passed_through() {
+        let from_front = (Vec3::new(0.2, 0.3, 1.0), -Vec3::Z);
+        let from_behind = (Vec3::new(0.2, 0.3, -1.0), Vec3::Z);
+        let closest = |tracer: &Tracer, (o, d): (Vec3, Vec3), cull: &[bool]| {
+            tracer
+                .closest_culling(o, d, f32::INFINITY, cull)
+                .map(|hit| (hit.triangle, hit.front))
+        };
+        let single = Tracer::new(&scene(false));
+        assert_eq!(closest(&single, from_behind, &[true]), None);
+        assert_eq!(closest(&single, from_behind, &[false]), Some((0, false)));
+        assert_eq!(closest(&single, from_front, &[true]), Some((0, true)));
+
+        // A linked back copy is never culled: the hit from behind lands on it.
+        let linked = Tracer::new(&scene(true));
+        assert_eq!(closest(&linked, from_behind, &[true; 2]), Some((1, true)));
+
+        // Two unlinked single-sided triangles back to back (a baked double-sided wall): each
+        // side sees its own, whichever of the coplanar pair the traversal meets first.
+        let mut s = scene(true);
+        s.instances[0].back = None;
+        s.instances[1].back_of = None;
+        let split = Tracer::new(&s);
+        assert_eq!(split.len(), 2);
+        assert_eq!(closest(&split, from_front, &[true; 2]), Some((0, true)));
+        assert_eq!(closest(&split, from_behind, &[true; 2]), Some((1, true)));
     }
 
     #[test]

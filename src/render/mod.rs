@@ -16,7 +16,8 @@
 //! | Parameter (`RenderOptions`) | Default | Meaning |
 //! |---|---|---|
 //! | `width`, `height` | 512 × 512 | image size in pixels |
-//! | `spp` | 16 | jittered samples per pixel (stratified in a √spp grid) |
+//! | `spp` | 16 | jittered samples per pixel (stratified in a √spp grid); the mean when adaptive |
+//! | `adaptive` | true | spend the samples where the image needs them (the `adaptive` module) |
 //! | `specular` | false | build the ray tree at specular surfaces |
 //! | `max_depth` | 6 | tree depth; hits at this depth are leaves (`L_d`) |
 //! | `glossy_samples` | 8 | GGX rays at a glossy primary hit (1 deeper in the tree) |
@@ -27,10 +28,12 @@
 //! `extras.lightmap = {"exr", "page"}`; the EXR pages hold `H/π`. The scene loader resolves
 //! everything the renderer reads — each instance's EXR page, each material's specular
 //! parameters ([`scene::Surface`]), the cameras — so this module never looks at glTF JSON. Scenes without any lightmap are
-//! refused. Limits: no alpha, no texture transforms, punctual lights are invisible (their light
+//! refused. As glTF asks, back faces of single-sided materials are culled (rays pass through
+//! them); the bake writes a double-sided surface as two single-sided primitives back to back. Limits: no alpha, no texture transforms, punctual lights are invisible (their light
 //! is in the lightmap), and the baker treated glass and mirrors as Lambertian (ρ = baseColor),
 //! so shadows behind glass are as dark as behind any opaque object of that colour.
 
+mod adaptive;
 mod shade;
 
 use std::collections::HashMap;
@@ -56,6 +59,7 @@ pub struct RenderOptions {
     pub width: u32,
     pub height: u32,
     pub spp: u32,
+    pub adaptive: bool,
     pub specular: bool,
     pub max_depth: u32,
     pub glossy_samples: u32,
@@ -69,6 +73,7 @@ impl Default for RenderOptions {
             width: 512,
             height: 512,
             spp: 16,
+            adaptive: true,
             specular: false,
             max_depth: 6,
             glossy_samples: 8,
@@ -89,6 +94,11 @@ pub struct RenderScene {
     /// Page of each scene instance (`None`: the primitive has no lightmap and shades black
     /// apart from its emission).
     pub instance_page: Vec<Option<u32>>,
+    /// Per scene triangle: its back face is culled (glTF's `"doubleSided": false`; a baked
+    /// double-sided wall is two such primitives, back to back, which would z-fight otherwise).
+    /// Transmissive surfaces are kept: a single-sided one bounds a volume, and its back face
+    /// is where rays leave the glass.
+    pub cull_back: Vec<bool>,
 }
 
 /// A rendered image: linear RGB radiance, row 0 at the top.
@@ -133,12 +143,21 @@ impl RenderScene {
             ));
         }
         let tracer = Tracer::new(&scene);
+        let cull_back = scene
+            .triangle_instance
+            .iter()
+            .map(|&i| {
+                let material = &scene.materials[scene.instances[i as usize].material as usize];
+                !material.double_sided && material.surface.transmission == 0.0
+            })
+            .collect();
         Ok(RenderScene {
             path: path.to_owned(),
             scene,
             tracer,
             pages,
             instance_page,
+            cull_back,
         })
     }
 
@@ -190,61 +209,141 @@ impl RenderScene {
                 options.spp
             )));
         }
-        let shader = shade::Shader::new(self, options);
-        let aspect = w as f32 / h as f32;
-        // Stratify the spp samples over a grid about √spp on a side; leftovers are pure jitter.
-        let grid = (options.spp as f32).sqrt().floor().max(1.0) as u32;
-        let rows: Vec<(Vec<Vec3>, u64, u64)> = (0..h)
-            .into_par_iter()
-            .map(|y| {
-                let mut row = Vec::with_capacity(w as usize);
-                let (mut nonfinite, mut rays) = (0u64, 0u64);
-                for x in 0..w {
-                    let pixel = y as u64 * w as u64 + x as u64;
-                    let mut rng = Rng::new(options.seed, pixel, PIXEL_STREAM);
-                    let mut sum = Vec3::ZERO;
-                    for s in 0..options.spp {
-                        let jitter = rng.next_vec2();
-                        let cell = if s < grid * grid {
-                            (Vec2::new((s % grid) as f32, (s / grid) as f32) + jitter) / grid as f32
-                        } else {
-                            jitter
-                        };
-                        let ndc = Vec2::new(
-                            2.0 * (x as f32 + cell.x) / w as f32 - 1.0,
-                            1.0 - 2.0 * (y as f32 + cell.y) / h as f32,
-                        );
-                        let dir = camera.direction(ndc, aspect);
-                        let l = shader.radiance(camera.eye, dir, 0, &mut rng, &mut rays);
-                        if l.is_finite() {
-                            sum += l;
-                        } else {
-                            nonfinite += 1;
-                        }
-                    }
-                    row.push(sum / options.spp as f32);
-                }
-                (row, nonfinite, rays)
-            })
-            .collect();
-        let mut image = Image {
+        let view = View {
+            shader: shade::Shader::new(self, options),
+            camera,
             width: w,
             height: h,
-            rgb: Vec::with_capacity((w * h) as usize),
+        };
+        let first = adaptive::first_pass_spp(options);
+        let mut pixels = view.pass(|x, y| {
+            let mut samples = Samples::default();
+            let mut rng = Rng::new(options.seed, view.pixel(x, y), PIXEL_STREAM);
+            view.sample(x, y, first, &mut rng, &mut samples);
+            samples
+        });
+        if first < options.spp {
+            let extra = adaptive::extra_samples(&pixels, w, h, options.spp - first, options.spp);
+            let refined = view.pass(|x, y| {
+                let pixel = view.pixel(x, y);
+                let mut samples = Samples::default();
+                if extra[pixel as usize] > 0 {
+                    let mut rng = Rng::new(options.seed, pixel, REFINE_STREAM);
+                    view.sample(x, y, extra[pixel as usize], &mut rng, &mut samples);
+                }
+                samples
+            });
+            for (p, r) in pixels.iter_mut().zip(&refined) {
+                p.merge(r);
+            }
+        }
+        Ok(Image {
+            width: w,
+            height: h,
+            rgb: pixels.iter().map(|p| p.sum / p.n as f32).collect(),
+            nonfinite: pixels.iter().map(|p| p.nonfinite).sum(),
+            rays: pixels.iter().map(|p| p.rays).sum(),
+        })
+    }
+}
+
+/// What a render pass needs to trace a pixel's samples.
+struct View<'a> {
+    shader: shade::Shader<'a>,
+    camera: &'a Camera,
+    width: u32,
+    height: u32,
+}
+
+impl View<'_> {
+    fn pixel(&self, x: u32, y: u32) -> u64 {
+        y as u64 * self.width as u64 + x as u64
+    }
+
+    /// `per_pixel(x, y)` for every pixel, rows in parallel, in row-major order.
+    fn pass(&self, per_pixel: impl Fn(u32, u32) -> Samples + Sync) -> Vec<Samples> {
+        let rows: Vec<Vec<Samples>> = (0..self.height)
+            .into_par_iter()
+            .map(|y| (0..self.width).map(|x| per_pixel(x, y)).collect())
+            .collect();
+        rows.concat()
+    }
+
+    /// Adds `n` jittered samples of pixel (x, y) to `out`, stratified over a grid about √n on
+    /// a side (leftovers are pure jitter).
+    fn sample(&self, x: u32, y: u32, n: u32, rng: &mut Rng, out: &mut Samples) {
+        let (w, h) = (self.width as f32, self.height as f32);
+        let grid = (n as f32).sqrt().floor().max(1.0) as u32;
+        let mut sum = Vec3::ZERO;
+        for s in 0..n {
+            let jitter = rng.next_vec2();
+            let cell = if s < grid * grid {
+                (Vec2::new((s % grid) as f32, (s / grid) as f32) + jitter) / grid as f32
+            } else {
+                jitter
+            };
+            let ndc = Vec2::new(
+                2.0 * (x as f32 + cell.x) / w - 1.0,
+                1.0 - 2.0 * (y as f32 + cell.y) / h,
+            );
+            let dir = self.camera.direction(ndc, w / h);
+            let l = self
+                .shader
+                .radiance(self.camera.eye, dir, 0, rng, &mut out.rays);
+            if l.is_finite() {
+                sum += l;
+                let luminance = adaptive::luminance(l);
+                out.lo = out.lo.min(luminance);
+                out.hi = out.hi.max(luminance);
+            } else {
+                out.nonfinite += 1;
+            }
+        }
+        out.sum += sum;
+        out.n += n;
+    }
+}
+
+/// The samples of one pixel so far.
+#[derive(Clone, Copy, Debug)]
+struct Samples {
+    sum: Vec3,
+    n: u32,
+    /// Range of the samples' luminance.
+    lo: f32,
+    hi: f32,
+    nonfinite: u64,
+    rays: u64,
+}
+
+impl Default for Samples {
+    fn default() -> Self {
+        Samples {
+            sum: Vec3::ZERO,
+            n: 0,
+            lo: f32::INFINITY,
+            hi: f32::NEG_INFINITY,
             nonfinite: 0,
             rays: 0,
-        };
-        for (row, nonfinite, rays) in rows {
-            image.rgb.extend(row);
-            image.nonfinite += nonfinite;
-            image.rays += rays;
         }
-        Ok(image)
+    }
+}
+
+impl Samples {
+    fn merge(&mut self, other: &Samples) {
+        self.sum += other.sum;
+        self.n += other.n;
+        self.lo = self.lo.min(other.lo);
+        self.hi = self.hi.max(other.hi);
+        self.nonfinite += other.nonfinite;
+        self.rays += other.rays;
     }
 }
 
 /// Purpose tag of the per-pixel random streams.
 const PIXEL_STREAM: u64 = 0x7265_6e64; // "rend"
+/// Purpose tag of the adaptive pass's per-pixel streams.
+const REFINE_STREAM: u64 = 0x7265_666e; // "refn"
 
 impl Image {
     /// 8-bit sRGB PNG, tone-mapped as [`output::png`] describes (scale by `2^exposure`, then a

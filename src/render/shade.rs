@@ -29,7 +29,6 @@
 //! |---|---|---|
 //! | [`MIRROR_ROUGHNESS`] | 0.02 | at or below: one perfect mirror ray |
 //! | [`GLOSSY_MAX_ROUGHNESS`] | 0.5 | above: no specular layer (lightmap only) |
-//! | `MAX_BACK_FACE_SKIPS` | 8 | single-sided faces seen from behind are skipped (culled) |
 //!
 //! Limits: Schlick's Fresnel is applied once per node with the macro-normal angle (not per
 //! microfacet); a single-sided transmissive surface is taken to bound a volume (hitting it from
@@ -47,8 +46,6 @@ use crate::trace::Hit;
 pub const MIRROR_ROUGHNESS: f32 = 0.02;
 /// Roughness above which a surface has no specular layer: it is shaded from the lightmap alone.
 pub const GLOSSY_MAX_ROUGHNESS: f32 = 0.5;
-/// Single-sided opaque faces hit from behind are skipped, as a rasteriser culls them.
-const MAX_BACK_FACE_SKIPS: u32 = 8;
 
 /// Has a specular layer worth tracing.
 fn is_specular(surface: &Surface) -> bool {
@@ -211,29 +208,13 @@ impl<'a> Shader<'a> {
         sum / k as f32
     }
 
-    /// Closest hit that is visible: front faces, and any face of a transmissive material.
+    /// Closest hit that is visible: back faces of opaque single-sided materials are culled.
     fn intersect(&self, origin: Vec3, dir: Vec3, rays: &mut u64) -> Option<Hit> {
-        let mut o = origin;
-        let mut travelled = 0.0;
-        for _ in 0..MAX_BACK_FACE_SKIPS {
-            *rays += 1;
-            let mut hit = self.scene.tracer.closest(o, dir, f32::INFINITY)?;
-            let instance = self.scene.scene.triangle_instance[hit.triangle as usize];
-            let material = self.scene.scene.instances[instance as usize].material;
-            if hit.front
-                || self.scene.scene.materials[material as usize]
-                    .surface
-                    .transmission
-                    > 0.0
-            {
-                hit.t += travelled;
-                return Some(hit);
-            }
-            let step = hit.t + self.epsilon;
-            o += dir * step;
-            travelled += step;
-        }
-        None
+        *rays += 1;
+        let scene = self.scene;
+        scene
+            .tracer
+            .closest_culling(origin, dir, f32::INFINITY, &scene.cull_back)
     }
 
     /// Bilinear lookup of `H/π` at `uv1` (see [`crate::lightmap::Page::bilinear`]).
