@@ -20,9 +20,13 @@ pub struct Args {
     output: PathBuf,
     #[command(flatten)]
     view: ViewArgs,
-    /// Jittered samples per pixel (anti-aliasing; glossy reflections).
+    /// Jittered samples per pixel (anti-aliasing; glossy reflections): the mean over the image,
+    /// spent where the image needs them (edges, emitters) unless --uniform.
     #[arg(long, default_value_t = 16)]
     spp: u32,
+    /// Every pixel gets exactly --spp samples (no adaptive sampling).
+    #[arg(long)]
+    uniform: bool,
     /// Add the ray-traced specular layer (mirrors, glossy metals, glass).
     #[arg(long)]
     specular: bool,
@@ -160,6 +164,7 @@ pub fn run(args: &Args) -> Result<()> {
         max_depth: args.max_depth,
         background: args.background,
         seed: args.seed,
+        adaptive: !args.uniform,
         ..RenderOptions::default()
     };
     let t = Instant::now();
