@@ -28,6 +28,14 @@ pub trait Progress: Sync {
 pub struct NoProgress;
 impl Progress for NoProgress {}
 
+/// Shows nothing of a sub-run (a pilot bake) but stops it when `0` is aborted.
+pub struct CancelOnly<'a>(pub &'a dyn Progress);
+impl Progress for CancelOnly<'_> {
+    fn aborted(&self) -> bool {
+        self.0.aborted()
+    }
+}
+
 /// Collects warnings (for tests and build tools that want them as data).
 #[derive(Default)]
 pub struct CollectWarnings(pub std::sync::Mutex<Vec<String>>);

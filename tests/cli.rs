@@ -292,3 +292,71 @@ fn reference_view_writes_an_image_and_its_standard_error() {
         assert!(help.contains(flag), "{flag} missing from help");
     }
 }
+
+/// SIGTERM or SIGINT during a bake (issue 14): the bake stops within a few seconds with exit
+/// code 128 + the signal and "interrupted", and leaves no file behind, neither an output nor a
+/// temporary one.
+#[cfg(unix)]
+#[test]
+fn signal_stops_a_bake_and_leaves_nothing() {
+    use std::time::{Duration, Instant};
+
+    // Seconds of work either way: matrix-free transport (every bounce casts again), and the
+    // automatic choice's pilot bakes (at 1.5 s; the final bake follows).
+    let gather = [
+        "--no-auto",
+        "--quality",
+        "high",
+        "--rays",
+        "4096",
+        "--solver",
+        "gather",
+    ];
+    let pilot = ["--quality", "high"];
+    let cases: [(_, _, &[&str]); 2] = [
+        (libc::SIGTERM, "cornell_box.gltf", &gather),
+        (libc::SIGINT, "two_rooms.gltf", &pilot),
+    ];
+    for (signal, scene, options) in cases {
+        let dir = scratch();
+        let out = dir.path().join("out");
+        let scene = fixture(scene);
+        let mut child = Command::new(env!("CARGO_BIN_EXE_lightbake"))
+            .args(["bake", scene.to_str().unwrap(), "-o", out.to_str().unwrap()])
+            .args(options)
+            .args(["--threads", "2"])
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .expect("run lightbake");
+        std::thread::sleep(Duration::from_millis(1500));
+        assert!(
+            child.try_wait().unwrap().is_none(),
+            "the bake ended before the signal: make it longer"
+        );
+        let sent = Instant::now();
+        // SAFETY: kill(2) on our own child's pid; no memory is involved.
+        assert_eq!(unsafe { libc::kill(child.id() as libc::pid_t, signal) }, 0);
+        let status = loop {
+            if let Some(status) = child.try_wait().unwrap() {
+                break status;
+            }
+            if sent.elapsed() > Duration::from_secs(20) {
+                child.kill().unwrap();
+                panic!("signal {signal}: the bake did not stop within 20 s");
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        };
+        let latency = sent.elapsed();
+        let o = child.wait_with_output().unwrap();
+        eprintln!("signal {signal}: stopped {latency:?} after it was sent");
+        assert_eq!(status.code(), Some(128 + signal), "{}", stderr(&o));
+        assert!(stderr(&o).contains("interrupted"), "{}", stderr(&o));
+        assert!(
+            latency < Duration::from_secs(3),
+            "signal {signal}: stopped only after {latency:?}"
+        );
+        let left: Vec<String> = list_files(dir.path());
+        assert!(left.is_empty(), "signal {signal} left {left:?}");
+    }
+}

@@ -12,10 +12,11 @@ use glam::Vec3;
 use super::light::{Lit, transport_and_solve};
 use crate::config::{BakeConfig, FormFactors, Keep, SolveParams, Technique, TransportParams};
 use crate::plan::{self, PILOT_RAYS, Plan};
+use crate::progress::CancelOnly;
 use crate::solve::Solution;
 use crate::texels::Texels;
 use crate::transport::{Surfaces, Transport};
-use crate::{NoProgress, Progress, Result, metrics};
+use crate::{Progress, Result, metrics};
 
 /// Step 2 onwards of the automatic choice, once texels and the tracer exist: method, rays
 /// (measured by the pilot), light samples, solver, tolerance and per-texel rays. Returns the
@@ -40,7 +41,7 @@ pub fn choose_transport(
         progress.begin("pilot", 2);
         let start = Instant::now();
         let tolerance = (e / 10.0).min(1e-3);
-        let bake = |k| PilotRuns::bake(surfaces, &config.transport, k, tolerance);
+        let bake = |k| PilotRuns::bake(surfaces, &config.transport, k, tolerance, progress);
         let mut runs = bake(PILOT_RAYS)?;
         let first = runs.noise(texels, config.transport.indirect_only);
         let mut rays = runs.rays();
@@ -104,6 +105,7 @@ impl PilotRuns {
         transport: &TransportParams,
         k: u32,
         tolerance: f32,
+        progress: &dyn Progress,
     ) -> Result<PilotRuns> {
         let solve_params = SolveParams {
             tolerance,
@@ -125,7 +127,7 @@ impl PilotRuns {
                     &params,
                     None,
                     &solve_params,
-                    &NoProgress,
+                    &CancelOnly(progress),
                 )
             })
             .collect::<Result<Vec<_>>>()?;

@@ -1,6 +1,7 @@
 //! The `lightbake` command line: flags → [`BakeConfig`], progress bars, one-line summary.
 
 mod compare;
+mod interrupt;
 mod progress;
 mod reference;
 mod render;
@@ -209,8 +210,10 @@ struct RunArgs {
 }
 
 impl RunArgs {
-    /// Starts the worker threads (before any parallel work).
-    fn start_threads(&self) -> Result<()> {
+    /// Starts the worker threads (before any parallel work) and the handlers that turn SIGINT
+    /// and SIGTERM into a cancelled run (the command checks them through its [`Bars`]).
+    fn start(&self) -> Result<()> {
+        interrupt::install()?;
         if let Some(n) = self.threads {
             rayon::ThreadPoolBuilder::new()
                 .num_threads(n.max(1))
@@ -316,7 +319,7 @@ impl BakeArgs {
 }
 
 fn bake(args: &BakeArgs) -> Result<()> {
-    args.run.start_threads()?;
+    args.run.start()?;
     let config = args.config()?;
     let bars = Bars::new(args.run.quiet);
     let report = lightbake::bake(&args.scene, &args.output, &config, &bars)
@@ -351,6 +354,10 @@ fn main() -> ExitCode {
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
+        Err(_) if let Some(signal) = interrupt::received() => {
+            eprintln!("interrupted");
+            ExitCode::from(interrupt::exit_code(signal) as u8)
+        }
         Err(e) => {
             eprintln!("error: {e:#}");
             ExitCode::FAILURE

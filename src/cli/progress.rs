@@ -43,6 +43,9 @@ impl Progress for Bars {
             None => eprintln!("warning: {message}"),
         }
     }
+    fn aborted(&self) -> bool {
+        crate::interrupt::received().is_some()
+    }
 }
 
 impl Bars {

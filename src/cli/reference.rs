@@ -145,7 +145,7 @@ impl Args {
 }
 
 pub fn run(args: &Args) -> Result<()> {
-    args.run.start_threads()?;
+    args.run.start()?;
     let config = args.config();
     let params = args.params(&config)?;
     if args.view {
