@@ -138,6 +138,32 @@ pub fn without_noise(error: f32, noise: f32) -> f32 {
     (error * error - noise * noise).max(0.0).sqrt()
 }
 
+/// `√(Σ w·mean_c(m) / Σ w) / (Σ w·mean_c(r) / Σ w)` over the kept texels: the relative RMS
+/// of an error known only by its expected square `m` per texel and channel, each texel weighing
+/// `w` (its area: a figure over area, like random points on surfaces), normalised as
+/// [`rmse_over_mean`]. `m` may come from an unbiased estimator that is negative where the
+/// error is small; a negative total reads as 0. NaN when nothing is kept or `r`'s mean is
+/// not positive.
+pub fn weighted_rms_over_mean(m: &[Vec3], r: &[Vec3], w: &[f32], skip: &[u32]) -> f32 {
+    assert!(
+        m.len() == r.len() && w.len() == r.len(),
+        "values must share texels"
+    );
+    let (mut square, mut sum, mut weight) = (0.0f64, 0.0f64, 0.0f64);
+    for (((m, r), w), k) in m.iter().zip(r).zip(w).zip(kept(r.len(), skip)) {
+        if k {
+            square += *w as f64 * m.element_sum() as f64;
+            sum += *w as f64 * r.element_sum() as f64;
+            weight += *w as f64;
+        }
+    }
+    if weight <= 0.0 || sum <= 0.0 {
+        return f32::NAN;
+    }
+    let channels = 3.0 * weight;
+    ((square.max(0.0) / channels).sqrt() / (sum / channels)) as f32
+}
+
 /// `Σx / Σr − 1` over the kept texels and channels: how much brighter `x` is on the whole.
 pub fn relative_bias(x: &[Vec3], r: &[Vec3], skip: &[u32]) -> f32 {
     let (mut a, mut b) = (0.0f64, 0.0f64);
@@ -282,6 +308,23 @@ mod tests {
         assert_eq!(rms_texel_relative_error(&x, &r, &[], 3.0), 0.0);
         assert_eq!(rms_texel_relative_error(&x, &r, &[0], 0.0), 0.0);
         assert!(rms_texel_relative_error(&x, &r, &[0, 1], 0.0).is_nan());
+    }
+
+    #[test]
+    fn weighted_rms_of_expected_squares() {
+        let (_, r) = pair();
+        // Expected squares 1 and 0, weights 3 and 1: √(3/4) over the weighted mean (3+3)/4.
+        let m = vec![Vec3::ONE, Vec3::ZERO];
+        let w = [3.0, 1.0];
+        assert!(close(
+            weighted_rms_over_mean(&m, &r, &w, &[]),
+            0.75f32.sqrt() / 1.5
+        ));
+        assert!(close(weighted_rms_over_mean(&m, &r, &w, &[0]), 0.0));
+        // A negative total (an unbiased estimate of a small error) reads as 0.
+        let negative = vec![-Vec3::ONE, Vec3::ZERO];
+        assert_eq!(weighted_rms_over_mean(&negative, &r, &w, &[]), 0.0);
+        assert!(weighted_rms_over_mean(&m, &r, &w, &[0, 1]).is_nan());
     }
 
     #[test]

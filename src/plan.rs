@@ -33,6 +33,13 @@
 //!   fixtures this saves 1.8–3.0% of the rays (emitters are small) and never touches lit texels.
 //! - **Tolerance** E/10: the solver stops once its remaining error is well below the Monte
 //!   Carlo error, not later.
+//! - **Resolution error** is predicted, not controlled (the density stays the preset's): what a
+//!   renderer shows between texel centres, where it blends four texels bilinearly, differs from
+//!   the light at that point where the light curves within a texel — shadow and spot-cone
+//!   edges, contact shadows, small objects. [`resolution_error`] estimates it from the pilot's
+//!   irradiance by the texels' second differences (derivation there); `--explain` reports it
+//!   next to the noise, their combination in quadrature is the prediction, and a combination
+//!   above the target is said plainly rather than promised away.
 //!
 //! The pilot costs nothing extra when its bakes suffice and a few solves otherwise (Cornell
 //! box, 7167 texels, medium: 4 pilot bakes, 0.3 s, and no further bake). It measures the scene
@@ -43,8 +50,9 @@
 use glam::Vec3;
 
 use crate::config::{BakeConfig, FormFactors, Keep, RowSolver, Technique};
+use crate::metrics;
 use crate::scene::Scene;
-use crate::texels::Texels;
+use crate::texels::{NO_TEXEL, Texels};
 
 /// Gathering rays per texel of the pilot bakes.
 pub const PILOT_RAYS: u32 = 16;
@@ -77,7 +85,10 @@ pub struct Plan {
     /// The pilot's measured relative noise at [`PILOT_RAYS`], if a pilot ran.
     pub pilot_noise: Option<f32>,
     /// Expected noise of the chosen bake (before denoising).
-    pub predicted_error: Option<f32>,
+    pub predicted_noise: Option<f32>,
+    /// Expected resolution error of the chosen density ([`resolution_error`]), measured on
+    /// the pilot's irradiance.
+    pub predicted_resolution: Option<f32>,
     /// Gathering rays per texel in all, the reused pilot bakes included.
     pub total_rays: Option<u32>,
     pub pilot_seconds: f64,
@@ -95,6 +106,15 @@ pub struct Plan {
 }
 
 impl Plan {
+    /// The expected error at random points of the surfaces, as a renderer shows the bake: noise
+    /// and resolution error are independent, so they add in quadrature. `None` without a pilot.
+    pub fn predicted_error(&self) -> Option<f32> {
+        match (self.predicted_noise, self.predicted_resolution) {
+            (Some(n), Some(r)) => Some(n.hypot(r)),
+            (n, r) => n.or(r),
+        }
+    }
+
     /// The choice in a few words (sets [`Plan::brief`]), once every decision is made.
     pub fn finish(&mut self, config: &BakeConfig) {
         let mut s = format!(
@@ -103,8 +123,13 @@ impl Plan {
             config.technique,
             self.total_rays.unwrap_or(config.transport.gather_rays)
         );
-        if let Some(p) = self.predicted_error {
-            s += &format!(" (predicted {:.1}%)", p * 100.0);
+        if let Some(p) = self.predicted_error() {
+            let over = if p > self.target_error {
+                ", above the target"
+            } else {
+                ""
+            };
+            s += &format!(" (predicted {:.1}%{over})", p * 100.0);
         }
         self.brief = s;
     }
@@ -239,7 +264,7 @@ pub fn choose_rays(
     } else {
         round_up_quarter_octave((k - reused) as f32).max(RAYS_RANGE.0)
     };
-    plan.predicted_error = Some(predicted);
+    plan.predicted_noise = Some(predicted);
     plan.total_rays = Some(if enough {
         reused
     } else {
@@ -371,6 +396,139 @@ pub fn choose_texel_rays(texels: &Texels, pilot: &[&[Vec3]], k: u32, plan: &mut 
     }
 }
 
+/// Step 3b, after the rays: the resolution error of the density ([`resolution_error`]) from
+/// the last pilot pair's lightmap values, and the prediction that combines it with the noise.
+pub fn predict_resolution(texels: &Texels, pilot: [&[Vec3]; 2], plan: &mut Plan) {
+    let r = resolution_error(texels, pilot);
+    if !r.is_finite() {
+        return;
+    }
+    plan.predicted_resolution = Some(r);
+    let e = plan.target_error;
+    let noise = plan.predicted_noise.unwrap_or(0.0);
+    let combined = noise.hypot(r);
+    let pct = |x: f32| format!("{:.2}%", x * 100.0);
+    let verdict = if combined <= e {
+        format!("within the {:.1}% target", e * 100.0)
+    } else if r > e {
+        format!(
+            "ABOVE the {:.1}% target: resolution error {} exceeds it — shadow edges, spot-cone \
+             edges and small objects need more texels than the density allows, and more rays \
+             cannot help (raise --texels-per-unit)",
+            e * 100.0,
+            pct(r)
+        )
+    } else if noise > e {
+        format!(
+            "ABOVE the {:.1}% target: the noise {} exceeds it at the ray cap",
+            e * 100.0,
+            pct(noise)
+        )
+    } else {
+        format!(
+            "ABOVE the {:.1}% target: noise and resolution error together exceed it \
+             (more texels would lower the resolution error)",
+            e * 100.0
+        )
+    };
+    plan.reasons.push(format!(
+        "prediction {} at random points of the surfaces, as a renderer shows the bake: noise {} \
+         and resolution error {} in quadrature — {verdict}. The resolution error is the \
+         bilinear lookup's between texel centres, from the pilot's second differences across \
+         neighbouring texels (area-weighted, like the point yardstick; gutters and chart \
+         borders not counted)",
+        pct(combined),
+        pct(noise),
+        pct(r)
+    ));
+}
+
+/// Neighbouring texels in a page whose normals are this close (cos 26°) lie on one smooth
+/// surface: their second difference measures the light, not a crease.
+const SAME_SURFACE_COS: f32 = 0.9;
+/// Mean and mean square of the bilinear lookup's error per unit second difference along one
+/// axis, over a texel (`g(t) = 1/24 + t(1−t)/2`, t uniform on [0, 1]; see [`resolution_error`]).
+const G_MEAN: f32 = 1.0 / 8.0;
+const G_MEAN_SQUARE: f32 = 49.0 / 2880.0;
+
+/// Relative RMS error, over the surfaces' area, of what a renderer reads from the lightmap
+/// (bilinear lookup between texel centres) against the light at each point, estimated from
+/// two independent bakes of the same texels (`pilot`, the values the lightmap stores).
+///
+/// **Model.** Along one page axis, with texel size `h` and a light `f` of second derivative
+/// `f''`: a texel's value is the mean of `f` over its footprint (its sample points jitter over
+/// it), `f(cᵢ) + f''h²/24`; a renderer at `x = cᵢ + t·h`, t ∈ [0, 1], reads the linear
+/// interpolation of the two values, and `f` lies `f''h²·t(1−t)/2` below the chord through
+/// `f(cᵢ)` and `f(cᵢ₊₁)`. The lookup's error is therefore `D·g(t)` with
+/// `g(t) = 1/24 + t(1−t)/2` and `D = f''h²`, which is exactly the second difference
+/// `vᵢ₋₁ − 2vᵢ + vᵢ₊₁` of the texel values (for a quadratic; the footprint mean shifts every
+/// value alike). Over uniform t: mean `g` = 1/24 + 1/12 = 1/8 (the midpoint alone, point-sampled,
+/// would give the textbook h²f''/8 with 1/24 on top for the footprint) and mean `g²` =
+/// 1/576 + 1/144 + 1/120 = 49/2880 (RMS 0.130·|D|). In two dimensions a mixed term `xy` is
+/// reproduced exactly by bilinear interpolation and by footprint means, so with `Dx`, `Dy` the
+/// second differences along x and y and (t, s) uniform over the cell, the mean square error is
+/// `49/2880·(Dx² + Dy²) + 2·(1/8)²·Dx·Dy`. No constant is fitted to a scene.
+///
+/// **Noise.** A second difference of noisy values carries six times a texel's noise variance,
+/// which at pilot ray counts would swamp the light's curvature. The two bakes are independent,
+/// so the product of their second differences, `D_a·D_b`, estimates `D²` without it (and
+/// `(Dx_a·Dy_b + Dx_b·Dy_a)/2` the mixed product): unbiased, though it can be negative where
+/// the light is smooth; the area sum is clamped at 0.
+///
+/// **Where.** A second difference needs both neighbours along an axis: in the same page, valid
+/// (not in `Texels::invalid`), on the same smooth surface ([`SAME_SURFACE_COS`]). A texel with
+/// one axis counts it twice (the light assumed as curved across as along); one with neither
+/// (a texel-wide strip, a lone texel) is left out, as are the lookups near chart borders that
+/// read dilated gutters: the figure covers the chart interiors. Aggregated with
+/// [`metrics::weighted_rms_over_mean`] over texel areas against the mean of the two bakes.
+/// NaN when no texel has a second difference or the light is black.
+pub fn resolution_error(texels: &Texels, pilot: [&[Vec3]; 2]) -> f32 {
+    let n = texels.len();
+    let mut valid = vec![true; n];
+    for &i in &texels.invalid {
+        valid[i as usize] = false;
+    }
+    let neighbour = |i: usize, dx: i64, dy: i64| -> Option<usize> {
+        let page = texels.page[i] as usize;
+        let size = texels.pages[page];
+        let [x, y] = texels.xy[i];
+        let (x, y) = (x as i64 + dx, y as i64 + dy);
+        if x < 0 || y < 0 || x >= size.width as i64 || y >= size.height as i64 {
+            return None;
+        }
+        let j = texels.index[page][(y * size.width as i64 + x) as usize];
+        (j != NO_TEXEL
+            && valid[j as usize]
+            && texels.normal[i].dot(texels.normal[j as usize]) >= SAME_SURFACE_COS)
+            .then_some(j as usize)
+    };
+    let second_difference = |i: usize, dx: i64, dy: i64| -> Option<[Vec3; 2]> {
+        let (a, b) = (neighbour(i, -dx, -dy)?, neighbour(i, dx, dy)?);
+        Some(pilot.map(|h| h[a] - 2.0 * h[i] + h[b]))
+    };
+    let mut square = vec![Vec3::ZERO; n];
+    let mut skip = Vec::new();
+    for i in 0..n {
+        let along = if valid[i] {
+            (second_difference(i, 1, 0), second_difference(i, 0, 1))
+        } else {
+            (None, None)
+        };
+        square[i] = match along {
+            (Some([xa, xb]), Some([ya, yb])) => {
+                G_MEAN_SQUARE * (xa * xb + ya * yb) + G_MEAN * G_MEAN * (xa * yb + xb * ya)
+            }
+            (Some([a, b]), None) | (None, Some([a, b])) => 2.0 * G_MEAN_SQUARE * a * b,
+            (None, None) => {
+                skip.push(i as u32);
+                Vec3::ZERO
+            }
+        };
+    }
+    let mean: Vec<Vec3> = (0..n).map(|i| (pilot[0][i] + pilot[1][i]) * 0.5).collect();
+    metrics::weighted_rms_over_mean(&square, &mean, &texels.area, &skip)
+}
+
 /// The smallest of 4·2ⁿ, 5·2ⁿ, 6·2ⁿ, 7·2ⁿ at or above `x` (four steps per octave: powers of
 /// two alone overshoot the rays, and the time, by up to 2×).
 fn round_up_quarter_octave(x: f32) -> u32 {
@@ -432,6 +590,103 @@ mod tests {
             .map(round_up_quarter_octave)
             .collect();
         assert_eq!(r, [1, 8, 8, 10, 80, 112, 128, 160]);
+    }
+
+    /// A `w × h` page fully covered by texels facing +z, of unit area, lit by `f(x, y)` at the
+    /// texel centres; returns the texels and their values.
+    fn page(w: u32, h: u32, f: impl Fn(f32, f32) -> f32) -> (Texels, Vec<Vec3>) {
+        let mut t = Texels {
+            pages: vec![crate::atlas::PageSize {
+                width: w,
+                height: h,
+            }],
+            index: vec![(0..w * h).collect()],
+            ..Texels::default()
+        };
+        let mut values = Vec::new();
+        for y in 0..h {
+            for x in 0..w {
+                t.position.push(Vec3::new(x as f32, y as f32, 0.0));
+                t.xy.push([x, y]);
+                t.page.push(0);
+                t.normal.push(Vec3::Z);
+                t.area.push(1.0);
+                values.push(Vec3::splat(f(x as f32, y as f32)));
+            }
+        }
+        (t, values)
+    }
+
+    #[test]
+    fn a_linear_ramp_has_no_resolution_error() {
+        let (t, v) = page(7, 5, |x, y| 1.0 + 0.25 * x - 0.125 * y);
+        assert!(resolution_error(&t, [&v, &v]) < 1e-6);
+        // Noise in one run only has no counterpart in the other: it does not count.
+        let noisy: Vec<Vec3> = v
+            .iter()
+            .enumerate()
+            .map(|(i, v)| *v + Vec3::splat(if i % 2 == 0 { 0.2 } else { -0.2 }))
+            .collect();
+        assert!(resolution_error(&t, [&noisy, &v]) < 1e-6);
+    }
+
+    /// The factors of the model, checked by integrating the lookup's error numerically: texel
+    /// values are footprint means of `f = x²` (x in texels, so D = 2), the lookup interpolates
+    /// them linearly between centres, and the mean and mean square of its error over a cell
+    /// are `D/8` and `49/2880·D²`.
+    #[test]
+    fn bilinear_error_factors_match_a_numerical_integral() {
+        let f = |x: f64| x * x;
+        let texel = |c: f64| c * c + 1.0 / 12.0; // ∫ x² over [c − ½, c + ½]
+        let steps = 100_000;
+        let (mut mean, mut square) = (0.0f64, 0.0f64);
+        for k in 0..steps {
+            let t = (k as f64 + 0.5) / steps as f64;
+            let e = texel(0.0) * (1.0 - t) + texel(1.0) * t - f(t);
+            mean += e / steps as f64;
+            square += e * e / steps as f64;
+        }
+        assert!((mean - 2.0 * G_MEAN as f64).abs() < 1e-6, "{mean}");
+        assert!(
+            (square - 4.0 * G_MEAN_SQUARE as f64).abs() < 1e-6,
+            "{square}"
+        );
+    }
+
+    #[test]
+    fn a_quadratic_has_the_analytic_resolution_error() {
+        // One row: the inner texels have the x axis only (counted twice), D = 2k everywhere.
+        let k = 0.01;
+        let (t, v) = page(9, 1, |x, _| 1.0 + k * x * x);
+        let inner: f32 = (1..8).map(|x| 1.0 + k * (x * x) as f32).sum::<f32>() / 7.0;
+        let expected = (2.0 * G_MEAN_SQUARE).sqrt() * 2.0 * k / inner;
+        let r = resolution_error(&t, [&v, &v]);
+        assert!((r - expected).abs() < 1e-3 * expected, "{r} vs {expected}");
+
+        // Both axes curved alike: the centre of a 3×3 page has D along x and y (mean square
+        // (2·49/2880 + 2/64)·D²), the middles of its sides D along one axis (2·49/2880·D²),
+        // corners none.
+        let (mut t, v) = page(3, 3, |x, y| 1.0 + k * (x * x + y * y));
+        let d2 = (2.0 * k) * (2.0 * k);
+        let centre = 2.0 * G_MEAN_SQUARE + 2.0 * G_MEAN * G_MEAN;
+        let ms = (centre + 4.0 * 2.0 * G_MEAN_SQUARE) * d2 / 5.0;
+        let mean = [1, 3, 4, 5, 7].map(|i| v[i].x).iter().sum::<f32>() / 5.0;
+        let r = resolution_error(&t, [&v, &v]);
+        assert!((r - ms.sqrt() / mean).abs() < 1e-3 * r, "{r}");
+        // Rows whose normals differ are different surfaces: no second difference across them
+        // (the middle of each row keeps its own along x).
+        for i in [0, 1, 2, 6, 7, 8] {
+            t.normal[i] = Vec3::X;
+        }
+        let one_axis = (2.0 * G_MEAN_SQUARE).sqrt() * 2.0 * k;
+        let mean = [1, 4, 7].map(|i| v[i].x).iter().sum::<f32>() / 3.0;
+        let r = resolution_error(&t, [&v, &v]);
+        assert!((r - one_axis / mean).abs() < 1e-3 * r, "{r}");
+        // Invalid texels are no neighbours either: only the centre is left.
+        t.normal = vec![Vec3::Z; 9];
+        t.invalid = vec![0, 1, 2, 6, 7, 8];
+        let r = resolution_error(&t, [&v, &v]);
+        assert!((r - one_axis / v[4].x).abs() < 1e-3 * r, "{r}");
     }
 
     #[test]

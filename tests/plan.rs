@@ -28,7 +28,7 @@ fn reaches_its_target_on_the_cornell_box() {
     let plan = baked.plan.as_ref().expect("a plan");
     assert!(plan.pilot_noise.unwrap() > 0.02, "{plan:?}");
     assert!(
-        plan.predicted_error.unwrap() <= 0.75 * target + 1e-6,
+        plan.predicted_noise.unwrap() <= 0.75 * target + 1e-6,
         "{plan:?}"
     );
     assert_eq!(baked.config.technique.method(), "montecarlo");
@@ -50,7 +50,7 @@ fn reaches_its_target_on_the_cornell_box() {
         rmse * 100.0,
         ref_noise * 100.0,
         corrected * 100.0,
-        plan.predicted_error.unwrap() * 100.0
+        plan.predicted_noise.unwrap() * 100.0
     );
     assert!(ref_noise < 0.03, "reference too noisy: {ref_noise}");
     assert!(
@@ -173,6 +173,16 @@ fn cli_explains_its_choice() {
     );
     assert!(stdout.contains("the pilot"), "{stdout}");
     assert!(stdout.contains("auto for 10.0%"), "{stdout}");
+    // Noise and resolution error are reported apart, with their combination.
+    let prediction = stdout
+        .lines()
+        .find(|l| l.contains("- prediction "))
+        .unwrap_or_else(|| panic!("no prediction line: {stdout}"));
+    assert!(
+        prediction.contains("noise ") && prediction.contains("resolution error "),
+        "{prediction}"
+    );
+    assert!(prediction.contains("in quadrature"), "{prediction}");
 
     let o = Command::new(env!("CARGO_BIN_EXE_lightbake"))
         .args(["bake", fixture("cornell_box.gltf").to_str().unwrap(), "-o"])

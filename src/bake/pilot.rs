@@ -58,6 +58,8 @@ pub fn choose_transport(
         plan.pilot_seconds = start.elapsed().as_secs_f64();
         plan.pilot_rays = rays;
         runs.enough = plan::choose_rays(config, plan, first, second);
+        let [a, b] = runs.stored(config.transport.indirect_only);
+        plan::predict_resolution(texels, [&a, &b], plan);
         pilot = Some(runs);
     } else if monte_carlo && !keep.rays {
         plan::keep_rays_unmeasured(config, plan);
@@ -143,8 +145,8 @@ impl PilotRuns {
         self.runs.iter().map(|r| r.transport.rays).sum()
     }
 
-    /// Relative RMS noise of one run (of what the lightmap stores).
-    fn noise(&self, texels: &Texels, indirect_only: bool) -> f32 {
+    /// What the lightmap stores, from each of the two runs.
+    fn stored(&self, indirect_only: bool) -> [Vec<Vec3>; 2] {
         let values = |r: &Lit| -> Vec<Vec3> {
             r.solution
                 .irradiance
@@ -159,11 +161,13 @@ impl PilotRuns {
                 })
                 .collect()
         };
-        metrics::relative_noise(
-            &values(&self.runs[0]),
-            &values(&self.runs[1]),
-            &texels.invalid,
-        )
+        [values(&self.runs[0]), values(&self.runs[1])]
+    }
+
+    /// Relative RMS noise of one run (of what the lightmap stores).
+    fn noise(&self, texels: &Texels, indirect_only: bool) -> f32 {
+        let [a, b] = self.stored(indirect_only);
+        metrics::relative_noise(&a, &b, &texels.invalid)
     }
 }
 
