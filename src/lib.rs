@@ -55,7 +55,10 @@
 //! Beside the pipeline: [`reference`](mod@reference) (the path tracer every accuracy figure is measured
 //! against, at texels or through a camera), [`render`] (lightmapped views with a ray-traced
 //! specular layer; it reads only the [`scene::Scene`] and the EXR pages its instances name,
-//! never glTF JSON) and [`metrics`] (the error measures of every accuracy figure).
+//! never glTF JSON) and [`metrics`] (the error measures of every accuracy figure). The
+//! reference also measures what a renderer shows: [`reference::points`] path-traces random
+//! visible surface points and reads the written bake there as a renderer does (`TEXCOORD_1`,
+//! bilinear lookup in the EXR page).
 //!
 //! ## Conventions
 //!
