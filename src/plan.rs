@@ -484,7 +484,7 @@ const G_MEAN_SQUARE: f32 = 49.0 / 2880.0;
 /// the light is smooth; the area sum is clamped at 0.
 ///
 /// **Where.** A second difference needs both neighbours along an axis: in the same page, valid
-/// (not in `Texels::invalid`), on the same smooth surface ([`SAME_SURFACE_COS`]). A texel with
+/// (not in `Texels::invalid`), on the same smooth surface (`SAME_SURFACE_COS`). A texel with
 /// one axis counts it twice (the light assumed as curved across as along); one with neither
 /// (a texel-wide strip, a lone texel) is left out, as are the lookups near chart borders that
 /// read dilated gutters: the figure covers the chart interiors. Aggregated with

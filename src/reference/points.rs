@@ -15,7 +15,7 @@
 //! Single-sided faces are seen from the front only. Candidates are drawn until `n` are visible.
 //!
 //! **Estimator.** At each kept point `x` with geometric normal `n`, one sample is one path of the
-//! texel reference's estimator ([`Paths::reflected`]: next-event estimation for punctual lights
+//! texel reference's estimator (`Paths::reflected`: next-event estimation for punctual lights
 //! and small emitters, MIS with the cosine-sampled bounce, Russian roulette) started at
 //! `x + ε·n`, so the mean estimates `H(x)/π` at the point itself (not a footprint average), with
 //! the standard error of the mean of independent paths. Paths after the first vertex read the
