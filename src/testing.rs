@@ -1445,6 +1445,29 @@ pub fn fixture_files() -> Vec<(&'static str, Vec<u8>)> {
     ]
 }
 
+/// The largest row sum of the raw point-to-point kernel over all texel pairs, with no
+/// visibility (right for a convex enclosure, where every pair sees each other): the documented
+/// failure of that kernel, whose rows exceed 1 where walls touch.
+pub fn raw_point_kernel_max_row_sum(t: &crate::texels::Texels) -> f32 {
+    use crate::transport::kernel::point_to_point;
+    (0..t.len())
+        .map(|i| {
+            (0..t.len())
+                .filter(|&j| j != i)
+                .map(|j| {
+                    point_to_point(
+                        t.position[i],
+                        t.normal[i],
+                        t.position[j],
+                        t.normal[j],
+                        t.area[j],
+                    )
+                })
+                .sum::<f32>()
+        })
+        .fold(0.0f32, f32::max)
+}
+
 #[cfg(test)]
 mod tests {
     use std::collections::BTreeMap;

@@ -6,7 +6,7 @@ use std::time::Instant;
 
 use glam::Vec3;
 use lightbake::config::{FormFactors, RowSolver, Technique};
-use lightbake::testing::{Geometry, GltfBuilder, Material};
+use lightbake::testing::{self, Geometry, GltfBuilder, Material};
 use lightbake::transport::kernel::{
     parallel_rectangles, perpendicular_rectangles, point_to_coaxial_disk, point_to_disk_bound,
     point_to_point,
@@ -375,22 +375,7 @@ fn raw_point_kernel_rows_exceed_one_at_corners() {
     .unwrap();
     let t = &baked.texels;
     // The box is convex: every pair sees each other, no visibility needed.
-    let raw_max = (0..t.len())
-        .map(|i| {
-            (0..t.len())
-                .filter(|&j| j != i)
-                .map(|j| {
-                    point_to_point(
-                        t.position[i],
-                        t.normal[i],
-                        t.position[j],
-                        t.normal[j],
-                        t.area[j],
-                    )
-                })
-                .sum::<f32>()
-        })
-        .fold(0.0f32, f32::max);
+    let raw_max = testing::raw_point_kernel_max_row_sum(t);
     // The cure before row normalisation: entries capped by the disk bound.
     let capped = |i: usize| {
         (0..t.len())

@@ -7,8 +7,8 @@ use std::time::Instant;
 
 use glam::Vec3;
 use lightbake::config::{FormFactors, RowSolver, Technique};
-use lightbake::transport::kernel::point_to_point;
-use lightbake::{BakeConfig, Baked, NoProgress, metrics};
+
+use lightbake::{BakeConfig, Baked, NoProgress, metrics, testing};
 
 /// A reference the main run computed, with where its texels are.
 pub struct Known<'a> {
@@ -77,22 +77,7 @@ fn point_singularity(dir: &Path) -> Case {
         Ok((b, seconds)) => {
             let t = &b.texels;
             // The box is convex: every pair sees each other, the raw kernel needs no rays.
-            let raw_max = (0..t.len())
-                .map(|i| {
-                    (0..t.len())
-                        .filter(|&j| j != i)
-                        .map(|j| {
-                            point_to_point(
-                                t.position[i],
-                                t.normal[i],
-                                t.position[j],
-                                t.normal[j],
-                                t.area[j],
-                            )
-                        })
-                        .sum::<f32>()
-                })
-                .fold(0.0f32, f32::max);
+            let raw_max = testing::raw_point_kernel_max_row_sum(t);
             let cured_max = (0..b.transport.len())
                 .map(|i| b.transport.row(i).map(|(_, f)| f).sum::<f32>() + b.transport.escape[i])
                 .fold(0.0f32, f32::max);
