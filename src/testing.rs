@@ -1423,6 +1423,42 @@ pub fn sphere_on_floor() -> GltfBuilder {
     gltf
 }
 
+/// A 3 × 3 m floor of tiles whose edges meet in T-junctions, lit by a point light (not a
+/// committed fixture). Row z ∈ [0, 1] is one quad; row z ∈ [1, 2] is three 1 m tiles in the
+/// same primitive, so the long quad's edge meets two tile corners in its middle; row
+/// z ∈ [2, 3] is another node with two 1.5 m tiles, overlapping the middle tile of row 1 half
+/// each (edges sharing only a part, between instances).
+pub fn t_junction_floor() -> GltfBuilder {
+    let mut gltf = GltfBuilder::new("t_junction_floor");
+    let material = gltf.add_material(Material::grey("floor", 0.5));
+    // Tiles x ∈ [x0, x1], z ∈ [z0, z0 + 1], facing up.
+    let tile = |x0: f32, x1: f32, z0: f32| {
+        Geometry::grid(
+            Vec3::new(x0, 0.0, z0 + 1.0),
+            Vec3::X * (x1 - x0),
+            Vec3::NEG_Z,
+            1,
+            1,
+        )
+    };
+    let mut near = tile(0.0, 3.0, 0.0);
+    for x in 0..3 {
+        near.append(&tile(x as f32, x as f32 + 1.0, 1.0));
+    }
+    let near_mesh = gltf.add_mesh("near", near.without_uv0(), material);
+    gltf.add_mesh_node("near", near_mesh);
+    let mut far = tile(0.0, 1.5, 2.0);
+    far.append(&tile(1.5, 3.0, 2.0));
+    let far_mesh = gltf.add_mesh("far", far.without_uv0(), material);
+    gltf.add_mesh_node("far", far_mesh);
+    gltf.add_light_node(
+        Light::point("light", [1.0; 3], 6.0),
+        Vec3::new(1.2, 1.5, 1.7),
+        Vec3::NEG_Y,
+    );
+    gltf
+}
+
 /// Every committed fixture: file name in `fixtures/` and its bytes.
 pub fn fixture_files() -> Vec<(&'static str, Vec<u8>)> {
     vec![

@@ -211,3 +211,54 @@ fn cli_reports_seams_and_no_seams_turns_them_off() {
     let off = run(&["--no-seams"]);
     assert!(!off.contains("seams: "), "{off}");
 }
+
+/// Mean `|A − B|` between the two sides of the T-junction lines of `testing::t_junction_floor`
+/// (z = 1 and z = 2, x ∈ (0, 3)) as a renderer reads the written bake, and the mean value there.
+fn t_junction_mismatch(seams: bool) -> (f32, f32, lightbake::lightmap::seams::SeamReport) {
+    use lightbake::reference::points::{self, Point};
+    let dir = scratch();
+    let input = dir.path().join("t_junction_floor.gltf");
+    lightbake::testing::t_junction_floor()
+        .write_gltf(&input)
+        .unwrap();
+    let out = dir.path().join("out");
+    let report = lightbake::bake(&input, &out, &config(seams), &NoProgress).unwrap();
+    let baked = lightbake::render::RenderScene::load(&report.files[0]).unwrap();
+    let side = |z: f32| {
+        (0..300)
+            .map(|k| Point {
+                position: glam::Vec3::new((k as f32 + 0.5) / 100.0, 0.0, z),
+                normal: glam::Vec3::Y,
+            })
+            .collect::<Vec<_>>()
+    };
+    let value = |points: Vec<Point>| -> Vec<glam::Vec3> {
+        points::look_up(&baked, &points)
+            .into_iter()
+            .map(|l| l.expect("the floor is under every point").value)
+            .collect()
+    };
+    let (mut diff, mut sum, mut n) = (0.0, 0.0, 0.0);
+    for z in [1.0, 2.0] {
+        let below = value(side(z - 1e-4));
+        let above = value(side(z + 1e-4));
+        for (a, b) in below.iter().zip(&above) {
+            diff += (*a - *b).abs().element_sum() / 3.0;
+            sum += (*a + *b).element_sum() / 6.0;
+            n += 1.0;
+        }
+    }
+    (diff / n, sum / n, report.seams.unwrap_or_default())
+}
+
+#[test]
+fn seams_close_at_t_junctions() {
+    // Edges meet mid-edge (a long tile against three short ones) and partly (tiles offset by
+    // half a tile, in another instance): seams no shared end points would find.
+    let (open, mean, _) = t_junction_mismatch(false);
+    let (stitched, _, report) = t_junction_mismatch(true);
+    assert!(open > 0.01 * mean, "open {open} of mean {mean}");
+    assert!(report.before.edges >= 5, "{report:?}");
+    // Measured: see the module docs of `lightmap::seams`.
+    assert!(stitched <= 0.1 * open, "{open} -> {stitched} (mean {mean})");
+}
