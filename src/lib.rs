@@ -32,7 +32,8 @@
 //! ```
 //!
 //! [`bake`] chains the stages ([`prepare`], [`compute`], [`write()`]); build tools that want the
-//! intermediate data call them directly. Stages call only downwards:
+//! intermediate data call them directly. [`build()`] bakes the scenes of a [`Manifest`] that
+//! changed since their last bake ([`mod@build`]). Stages call only downwards:
 //!
 //! ```text
 //!   error, progress, sampling        below everything
@@ -49,6 +50,8 @@
 //!   bake                             prepare/compute/write; `light`: the one dispatch of a
 //!                                    Technique to transport and solver; `pilot`: the pilot runs
 //!                                    and the final bake that reuses them
+//!   build                            many scenes from a manifest: `bake` options by name, a
+//!                                    content-addressed cache, a JSON report, the error gate
 //!   reference, render                beside the pipeline (reference uses bake's prepare)
 //! ```
 //!
@@ -74,6 +77,7 @@
 //! collect in order. The same input and options give the same bytes on any thread count.
 
 pub mod atlas;
+pub mod build;
 pub mod config;
 pub mod error;
 pub mod lightmap;
@@ -98,6 +102,7 @@ pub mod testing;
 mod bake;
 
 pub use bake::{BakeReport, Baked, Prepared, StageTime, bake, compute, prepare, write};
+pub use build::{BuildReport, Manifest, build};
 pub use config::BakeConfig;
 pub use error::{Error, Result};
 pub use progress::{NoProgress, Progress};

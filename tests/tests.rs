@@ -3,6 +3,7 @@
 mod util;
 
 mod analytic;
+mod build;
 mod cli;
 mod denoise;
 mod form_factors;

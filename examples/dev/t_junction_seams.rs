@@ -8,7 +8,7 @@ use std::path::Path;
 use std::time::Instant;
 
 use lightbake::lightmap::seams::{self, SeamParams, Seams};
-use lightbake::{BakeConfig, NoProgress, compute};
+use lightbake::{BakeConfig, NoProgress, compute, prepare};
 
 fn main() {
     let dir = tempfile::tempdir().unwrap();
@@ -99,5 +99,24 @@ fn main() {
                 before.mean_value
             );
         }
+    }
+
+    // Cost on a large scene: the 116k-triangle hall (finding only; its meshes are closed grids).
+    let hall = dir.path().join("large_hall.gltf");
+    lightbake::testing::large_hall().write_gltf(&hall).unwrap();
+    let prepared = prepare(&hall, &BakeConfig::draft(), &NoProgress).unwrap();
+    for t_junctions in [false, true] {
+        let params = SeamParams {
+            t_junctions,
+            ..SeamParams::default()
+        };
+        let t = Instant::now();
+        let found = seams::find(&prepared.scene, &prepared.atlas, &params);
+        println!(
+            "large_hall ({} triangles), t_junctions {t_junctions}: {} edges, find {:.0} ms",
+            prepared.scene.triangles.len(),
+            found.edges.len(),
+            t.elapsed().as_secs_f64() * 1e3
+        );
     }
 }

@@ -1,5 +1,6 @@
 //! The `lightbake` command line: flags → [`BakeConfig`], progress bars, one-line summary.
 
+mod build;
 mod compare;
 mod interrupt;
 mod progress;
@@ -13,7 +14,9 @@ use anyhow::{Context, Result};
 use clap::{Parser, Subcommand, ValueEnum};
 use glam::Vec3;
 use lightbake::BakeConfig;
-use lightbake::config::{AutoParams, Keep, Technique, UvMode};
+use lightbake::build::options::{Options, Rgb};
+use lightbake::build::{Gate, SceneResult};
+use lightbake::config::{AutoParams, UvMode};
 use progress::Bars;
 
 #[derive(Parser)]
@@ -39,6 +42,9 @@ enum Command {
     Reference(reference::Args),
     /// Compare a baked scene, read as a renderer reads it, with a point reference.
     Compare(compare::Args),
+    /// Bake every scene a manifest (lightbake.toml) lists, skipping those whose outputs are up
+    /// to date.
+    Build(build::Args),
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -195,7 +201,54 @@ struct BakeArgs {
     #[arg(long, default_value_t = 0)]
     seed: u64,
     #[command(flatten)]
+    gate: GateArgs,
+    #[command(flatten)]
     run: RunArgs,
+}
+
+/// The error gate of `bake` and `build`: exit code [`GATE_EXIT`] when a bake is not good enough.
+#[derive(clap::Args)]
+struct GateArgs {
+    /// Exit with code 3 when a scene's estimated error (the planner's prediction of the error a
+    /// renderer will show, noise and resolution) exceeds E (0.05 = 5%). A scene without an
+    /// estimate (--no-auto) fails the gate too.
+    #[arg(long, value_name = "E")]
+    max_error: Option<f32>,
+    /// Exit with code 3 when a bake gave a warning.
+    #[arg(long)]
+    deny_warnings: bool,
+}
+
+/// Exit code of a failed error gate (`--max-error`, `--deny-warnings`).
+const GATE_EXIT: u8 = 3;
+
+/// The error gate failed: the message says which scenes and why.
+#[derive(Debug)]
+struct GateFailed(String);
+
+impl std::fmt::Display for GateFailed {
+    fn fmt(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for GateFailed {}
+
+impl GateArgs {
+    fn gate(&self) -> Gate {
+        Gate {
+            max_error: self.max_error,
+            deny_warnings: self.deny_warnings,
+        }
+    }
+}
+
+/// `Err(GateFailed)` naming `problems`, if any.
+fn check_gate(problems: Vec<String>) -> Result<()> {
+    match problems.is_empty() {
+        true => Ok(()),
+        false => Err(GateFailed(problems.join("; ")).into()),
+    }
 }
 
 /// Threads and verbosity, shared by `bake` and `reference`.
@@ -270,51 +323,37 @@ fn value_name(v: impl ValueEnum) -> String {
 }
 
 impl BakeArgs {
+    /// The flags as the library's options by name (the manifest's format), which make the
+    /// configuration.
+    fn options(&self) -> Options {
+        Options {
+            quality: Some(value_name(self.quality)),
+            target_error: self.target_error,
+            no_auto: Some(self.no_auto),
+            texels_per_unit: self.atlas.texels_per_unit,
+            max_page_size: Some(self.atlas.max_page_size),
+            padding: Some(self.atlas.padding),
+            uv: Some(value_name(self.atlas.uv)),
+            rays: self.rays,
+            light_samples: self.light_samples,
+            sky: Some(Rgb::Rgb(self.sky.to_array())),
+            method: self.method.map(value_name),
+            solver: self.solver.map(value_name),
+            tolerance: self.tolerance,
+            max_iterations: Some(self.max_iterations),
+            indirect_only: Some(self.indirect_only),
+            float: Some(self.float),
+            rgbm: Some(self.rgbm),
+            no_validity: Some(self.no_validity),
+            no_denoise: Some(self.no_denoise),
+            no_seams: Some(self.no_seams),
+            exposure: Some(self.exposure),
+            seed: Some(self.seed),
+        }
+    }
+
     fn config(&self) -> Result<BakeConfig> {
-        let mut c = self.atlas.config(self.quality);
-        if let Some(r) = self.rays {
-            c.transport.gather_rays = r;
-        }
-        if let Some(l) = self.light_samples {
-            c.transport.light_samples = l;
-        }
-        c.transport.sky = self.sky;
-        c.transport.indirect_only = self.indirect_only;
-        c.transport.seed = self.seed;
-        if self.method.is_some() || self.solver.is_some() {
-            // The flag not given keeps the preset's part (the automatic choice may change it).
-            let method = self
-                .method
-                .map_or_else(|| c.technique.method().to_string(), value_name);
-            let solver = self
-                .solver
-                .map_or_else(|| c.technique.solver().to_string(), value_name);
-            c.technique = Technique::from_names(&method, &solver)?;
-        }
-        if let Some(t) = self.tolerance {
-            c.solve.tolerance = t;
-        }
-        c.solve.max_iterations = self.max_iterations;
-        c.output.float = self.float;
-        c.output.preview_exposure = self.exposure;
-        c.output.rgbm = self.rgbm;
-        c.transport.validity = !self.no_validity;
-        c.transport.denoise = !self.no_denoise;
-        if !self.no_auto {
-            c.auto = Some(AutoParams {
-                target_error: self.target_error.unwrap_or(self.quality.target_error()),
-                keep: Keep {
-                    texels_per_unit: self.atlas.texels_per_unit.is_some(),
-                    method: self.method.is_some(),
-                    solver: self.solver.is_some(),
-                    rays: self.rays.is_some(),
-                    light_samples: self.light_samples.is_some(),
-                    tolerance: self.tolerance.is_some(),
-                },
-            });
-        }
-        c.output.seams = !self.no_seams;
-        Ok(c)
+        Ok(self.options().config()?)
     }
 }
 
@@ -341,7 +380,8 @@ fn bake(args: &BakeArgs) -> Result<()> {
             println!("wrote {}", gltf.display());
         }
     }
-    Ok(())
+    let result = SceneResult::of(&report, bars.warnings.lock().unwrap().clone());
+    check_gate(args.gate.gate().problems(&result))
 }
 
 fn main() -> ExitCode {
@@ -351,12 +391,17 @@ fn main() -> ExitCode {
         Command::Reference(args) => reference::run(args),
         Command::Bake(args) => bake(args),
         Command::Compare(args) => compare::run(args),
+        Command::Build(args) => build::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(_) if let Some(signal) = interrupt::received() => {
             eprintln!("interrupted");
             ExitCode::from(interrupt::exit_code(signal) as u8)
+        }
+        Err(e) if e.is::<GateFailed>() => {
+            eprintln!("error: the bake is not good enough: {e}");
+            ExitCode::from(GATE_EXIT)
         }
         Err(e) => {
             eprintln!("error: {e:#}");

@@ -10,6 +10,8 @@ use lightbake::Progress;
 pub struct Bars {
     pub enabled: bool,
     pub bar: Mutex<Option<ProgressBar>>,
+    /// Warnings shown so far (for `--deny-warnings`).
+    pub warnings: Mutex<Vec<String>>,
 }
 
 impl Progress for Bars {
@@ -38,6 +40,7 @@ impl Progress for Bars {
         }
     }
     fn warn(&self, message: &str) {
+        self.warnings.lock().unwrap().push(message.to_string());
         match &*self.bar.lock().unwrap() {
             Some(bar) => bar.suspend(|| eprintln!("warning: {message}")),
             None => eprintln!("warning: {message}"),
@@ -55,6 +58,7 @@ impl Bars {
         Bars {
             enabled: !quiet && std::io::stderr().is_terminal(),
             bar: Mutex::new(None),
+            warnings: Mutex::default(),
         }
     }
 }

@@ -108,14 +108,7 @@ impl Files<'_> {
                 .decode(payload.trim())
                 .map_err(|e| self.invalid(format!("{what}: bad base64 data URI: {e}")));
         }
-        let file = if let Some(absolute) = uri.strip_prefix("file://") {
-            PathBuf::from(percent_decode(absolute))
-        } else if uri.contains(':') {
-            let message = format!("{what}: only relative paths and data URIs are supported");
-            return Err(Error::unsupported(self.gltf_path, message));
-        } else {
-            self.dir.join(percent_decode(uri))
-        };
+        let file = self.resolve(uri, what)?;
         std::fs::read(&file).map_err(|e| {
             let problem = match e.kind() {
                 std::io::ErrorKind::NotFound => "not found",
@@ -124,6 +117,47 @@ impl Files<'_> {
             self.invalid(format!("{what} {problem}: {}: {e}", file.display()))
         })
     }
+}
+
+impl Files<'_> {
+    /// The file a URI that is not a data URI names: a path relative to the glTF file, or a
+    /// `file://` URI.
+    fn resolve(&self, uri: &str, what: &str) -> Result<PathBuf> {
+        if let Some(absolute) = uri.strip_prefix("file://") {
+            Ok(PathBuf::from(percent_decode(absolute)))
+        } else if uri.contains(':') {
+            let message = format!("{what}: only relative paths and data URIs are supported");
+            Err(Error::unsupported(self.gltf_path, message))
+        } else {
+            Ok(self.dir.join(percent_decode(uri)))
+        }
+    }
+}
+
+/// The files besides `path` that a scene is read from: its external buffers, then its external
+/// images, in the order the glTF lists them (data URIs and a GLB's own chunk are inside the
+/// file). For build tools that decide whether a scene changed.
+pub fn external_files(path: &Path) -> Result<Vec<PathBuf>> {
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let json = if bytes.starts_with(b"glTF") {
+        parse_json(path, &parse_glb(path, &bytes)?.json)?
+    } else {
+        parse_json(path, &bytes)?
+    };
+    let files = Files {
+        gltf_path: path,
+        dir: path.parent().unwrap_or(Path::new("")),
+    };
+    let uris = ["buffers", "images"].into_iter().flat_map(|list| {
+        let items = json[list].as_array().map(Vec::as_slice).unwrap_or_default();
+        items
+            .iter()
+            .enumerate()
+            .filter_map(move |(k, item)| Some((list, k, item["uri"].as_str()?)))
+    });
+    uris.filter(|(_, _, uri)| !uri.starts_with("data:"))
+        .map(|(list, k, uri)| files.resolve(uri, &format!("{list}[{k}]")))
+        .collect()
 }
 
 /// Runs third-party code that the checks in [`check`] should have made safe. A panic that

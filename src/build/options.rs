@@ -1,0 +1,180 @@
+//! The `bake` options by their command-line long names (without dashes), as a manifest gives
+//! them, and the [`BakeConfig`] they make. The command line's `bake` goes through the same
+//! [`Options::config`], so a manifest entry and a `bake` call with the same options bake alike.
+
+use glam::Vec3;
+use serde::Deserialize;
+
+use crate::config::{AutoParams, Keep, Technique, UvMode};
+use crate::{BakeConfig, Error, Result};
+
+/// Every option of `lightbake bake` that changes what is baked; `None` (left out) is the
+/// command line's default. Unknown names are an error.
+#[derive(Clone, Debug, Default, PartialEq, Deserialize)]
+#[serde(rename_all = "kebab-case", deny_unknown_fields)]
+pub struct Options {
+    /// `draft`, `medium` (the default) or `high`.
+    pub quality: Option<String>,
+    pub target_error: Option<f32>,
+    pub no_auto: Option<bool>,
+    pub texels_per_unit: Option<f32>,
+    pub max_page_size: Option<u32>,
+    pub padding: Option<u32>,
+    /// `auto` (the default), `unwrap` or `existing`.
+    pub uv: Option<String>,
+    pub rays: Option<u32>,
+    pub light_samples: Option<u32>,
+    /// One value for all channels or `[r, g, b]`.
+    pub sky: Option<Rgb>,
+    /// One of [`Technique::METHODS`].
+    pub method: Option<String>,
+    /// One of [`Technique::SOLVERS`].
+    pub solver: Option<String>,
+    pub tolerance: Option<f32>,
+    pub max_iterations: Option<u32>,
+    pub indirect_only: Option<bool>,
+    pub float: Option<bool>,
+    pub rgbm: Option<bool>,
+    pub no_validity: Option<bool>,
+    pub no_denoise: Option<bool>,
+    pub no_seams: Option<bool>,
+    pub exposure: Option<f32>,
+    pub seed: Option<u64>,
+}
+
+/// A colour given as one value or three.
+#[derive(Clone, Copy, Debug, PartialEq, Deserialize)]
+#[serde(untagged)]
+pub enum Rgb {
+    Grey(f32),
+    Rgb([f32; 3]),
+}
+
+impl From<Rgb> for Vec3 {
+    fn from(c: Rgb) -> Vec3 {
+        match c {
+            Rgb::Grey(v) => Vec3::splat(v),
+            Rgb::Rgb(c) => Vec3::from(c),
+        }
+    }
+}
+
+impl Options {
+    /// The bake configuration: the quality preset, the options given on top, and the automatic
+    /// choice (unless `no-auto`) keeping what was given.
+    pub fn config(&self) -> Result<BakeConfig> {
+        let quality = self.quality.as_deref().unwrap_or("medium");
+        let preset = BakeConfig::PRESETS
+            .iter()
+            .find(|(name, _)| *name == quality);
+        let mut c = match preset {
+            Some((_, c)) => c.clone(),
+            None => return Err(expected("quality", quality, &["draft", "medium", "high"])),
+        };
+        let no_auto = self.no_auto.unwrap_or(false);
+        if no_auto && self.target_error.is_some() {
+            return Err(Error::Option(
+                "target-error asks for the automatic choice that no-auto turns off".into(),
+            ));
+        }
+        if let Some(t) = self.texels_per_unit {
+            c.atlas.texels_per_unit = t;
+        }
+        if let Some(m) = self.max_page_size {
+            c.atlas.max_page_size = m;
+        }
+        if let Some(p) = self.padding {
+            c.atlas.padding = p;
+        }
+        c.atlas.uv = match self.uv.as_deref().unwrap_or("auto") {
+            "auto" => UvMode::Auto,
+            "unwrap" => UvMode::Unwrap,
+            "existing" => UvMode::Existing,
+            other => return Err(expected("uv", other, &["auto", "unwrap", "existing"])),
+        };
+        if let Some(r) = self.rays {
+            c.transport.gather_rays = r;
+        }
+        if let Some(l) = self.light_samples {
+            c.transport.light_samples = l;
+        }
+        c.transport.sky = self.sky.map_or(Vec3::ZERO, Vec3::from);
+        c.transport.indirect_only = self.indirect_only.unwrap_or(false);
+        c.transport.seed = self.seed.unwrap_or(0);
+        if self.method.is_some() || self.solver.is_some() {
+            // The one not given keeps the preset's part (the automatic choice may change it).
+            let method = self.method.as_deref().unwrap_or(c.technique.method());
+            let solver = self.solver.as_deref().unwrap_or(c.technique.solver());
+            c.technique = Technique::from_names(method, solver)?;
+        }
+        if let Some(t) = self.tolerance {
+            c.solve.tolerance = t;
+        }
+        c.solve.max_iterations = self.max_iterations.unwrap_or(10_000);
+        c.output.float = self.float.unwrap_or(false);
+        c.output.preview_exposure = self.exposure.unwrap_or(0.0);
+        c.output.rgbm = self.rgbm.unwrap_or(false);
+        c.transport.validity = !self.no_validity.unwrap_or(false);
+        c.transport.denoise = !self.no_denoise.unwrap_or(false);
+        if !no_auto {
+            let preset_error = AutoParams::for_preset(quality).unwrap_or(0.04);
+            c.auto = Some(AutoParams {
+                target_error: self.target_error.unwrap_or(preset_error),
+                keep: Keep {
+                    texels_per_unit: self.texels_per_unit.is_some(),
+                    method: self.method.is_some(),
+                    solver: self.solver.is_some(),
+                    rays: self.rays.is_some(),
+                    light_samples: self.light_samples.is_some(),
+                    tolerance: self.tolerance.is_some(),
+                },
+            });
+        }
+        c.output.seams = !self.no_seams.unwrap_or(false);
+        Ok(c)
+    }
+}
+
+fn expected(option: &str, value: &str, names: &[&str]) -> Error {
+    Error::Option(format!(
+        "{option} {value:?}: expected one of {}",
+        names.join(", ")
+    ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn no_options_are_the_medium_preset_with_the_automatic_choice() {
+        let c = Options::default().config().unwrap();
+        let medium = BakeConfig::medium();
+        assert_eq!(c.atlas.texels_per_unit, medium.atlas.texels_per_unit);
+        assert_eq!(c.auto.map(|a| a.target_error), Some(0.04));
+        assert_eq!(c.auto.map(|a| a.keep), Some(Keep::default()));
+    }
+
+    #[test]
+    fn given_options_are_kept_and_bad_names_named() {
+        let o = Options {
+            quality: Some("draft".into()),
+            rays: Some(32),
+            sky: Some(Rgb::Rgb([0.1, 0.2, 0.3])),
+            solver: Some("gather".into()),
+            ..Options::default()
+        };
+        let c = o.config().unwrap();
+        assert_eq!(c.transport.gather_rays, 32);
+        assert_eq!(c.transport.sky, Vec3::new(0.1, 0.2, 0.3));
+        assert_eq!(c.technique.solver(), "gather");
+        let auto = c.auto.unwrap();
+        assert_eq!(auto.target_error, 0.08);
+        assert!(auto.keep.rays && auto.keep.solver && !auto.keep.method);
+        let bad = Options {
+            uv: Some("sideways".into()),
+            ..Options::default()
+        };
+        assert!(bad.config().unwrap_err().to_string().contains("sideways"));
+    }
+}
