@@ -36,7 +36,7 @@ output = "baked/a"
 [[scene]]
 path = "levels/b.gltf"
 output = "baked/b"
-rays = 32
+seed = 3
 "#;
 
 /// A manifest in `dir` over a textured scene (a) and an untextured one (b).
@@ -169,7 +169,8 @@ fn unknown_manifest_keys_are_named() {
     let m = Manifest::parse(MANIFEST, root).unwrap();
     assert_eq!(m.scenes[1].input, root.join("levels/b.gltf"));
     assert_eq!(m.scenes[1].output, root.join("baked/b"));
-    assert_eq!(m.scenes[1].config.transport.gather_rays, 32);
+    assert_eq!(m.scenes[1].config.transport.seed, 3);
+    assert_eq!(m.scenes[0].config.transport.seed, 0);
     assert_eq!(m.scenes[0].config.atlas.texels_per_unit, 4.0);
 }
 
