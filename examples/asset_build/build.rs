@@ -37,5 +37,8 @@ fn main() {
         let error = scene.error.as_deref().unwrap_or_default();
         problems.push(format!("{}: {error}", scene.path.display()));
     }
-    assert!(problems.is_empty(), "lightmaps not good enough: {problems:#?}");
+    assert!(
+        problems.is_empty(),
+        "lightmaps not good enough: {problems:#?}"
+    );
 }
