@@ -238,3 +238,38 @@ impl Progress for Warnings<'_> {
         self.inner.aborted()
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn result(total: Option<f32>, warnings: &[&str]) -> SceneResult {
+        SceneResult {
+            estimated_error: Some(EstimatedError {
+                total,
+                noise: total,
+                resolution: None,
+            }),
+            warnings: warnings.iter().map(|w| w.to_string()).collect(),
+            ..SceneResult::default()
+        }
+    }
+
+    #[test]
+    fn the_gate_checks_the_estimate_and_the_warnings() {
+        let gate = Gate {
+            max_error: Some(0.05),
+            deny_warnings: true,
+        };
+        assert!(gate.problems(&result(Some(0.05), &[])).is_empty());
+        let over = gate.problems(&result(Some(0.051), &[]));
+        assert_eq!(over, ["estimated error 5.10% exceeds the maximum 5.00%"]);
+        assert_eq!(gate.problems(&result(None, &[])).len(), 1);
+        assert_eq!(
+            gate.problems(&result(Some(0.01), &["no lights"])),
+            ["1 warning(s)"]
+        );
+        // Off by default.
+        assert!(Gate::default().problems(&result(None, &["x"])).is_empty());
+    }
+}
