@@ -54,7 +54,7 @@ fn statuses(r: &BuildReport) -> Vec<Status> {
 }
 
 fn schema() -> jsonschema::Validator {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("schemas/build-report.schema.json");
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("src/build/report.schema.json");
     let schema: serde_json::Value = serde_json::from_slice(&std::fs::read(path).unwrap()).unwrap();
     jsonschema::validator_for(&schema).unwrap()
 }

@@ -1,7 +1,7 @@
 //! Building many scenes at once, as a game-asset build step does: a [`Manifest`] lists the
 //! scenes and their options, [`build`] bakes each one not already baked (the content-addressed
 //! [`cache`]), and a [`BuildReport`] says what happened in a form tools read (JSON, with a
-//! schema in `schemas/build-report.schema.json`).
+//! schema in `src/build/report.schema.json`).
 //!
 //! Scenes run one after another, each with all threads; a failing scene is reported and the
 //! others still run. A scene is skipped when the hash of its input files, its effective options
@@ -110,7 +110,7 @@ impl BuildReport {
             .collect()
     }
 
-    /// The report as JSON (the schema is `schemas/build-report.schema.json`).
+    /// The report as JSON (the schema is `src/build/report.schema.json`).
     pub fn to_json(&self) -> String {
         serde_json::to_string_pretty(self).expect("a report serialises")
     }

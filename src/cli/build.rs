@@ -18,7 +18,7 @@ pub struct Args {
     /// Bake every scene, even those whose outputs are up to date.
     #[arg(long)]
     force: bool,
-    /// Write what happened to each scene as JSON (schema: schemas/build-report.schema.json).
+    /// Write what happened to each scene as JSON (schema: src/build/report.schema.json).
     #[arg(long, value_name = "FILE.json")]
     report: Option<PathBuf>,
     #[command(flatten)]
