@@ -198,6 +198,156 @@ pub fn choose_density(scene: &Scene, config: &mut BakeConfig, plan: &mut Plan, k
     ));
 }
 
+/// Light-driven density factors of [`choose_instance_density`] stay within this range.
+pub const DENSITY_RANGE: (f32, f32) = (0.25, 4.0);
+/// Every seen and lit instance gets at least this many texels (at most [`MAX_FLOOR_FACTOR`]
+/// times the base density): no visible object is reduced to a handful of texels.
+pub const MIN_INSTANCE_TEXELS: f64 = 64.0;
+/// Largest density factor the texel floor may ask for (a 1 cm² object gets what it can).
+pub const MAX_FLOOR_FACTOR: f32 = 8.0;
+/// Factors all this close to 1 keep the uniform atlas (not worth laying it out again).
+const UNIFORM_WITHIN: f32 = 0.1;
+
+/// Step 1b, after a pilot on a uniform atlas: a density factor per scene instance
+/// (`AtlasParams::instance_density`), from the pilot's light (`pilot`, the two runs' stored
+/// values at `texels`), within the texel count of the uniform density. `None` when every
+/// factor rounds to 1 (the uniform atlas stays).
+///
+/// **Where texels pay.** Per instance, `m` is the area mean of the bilinear lookup's squared
+/// error per texel ([`resolution_squares`]: the pilot's second differences, noise-free by the
+/// product of two independent runs). At a hard shadow or cone edge — the error that dominates —
+/// the error sits in a band one texel wide, so the mean square falls as the texel size `h`:
+/// an instance of area `A` at density factor `s` contributes `A·m/s`. Minimising `Σ A·m/s`
+/// at a fixed texel count `Σ A·s²` gives `s ∝ m^⅓`. Factors stay within [`DENSITY_RANGE`];
+/// an instance without second differences (every chart narrower than three texels) keeps the
+/// scene's mean `m`; an instance the pilot found unlit (below 10⁻³ of the scene's mean light)
+/// or whose texels are all buried in geometry gets the smallest factor: nothing there needs
+/// resolving. Then a floor: every other instance gets [`MIN_INSTANCE_TEXELS`] (thin legs,
+/// cups, books). The factors are scaled together so the texels add up to the uniform count,
+/// and rounded to two decimals.
+pub fn choose_instance_density(
+    scene: &Scene,
+    texels: &Texels,
+    pilot: [&[Vec3]; 2],
+    tpu: f32,
+    plan: &mut Plan,
+) -> Option<Vec<f32>> {
+    let instances = scene.instances.len();
+    if instances < 2 || texels.is_empty() {
+        return None;
+    }
+    let mut area = vec![0.0f64; instances];
+    for (t, &i) in scene.triangle_instance.iter().enumerate() {
+        let p = |k: usize| scene.positions[scene.triangles[t][k] as usize].as_dvec3();
+        area[i as usize] += 0.5 * (p(1) - p(0)).cross(p(2) - p(0)).length();
+    }
+    let (square, skip) = resolution_squares(texels, pilot);
+    let mut invalid = vec![false; texels.len()];
+    for &i in &texels.invalid {
+        invalid[i as usize] = true;
+    }
+    let mut no_difference = vec![false; texels.len()];
+    for &i in &skip {
+        no_difference[i as usize] = true;
+    }
+    // Per instance: Σ w·square and Σ w over texels with a second difference; Σ w·light and
+    // Σ w over valid texels.
+    let (mut error, mut error_weight) = (vec![0.0f64; instances], vec![0.0f64; instances]);
+    let (mut light, mut seen) = (vec![0.0f64; instances], vec![0.0f64; instances]);
+    for i in 0..texels.len() {
+        if invalid[i] {
+            continue;
+        }
+        let inst = scene.triangle_instance[texels.triangle[i] as usize] as usize;
+        let w = texels.area[i] as f64;
+        let value = (pilot[0][i] + pilot[1][i]).element_sum() as f64 / 6.0;
+        light[inst] += w * value;
+        seen[inst] += w;
+        if !no_difference[i] {
+            error[inst] += w * square[i].element_sum() as f64 / 3.0;
+            error_weight[inst] += w;
+        }
+    }
+    let scene_light = light.iter().sum::<f64>() / seen.iter().sum::<f64>().max(f64::MIN_POSITIVE);
+    let scene_error =
+        (error.iter().sum::<f64>() / error_weight.iter().sum::<f64>().max(1e-300)).max(0.0);
+    if !(scene_light > 0.0 && scene_error > 0.0) {
+        return None;
+    }
+    let (lo, hi) = DENSITY_RANGE;
+    // Light-driven factor before scaling, and the floor, per instance.
+    let mut wanted = vec![lo; instances];
+    let mut floor = vec![0.0f32; instances];
+    let mut dark = 0;
+    for i in 0..instances {
+        if area[i] <= 0.0 {
+            wanted[i] = 1.0;
+            continue;
+        }
+        if seen[i] <= 0.0 || light[i] / seen[i] <= 1e-3 * scene_light {
+            dark += 1;
+            continue;
+        }
+        let m = if error_weight[i] > 0.0 {
+            (error[i] / error_weight[i]).max(0.0)
+        } else {
+            scene_error
+        };
+        wanted[i] = ((m / scene_error).cbrt() as f32).max(1e-3);
+        let texels_now = area[i] * f64::from(tpu).powi(2);
+        floor[i] = ((MIN_INSTANCE_TEXELS / texels_now).sqrt() as f32).min(MAX_FLOOR_FACTOR);
+    }
+    let budget: f64 = area.iter().sum();
+    let factors = |c: f32| -> Vec<f32> {
+        (0..instances)
+            .map(|i| (c * wanted[i]).clamp(lo, hi).max(floor[i]))
+            .collect()
+    };
+    let texels_at = |f: &[f32]| -> f64 {
+        f.iter()
+            .zip(&area)
+            .map(|(f, a)| a * f64::from(*f).powi(2))
+            .sum()
+    };
+    // The texel count grows with the common scale `c`: bisect on log c.
+    let (mut c_lo, mut c_hi) = (1e-3f32, 1e3f32);
+    for _ in 0..60 {
+        let c = (c_lo * c_hi).sqrt();
+        if texels_at(&factors(c)) > budget {
+            c_hi = c;
+        } else {
+            c_lo = c;
+        }
+    }
+    // Two decimals read well and keep the choice stable.
+    let chosen: Vec<f32> = factors(c_lo)
+        .into_iter()
+        .map(|f| (f * 100.0).round() / 100.0)
+        .collect();
+    if chosen.iter().all(|&f| (f - 1.0).abs() <= UNIFORM_WITHIN) {
+        return None;
+    }
+    let floored = (0..instances)
+        .filter(|&i| floor[i] > (c_lo * wanted[i]).clamp(lo, hi))
+        .count();
+    let denser = chosen.iter().filter(|&&f| f > 1.0).count();
+    let sparser = chosen.iter().filter(|&&f| f < 1.0).count();
+    let (min, max) = chosen
+        .iter()
+        .fold((f32::INFINITY, 0.0f32), |(a, b), &f| (a.min(f), b.max(f)));
+    plan.reasons.push(format!(
+        "adaptive texel density per instance (×{min:.2}…×{max:.2} of {tpu} /m, {} texels in all as \
+         uniform would have about {budget_texels:.0}): {denser} of {instances} instances denser \
+         where the pilot's light curves or steps within a texel (shadow and cone edges; factor \
+         ∝ the cube root of their resolution error), {sparser} sparser where it is even; \
+         {dark} unlit or buried get ×{lo}; {floored} small ones raised to at least \
+         {MIN_INSTANCE_TEXELS} texels",
+        format_args!("{:.0}", texels_at(&chosen) * f64::from(tpu).powi(2)),
+        budget_texels = budget * f64::from(tpu).powi(2),
+    ));
+    Some(chosen)
+}
+
 /// Step 2, once texels exist: the method. Monte Carlo unless the user fixed it; the solver is
 /// kept (a hierarchical technique's Jacobi sweeps become Monte Carlo rows with Jacobi).
 pub fn choose_method(config: &mut BakeConfig, plan: &mut Plan, keep: &Keep) {
@@ -491,6 +641,16 @@ const G_MEAN_SQUARE: f32 = 49.0 / 2880.0;
 /// [`metrics::weighted_rms_over_mean`] over texel areas against the mean of the two bakes.
 /// NaN when no texel has a second difference or the light is black.
 pub fn resolution_error(texels: &Texels, pilot: [&[Vec3]; 2]) -> f32 {
+    let (square, skip) = resolution_squares(texels, pilot);
+    let n = texels.len();
+    let mean: Vec<Vec3> = (0..n).map(|i| (pilot[0][i] + pilot[1][i]) * 0.5).collect();
+    metrics::weighted_rms_over_mean(&square, &mean, &texels.area, &skip)
+}
+
+/// Per texel, the expected square of the bilinear lookup's error over its cell (per channel,
+/// may be negative where the light is smooth: see [`resolution_error`]), and the texels that
+/// have no second difference (ascending).
+fn resolution_squares(texels: &Texels, pilot: [&[Vec3]; 2]) -> (Vec<Vec3>, Vec<u32>) {
     let n = texels.len();
     let mut valid = vec![true; n];
     for &i in &texels.invalid {
@@ -533,8 +693,7 @@ pub fn resolution_error(texels: &Texels, pilot: [&[Vec3]; 2]) -> f32 {
             }
         };
     }
-    let mean: Vec<Vec3> = (0..n).map(|i| (pilot[0][i] + pilot[1][i]) * 0.5).collect();
-    metrics::weighted_rms_over_mean(&square, &mean, &texels.area, &skip)
+    (square, skip)
 }
 
 /// The smallest of 4·2ⁿ, 5·2ⁿ, 6·2ⁿ, 7·2ⁿ at or above `x` (four steps per octave: powers of

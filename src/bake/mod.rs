@@ -267,27 +267,28 @@ fn prepare_loaded(
         plan::choose_density(&scene, &mut config, plan, &auto.keep);
     }
     check_memory(&scene, input, &config)?;
-    let t = Instant::now();
-    let atlas = atlas::build(&scene, &source, &config.atlas)?;
-    timed(&mut stages, "atlas", t);
-    check_aborted(progress)?;
+    let (mut atlas, mut texels, mut validity) =
+        lay_out(&scene, &source, &tracer, &config, progress, &mut stages)?;
 
-    let t = Instant::now();
-    let mut texels = texels::build(&scene, &atlas)?;
-    timed(&mut stages, "texels", t);
-    check_aborted(progress)?;
-
-    let t = Instant::now();
-    let validity = if config.transport.validity {
-        let params = texels::validity::ValidityParams {
-            seed: config.transport.seed,
-            ..Default::default()
+    // Adaptive density: a pilot on the uniform atlas chooses a density per instance, and the
+    // atlas is laid out again with it.
+    if let (Some(plan), Some(auto)) = (&mut plan, config.auto)
+        && !auto.keep.texels_per_unit
+        && !atlas.reused_input_uvs
+    {
+        let t = Instant::now();
+        let surfaces = Surfaces {
+            scene: &scene,
+            texels: &texels,
+            tracer: &tracer,
         };
-        texels::validity::fix(&mut texels, &scene, &tracer, &params)
-    } else {
-        Default::default()
-    };
-    timed(&mut stages, "validity", t);
+        if let Some(factors) = pilot::measure_density(surfaces, &config, plan, progress)? {
+            config.atlas.instance_density = factors;
+            (atlas, texels, validity) =
+                lay_out(&scene, &source, &tracer, &config, progress, &mut Vec::new())?;
+        }
+        timed(&mut stages, "density", t);
+    }
 
     Ok(Prepared {
         scene,
@@ -300,6 +301,43 @@ fn prepare_loaded(
         plan,
         stages,
     })
+}
+
+/// The atlas, its texels and their validity pass (each stage timed into `stages`).
+fn lay_out(
+    scene: &scene::Scene,
+    source: &scene::Source,
+    tracer: &Tracer,
+    config: &BakeConfig,
+    progress: &dyn Progress,
+    stages: &mut Vec<StageTime>,
+) -> Result<(
+    atlas::Atlas,
+    texels::Texels,
+    texels::validity::ValidityReport,
+)> {
+    let t = Instant::now();
+    let atlas = atlas::build(scene, source, &config.atlas)?;
+    timed(stages, "atlas", t);
+    check_aborted(progress)?;
+
+    let t = Instant::now();
+    let mut texels = texels::build(scene, &atlas)?;
+    timed(stages, "texels", t);
+    check_aborted(progress)?;
+
+    let t = Instant::now();
+    let validity = if config.transport.validity {
+        let params = texels::validity::ValidityParams {
+            seed: config.transport.seed,
+            ..Default::default()
+        };
+        texels::validity::fix(&mut texels, scene, tracer, &params)
+    } else {
+        Default::default()
+    };
+    timed(stages, "validity", t);
+    Ok((atlas, texels, validity))
 }
 
 /// Runs every stage up to the dilated pages, in memory.

@@ -34,10 +34,8 @@ pub fn choose_transport(
     let mut pilot = None;
     plan::choose_method(config, plan, keep);
     let emitters = texels.emission.iter().any(|l| l.max_element() > 0.0);
-    let sampled =
-        emitters || config.transport.sky.max_element() > 0.0 || !surfaces.scene.lights.is_empty();
     let monte_carlo = config.technique.is_monte_carlo();
-    if monte_carlo && !keep.rays && n > 0 && sampled {
+    if monte_carlo && !keep.rays && n > 0 && lit(surfaces, &config.transport) {
         progress.begin("pilot", 2);
         let start = Instant::now();
         let tolerance = (e / 10.0).min(1e-3);
@@ -88,6 +86,41 @@ pub fn choose_transport(
     }
     plan.finish(config);
     Ok(pilot)
+}
+
+/// Whether any light source reaches the texels' transport (emitters, sky or punctual lights).
+fn lit(surfaces: Surfaces, transport: &TransportParams) -> bool {
+    surfaces
+        .texels
+        .emission
+        .iter()
+        .any(|l| l.max_element() > 0.0)
+        || transport.sky.max_element() > 0.0
+        || !surfaces.scene.lights.is_empty()
+}
+
+/// Step 1b of the automatic choice, on the uniform atlas: a pilot pair at [`PILOT_RAYS`] and
+/// the density factor per instance it asks for ([`plan::choose_instance_density`]); `None`
+/// keeps the uniform atlas. The pair is not reused: the texels change with the atlas.
+pub fn measure_density(
+    surfaces: Surfaces,
+    config: &BakeConfig,
+    plan: &mut Plan,
+    progress: &dyn Progress,
+) -> Result<Option<Vec<f32>>> {
+    if surfaces.texels.is_empty() || !lit(surfaces, &config.transport) {
+        return Ok(None);
+    }
+    let tolerance = (plan.target_error / 10.0).min(1e-3);
+    let runs = PilotRuns::bake(surfaces, &config.transport, PILOT_RAYS, tolerance, progress)?;
+    let [a, b] = runs.stored(config.transport.indirect_only);
+    Ok(plan::choose_instance_density(
+        surfaces.scene,
+        surfaces.texels,
+        [&a, &b],
+        config.atlas.texels_per_unit,
+        plan,
+    ))
 }
 
 /// Two Monte Carlo bakes of the same texels with independent seeds: their difference measures
