@@ -51,7 +51,11 @@
 //! sunlit terrain at the same target. The denoiser's gain is not counted (it lowers the error
 //! at low K and leaves it at high K), so the choice errs towards more rays.
 
+pub mod punctual;
+
 use glam::Vec3;
+
+pub use punctual::PunctualSample;
 
 use crate::config::{BakeConfig, FormFactors, Keep, RowSolver, Technique};
 use crate::metrics;
@@ -93,6 +97,8 @@ pub struct Plan {
     /// Expected resolution error of the chosen density ([`resolution_error`]), measured on
     /// the pilot's irradiance.
     pub predicted_resolution: Option<f32>,
+    /// What the resolution error is made of ([`predict_resolution`]).
+    pub resolution_parts: Option<ResolutionParts>,
     /// Gathering rays per texel in all, the reused pilot bakes included.
     pub total_rays: Option<u32>,
     pub pilot_seconds: f64,
@@ -107,6 +113,19 @@ pub struct Plan {
     pub reasons: Vec<String>,
     /// The choice in a few words, for the one-line summary.
     pub brief: String,
+}
+
+/// The parts of the predicted resolution error.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct ResolutionParts {
+    /// Relative RMS lookup error of the light other than punctual direct light, from the
+    /// pilot's second differences ([`resolution_error`]'s model; a lower bound).
+    pub curved: f32,
+    /// Relative RMS lookup error of punctual direct light, sampled at random surface points
+    /// ([`PunctualSample`]): hard shadow and cone edges, sub-texel features, gutters.
+    pub sampled: f32,
+    /// Share of those lookups that read a gutter or buried neighbour.
+    pub border_share: f32,
 }
 
 impl Plan {
@@ -229,6 +248,7 @@ pub fn choose_instance_density(
     scene: &Scene,
     texels: &Texels,
     pilot: [&[Vec3]; 2],
+    punctual: Option<&PunctualSample>,
     tpu: f32,
     plan: &mut Plan,
 ) -> Option<Vec<f32>> {
@@ -241,7 +261,8 @@ pub fn choose_instance_density(
         let p = |k: usize| scene.positions[scene.triangles[t][k] as usize].as_dvec3();
         area[i as usize] += 0.5 * (p(1) - p(0)).cross(p(2) - p(0)).length();
     }
-    let (square, skip) = resolution_squares(texels, pilot);
+    let without = without_punctual(pilot, punctual);
+    let (square, skip) = resolution_squares(texels, [&without[0], &without[1]]);
     let mut invalid = vec![false; texels.len()];
     for &i in &texels.invalid {
         invalid[i as usize] = true;
@@ -268,9 +289,34 @@ pub fn choose_instance_density(
             error_weight[inst] += w;
         }
     }
-    let scene_light = light.iter().sum::<f64>() / seen.iter().sum::<f64>().max(f64::MIN_POSITIVE);
-    let scene_error =
+    // Per instance, the mean square lookup error: the curvature of the light other than
+    // punctual direct light, plus the sampled error of that at the instance's points (the
+    // scene's mean where an instance has none of either).
+    let (mut sampled, mut count) = (vec![0.0f64; instances], vec![0usize; instances]);
+    for p in punctual.map_or(&[][..], |p| &p.points) {
+        sampled[p.instance as usize] += f64::from(p.square);
+        count[p.instance as usize] += 1;
+    }
+    let scene_curved =
         (error.iter().sum::<f64>() / error_weight.iter().sum::<f64>().max(1e-300)).max(0.0);
+    let scene_sampled = sampled.iter().sum::<f64>() / (count.iter().sum::<usize>().max(1) as f64);
+    let mean_square: Vec<f64> = (0..instances)
+        .map(|i| {
+            let curved = if error_weight[i] > 0.0 {
+                (error[i] / error_weight[i]).max(0.0)
+            } else {
+                scene_curved
+            };
+            let sampled = if count[i] > 0 {
+                sampled[i] / count[i] as f64
+            } else {
+                scene_sampled
+            };
+            curved + sampled
+        })
+        .collect();
+    let scene_light = light.iter().sum::<f64>() / seen.iter().sum::<f64>().max(f64::MIN_POSITIVE);
+    let scene_error = scene_curved + scene_sampled;
     if !(scene_light > 0.0 && scene_error > 0.0) {
         return None;
     }
@@ -288,12 +334,7 @@ pub fn choose_instance_density(
             dark += 1;
             continue;
         }
-        let m = if error_weight[i] > 0.0 {
-            (error[i] / error_weight[i]).max(0.0)
-        } else {
-            scene_error
-        };
-        wanted[i] = ((m / scene_error).cbrt() as f32).max(1e-3);
+        wanted[i] = ((mean_square[i] / scene_error).cbrt() as f32).max(1e-3);
         let texels_now = area[i] * f64::from(tpu).powi(2);
         floor[i] = ((MIN_INSTANCE_TEXELS / texels_now).sqrt() as f32).min(MAX_FLOOR_FACTOR);
     }
@@ -552,11 +593,27 @@ pub fn choose_texel_rays(texels: &Texels, pilot: &[&[Vec3]], k: u32, plan: &mut 
 
 /// Step 3b, after the rays: the resolution error of the density ([`resolution_error`]) from
 /// the last pilot pair's lightmap values, and the prediction that combines it with the noise.
-pub fn predict_resolution(texels: &Texels, pilot: [&[Vec3]; 2], plan: &mut Plan) {
-    let r = resolution_error(texels, pilot);
+pub fn predict_resolution(
+    texels: &Texels,
+    pilot: [&[Vec3]; 2],
+    punctual: Option<&PunctualSample>,
+    plan: &mut Plan,
+) {
+    let n = texels.len();
+    let mean: Vec<Vec3> = (0..n).map(|i| (pilot[0][i] + pilot[1][i]) * 0.5).collect();
+    let without = without_punctual(pilot, punctual);
+    let (square, skip) = resolution_squares(texels, [&without[0], &without[1]]);
+    let curved = metrics::weighted_rms_over_mean(&square, &mean, &texels.area, &skip);
+    let sampled = punctual.map_or(0.0, |p| p.relative_error());
+    let r = curved.hypot(sampled);
     if !r.is_finite() {
         return;
     }
+    plan.resolution_parts = Some(ResolutionParts {
+        curved,
+        sampled,
+        border_share: punctual.map_or(0.0, |p| p.border_share()),
+    });
     plan.predicted_resolution = Some(r);
     let e = plan.target_error;
     let noise = plan.predicted_noise.unwrap_or(0.0);
@@ -571,7 +628,8 @@ pub fn predict_resolution(texels: &Texels, pilot: [&[Vec3]; 2], plan: &mut Plan)
         format!(
             "ABOVE the {:.1}% target: resolution error {} exceeds it — shadow edges, spot-cone \
              edges and small objects need more texels than the density allows, and more rays \
-             cannot help (raise --texels-per-unit)",
+             cannot help (raise --texels-per-unit: at an edge the lookup error falls only as \
+             the square root of the texel size, so halving it takes 4× the density)",
             e * 100.0,
             pct(r)
         )
@@ -588,17 +646,31 @@ pub fn predict_resolution(texels: &Texels, pilot: [&[Vec3]; 2], plan: &mut Plan)
             e * 100.0
         )
     };
+    let parts = plan.resolution_parts.unwrap_or_default();
     plan.reasons.push(format!(
         "prediction {} at random points of the surfaces, as a renderer shows the bake: noise {} \
-         and resolution error {} in quadrature — {verdict}. The resolution error is the \
-         bilinear lookup's between texel centres, from the pilot's second differences across \
-         neighbouring texels (area-weighted, like the point yardstick), and a lower bound: \
-         lookups near chart borders and gutters and features narrower than a texel are not in \
-         it",
+         and resolution error {} in quadrature — {verdict}. Resolution error: punctual direct \
+         light {} (sampled: texel values read back by bilinear lookup at {} random surface \
+         points against the exact light there; {:.1}% of those lookups read a gutter or buried \
+         neighbour), the rest {} (the pilot's second differences between texel centres; a \
+         lower bound: emitter shadow edges narrower than a texel are not in it)",
         pct(combined),
         pct(noise),
-        pct(r)
+        pct(r),
+        pct(parts.sampled),
+        punctual::POINTS,
+        parts.border_share * 100.0,
+        pct(parts.curved),
     ));
+}
+
+/// The pilot's values without the direct light of punctual lights (measured apart by
+/// [`PunctualSample`]), so the second differences see the rest alone.
+fn without_punctual(pilot: [&[Vec3]; 2], punctual: Option<&PunctualSample>) -> [Vec<Vec3>; 2] {
+    pilot.map(|run| match punctual {
+        Some(p) => run.iter().zip(&p.texel).map(|(h, d)| *h - *d).collect(),
+        None => run.to_vec(),
+    })
 }
 
 /// Neighbouring texels in a page whose normals are this close (cos 26°) lie on one smooth

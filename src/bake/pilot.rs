@@ -11,7 +11,7 @@ use glam::Vec3;
 
 use super::light::{Lit, transport_and_solve};
 use crate::config::{BakeConfig, FormFactors, Keep, SolveParams, Technique, TransportParams};
-use crate::plan::{self, PILOT_RAYS, Plan};
+use crate::plan::{self, PILOT_RAYS, Plan, PunctualSample};
 use crate::progress::CancelOnly;
 use crate::solve::Solution;
 use crate::texels::Texels;
@@ -57,7 +57,8 @@ pub fn choose_transport(
         plan.pilot_rays = rays;
         runs.enough = plan::choose_rays(config, plan, first, second);
         let [a, b] = runs.stored(config.transport.indirect_only);
-        plan::predict_resolution(texels, [&a, &b], plan);
+        let punctual = punctual_sample(surfaces, &config.transport, [&a, &b]);
+        plan::predict_resolution(texels, [&a, &b], punctual.as_ref(), plan);
         pilot = Some(runs);
     } else if monte_carlo && !keep.rays {
         plan::keep_rays_unmeasured(config, plan);
@@ -114,13 +115,40 @@ pub fn measure_density(
     let tolerance = (plan.target_error / 10.0).min(1e-3);
     let runs = PilotRuns::bake(surfaces, &config.transport, PILOT_RAYS, tolerance, progress)?;
     let [a, b] = runs.stored(config.transport.indirect_only);
+    let punctual = punctual_sample(surfaces, &config.transport, [&a, &b]);
     Ok(plan::choose_instance_density(
         surfaces.scene,
         surfaces.texels,
         [&a, &b],
+        punctual.as_ref(),
         config.atlas.texels_per_unit,
         plan,
     ))
+}
+
+/// Punctual direct light at the texels and its lookup error at random surface points
+/// ([`PunctualSample`]), normalised by the pilot pair's mean; none when the lightmap leaves
+/// direct light out.
+fn punctual_sample(
+    surfaces: Surfaces,
+    transport: &TransportParams,
+    pilot: [&[Vec3]; 2],
+) -> Option<PunctualSample> {
+    if transport.indirect_only {
+        return None;
+    }
+    let mean: Vec<Vec3> = pilot[0]
+        .iter()
+        .zip(pilot[1])
+        .map(|(a, b)| (*a + *b) * 0.5)
+        .collect();
+    PunctualSample::measure(
+        surfaces.scene,
+        surfaces.texels,
+        surfaces.tracer,
+        &mean,
+        transport.seed,
+    )
 }
 
 /// Two Monte Carlo bakes of the same texels with independent seeds: their difference measures
