@@ -33,17 +33,25 @@
 //!   fixtures this saves 1.8–3.0% of the rays (emitters are small) and never touches lit texels.
 //! - **Tolerance** E/10: the solver stops once its remaining error is well below the Monte
 //!   Carlo error, not later.
-//! - **Resolution error** is predicted, not controlled (the density stays the preset's): what a
-//!   renderer shows between texel centres, where it blends four texels bilinearly, differs from
-//!   the light at that point where the light curves within a texel — shadow and spot-cone
-//!   edges, contact shadows, small objects. [`resolution_error`] estimates it from the pilot's
-//!   irradiance by the texels' second differences (derivation there); `--explain` reports it
-//!   next to the noise, their combination in quadrature is the prediction, and a combination
-//!   above the target is said plainly rather than promised away. It is a lower bound: lookups
-//!   near chart borders and gutters, and features narrower than a texel, are left out; measured
-//!   against the point yardstick at `--quality medium` it came within 0.7 points on the Cornell
-//!   box and spot_and_directional but predicted about half of two_rooms' (3.8% vs 7.5%) and
-//!   sphere_on_floor's (4.1% vs 9.5%) point error.
+//! - **Adaptive texel density** ([`choose_instance_density`]): a pilot pair on the uniform
+//!   atlas measures where the lookup error sits, and each instance gets a density factor
+//!   (cube root of its mean square error, within ×¼…×4; unlit or buried instances ×¼; a floor
+//!   of [`MIN_INSTANCE_TEXELS`] texels for every seen, lit instance) at the uniform texel
+//!   count; the atlas, texels and validity are then laid out again and the rest of the plan
+//!   runs on them. Per instance, not per chart: a floor with one shadow is raised whole.
+//! - **Resolution error** is predicted ([`predict_resolution`]), not yet controlled by the
+//!   global density: what a renderer shows between texel centres, where it blends four texels
+//!   bilinearly, differs from the light at that point where the light changes within a texel.
+//!   For punctual direct light (hard shadows of sun, point and spot lights, spot-cone edges)
+//!   it is *sampled* ([`PunctualSample`]): texel values read back by bilinear lookup at random
+//!   surface points against the exact light there, gutters and buried texels included. For
+//!   the rest (interreflection, emitters) it is estimated from the pilot's second differences
+//!   ([`resolution_error`]; a lower bound: emitter shadow edges narrower than a texel are not
+//!   in it). `--explain` reports noise and both parts, and says plainly when the prediction is
+//!   above the target and why (resolution error that more rays cannot lower, or noise at the
+//!   ray cap). Against the point yardstick at `--quality medium` the sampled part
+//!   over-predicted the courtyard (8.6% predicted, 6.2% measured) and spot_and_directional
+//!   (3.0% predicted resolution, 2.4% measured in all).
 //!
 //! The pilot costs nothing extra when its bakes suffice and a few solves otherwise (Cornell
 //! box, 7167 texels, medium: 4 pilot bakes, 0.3 s, and no further bake). It measures the scene
@@ -230,16 +238,17 @@ const UNIFORM_WITHIN: f32 = 0.1;
 /// Step 1b, after a pilot on a uniform atlas: a density factor per scene instance
 /// (`AtlasParams::instance_density`), from the pilot's light (`pilot`, the two runs' stored
 /// values at `texels`), within the texel count of the uniform density. `None` when every
-/// factor rounds to 1 (the uniform atlas stays).
+/// factor is within 10% of 1 (the uniform atlas stays).
 ///
-/// **Where texels pay.** Per instance, `m` is the area mean of the bilinear lookup's squared
-/// error per texel ([`resolution_squares`]: the pilot's second differences, noise-free by the
-/// product of two independent runs). At a hard shadow or cone edge — the error that dominates —
+/// **Where texels pay.** Per instance, `m` is the mean square of the bilinear lookup's error:
+/// the sampled error of punctual direct light at the instance's points (`punctual`,
+/// [`PunctualSample`]) plus the area mean of the rest's from the pilot's second differences
+/// (`resolution_squares`, noise-free by the product of two independent runs); the scene's mean
+/// where an instance has no points or no second differences. At a hard shadow or cone edge — the error that dominates —
 /// the error sits in a band one texel wide, so the mean square falls as the texel size `h`:
 /// an instance of area `A` at density factor `s` contributes `A·m/s`. Minimising `Σ A·m/s`
 /// at a fixed texel count `Σ A·s²` gives `s ∝ m^⅓`. Factors stay within [`DENSITY_RANGE`];
-/// an instance without second differences (every chart narrower than three texels) keeps the
-/// scene's mean `m`; an instance the pilot found unlit (below 10⁻³ of the scene's mean light)
+/// an instance the pilot found unlit (below 10⁻³ of the scene's mean light)
 /// or whose texels are all buried in geometry gets the smallest factor: nothing there needs
 /// resolving. Then a floor: every other instance gets [`MIN_INSTANCE_TEXELS`] (thin legs,
 /// cups, books). The factors are scaled together so the texels add up to the uniform count,

@@ -149,6 +149,29 @@ fn scenes(out: &Path, quick: bool) -> Vec<Scene> {
             all_pairs: false,
             ..Scene::default()
         },
+        // The point-error corpus (issue 12): hard sun shadows, punctual lights only, and a
+        // 64k-triangle furnished interior. Monte Carlo and the automatic choice only.
+        Scene {
+            name: "courtyard",
+            path: fixture("courtyard.gltf"),
+            texels_per_unit: 8.0,
+            montecarlo_only: true,
+            ..Scene::default()
+        },
+        Scene {
+            name: "lamp_room",
+            path: fixture("lamp_room.gltf"),
+            texels_per_unit: 16.0,
+            montecarlo_only: true,
+            ..Scene::default()
+        },
+        Scene {
+            name: "furnished_interior",
+            path: fixture("furnished_interior.glb"),
+            texels_per_unit: 8.0,
+            montecarlo_only: true,
+            ..Scene::default()
+        },
         // The issue's large case: the Cornell box at about 167k texels (161 texels/m), where a
         // CPU path-tracing baker needs about 15 minutes for 1%. Its path tracer curve stops at
         // 64 paths per texel; the time to each error is scaled from there as 1/error².
