@@ -24,6 +24,9 @@ use lightbake::render::RenderScene;
 use lightbake::{BakeConfig, NoProgress};
 use plotters::prelude::*;
 
+#[path = "../benchmark/font.rs"]
+mod font;
+
 struct Row {
     scene: String,
     quality: String,
@@ -151,22 +154,9 @@ fn baked_file(dir: &Path, stem: &str) -> PathBuf {
         .expect("baked file")
 }
 
-fn font() {
-    for path in [
-        "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf",
-        "/usr/share/fonts/TTF/DejaVuSans.ttf",
-    ] {
-        if let Ok(bytes) = std::fs::read(path) {
-            let bytes: &'static [u8] = Box::leak(bytes.into_boxed_slice());
-            let _ = plotters::style::register_font("sans-serif", FontStyle::Normal, bytes);
-            return;
-        }
-    }
-}
-
 /// Point error against wall time, one panel per scene: before and after, one point per preset.
 fn chart(path: &Path, rows: &[Row]) -> Result<(), Box<dyn std::error::Error>> {
-    font();
+    font::register();
     let mut scenes: Vec<&str> = rows.iter().map(|r| r.scene.as_str()).collect();
     scenes.dedup();
     let columns = 3;

@@ -29,7 +29,7 @@ pub const POINTS: usize = 16_384;
 /// 8.73%: the footprint sampling noise is a small part of the error).
 pub const GRID: u32 = 4;
 /// Mixed into the seed: these streams differ from transport's and the point yardstick's.
-const SALT: u64 = 0x5EED_0F_D1EC7;
+const SALT: u64 = 0x05EE_D0FD_1EC7;
 
 /// The error of one sampled point.
 #[derive(Clone, Copy, Debug)]
