@@ -194,6 +194,9 @@ pub struct Prepared {
     pub config: BakeConfig,
     /// The automatic choice so far (the density), when `config.auto` asks for one.
     pub plan: Option<Plan>,
+    /// The density pilot's pair when the atlas stayed uniform: the first pilot of the
+    /// transport choice.
+    pub first_pilot: Option<pilot::PilotRuns>,
     pub stages: Vec<StageTime>,
 }
 
@@ -269,6 +272,7 @@ fn prepare_loaded(
     check_memory(&scene, input, &config)?;
     let (mut atlas, mut texels, mut validity) =
         lay_out(&scene, &source, &tracer, &config, progress, &mut stages)?;
+    let mut first_pilot = None;
 
     // Adaptive density: a pilot on the uniform atlas chooses a density per instance, and the
     // atlas is laid out again with it.
@@ -282,10 +286,13 @@ fn prepare_loaded(
             texels: &texels,
             tracer: &tracer,
         };
-        if let Some(factors) = pilot::measure_density(surfaces, &config, plan, progress)? {
-            config.atlas.instance_density = factors;
-            (atlas, texels, validity) =
-                lay_out(&scene, &source, &tracer, &config, progress, &mut Vec::new())?;
+        match pilot::measure_density(surfaces, &config, plan, progress)? {
+            pilot::Density::Factors(factors) => {
+                config.atlas.instance_density = factors;
+                (atlas, texels, validity) =
+                    lay_out(&scene, &source, &tracer, &config, progress, &mut Vec::new())?;
+            }
+            pilot::Density::Uniform(runs) => first_pilot = runs,
         }
         timed(&mut stages, "density", t);
     }
@@ -299,6 +306,7 @@ fn prepare_loaded(
         validity,
         config,
         plan,
+        first_pilot,
         stages,
     })
 }
@@ -346,7 +354,8 @@ pub fn compute(input: &Path, config: &BakeConfig, progress: &dyn Progress) -> Re
 }
 
 /// [`compute`] from the prepared stages.
-fn compute_prepared(prepared: Prepared, progress: &dyn Progress) -> Result<Baked> {
+fn compute_prepared(mut prepared: Prepared, progress: &dyn Progress) -> Result<Baked> {
+    let first = prepared.first_pilot.take();
     let surfaces = prepared.surfaces();
     let (mut config, mut plan, mut stages) = (
         prepared.config.clone(),
@@ -357,7 +366,7 @@ fn compute_prepared(prepared: Prepared, progress: &dyn Progress) -> Result<Baked
     let mut pilot = None;
     if let (Some(plan), Some(auto)) = (&mut plan, config.auto) {
         let t = Instant::now();
-        pilot = pilot::choose_transport(surfaces, &mut config, plan, &auto.keep, progress)?;
+        pilot = pilot::choose_transport(surfaces, &mut config, plan, &auto.keep, progress, first)?;
         config.validate()?;
         timed(&mut stages, "plan", t);
     }

@@ -27,6 +27,7 @@ pub fn choose_transport(
     plan: &mut Plan,
     keep: &Keep,
     progress: &dyn Progress,
+    first: Option<PilotRuns>,
 ) -> Result<Option<PilotRuns>> {
     let texels = surfaces.texels;
     let n = texels.len();
@@ -40,7 +41,12 @@ pub fn choose_transport(
         let start = Instant::now();
         let tolerance = (e / 10.0).min(1e-3);
         let bake = |k| PilotRuns::bake(surfaces, &config.transport, k, tolerance, progress);
-        let mut runs = bake(PILOT_RAYS)?;
+        // The density pilot's pair, when the atlas stayed: the same bakes (same texels, seeds
+        // and tolerance), not cast twice.
+        let mut runs = match first {
+            Some(runs) => runs,
+            None => bake(PILOT_RAYS)?,
+        };
         let first = runs.noise(texels, config.transport.indirect_only);
         let mut rays = runs.rays();
         progress.advance(1);
@@ -100,30 +106,44 @@ fn lit(surfaces: Surfaces, transport: &TransportParams) -> bool {
         || !surfaces.scene.lights.is_empty()
 }
 
+/// What the density pilot found: new density factors (the pair is of no use on the new
+/// atlas), or none and the pair, which is the first pilot of [`choose_transport`].
+pub enum Density {
+    Factors(Vec<f32>),
+    Uniform(Option<PilotRuns>),
+}
+
 /// Step 1b of the automatic choice, on the uniform atlas: a pilot pair at [`PILOT_RAYS`] and
-/// the density factor per instance it asks for ([`plan::choose_instance_density`]); `None`
-/// keeps the uniform atlas. The pair is not reused: the texels change with the atlas.
+/// the density factor per instance it asks for ([`plan::choose_instance_density`]).
 pub fn measure_density(
     surfaces: Surfaces,
     config: &BakeConfig,
     plan: &mut Plan,
     progress: &dyn Progress,
-) -> Result<Option<Vec<f32>>> {
-    if surfaces.texels.is_empty() || !lit(surfaces, &config.transport) {
-        return Ok(None);
+) -> Result<Density> {
+    if surfaces.texels.is_empty()
+        || !lit(surfaces, &config.transport)
+        || !config.technique.is_monte_carlo()
+    {
+        return Ok(Density::Uniform(None));
     }
     let tolerance = (plan.target_error / 10.0).min(1e-3);
     let runs = PilotRuns::bake(surfaces, &config.transport, PILOT_RAYS, tolerance, progress)?;
     let [a, b] = runs.stored(config.transport.indirect_only);
     let punctual = punctual_sample(surfaces, &config.transport, [&a, &b]);
-    Ok(plan::choose_instance_density(
-        surfaces.scene,
-        surfaces.texels,
-        [&a, &b],
-        punctual.as_ref(),
-        config.atlas.texels_per_unit,
-        plan,
-    ))
+    Ok(
+        match plan::choose_instance_density(
+            surfaces.scene,
+            surfaces.texels,
+            [&a, &b],
+            punctual.as_ref(),
+            config.atlas.texels_per_unit,
+            plan,
+        ) {
+            Some(factors) => Density::Factors(factors),
+            None => Density::Uniform(Some(runs)),
+        },
+    )
 }
 
 /// Punctual direct light at the texels and its lookup error at random surface points
