@@ -38,7 +38,9 @@
 //!   (cube root of its mean square error, within ×¼…×4; unlit or buried instances ×¼; a floor
 //!   of [`MIN_INSTANCE_TEXELS`] texels for every seen, lit instance) at the uniform texel
 //!   count; the atlas, texels and validity are then laid out again and the rest of the plan
-//!   runs on them. Per instance, not per chart: a floor with one shadow is raised whole.
+//!   runs on them. Only where the sampled punctual error is the larger part (the second
+//!   differences alone are a lower bound); when the atlas stays, its pilot pair is the first
+//!   pilot below. Per instance, not per chart: a floor with one shadow is raised whole.
 //! - **Resolution error** is predicted ([`predict_resolution`]), not yet controlled by the
 //!   global density: what a renderer shows between texel centres, where it blends four texels
 //!   bilinearly, differs from the light at that point where the light changes within a texel.
