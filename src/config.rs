@@ -22,6 +22,11 @@ pub struct AtlasParams {
     /// Texel density in texels per world unit (metre). Higher = sharper shadows, quadratically
     /// more texels, rays and memory.
     pub texels_per_unit: f32,
+    /// Adaptive density: a factor on `texels_per_unit` per scene instance (parallel to
+    /// `Scene::instances`), chosen by the automatic plan from the pilot's light
+    /// ([`crate::plan::choose_instance_density`]). Empty: one density everywhere. Unwrapped
+    /// atlases only (reused `TEXCOORD_1` keeps its layout).
+    pub instance_density: Vec<f32>,
     /// Pages are at most this many texels on a side; more pages are made when charts do not fit.
     pub max_page_size: u32,
     /// Empty texels between charts (room for dilation and bilinear filtering). At least 1.
@@ -277,6 +282,7 @@ impl BakeConfig {
             atlas: AtlasParams {
                 uv: UvMode::Auto,
                 texels_per_unit,
+                instance_density: Vec::new(),
                 max_page_size: 1024,
                 padding: 2,
             },

@@ -33,17 +33,27 @@
 //!   fixtures this saves 1.8–3.0% of the rays (emitters are small) and never touches lit texels.
 //! - **Tolerance** E/10: the solver stops once its remaining error is well below the Monte
 //!   Carlo error, not later.
-//! - **Resolution error** is predicted, not controlled (the density stays the preset's): what a
-//!   renderer shows between texel centres, where it blends four texels bilinearly, differs from
-//!   the light at that point where the light curves within a texel — shadow and spot-cone
-//!   edges, contact shadows, small objects. [`resolution_error`] estimates it from the pilot's
-//!   irradiance by the texels' second differences (derivation there); `--explain` reports it
-//!   next to the noise, their combination in quadrature is the prediction, and a combination
-//!   above the target is said plainly rather than promised away. It is a lower bound: lookups
-//!   near chart borders and gutters, and features narrower than a texel, are left out; measured
-//!   against the point yardstick at `--quality medium` it came within 0.7 points on the Cornell
-//!   box and spot_and_directional but predicted about half of two_rooms' (3.8% vs 7.5%) and
-//!   sphere_on_floor's (4.1% vs 9.5%) point error.
+//! - **Adaptive texel density** ([`choose_instance_density`]): a pilot pair on the uniform
+//!   atlas measures where the lookup error sits, and each instance gets a density factor
+//!   (cube root of its mean square error, within ×¼…×4; unlit or buried instances ×¼; a floor
+//!   of [`MIN_INSTANCE_TEXELS`] texels for every seen, lit instance) at the uniform texel
+//!   count; the atlas, texels and validity are then laid out again and the rest of the plan
+//!   runs on them. Only where the sampled punctual error is the larger part (the second
+//!   differences alone are a lower bound); when the atlas stays, its pilot pair is the first
+//!   pilot below. Per instance, not per chart: a floor with one shadow is raised whole.
+//! - **Resolution error** is predicted ([`predict_resolution`]), not yet controlled by the
+//!   global density: what a renderer shows between texel centres, where it blends four texels
+//!   bilinearly, differs from the light at that point where the light changes within a texel.
+//!   For punctual direct light (hard shadows of sun, point and spot lights, spot-cone edges)
+//!   it is *sampled* ([`PunctualSample`]): texel values read back by bilinear lookup at random
+//!   surface points against the exact light there, gutters and buried texels included. For
+//!   the rest (interreflection, emitters) it is estimated from the pilot's second differences
+//!   ([`resolution_error`]; a lower bound: emitter shadow edges narrower than a texel are not
+//!   in it). `--explain` reports noise and both parts, and says plainly when the prediction is
+//!   above the target and why (resolution error that more rays cannot lower, or noise at the
+//!   ray cap). Against the point yardstick at `--quality medium` the sampled part
+//!   over-predicted the courtyard (8.6% predicted, 6.2% measured) and spot_and_directional
+//!   (3.0% predicted resolution, 2.4% measured in all).
 //!
 //! The pilot costs nothing extra when its bakes suffice and a few solves otherwise (Cornell
 //! box, 7167 texels, medium: 4 pilot bakes, 0.3 s, and no further bake). It measures the scene
@@ -51,7 +61,11 @@
 //! sunlit terrain at the same target. The denoiser's gain is not counted (it lowers the error
 //! at low K and leaves it at high K), so the choice errs towards more rays.
 
+pub mod punctual;
+
 use glam::Vec3;
+
+pub use punctual::PunctualSample;
 
 use crate::config::{BakeConfig, FormFactors, Keep, RowSolver, Technique};
 use crate::metrics;
@@ -93,6 +107,8 @@ pub struct Plan {
     /// Expected resolution error of the chosen density ([`resolution_error`]), measured on
     /// the pilot's irradiance.
     pub predicted_resolution: Option<f32>,
+    /// What the resolution error is made of ([`predict_resolution`]).
+    pub resolution_parts: Option<ResolutionParts>,
     /// Gathering rays per texel in all, the reused pilot bakes included.
     pub total_rays: Option<u32>,
     pub pilot_seconds: f64,
@@ -107,6 +123,19 @@ pub struct Plan {
     pub reasons: Vec<String>,
     /// The choice in a few words, for the one-line summary.
     pub brief: String,
+}
+
+/// The parts of the predicted resolution error.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct ResolutionParts {
+    /// Relative RMS lookup error of the light other than punctual direct light, from the
+    /// pilot's second differences ([`resolution_error`]'s model; a lower bound).
+    pub curved: f32,
+    /// Relative RMS lookup error of punctual direct light, sampled at random surface points
+    /// ([`PunctualSample`]): hard shadow and cone edges, sub-texel features, gutters.
+    pub sampled: f32,
+    /// Share of those lookups that read a gutter or buried neighbour.
+    pub border_share: f32,
 }
 
 impl Plan {
@@ -196,6 +225,187 @@ pub fn choose_density(scene: &Scene, config: &mut BakeConfig, plan: &mut Plan, k
         "texel density {chosen} /m: {why} (about {:.0} texels)",
         area * (chosen as f64).powi(2)
     ));
+}
+
+/// Light-driven density factors of [`choose_instance_density`] stay within this range.
+pub const DENSITY_RANGE: (f32, f32) = (0.25, 4.0);
+/// Every seen and lit instance gets at least this many texels (at most [`MAX_FLOOR_FACTOR`]
+/// times the base density): no visible object is reduced to a handful of texels.
+pub const MIN_INSTANCE_TEXELS: f64 = 64.0;
+/// Largest density factor the texel floor may ask for (a 1 cm² object gets what it can).
+pub const MAX_FLOOR_FACTOR: f32 = 8.0;
+/// Factors all this close to 1 keep the uniform atlas (not worth laying it out again).
+const UNIFORM_WITHIN: f32 = 0.1;
+
+/// Step 1b, after a pilot on a uniform atlas: a density factor per scene instance
+/// (`AtlasParams::instance_density`), from the pilot's light (`pilot`, the two runs' stored
+/// values at `texels`), within the texel count of the uniform density. `None` when every
+/// factor is within 10% of 1, or when the sampled punctual error is not the larger part of
+/// the resolution error (scenes lit mainly by emitters): the uniform atlas stays.
+///
+/// **Where texels pay.** Per instance, `m` is the mean square of the bilinear lookup's error:
+/// the sampled error of punctual direct light at the instance's points (`punctual`,
+/// [`PunctualSample`]) plus the area mean of the rest's from the pilot's second differences
+/// (`resolution_squares`, noise-free by the product of two independent runs); the scene's mean
+/// where an instance has no points or no second differences. At a hard shadow or cone edge — the error that dominates —
+/// the error sits in a band one texel wide, so the mean square falls as the texel size `h`:
+/// an instance of area `A` at density factor `s` contributes `A·m/s`. Minimising `Σ A·m/s`
+/// at a fixed texel count `Σ A·s²` gives `s ∝ m^⅓`. Factors stay within [`DENSITY_RANGE`];
+/// an instance the pilot found unlit (below 10⁻³ of the scene's mean light)
+/// or whose texels are all buried in geometry gets the smallest factor: nothing there needs
+/// resolving. Then a floor: every other instance gets [`MIN_INSTANCE_TEXELS`] (thin legs,
+/// cups, books). The factors are scaled together so the texels add up to the uniform count,
+/// and rounded to two decimals.
+pub fn choose_instance_density(
+    scene: &Scene,
+    texels: &Texels,
+    pilot: [&[Vec3]; 2],
+    punctual: Option<&PunctualSample>,
+    tpu: f32,
+    plan: &mut Plan,
+) -> Option<Vec<f32>> {
+    let instances = scene.instances.len();
+    if instances < 2 || texels.is_empty() {
+        return None;
+    }
+    let mut area = vec![0.0f64; instances];
+    for (t, &i) in scene.triangle_instance.iter().enumerate() {
+        let p = |k: usize| scene.positions[scene.triangles[t][k] as usize].as_dvec3();
+        area[i as usize] += 0.5 * (p(1) - p(0)).cross(p(2) - p(0)).length();
+    }
+    let without = without_punctual(pilot, punctual);
+    let (square, skip) = resolution_squares(texels, [&without[0], &without[1]]);
+    let mut invalid = vec![false; texels.len()];
+    for &i in &texels.invalid {
+        invalid[i as usize] = true;
+    }
+    let mut no_difference = vec![false; texels.len()];
+    for &i in &skip {
+        no_difference[i as usize] = true;
+    }
+    // Per instance: Σ w·square and Σ w over texels with a second difference; Σ w·light and
+    // Σ w over valid texels.
+    let (mut error, mut error_weight) = (vec![0.0f64; instances], vec![0.0f64; instances]);
+    let (mut light, mut seen) = (vec![0.0f64; instances], vec![0.0f64; instances]);
+    for i in 0..texels.len() {
+        if invalid[i] {
+            continue;
+        }
+        let inst = scene.triangle_instance[texels.triangle[i] as usize] as usize;
+        let w = texels.area[i] as f64;
+        let value = (pilot[0][i] + pilot[1][i]).element_sum() as f64 / 6.0;
+        light[inst] += w * value;
+        seen[inst] += w;
+        if !no_difference[i] {
+            error[inst] += w * square[i].element_sum() as f64 / 3.0;
+            error_weight[inst] += w;
+        }
+    }
+    // Per instance, the mean square lookup error: the curvature of the light other than
+    // punctual direct light, plus the sampled error of that at the instance's points (the
+    // scene's mean where an instance has none of either).
+    let (mut sampled, mut count) = (vec![0.0f64; instances], vec![0usize; instances]);
+    for p in punctual.map_or(&[][..], |p| &p.points) {
+        sampled[p.instance as usize] += f64::from(p.square);
+        count[p.instance as usize] += 1;
+    }
+    let scene_curved =
+        (error.iter().sum::<f64>() / error_weight.iter().sum::<f64>().max(1e-300)).max(0.0);
+    let scene_sampled = sampled.iter().sum::<f64>() / (count.iter().sum::<usize>().max(1) as f64);
+    let mean_square: Vec<f64> = (0..instances)
+        .map(|i| {
+            let curved = if error_weight[i] > 0.0 {
+                (error[i] / error_weight[i]).max(0.0)
+            } else {
+                scene_curved
+            };
+            let sampled = if count[i] > 0 {
+                sampled[i] / count[i] as f64
+            } else {
+                scene_sampled
+            };
+            curved + sampled
+        })
+        .collect();
+    // The factors follow a measurement, not a bound: where the sampled punctual error is not
+    // the larger part, the second differences (a lower bound, noisy at pilot rays) would steer
+    // them, and on the furnished interior (emitter panels) that tripled the time and raised
+    // the point error from 4.8% to 6.7% at medium.
+    if scene_sampled <= scene_curved {
+        return None;
+    }
+    let scene_light = light.iter().sum::<f64>() / seen.iter().sum::<f64>().max(f64::MIN_POSITIVE);
+    let scene_error = scene_curved + scene_sampled;
+    if !(scene_light > 0.0 && scene_error > 0.0) {
+        return None;
+    }
+    let (lo, hi) = DENSITY_RANGE;
+    // Light-driven factor before scaling, and the floor, per instance.
+    let mut wanted = vec![lo; instances];
+    let mut floor = vec![0.0f32; instances];
+    let mut dark = 0;
+    for i in 0..instances {
+        if area[i] <= 0.0 {
+            wanted[i] = 1.0;
+            continue;
+        }
+        if seen[i] <= 0.0 || light[i] / seen[i] <= 1e-3 * scene_light {
+            dark += 1;
+            continue;
+        }
+        wanted[i] = ((mean_square[i] / scene_error).cbrt() as f32).max(1e-3);
+        let texels_now = area[i] * f64::from(tpu).powi(2);
+        floor[i] = ((MIN_INSTANCE_TEXELS / texels_now).sqrt() as f32).min(MAX_FLOOR_FACTOR);
+    }
+    let budget: f64 = area.iter().sum();
+    let factors = |c: f32| -> Vec<f32> {
+        (0..instances)
+            .map(|i| (c * wanted[i]).clamp(lo, hi).max(floor[i]))
+            .collect()
+    };
+    let texels_at = |f: &[f32]| -> f64 {
+        f.iter()
+            .zip(&area)
+            .map(|(f, a)| a * f64::from(*f).powi(2))
+            .sum()
+    };
+    // The texel count grows with the common scale `c`: bisect on log c.
+    let (mut c_lo, mut c_hi) = (1e-3f32, 1e3f32);
+    for _ in 0..60 {
+        let c = (c_lo * c_hi).sqrt();
+        if texels_at(&factors(c)) > budget {
+            c_hi = c;
+        } else {
+            c_lo = c;
+        }
+    }
+    // Two decimals read well and keep the choice stable.
+    let chosen: Vec<f32> = factors(c_lo)
+        .into_iter()
+        .map(|f| (f * 100.0).round() / 100.0)
+        .collect();
+    if chosen.iter().all(|&f| (f - 1.0).abs() <= UNIFORM_WITHIN) {
+        return None;
+    }
+    let floored = (0..instances)
+        .filter(|&i| floor[i] > (c_lo * wanted[i]).clamp(lo, hi))
+        .count();
+    let denser = chosen.iter().filter(|&&f| f > 1.0).count();
+    let sparser = chosen.iter().filter(|&&f| f < 1.0).count();
+    let (min, max) = chosen
+        .iter()
+        .fold((f32::INFINITY, 0.0f32), |(a, b), &f| (a.min(f), b.max(f)));
+    plan.reasons.push(format!(
+        "adaptive texel density per instance (×{min:.2}…×{max:.2} of {tpu} /m, {} texels in all as \
+         uniform would have about {budget_texels:.0}): {denser} of {instances} instances denser \
+         where the pilot's light curves or steps within a texel (shadow and cone edges; factor \
+         ∝ the cube root of their resolution error), {sparser} sparser where it is even; \
+         {dark} unlit or buried get ×{lo}; {floored} small ones raised to at least \
+         {MIN_INSTANCE_TEXELS} texels",
+        format_args!("{:.0}", texels_at(&chosen) * f64::from(tpu).powi(2)),
+        budget_texels = budget * f64::from(tpu).powi(2),
+    ));
+    Some(chosen)
 }
 
 /// Step 2, once texels exist: the method. Monte Carlo unless the user fixed it; the solver is
@@ -402,11 +612,27 @@ pub fn choose_texel_rays(texels: &Texels, pilot: &[&[Vec3]], k: u32, plan: &mut 
 
 /// Step 3b, after the rays: the resolution error of the density ([`resolution_error`]) from
 /// the last pilot pair's lightmap values, and the prediction that combines it with the noise.
-pub fn predict_resolution(texels: &Texels, pilot: [&[Vec3]; 2], plan: &mut Plan) {
-    let r = resolution_error(texels, pilot);
+pub fn predict_resolution(
+    texels: &Texels,
+    pilot: [&[Vec3]; 2],
+    punctual: Option<&PunctualSample>,
+    plan: &mut Plan,
+) {
+    let n = texels.len();
+    let mean: Vec<Vec3> = (0..n).map(|i| (pilot[0][i] + pilot[1][i]) * 0.5).collect();
+    let without = without_punctual(pilot, punctual);
+    let (square, skip) = resolution_squares(texels, [&without[0], &without[1]]);
+    let curved = metrics::weighted_rms_over_mean(&square, &mean, &texels.area, &skip);
+    let sampled = punctual.map_or(0.0, |p| p.relative_error());
+    let r = curved.hypot(sampled);
     if !r.is_finite() {
         return;
     }
+    plan.resolution_parts = Some(ResolutionParts {
+        curved,
+        sampled,
+        border_share: punctual.map_or(0.0, |p| p.border_share()),
+    });
     plan.predicted_resolution = Some(r);
     let e = plan.target_error;
     let noise = plan.predicted_noise.unwrap_or(0.0);
@@ -421,7 +647,8 @@ pub fn predict_resolution(texels: &Texels, pilot: [&[Vec3]; 2], plan: &mut Plan)
         format!(
             "ABOVE the {:.1}% target: resolution error {} exceeds it — shadow edges, spot-cone \
              edges and small objects need more texels than the density allows, and more rays \
-             cannot help (raise --texels-per-unit)",
+             cannot help (raise --texels-per-unit: at an edge the lookup error falls only as \
+             the square root of the texel size, so halving it takes 4× the density)",
             e * 100.0,
             pct(r)
         )
@@ -438,17 +665,31 @@ pub fn predict_resolution(texels: &Texels, pilot: [&[Vec3]; 2], plan: &mut Plan)
             e * 100.0
         )
     };
+    let parts = plan.resolution_parts.unwrap_or_default();
     plan.reasons.push(format!(
         "prediction {} at random points of the surfaces, as a renderer shows the bake: noise {} \
-         and resolution error {} in quadrature — {verdict}. The resolution error is the \
-         bilinear lookup's between texel centres, from the pilot's second differences across \
-         neighbouring texels (area-weighted, like the point yardstick), and a lower bound: \
-         lookups near chart borders and gutters and features narrower than a texel are not in \
-         it",
+         and resolution error {} in quadrature — {verdict}. Resolution error: punctual direct \
+         light {} (sampled: texel values read back by bilinear lookup at {} random surface \
+         points against the exact light there; {:.1}% of those lookups read a gutter or buried \
+         neighbour), the rest {} (the pilot's second differences between texel centres; a \
+         lower bound: emitter shadow edges narrower than a texel are not in it)",
         pct(combined),
         pct(noise),
-        pct(r)
+        pct(r),
+        pct(parts.sampled),
+        punctual::POINTS,
+        parts.border_share * 100.0,
+        pct(parts.curved),
     ));
+}
+
+/// The pilot's values without the direct light of punctual lights (measured apart by
+/// [`PunctualSample`]), so the second differences see the rest alone.
+fn without_punctual(pilot: [&[Vec3]; 2], punctual: Option<&PunctualSample>) -> [Vec<Vec3>; 2] {
+    pilot.map(|run| match punctual {
+        Some(p) => run.iter().zip(&p.texel).map(|(h, d)| *h - *d).collect(),
+        None => run.to_vec(),
+    })
 }
 
 /// Neighbouring texels in a page whose normals are this close (cos 26°) lie on one smooth
@@ -491,6 +732,16 @@ const G_MEAN_SQUARE: f32 = 49.0 / 2880.0;
 /// [`metrics::weighted_rms_over_mean`] over texel areas against the mean of the two bakes.
 /// NaN when no texel has a second difference or the light is black.
 pub fn resolution_error(texels: &Texels, pilot: [&[Vec3]; 2]) -> f32 {
+    let (square, skip) = resolution_squares(texels, pilot);
+    let n = texels.len();
+    let mean: Vec<Vec3> = (0..n).map(|i| (pilot[0][i] + pilot[1][i]) * 0.5).collect();
+    metrics::weighted_rms_over_mean(&square, &mean, &texels.area, &skip)
+}
+
+/// Per texel, the expected square of the bilinear lookup's error over its cell (per channel,
+/// may be negative where the light is smooth: see [`resolution_error`]), and the texels that
+/// have no second difference (ascending).
+fn resolution_squares(texels: &Texels, pilot: [&[Vec3]; 2]) -> (Vec<Vec3>, Vec<u32>) {
     let n = texels.len();
     let mut valid = vec![true; n];
     for &i in &texels.invalid {
@@ -533,8 +784,7 @@ pub fn resolution_error(texels: &Texels, pilot: [&[Vec3]; 2]) -> f32 {
             }
         };
     }
-    let mean: Vec<Vec3> = (0..n).map(|i| (pilot[0][i] + pilot[1][i]) * 0.5).collect();
-    metrics::weighted_rms_over_mean(&square, &mean, &texels.area, &skip)
+    (square, skip)
 }
 
 /// The smallest of 4·2ⁿ, 5·2ⁿ, 6·2ⁿ, 7·2ⁿ at or above `x` (four steps per octave: powers of

@@ -149,6 +149,57 @@ impl Geometry {
         geometry
     }
 
+    /// A closed cylinder along +Y standing on `base`: `segments` sides with smooth normals,
+    /// flat top and bottom caps.
+    pub fn cylinder(base: Vec3, radius: f32, height: f32, segments: u32) -> Self {
+        assert!(segments >= 3, "a cylinder needs at least 3 sides");
+        let mut g = Geometry {
+            normals: Some(Vec::new()),
+            uv0: Some(Vec::new()),
+            ..Default::default()
+        };
+        let mut vertex = |p: Vec3, n: Vec3, uv: Vec2| {
+            g.positions.push(p);
+            g.normals.as_mut().unwrap().push(n);
+            g.uv0.as_mut().unwrap().push(uv);
+        };
+        for i in 0..=segments {
+            let s = i as f32 / segments as f32;
+            let phi = s * std::f32::consts::TAU;
+            let n = Vec3::new(phi.cos(), 0.0, -phi.sin());
+            vertex(base + n * radius, n, Vec2::new(s, 1.0));
+            vertex(base + n * radius + Vec3::Y * height, n, Vec2::new(s, 0.0));
+        }
+        let caps = 2 * (segments + 1);
+        for (y, n) in [(0.0, Vec3::NEG_Y), (height, Vec3::Y)] {
+            vertex(base + Vec3::Y * y, n, Vec2::splat(0.5));
+            for i in 0..segments {
+                let phi = i as f32 / segments as f32 * std::f32::consts::TAU;
+                let d = Vec3::new(phi.cos(), 0.0, -phi.sin());
+                vertex(
+                    base + d * radius + Vec3::Y * y,
+                    n,
+                    Vec2::splat(0.5) + 0.5 * Vec2::new(d.x, d.z),
+                );
+            }
+        }
+        for i in 0..segments {
+            let (a, b, c, d) = (2 * i, 2 * i + 2, 2 * i + 3, 2 * i + 1);
+            g.indices.extend_from_slice(&[a, b, c, a, c, d]);
+        }
+        for (cap, up) in [(caps, false), (caps + segments + 1, true)] {
+            for i in 0..segments {
+                let (p, q) = (cap + 1 + i, cap + 1 + (i + 1) % segments);
+                if up {
+                    g.indices.extend_from_slice(&[cap, p, q]);
+                } else {
+                    g.indices.extend_from_slice(&[cap, q, p]);
+                }
+            }
+        }
+        g
+    }
+
     /// Appends `other`'s vertices and triangles; both must carry the same attributes
     /// (an empty geometry takes on `other`'s).
     pub fn append(&mut self, other: &Geometry) {
@@ -1459,6 +1510,428 @@ pub fn t_junction_floor() -> GltfBuilder {
     gltf
 }
 
+/// A sun-lit courtyard, directional light only (no sky): an 12 × 12 m paved ground, walls of
+/// several heights (1.2, 2, 3 and 4 m, closed 0.3 m solids standing on it), and a pillar whose
+/// node is rotated about two axes and scaled non-uniformly. Every shadow is a hard edge cast
+/// by one parallel light: the case texel density matters most for.
+pub fn courtyard() -> GltfBuilder {
+    let mut gltf = GltfBuilder::new("courtyard");
+    let ground_m = gltf.add_material(Material::grey("ground", 0.4));
+    let wall_m = gltf.add_material(Material::diffuse("wall", [0.75, 0.68, 0.55]));
+    let pillar_m = gltf.add_material(Material::diffuse("pillar", [0.55, 0.6, 0.7]));
+    let ground = gltf.add_mesh("ground", floor(12.0, 12).without_uv0(), ground_m);
+    gltf.add_mesh_node("ground", ground);
+    // (min, max) of each wall: the courtyard is open towards +z; the sun, low from behind the
+    // north wall, casts the walls' shadows across it.
+    let walls = [
+        (Vec3::new(-4.0, 0.0, -4.3), Vec3::new(4.0, 4.0, -4.0)),
+        (Vec3::new(-4.3, 0.0, -4.0), Vec3::new(-4.0, 3.0, 3.0)),
+        (Vec3::new(4.0, 0.0, -4.0), Vec3::new(4.3, 2.0, 1.5)),
+        (Vec3::new(-1.5, 0.0, 1.2), Vec3::new(1.5, 1.2, 1.5)),
+    ];
+    for (k, (min, max)) in walls.into_iter().enumerate() {
+        let n = ((max - min).max_element() * 0.5).ceil() as u32;
+        let solid = Geometry::box_faces(min, max, &Face::ALL, n).without_uv0();
+        let mesh = gltf.add_mesh(&format!("wall_{k}"), solid, wall_m);
+        gltf.add_mesh_node(&format!("wall_{k}"), mesh);
+    }
+    let unit = Geometry::box_faces(
+        Vec3::new(-0.5, 0.0, -0.5),
+        Vec3::new(0.5, 1.0, 0.5),
+        &Face::ALL,
+        2,
+    )
+    .without_uv0();
+    let pillar = gltf.add_mesh("pillar", unit, pillar_m);
+    let turn = Quat::from_rotation_y(0.6) * Quat::from_rotation_z(0.12);
+    gltf.add_node(
+        Node::new("pillar")
+            .trs(Vec3::new(1.2, -0.05, -1.0), turn, Vec3::new(0.35, 2.6, 0.7))
+            .with_mesh(pillar),
+    );
+    let sun = Light::directional("sun", [1.0, 0.96, 0.9], 3.0);
+    gltf.add_light_node(sun, Vec3::new(0.0, 6.0, 0.0), Vec3::new(0.5, -0.7, 0.55));
+    let camera = Camera::perspective("camera", 1.0, Some(1.5));
+    gltf.add_camera_node(camera, Vec3::new(3.0, 5.0, 9.0), Vec3::new(-0.5, 0.5, -1.0));
+    gltf
+}
+
+/// A closed room (5 × 4 m, 2.8 m high, facing inward) lit only by a point light under the
+/// ceiling and a spot light aimed at a table; a table (thin top, four thin legs) and a cabinet
+/// (a closed box against a wall). Punctual lights only: hard shadows, a spot-cone edge, and
+/// all the rest is interreflection.
+pub fn lamp_room() -> GltfBuilder {
+    let mut gltf = GltfBuilder::new("lamp_room");
+    let walls_m = gltf.add_material(Material::diffuse("walls", [0.75, 0.72, 0.66]));
+    let floor_m = gltf.add_material(Material::diffuse("floor", [0.45, 0.35, 0.25]));
+    let wood_m = gltf.add_material(Material::diffuse("wood", [0.6, 0.42, 0.28]));
+    let cabinet_m = gltf.add_material(Material::diffuse("cabinet", [0.3, 0.45, 0.4]));
+    let (min, max) = (Vec3::new(-2.5, 0.0, -2.0), Vec3::new(2.5, 2.8, 2.0));
+    let shell = gltf.add_mesh(
+        "floor",
+        Geometry::box_face(min, max, Face::NegY, 10, 8)
+            .flipped()
+            .without_uv0(),
+        floor_m,
+    );
+    let mut walls = Geometry::box_face(min, max, Face::PosY, 10, 8).flipped();
+    for face in [Face::NegX, Face::PosX, Face::NegZ, Face::PosZ] {
+        walls.append(&Geometry::box_face(min, max, face, 8, 6).flipped());
+    }
+    gltf.add_primitive(shell, walls.without_uv0(), walls_m);
+    gltf.add_mesh_node("room", shell);
+
+    let mut table = Geometry::box_faces(
+        Vec3::new(-0.7, 0.72, -0.4),
+        Vec3::new(0.7, 0.76, 0.4),
+        &Face::ALL,
+        4,
+    );
+    for (x, z) in [(-0.65, -0.35), (0.61, -0.35), (-0.65, 0.31), (0.61, 0.31)] {
+        table.append(&Geometry::box_faces(
+            Vec3::new(x, 0.0, z),
+            Vec3::new(x + 0.04, 0.72, z + 0.04),
+            &Face::NO_BOTTOM,
+            1,
+        ));
+    }
+    let table = gltf.add_mesh("table", table.without_uv0(), wood_m);
+    gltf.add_node(
+        Node::new("table")
+            .trs(
+                Vec3::new(0.3, 0.0, 0.2),
+                Quat::from_rotation_y(0.3),
+                Vec3::ONE,
+            )
+            .with_mesh(table),
+    );
+    let cabinet = Geometry::box_faces(
+        Vec3::new(-0.45, 0.0, -0.22),
+        Vec3::new(0.45, 1.8, 0.22),
+        &Face::ALL,
+        4,
+    );
+    let cabinet = gltf.add_mesh("cabinet", cabinet.without_uv0(), cabinet_m);
+    gltf.add_node(
+        Node::new("cabinet")
+            .at(Vec3::new(-1.6, 0.0, -1.75))
+            .with_mesh(cabinet),
+    );
+    gltf.add_light_node(
+        Light::point("bulb", [1.0, 0.9, 0.75], 12.0),
+        Vec3::new(1.2, 2.5, -0.8),
+        Vec3::NEG_Y,
+    );
+    let spot = Light::spot("spot", [0.9, 0.95, 1.0], 40.0, 0.2, 0.32).with_range(10.0);
+    let spot_at = Vec3::new(-2.2, 2.6, 1.7);
+    gltf.add_light_node(spot, spot_at, Vec3::new(0.3, 0.76, 0.2) - spot_at);
+    let camera = Camera::perspective("camera", 1.1, Some(1.25));
+    gltf.add_camera_node(camera, Vec3::new(2.2, 1.9, 1.8), Vec3::new(-0.6, 0.6, -0.6));
+    gltf
+}
+
+/// A furnished interior of over 50 000 triangles: a 8 × 6 m room, 3 m high, whose walls, floor
+/// and ceiling are closed 0.2 m solids with finely tessellated inner faces (as a scanned or
+/// sculpted asset comes), two tables with thin legs, eight chairs with slatted backs, a
+/// bookcase of small books, cups and bottles (smooth cylinders), a rug (1 cm thick), picture
+/// frames, two emissive ceiling panels and a point-lit lamp. Thin and small objects get few
+/// texels at a uniform density; the walls' outer faces are seen by nothing.
+pub fn furnished_interior() -> GltfBuilder {
+    let mut gltf = GltfBuilder::new("furnished_interior");
+    let plaster = gltf.add_material(Material::diffuse("plaster", [0.78, 0.76, 0.72]));
+    let boards = gltf.add_material(Material::diffuse("boards", [0.5, 0.38, 0.26]));
+    let wood = gltf.add_material(Material::diffuse("wood", [0.55, 0.36, 0.22]));
+    let fabric = gltf.add_material(Material::diffuse("fabric", [0.25, 0.35, 0.6]));
+    let rug_m = gltf.add_material(Material::diffuse("rug", [0.6, 0.15, 0.12]));
+    let paper = gltf.add_material(Material::diffuse("paper", [0.8, 0.78, 0.7]));
+    let glaze = gltf.add_material(Material::diffuse("glaze", [0.85, 0.85, 0.9]));
+    let glass = gltf.add_material(Material::diffuse("bottle", [0.2, 0.45, 0.25]));
+    let panel_m = gltf.add_material(Material::grey("panel", 0.8).emitting([1.0, 0.97, 0.9], 12.0));
+    let (half_x, half_z, height, wall) = (4.0f32, 3.0f32, 3.0f32, 0.2f32);
+    // Slabs and walls are closed boxes: their inner faces tessellated every 8 cm, the others
+    // (outside, and ends buried in the neighbouring solids) one quad per face.
+    let slab = |min: Vec3, max: Vec3, inner: Face| {
+        let size = max - min;
+        let mut g = Geometry::default();
+        for face in Face::ALL {
+            let (nu, nv) = if face == inner {
+                let [u, v] = match face {
+                    Face::PosY | Face::NegY => [size.x, size.z],
+                    Face::PosX | Face::NegX => [size.z, size.y],
+                    Face::PosZ | Face::NegZ => [size.x, size.y],
+                };
+                ((u * 12.5).round() as u32, (v * 12.5).round() as u32)
+            } else {
+                (1, 1)
+            };
+            g.append(&Geometry::box_face(min, max, face, nu.max(1), nv.max(1)));
+        }
+        g.without_uv0().without_normals()
+    };
+    let solids = [
+        (
+            "floor",
+            Vec3::new(-half_x, -wall, -half_z),
+            Vec3::new(half_x, 0.0, half_z),
+            Face::PosY,
+            boards,
+        ),
+        (
+            "ceiling",
+            Vec3::new(-half_x, height, -half_z),
+            Vec3::new(half_x, height + wall, half_z),
+            Face::NegY,
+            plaster,
+        ),
+        (
+            "wall_north",
+            Vec3::new(-half_x - wall, -wall, -half_z - wall),
+            Vec3::new(half_x + wall, height + wall, -half_z),
+            Face::PosZ,
+            plaster,
+        ),
+        (
+            "wall_south",
+            Vec3::new(-half_x - wall, -wall, half_z),
+            Vec3::new(half_x + wall, height + wall, half_z + wall),
+            Face::NegZ,
+            plaster,
+        ),
+        (
+            "wall_west",
+            Vec3::new(-half_x - wall, -wall, -half_z),
+            Vec3::new(-half_x, height + wall, half_z),
+            Face::PosX,
+            plaster,
+        ),
+        (
+            "wall_east",
+            Vec3::new(half_x, -wall, -half_z),
+            Vec3::new(half_x + wall, height + wall, half_z),
+            Face::NegX,
+            plaster,
+        ),
+    ];
+    for (name, min, max, inner, material) in solids {
+        let mesh = gltf.add_mesh(name, slab(min, max, inner), material);
+        gltf.add_mesh_node(name, mesh);
+    }
+    let cuboid = |min: Vec3, max: Vec3| Geometry::box_faces(min, max, &Face::ALL, 1).without_uv0();
+    let place = |gltf: &mut GltfBuilder, name: &str, mesh: usize, at: Vec3, turn: f32| {
+        gltf.add_node(
+            Node::new(name)
+                .trs(at, Quat::from_rotation_y(turn), Vec3::ONE)
+                .with_mesh(mesh),
+        );
+    };
+    // Tables: a 4 cm top, four 4 cm legs.
+    let mut table = cuboid(Vec3::new(-0.8, 0.72, -0.45), Vec3::new(0.8, 0.76, 0.45));
+    for (x, z) in [(-0.75, -0.4), (0.71, -0.4), (-0.75, 0.36), (0.71, 0.36)] {
+        table.append(&cuboid(
+            Vec3::new(x, 0.0, z),
+            Vec3::new(x + 0.04, 0.72, z + 0.04),
+        ));
+    }
+    let table = gltf.add_mesh("table", table, wood);
+    // Chairs: seat, 3 cm legs, a back of five 2 cm slats.
+    let mut chair = cuboid(Vec3::new(-0.22, 0.44, -0.22), Vec3::new(0.22, 0.47, 0.22));
+    for (x, z) in [(-0.21, -0.21), (0.18, -0.21), (-0.21, 0.18), (0.18, 0.18)] {
+        chair.append(&cuboid(
+            Vec3::new(x, 0.0, z),
+            Vec3::new(x + 0.03, 0.44, z + 0.03),
+        ));
+    }
+    for k in 0..5 {
+        let x = -0.2 + 0.09 * k as f32;
+        chair.append(&cuboid(
+            Vec3::new(x, 0.47, 0.19),
+            Vec3::new(x + 0.02, 0.9, 0.22),
+        ));
+    }
+    let chair = gltf.add_mesh("chair", chair, fabric);
+    for (t, centre) in [Vec3::new(-1.6, 0.0, 0.2), Vec3::new(1.6, 0.0, -0.4)]
+        .into_iter()
+        .enumerate()
+    {
+        place(&mut gltf, &format!("table_{t}"), table, centre, 0.0);
+        for (c, (dx, dz, turn)) in [
+            (-0.45, 0.6, 0.0),
+            (0.45, 0.6, 0.0),
+            (-0.45, -0.6, PI),
+            (0.45, -0.6, PI),
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            let at = centre + Vec3::new(dx, 0.0, dz);
+            place(
+                &mut gltf,
+                &format!("chair_{t}_{c}"),
+                chair,
+                at,
+                turn + 0.05 * c as f32,
+            );
+        }
+    }
+    // Cups and bottles on the tables: smooth cylinders.
+    let cup = gltf.add_mesh(
+        "cup",
+        Geometry::cylinder(Vec3::ZERO, 0.04, 0.1, 24).without_uv0(),
+        glaze,
+    );
+    let bottle = gltf.add_mesh(
+        "bottle",
+        Geometry::cylinder(Vec3::ZERO, 0.035, 0.3, 24).without_uv0(),
+        glass,
+    );
+    for (k, (x, z)) in [
+        (-1.9, 0.0),
+        (-1.4, 0.35),
+        (1.3, -0.6),
+        (1.8, -0.2),
+        (1.5, -0.15),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        place(
+            &mut gltf,
+            &format!("cup_{k}"),
+            cup,
+            Vec3::new(x, 0.76, z),
+            0.0,
+        );
+    }
+    for (k, (x, z)) in [(-1.6, 0.15), (1.7, -0.5)].into_iter().enumerate() {
+        place(
+            &mut gltf,
+            &format!("bottle_{k}"),
+            bottle,
+            Vec3::new(x, 0.76, z),
+            0.0,
+        );
+    }
+    // A bookcase against the west wall: a carcass of 2 cm boards, four shelves of books.
+    let mut case = Geometry::default();
+    for (min, max) in [
+        (Vec3::new(0.0, 0.0, -0.6), Vec3::new(0.3, 2.0, -0.58)),
+        (Vec3::new(0.0, 0.0, 0.58), Vec3::new(0.3, 2.0, 0.6)),
+        (Vec3::new(0.0, 0.0, -0.58), Vec3::new(0.02, 2.0, 0.58)),
+    ] {
+        case.append(&cuboid(min, max));
+    }
+    for s in 0..5 {
+        let y = 0.02 + 0.48 * s as f32;
+        case.append(&cuboid(
+            Vec3::new(0.02, y - 0.02, -0.58),
+            Vec3::new(0.3, y, 0.58),
+        ));
+    }
+    let case = gltf.add_mesh("bookcase", case, wood);
+    place(
+        &mut gltf,
+        "bookcase",
+        case,
+        Vec3::new(-half_x, 0.0, -1.2),
+        0.0,
+    );
+    let mut books = Geometry::default();
+    for s in 0..4 {
+        let y = 0.02 + 0.48 * s as f32;
+        let mut z = -0.56;
+        let mut k = 0;
+        while z < 0.5 {
+            let width = 0.025 + 0.01 * ((k * 7 + s * 3) % 4) as f32;
+            let tall = 0.22 + 0.03 * ((k * 5 + s) % 5) as f32;
+            books.append(&cuboid(
+                Vec3::new(0.05, y, z),
+                Vec3::new(0.27, y + tall, z + width),
+            ));
+            z += width + 0.004;
+            k += 1;
+        }
+    }
+    let books = gltf.add_mesh("books", books, paper);
+    place(
+        &mut gltf,
+        "books",
+        books,
+        Vec3::new(-half_x, 0.0, -1.2),
+        0.0,
+    );
+    // A 1 cm rug, a sofa of boxes, picture frames 2 cm off the walls.
+    let rug = gltf.add_mesh(
+        "rug",
+        cuboid(Vec3::new(-1.2, 0.0, -0.9), Vec3::new(1.2, 0.01, 0.9)),
+        rug_m,
+    );
+    place(&mut gltf, "rug", rug, Vec3::new(0.0, 0.0, 1.6), 0.0);
+    let mut sofa = cuboid(Vec3::new(-1.0, 0.0, -0.4), Vec3::new(1.0, 0.42, 0.4));
+    sofa.append(&cuboid(
+        Vec3::new(-1.0, 0.42, 0.25),
+        Vec3::new(1.0, 0.85, 0.4),
+    ));
+    sofa.append(&cuboid(
+        Vec3::new(-1.0, 0.42, -0.4),
+        Vec3::new(-0.85, 0.62, 0.25),
+    ));
+    sofa.append(&cuboid(
+        Vec3::new(0.85, 0.42, -0.4),
+        Vec3::new(1.0, 0.62, 0.25),
+    ));
+    let sofa = gltf.add_mesh("sofa", sofa, fabric);
+    place(&mut gltf, "sofa", sofa, Vec3::new(0.2, 0.0, 2.5), 0.0);
+    let frame = gltf.add_mesh(
+        "frame",
+        cuboid(Vec3::new(-0.4, -0.3, 0.0), Vec3::new(0.4, 0.3, 0.02)),
+        paper,
+    );
+    for (k, x) in [-2.0f32, 0.5, 2.6].into_iter().enumerate() {
+        place(
+            &mut gltf,
+            &format!("frame_{k}"),
+            frame,
+            Vec3::new(x, 1.7, -half_z),
+            0.0,
+        );
+    }
+    // A floor lamp: a thin stand and a point light under a shade.
+    let mut lamp = Geometry::cylinder(Vec3::ZERO, 0.015, 1.5, 12);
+    lamp.append(&Geometry::cylinder(
+        Vec3::new(0.0, 1.5, 0.0),
+        0.18,
+        0.22,
+        32,
+    ));
+    let lamp = gltf.add_mesh("lamp", lamp.without_uv0(), paper);
+    place(&mut gltf, "lamp", lamp, Vec3::new(3.3, 0.0, 2.3), 0.0);
+    gltf.add_light_node(
+        Light::point("lamp_bulb", [1.0, 0.85, 0.65], 4.0),
+        Vec3::new(3.3, 1.4, 2.3),
+        Vec3::NEG_Y,
+    );
+    let panel = Geometry::grid(
+        Vec3::new(-0.6, height - 0.01, -0.3),
+        Vec3::X * 1.2,
+        Vec3::Z * 0.6,
+        1,
+        1,
+    );
+    let panel = gltf.add_mesh("panel", panel.without_uv0(), panel_m);
+    for (k, x) in [-1.6f32, 1.6].into_iter().enumerate() {
+        place(
+            &mut gltf,
+            &format!("panel_{k}"),
+            panel,
+            Vec3::new(x, 0.0, 0.0),
+            0.0,
+        );
+    }
+    let camera = Camera::perspective("camera", 1.2, Some(1.5));
+    gltf.add_camera_node(camera, Vec3::new(3.6, 2.2, 2.7), Vec3::new(-1.0, 0.7, -0.8));
+    gltf
+}
+
 /// Every committed fixture: file name in `fixtures/` and its bytes.
 pub fn fixture_files() -> Vec<(&'static str, Vec<u8>)> {
     vec![
@@ -1478,6 +1951,12 @@ pub fn fixture_files() -> Vec<(&'static str, Vec<u8>)> {
         ("textured.gltf", textured().to_gltf_bytes()),
         ("two_rooms.gltf", two_rooms().to_gltf_bytes()),
         ("sphere_on_floor.gltf", sphere_on_floor().to_gltf_bytes()),
+        ("courtyard.gltf", courtyard().to_gltf_bytes()),
+        ("lamp_room.gltf", lamp_room().to_gltf_bytes()),
+        (
+            "furnished_interior.glb",
+            furnished_interior().to_glb_bytes(),
+        ),
     ]
 }
 

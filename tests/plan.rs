@@ -254,3 +254,62 @@ fn emitter_and_unlit_texels_cast_fewer_rays() {
             .all(|v| v.is_finite() && v.min_element() >= 0.0)
     );
 }
+
+/// Adaptive density: on the sun-lit courtyard (hard shadows across the ground, evenly lit
+/// walls) the pilot gives the instances different densities within about the uniform texel
+/// count; a density the user fixed stays uniform.
+#[test]
+fn adaptive_density_spends_texels_where_the_light_changes() {
+    let config = auto(BakeConfig::draft(), 0.08, Keep::default());
+    let baked = lightbake::compute(&fixture("courtyard.gltf"), &config, &NoProgress).unwrap();
+    let factors = &baked.config.atlas.instance_density;
+    assert_eq!(factors.len(), baked.scene.instances.len(), "{factors:?}");
+    // Instance 0 is the ground, where every shadow falls.
+    let ground = factors[0];
+    assert!(
+        factors.iter().all(|&f| f <= ground) && factors.iter().any(|&f| f < 1.0),
+        "{factors:?}"
+    );
+    let tpu = baked.config.atlas.texels_per_unit as f64;
+    let uniform = lightbake::plan::surface_area(&baked.scene) * tpu * tpu;
+    let ratio = baked.texels.len() as f64 / uniform;
+    assert!((0.8..1.3).contains(&ratio), "{ratio}");
+    let plan = baked.plan.unwrap();
+    assert!(
+        plan.reasons
+            .iter()
+            .any(|r| r.starts_with("adaptive texel density")),
+        "{:?}",
+        plan.reasons
+    );
+
+    let keep = Keep {
+        texels_per_unit: true,
+        ..Keep::default()
+    };
+    let fixed = lightbake::compute(
+        &fixture("courtyard.gltf"),
+        &auto(BakeConfig::draft(), 0.08, keep),
+        &NoProgress,
+    )
+    .unwrap();
+    assert!(fixed.config.atlas.instance_density.is_empty());
+}
+
+/// The resolution error of punctual light is sampled at surface points: next to nothing under
+/// a lone point light over a plane (smooth light), several percent on the courtyard's hard sun
+/// shadows; both apart from the second-difference part.
+#[test]
+fn punctual_resolution_error_is_sampled() {
+    let config = auto(BakeConfig::draft(), 0.08, Keep::default());
+    let parts = |name: &str| {
+        let baked = lightbake::compute(&fixture(name), &config, &NoProgress).unwrap();
+        baked.plan.unwrap().resolution_parts.expect("parts")
+    };
+    let smooth = parts("point_light.gltf");
+    let edges = parts("courtyard.gltf");
+    println!("point_light {smooth:?}\ncourtyard {edges:?}");
+    assert!(smooth.sampled < 0.01, "{smooth:?}");
+    assert!(edges.sampled > 0.03, "{edges:?}");
+    assert!(edges.border_share < 0.05, "{edges:?}");
+}

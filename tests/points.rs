@@ -152,3 +152,49 @@ fn cornell_box_point_error_includes_the_texel_error() {
         c.rmse_without_noise
     );
 }
+
+/// Acceptance on a small scene (issue 12): spot and sun light with a box's hard shadows, baked
+/// automatically at the draft and medium presets, read as a renderer reads it: the point error
+/// with the reference's noise taken out is within each preset's target.
+#[test]
+fn point_error_is_within_the_target_at_draft_and_medium() {
+    let input = fixture("spot_and_directional.gltf");
+    let reference_params = ReferenceParams {
+        max_samples: 1024,
+        target_rel_error: Some(0.01),
+        ..ReferenceParams::default()
+    };
+    let (reference, _) = points::compute(
+        &input,
+        &BakeConfig::medium(),
+        &reference_params,
+        1024,
+        &NoProgress,
+    )
+    .unwrap();
+    for preset in ["draft", "medium"] {
+        let target = lightbake::config::AutoParams::for_preset(preset).unwrap();
+        let config = BakeConfig {
+            auto: Some(lightbake::config::AutoParams {
+                target_error: target,
+                keep: Default::default(),
+            }),
+            ..BakeConfig::PRESETS
+                .iter()
+                .find(|(name, _)| *name == preset)
+                .unwrap()
+                .1
+                .clone()
+        };
+        let dir = scratch();
+        let report = lightbake::bake(&input, dir.path(), &config, &NoProgress).unwrap();
+        let render = RenderScene::load(&report.files[0]).unwrap();
+        let c = points::compare(&render, &reference);
+        println!("{preset}: {}", c.summary());
+        assert!(
+            c.rmse_without_noise <= target,
+            "{preset}: point error {} above the target {target}",
+            c.rmse_without_noise
+        );
+    }
+}

@@ -41,6 +41,7 @@ use lightbake::render::RenderScene;
 use lightbake::{BakeConfig, NoProgress, metrics};
 use plotters::prelude::*;
 
+mod font;
 mod stability;
 
 /// One bake configuration of the sweep.
@@ -147,6 +148,29 @@ fn scenes(out: &Path, quick: bool) -> Vec<Scene> {
             path: large,
             texels_per_unit: if quick { 2.0 } else { 3.0 },
             all_pairs: false,
+            ..Scene::default()
+        },
+        // The point-error corpus (issue 12): hard sun shadows, punctual lights only, and a
+        // 64k-triangle furnished interior. Monte Carlo and the automatic choice only.
+        Scene {
+            name: "courtyard",
+            path: fixture("courtyard.gltf"),
+            texels_per_unit: 8.0,
+            montecarlo_only: true,
+            ..Scene::default()
+        },
+        Scene {
+            name: "lamp_room",
+            path: fixture("lamp_room.gltf"),
+            texels_per_unit: 16.0,
+            montecarlo_only: true,
+            ..Scene::default()
+        },
+        Scene {
+            name: "furnished_interior",
+            path: fixture("furnished_interior.glb"),
+            texels_per_unit: 8.0,
+            montecarlo_only: true,
             ..Scene::default()
         },
         // The issue's large case: the Cornell box at about 167k texels (161 texels/m), where a
@@ -513,21 +537,6 @@ fn path_tracer_curve(scene: &Scene, reference: &Ref, quick: bool) -> Vec<(u32, f
         .collect()
 }
 
-fn font() {
-    // plotters' ab_glyph backend needs a font registered by name; DejaVu ships with Debian.
-    for path in [
-        "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf",
-        "/usr/share/fonts/TTF/DejaVuSans.ttf",
-    ] {
-        if let Ok(bytes) = std::fs::read(path) {
-            let bytes: &'static [u8] = Box::leak(bytes.into_boxed_slice());
-            let _ = plotters::style::register_font("sans-serif", FontStyle::Normal, bytes);
-            return;
-        }
-    }
-    eprintln!("warning: no DejaVuSans.ttf found; chart text will be missing");
-}
-
 const COLORS: [RGBColor; 8] = [
     RGBColor(31, 119, 180),
     RGBColor(255, 127, 14),
@@ -768,7 +777,7 @@ fn main() {
     let work = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("target/chart");
     std::fs::create_dir_all(&work).unwrap();
     std::fs::create_dir_all(&gallery).unwrap();
-    font();
+    font::register();
 
     let mut rows: Vec<Row> = Vec::new();
     let mut md = String::new();

@@ -77,10 +77,12 @@ const NEGLIGIBLE_TEXEL_AREA: f64 = 1e-3;
 /// Unwraps every instance with xatlas at `params.texels_per_unit` and packs the charts.
 pub fn unwrap(scene: &Scene, source: &Source, params: &AtlasParams) -> Result<Atlas> {
     let tpu = params.texels_per_unit;
+    let tpus = instance_densities(scene, params);
     let estimated_texels: f64 = (0..scene.triangles.len())
-        .map(|t| world_area(scene, t))
-        .sum::<f64>()
-        * f64::from(tpu).powi(2);
+        .map(|t| {
+            world_area(scene, t) * f64::from(tpus[scene.triangle_instance[t] as usize]).powi(2)
+        })
+        .sum();
     if estimated_texels > MAX_TEXELS {
         return Err(Error::Option(format!(
             "{} texels per unit would need about {:.0} M lightmap texels (at most {:.0} M): lower the texel density",
@@ -101,7 +103,7 @@ pub fn unwrap(scene: &Scene, source: &Source, params: &AtlasParams) -> Result<At
     // charting is per chart group, so the second run places every remaining outline alike.
     let mut excluded = BTreeSet::new();
     let output = loop {
-        match run_xatlas(scene, tpu, resolution, params.padding, &excluded) {
+        match run_xatlas(scene, &tpus, resolution, params.padding, &excluded) {
             Ok(output) => break output,
             Err(failed) => excluded.extend(failed),
         }
@@ -117,7 +119,7 @@ pub fn unwrap(scene: &Scene, source: &Source, params: &AtlasParams) -> Result<At
     let mut instances = Vec::with_capacity(scene.instances.len());
     for (i, inst) in scene.instances.iter().enumerate() {
         let uv = match &output.meshes[i] {
-            Some(mesh) => instance_uv(scene, source, inst, mesh, tpu, output.page_count)?,
+            Some(mesh) => instance_uv(scene, source, inst, mesh, tpus[i], output.page_count)?,
             None => InstanceUv::default(),
         };
         instances.push(uv);
@@ -149,6 +151,15 @@ pub fn unwrap(scene: &Scene, source: &Source, params: &AtlasParams) -> Result<At
         texels_per_unit: tpu,
         reused_input_uvs: false,
     })
+}
+
+/// Texels per unit of each scene instance: `texels_per_unit` times the instance's factor in
+/// `instance_density` (1 where it has none). xatlas is given positions in texel units, so an
+/// instance's density is the scale of its positions.
+fn instance_densities(scene: &Scene, params: &AtlasParams) -> Vec<f32> {
+    (0..scene.instances.len())
+        .map(|i| params.texels_per_unit * params.instance_density.get(i).copied().unwrap_or(1.0))
+        .collect()
 }
 
 /// World-space area of scene triangle `t`.
@@ -535,11 +546,12 @@ fn placement(
     linear.is_finite().then_some((page, linear, offset))
 }
 
-/// Charts and packs the scene in one xatlas atlas. `Err` lists the regions (instance, seed)
+/// Charts and packs the scene in one xatlas atlas, instance `i` at `tpus[i]` texels per unit.
+/// `Err` lists the regions (instance, seed)
 /// whose outline xatlas did not place as one planar chart; run again with them excluded.
 fn run_xatlas(
     scene: &Scene,
-    tpu: f32,
+    tpus: &[f32],
     resolution: u32,
     padding: u32,
     excluded: &BTreeSet<(u32, u32)>,
@@ -573,6 +585,7 @@ fn run_xatlas(
             given.push(Vec::new());
             continue;
         }
+        let tpu = tpus[index];
         let (inst_regions, rest) = planar_regions(scene, index as u32, tpu, limits, excluded);
         regions.extend(inst_regions);
         let inst_blocks = blocks(scene, inst, rest);
@@ -1257,6 +1270,7 @@ pub(super) mod tests {
         AtlasParams {
             uv: UvMode::Unwrap,
             texels_per_unit,
+            instance_density: Vec::new(),
             max_page_size,
             padding: 2,
         }
@@ -1311,6 +1325,42 @@ pub(super) mod tests {
             .map(|t| world_area(scene, t))
             .sum();
         texels / (world * f64::from(atlas.texels_per_unit).powi(2))
+    }
+
+    /// Texels of the triangles of instance `i` over its world area (texels² per m²).
+    fn instance_texel_density(scene: &Scene, atlas: &Atlas, i: usize) -> f64 {
+        let (mut texels, mut world) = (0.0, 0.0);
+        for t in scene.instances[i].triangles.clone() {
+            let ([a, b, c], page) = atlas.triangle_uv(scene, t);
+            let size = atlas.pages[page as usize];
+            texels += 0.5
+                * f64::from((b - a).perp_dot(c - a).abs())
+                * f64::from(size.width * size.height);
+            world += world_area(scene, t as usize);
+        }
+        texels / world
+    }
+
+    #[test]
+    fn instance_density_scales_each_instance() {
+        let scene = scene_of(
+            &[
+                quad(Vec3::ZERO, 1.0, 1.0),
+                quad(Vec3::new(3.0, 0.0, 0.0), 1.0, 1.0),
+            ],
+            &[],
+        );
+        let atlas = unwrap_ok(
+            &scene,
+            &AtlasParams {
+                instance_density: vec![1.0, 2.5],
+                ..params(8.0, 1024)
+            },
+        );
+        let [a, b] = [0, 1].map(|i| instance_texel_density(&scene, &atlas, i));
+        assert!((a - 64.0).abs() < 0.5, "{a}");
+        assert!((b - 400.0).abs() < 2.0, "{b}");
+        assert_eq!(first_page_overlaps(&scene, &atlas).overlapping, 0);
     }
 
     #[test]
@@ -1492,7 +1542,7 @@ pub(super) mod tests {
             disc.triangles.push([0, 1 + s, 1 + (s + 1) % 1024]);
         }
         let scene = scene_of(&[disc], &[]);
-        assert!(run_xatlas(&scene, 16.0, 1024, 2, &BTreeSet::new()).is_err());
+        assert!(run_xatlas(&scene, &[16.0], 1024, 2, &BTreeSet::new()).is_err());
         let atlas = unwrap_ok(&scene, &params(16.0, 1024));
         let overlaps = first_page_overlaps(&scene, &atlas);
         assert_eq!(overlaps.overlapping, 0, "{overlaps:?}");

@@ -194,6 +194,9 @@ pub struct Prepared {
     pub config: BakeConfig,
     /// The automatic choice so far (the density), when `config.auto` asks for one.
     pub plan: Option<Plan>,
+    /// The density pilot's pair when the atlas stayed uniform: the first pilot of the
+    /// transport choice.
+    pub first_pilot: Option<pilot::PilotRuns>,
     pub stages: Vec<StageTime>,
 }
 
@@ -267,27 +270,32 @@ fn prepare_loaded(
         plan::choose_density(&scene, &mut config, plan, &auto.keep);
     }
     check_memory(&scene, input, &config)?;
-    let t = Instant::now();
-    let atlas = atlas::build(&scene, &source, &config.atlas)?;
-    timed(&mut stages, "atlas", t);
-    check_aborted(progress)?;
+    let (mut atlas, mut texels, mut validity) =
+        lay_out(&scene, &source, &tracer, &config, progress, &mut stages)?;
+    let mut first_pilot = None;
 
-    let t = Instant::now();
-    let mut texels = texels::build(&scene, &atlas)?;
-    timed(&mut stages, "texels", t);
-    check_aborted(progress)?;
-
-    let t = Instant::now();
-    let validity = if config.transport.validity {
-        let params = texels::validity::ValidityParams {
-            seed: config.transport.seed,
-            ..Default::default()
+    // Adaptive density: a pilot on the uniform atlas chooses a density per instance, and the
+    // atlas is laid out again with it.
+    if let (Some(plan), Some(auto)) = (&mut plan, config.auto)
+        && !auto.keep.texels_per_unit
+        && !atlas.reused_input_uvs
+    {
+        let t = Instant::now();
+        let surfaces = Surfaces {
+            scene: &scene,
+            texels: &texels,
+            tracer: &tracer,
         };
-        texels::validity::fix(&mut texels, &scene, &tracer, &params)
-    } else {
-        Default::default()
-    };
-    timed(&mut stages, "validity", t);
+        match pilot::measure_density(surfaces, &config, plan, progress)? {
+            pilot::Density::Factors(factors) => {
+                config.atlas.instance_density = factors;
+                (atlas, texels, validity) =
+                    lay_out(&scene, &source, &tracer, &config, progress, &mut Vec::new())?;
+            }
+            pilot::Density::Uniform(runs) => first_pilot = runs,
+        }
+        timed(&mut stages, "density", t);
+    }
 
     Ok(Prepared {
         scene,
@@ -298,8 +306,46 @@ fn prepare_loaded(
         validity,
         config,
         plan,
+        first_pilot,
         stages,
     })
+}
+
+/// The atlas, its texels and their validity pass (each stage timed into `stages`).
+fn lay_out(
+    scene: &scene::Scene,
+    source: &scene::Source,
+    tracer: &Tracer,
+    config: &BakeConfig,
+    progress: &dyn Progress,
+    stages: &mut Vec<StageTime>,
+) -> Result<(
+    atlas::Atlas,
+    texels::Texels,
+    texels::validity::ValidityReport,
+)> {
+    let t = Instant::now();
+    let atlas = atlas::build(scene, source, &config.atlas)?;
+    timed(stages, "atlas", t);
+    check_aborted(progress)?;
+
+    let t = Instant::now();
+    let mut texels = texels::build(scene, &atlas)?;
+    timed(stages, "texels", t);
+    check_aborted(progress)?;
+
+    let t = Instant::now();
+    let validity = if config.transport.validity {
+        let params = texels::validity::ValidityParams {
+            seed: config.transport.seed,
+            ..Default::default()
+        };
+        texels::validity::fix(&mut texels, scene, tracer, &params)
+    } else {
+        Default::default()
+    };
+    timed(stages, "validity", t);
+    Ok((atlas, texels, validity))
 }
 
 /// Runs every stage up to the dilated pages, in memory.
@@ -308,7 +354,8 @@ pub fn compute(input: &Path, config: &BakeConfig, progress: &dyn Progress) -> Re
 }
 
 /// [`compute`] from the prepared stages.
-fn compute_prepared(prepared: Prepared, progress: &dyn Progress) -> Result<Baked> {
+fn compute_prepared(mut prepared: Prepared, progress: &dyn Progress) -> Result<Baked> {
+    let first = prepared.first_pilot.take();
     let surfaces = prepared.surfaces();
     let (mut config, mut plan, mut stages) = (
         prepared.config.clone(),
@@ -319,7 +366,7 @@ fn compute_prepared(prepared: Prepared, progress: &dyn Progress) -> Result<Baked
     let mut pilot = None;
     if let (Some(plan), Some(auto)) = (&mut plan, config.auto) {
         let t = Instant::now();
-        pilot = pilot::choose_transport(surfaces, &mut config, plan, &auto.keep, progress)?;
+        pilot = pilot::choose_transport(surfaces, &mut config, plan, &auto.keep, progress, first)?;
         config.validate()?;
         timed(&mut stages, "plan", t);
     }

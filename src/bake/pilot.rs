@@ -11,7 +11,7 @@ use glam::Vec3;
 
 use super::light::{Lit, transport_and_solve};
 use crate::config::{BakeConfig, FormFactors, Keep, SolveParams, Technique, TransportParams};
-use crate::plan::{self, PILOT_RAYS, Plan};
+use crate::plan::{self, PILOT_RAYS, Plan, PunctualSample};
 use crate::progress::CancelOnly;
 use crate::solve::Solution;
 use crate::texels::Texels;
@@ -27,6 +27,7 @@ pub fn choose_transport(
     plan: &mut Plan,
     keep: &Keep,
     progress: &dyn Progress,
+    first: Option<PilotRuns>,
 ) -> Result<Option<PilotRuns>> {
     let texels = surfaces.texels;
     let n = texels.len();
@@ -34,15 +35,18 @@ pub fn choose_transport(
     let mut pilot = None;
     plan::choose_method(config, plan, keep);
     let emitters = texels.emission.iter().any(|l| l.max_element() > 0.0);
-    let sampled =
-        emitters || config.transport.sky.max_element() > 0.0 || !surfaces.scene.lights.is_empty();
     let monte_carlo = config.technique.is_monte_carlo();
-    if monte_carlo && !keep.rays && n > 0 && sampled {
+    if monte_carlo && !keep.rays && n > 0 && lit(surfaces, &config.transport) {
         progress.begin("pilot", 2);
         let start = Instant::now();
         let tolerance = (e / 10.0).min(1e-3);
         let bake = |k| PilotRuns::bake(surfaces, &config.transport, k, tolerance, progress);
-        let mut runs = bake(PILOT_RAYS)?;
+        // The density pilot's pair, when the atlas stayed: the same bakes (same texels, seeds
+        // and tolerance), not cast twice.
+        let mut runs = match first {
+            Some(runs) => runs,
+            None => bake(PILOT_RAYS)?,
+        };
         let first = runs.noise(texels, config.transport.indirect_only);
         let mut rays = runs.rays();
         progress.advance(1);
@@ -59,7 +63,8 @@ pub fn choose_transport(
         plan.pilot_rays = rays;
         runs.enough = plan::choose_rays(config, plan, first, second);
         let [a, b] = runs.stored(config.transport.indirect_only);
-        plan::predict_resolution(texels, [&a, &b], plan);
+        let punctual = punctual_sample(surfaces, &config.transport, [&a, &b]);
+        plan::predict_resolution(texels, [&a, &b], punctual.as_ref(), plan);
         pilot = Some(runs);
     } else if monte_carlo && !keep.rays {
         plan::keep_rays_unmeasured(config, plan);
@@ -88,6 +93,82 @@ pub fn choose_transport(
     }
     plan.finish(config);
     Ok(pilot)
+}
+
+/// Whether any light source reaches the texels' transport (emitters, sky or punctual lights).
+fn lit(surfaces: Surfaces, transport: &TransportParams) -> bool {
+    surfaces
+        .texels
+        .emission
+        .iter()
+        .any(|l| l.max_element() > 0.0)
+        || transport.sky.max_element() > 0.0
+        || !surfaces.scene.lights.is_empty()
+}
+
+/// What the density pilot found: new density factors (the pair is of no use on the new
+/// atlas), or none and the pair, which is the first pilot of [`choose_transport`].
+pub enum Density {
+    Factors(Vec<f32>),
+    Uniform(Option<PilotRuns>),
+}
+
+/// Step 1b of the automatic choice, on the uniform atlas: a pilot pair at [`PILOT_RAYS`] and
+/// the density factor per instance it asks for ([`plan::choose_instance_density`]).
+pub fn measure_density(
+    surfaces: Surfaces,
+    config: &BakeConfig,
+    plan: &mut Plan,
+    progress: &dyn Progress,
+) -> Result<Density> {
+    if surfaces.texels.is_empty()
+        || !lit(surfaces, &config.transport)
+        || !config.technique.is_monte_carlo()
+    {
+        return Ok(Density::Uniform(None));
+    }
+    let tolerance = (plan.target_error / 10.0).min(1e-3);
+    let runs = PilotRuns::bake(surfaces, &config.transport, PILOT_RAYS, tolerance, progress)?;
+    let [a, b] = runs.stored(config.transport.indirect_only);
+    let punctual = punctual_sample(surfaces, &config.transport, [&a, &b]);
+    Ok(
+        match plan::choose_instance_density(
+            surfaces.scene,
+            surfaces.texels,
+            [&a, &b],
+            punctual.as_ref(),
+            config.atlas.texels_per_unit,
+            plan,
+        ) {
+            Some(factors) => Density::Factors(factors),
+            None => Density::Uniform(Some(runs)),
+        },
+    )
+}
+
+/// Punctual direct light at the texels and its lookup error at random surface points
+/// ([`PunctualSample`]), normalised by the pilot pair's mean; none when the lightmap leaves
+/// direct light out.
+fn punctual_sample(
+    surfaces: Surfaces,
+    transport: &TransportParams,
+    pilot: [&[Vec3]; 2],
+) -> Option<PunctualSample> {
+    if transport.indirect_only {
+        return None;
+    }
+    let mean: Vec<Vec3> = pilot[0]
+        .iter()
+        .zip(pilot[1])
+        .map(|(a, b)| (*a + *b) * 0.5)
+        .collect();
+    PunctualSample::measure(
+        surfaces.scene,
+        surfaces.texels,
+        surfaces.tracer,
+        &mean,
+        transport.seed,
+    )
 }
 
 /// Two Monte Carlo bakes of the same texels with independent seeds: their difference measures

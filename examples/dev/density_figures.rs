@@ -1,0 +1,230 @@
+//! Point error, wall time and peak memory of two lightbake binaries (before and after a
+//! change) baking the same scenes at each quality preset, interleaved in one run, and a chart.
+//!
+//! ```text
+//! cargo run --release --example density_figures -- OUT REFS OLD_BIN NEW_BIN QUALITIES SCENE...
+//! ```
+//!
+//! `QUALITIES` is a comma-separated list of presets (`draft,medium,high`). For each scene the
+//! point reference `REFS/<stem>.csv` is read (written by `lightbake reference SCENE --points N`);
+//! when missing it is computed (2048 points, to 1% noise or 4096 paths) and stored there. Each
+//! binary bakes with `bake SCENE --quality Q` under `/usr/bin/time` (wall seconds, peak resident
+//! memory); the output is read as a renderer reads it and compared with the reference
+//! (`points::compare`): relative RMSE with the reference's noise taken out, p95, share of
+//! lookups touching black texels. Prints a Markdown table, writes `OUT/density_figures.csv`
+//! and `OUT/density_before_after.png` (point error against time, one panel per scene).
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::Duration;
+
+use lightbake::reference::ReferenceParams;
+use lightbake::reference::points::{self, PointReference};
+use lightbake::render::RenderScene;
+use lightbake::{BakeConfig, NoProgress};
+use plotters::prelude::*;
+
+#[path = "../benchmark/font.rs"]
+mod font;
+
+struct Row {
+    scene: String,
+    quality: String,
+    binary: &'static str,
+    seconds: f64,
+    peak_mb: f64,
+    point: f32,
+    p95: f32,
+    black: f32,
+    target: f32,
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let [out, refs, old, new, qualities, scenes @ ..] = &args[..] else {
+        panic!("usage: density_figures OUT REFS OLD_BIN NEW_BIN QUALITIES SCENE...")
+    };
+    let (out, refs) = (Path::new(out), Path::new(refs));
+    std::fs::create_dir_all(out).expect("OUT");
+    std::fs::create_dir_all(refs).expect("REFS");
+    let mut rows = Vec::new();
+    println!(
+        "| scene | quality | target | binary | time s | peak MB | point RMSE (noise out) | p95 | touching black |"
+    );
+    println!("|---|---|---:|---|---:|---:|---:|---:|---:|");
+    for scene in scenes {
+        let input = Path::new(scene);
+        let stem = input.file_stem().unwrap().to_string_lossy().to_string();
+        let reference = point_reference(input, &refs.join(format!("{stem}.csv")));
+        for quality in qualities.split(',') {
+            let target = lightbake::config::AutoParams::for_preset(quality).expect("quality");
+            for (binary, bin) in [("before", old), ("after", new)] {
+                let dir = out.join(format!("{stem}_{quality}_{binary}"));
+                let _ = std::fs::remove_dir_all(&dir);
+                let (seconds, peak_mb) = bake(bin, input, &dir, quality);
+                let baked = baked_file(&dir, &stem);
+                let render = RenderScene::load(&baked).expect("load the bake");
+                let c = points::compare(&render, &reference);
+                let row = Row {
+                    scene: stem.clone(),
+                    quality: quality.to_string(),
+                    binary,
+                    seconds,
+                    peak_mb,
+                    point: c.rmse_without_noise,
+                    p95: c.p95,
+                    black: c.black_touch,
+                    target,
+                };
+                println!(
+                    "| {} | {} | {:.0}% | {} | {:.2} | {:.0} | {:.2}%{} | {:.1}% | {:.2}% |",
+                    row.scene,
+                    row.quality,
+                    target * 100.0,
+                    binary,
+                    seconds,
+                    peak_mb,
+                    row.point * 100.0,
+                    if row.point > target { " (above)" } else { "" },
+                    row.p95 * 100.0,
+                    row.black * 100.0
+                );
+                rows.push(row);
+            }
+        }
+    }
+    let mut csv =
+        String::from("scene,quality,target,binary,seconds,peak_mb,point_rmse,p95,black\n");
+    for r in &rows {
+        csv += &format!(
+            "{},{},{},{},{:.3},{:.1},{},{},{}\n",
+            r.scene, r.quality, r.target, r.binary, r.seconds, r.peak_mb, r.point, r.p95, r.black
+        );
+    }
+    std::fs::write(out.join("density_figures.csv"), csv).expect("write CSV");
+    chart(&out.join("density_before_after.png"), &rows).expect("chart");
+}
+
+/// The stored point reference, or a new one (2048 points, 1% noise or 4096 paths) stored there.
+fn point_reference(input: &Path, csv: &Path) -> PointReference {
+    if let Ok(text) = std::fs::read_to_string(csv) {
+        return PointReference::from_csv(&text, csv).expect("point reference");
+    }
+    let config = BakeConfig::medium();
+    let params = ReferenceParams {
+        samples_per_pass: 32,
+        max_samples: 4096,
+        target_rel_error: Some(0.01),
+        time_limit: Some(Duration::from_secs(600)),
+        ..ReferenceParams::like(&config)
+    };
+    let (reference, _) =
+        points::compute(input, &config, &params, 2048, &NoProgress).expect("point reference");
+    std::fs::write(csv, reference.to_csv()).expect("store the point reference");
+    reference
+}
+
+/// Bakes with `bin` under `/usr/bin/time`; wall seconds and peak resident memory (MB).
+fn bake(bin: &str, input: &Path, dir: &Path, quality: &str) -> (f64, f64) {
+    let output = Command::new("/usr/bin/time")
+        .args(["-f", "%e %M", bin, "bake"])
+        .arg(input)
+        .arg("-o")
+        .arg(dir)
+        .args(["--quality", quality, "--quiet"])
+        .output()
+        .expect("run the bake");
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(output.status.success(), "{bin} failed: {stderr}");
+    let last = stderr.lines().last().unwrap_or_default();
+    let mut it = last
+        .split_whitespace()
+        .map(|v| v.parse::<f64>().unwrap_or(f64::NAN));
+    let seconds = it.next().unwrap_or(f64::NAN);
+    let kb = it.next().unwrap_or(f64::NAN);
+    (seconds, kb / 1024.0)
+}
+
+/// The glTF or GLB a bake wrote into `dir`.
+fn baked_file(dir: &Path, stem: &str) -> PathBuf {
+    ["gltf", "glb"]
+        .iter()
+        .map(|ext| dir.join(format!("{stem}.{ext}")))
+        .find(|p| p.exists())
+        .expect("baked file")
+}
+
+/// Point error against wall time, one panel per scene: before and after, one point per preset.
+fn chart(path: &Path, rows: &[Row]) -> Result<(), Box<dyn std::error::Error>> {
+    font::register();
+    let mut scenes: Vec<&str> = rows.iter().map(|r| r.scene.as_str()).collect();
+    scenes.dedup();
+    let columns = 3;
+    let lines = scenes.len().div_ceil(columns).max(1);
+    let root = BitMapBackend::new(path, (1200, 380 * lines as u32)).into_drawing_area();
+    root.fill(&WHITE)?;
+    let panels = root.split_evenly((lines, columns));
+    for (scene, panel) in scenes.iter().zip(panels.iter()) {
+        let mine: Vec<&Row> = rows.iter().filter(|r| r.scene == *scene).collect();
+        let (t0, t1) = mine.iter().fold((f64::MAX, f64::MIN), |(a, b), r| {
+            (a.min(r.seconds), b.max(r.seconds))
+        });
+        let (e0, e1) = mine.iter().fold((f64::MAX, f64::MIN), |(a, b), r| {
+            let e = f64::from(r.point).max(1e-4);
+            (
+                a.min(e.min(f64::from(r.target))),
+                b.max(e.max(f64::from(r.target))),
+            )
+        });
+        let mut chart = ChartBuilder::on(panel)
+            .caption(*scene, ("sans-serif", 18))
+            .margin(8)
+            .x_label_area_size(32)
+            .y_label_area_size(52)
+            .build_cartesian_2d(
+                (t0 * 0.7..t1 * 1.4).log_scale(),
+                (e0 * 0.7..e1 * 1.4).log_scale(),
+            )?;
+        chart
+            .configure_mesh()
+            .x_desc("wall time (s)")
+            .y_desc("point RMSE")
+            .y_label_formatter(&|v| format!("{:.1}%", v * 100.0))
+            .draw()?;
+        for (binary, color) in [
+            ("before", RGBColor(150, 150, 150)),
+            ("after", RGBColor(31, 119, 180)),
+        ] {
+            let pts: Vec<(f64, f64)> = mine
+                .iter()
+                .filter(|r| r.binary == binary)
+                .map(|r| (r.seconds, f64::from(r.point)))
+                .collect();
+            chart
+                .draw_series(LineSeries::new(pts.clone(), color.stroke_width(2)))?
+                .label(binary)
+                .legend(move |(x, y)| {
+                    PathElement::new([(x, y), (x + 18, y)], color.stroke_width(2))
+                });
+            chart.draw_series(pts.iter().map(|&p| Circle::new(p, 4, color.filled())))?;
+        }
+        // The preset targets, as short dashes at the left edge.
+        for r in mine.iter().filter(|r| r.binary == "after") {
+            let y = f64::from(r.target);
+            chart.draw_series(DashedLineSeries::new(
+                [(t0 * 0.7, y), (t1 * 1.4, y)],
+                4,
+                4,
+                RGBColor(200, 80, 80).stroke_width(1),
+            ))?;
+        }
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::UpperRight)
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .draw()?;
+    }
+    root.present()?;
+    Ok(())
+}
