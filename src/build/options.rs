@@ -65,10 +65,10 @@ impl Options {
     pub fn config(&self) -> Result<BakeConfig> {
         let quality = self.quality.as_deref().unwrap_or("medium");
         let preset = BakeConfig::PRESETS
-            .iter()
+            .into_iter()
             .find(|(name, _)| *name == quality);
         let mut c = match preset {
-            Some((_, c)) => c.clone(),
+            Some((_, c)) => c,
             None => return Err(expected("quality", quality, &["draft", "medium", "high"])),
         };
         let no_auto = self.no_auto.unwrap_or(false);
