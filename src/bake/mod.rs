@@ -44,6 +44,8 @@ pub struct BakeReport {
     pub plan: Option<Plan>,
     /// Seam discontinuity before and after stitching (`None` when stitching is off).
     pub seams: Option<lightmap::seams::SeamReport>,
+    /// What the junction split cut (`None` when it did not run).
+    pub junctions: Option<scene::junctions::JunctionReport>,
     pub stages: Vec<StageTime>,
     /// The files written, the glTF first.
     pub files: Vec<PathBuf>,
@@ -69,8 +71,12 @@ impl BakeReport {
             ),
             _ => String::new(),
         };
+        let junctions = self
+            .junctions
+            .as_ref()
+            .map_or(String::new(), |j| format!("; {}", j.brief()));
         format!(
-            "{} texels ({} moved out of geometry, {} invalid, {} divided by a wall) on {} page(s), {} triangles, {:.2} M rays, {} iterations, residual {:.1e}{}{}{plan}; {} (total {:.2}s)",
+            "{} texels ({} moved out of geometry, {} invalid, {} divided by a wall) on {} page(s), {} triangles, {:.2} M rays, {} iterations, residual {:.1e}{}{}{junctions}{plan}; {} (total {:.2}s)",
             self.texels,
             self.validity.moved,
             self.validity.invalid,
@@ -109,6 +115,7 @@ pub struct Baked {
     pub config: BakeConfig,
     pub plan: Option<Plan>,
     pub seams: Option<lightmap::seams::SeamReport>,
+    pub junctions: Option<scene::junctions::JunctionReport>,
     pub stages: Vec<StageTime>,
 }
 
@@ -175,6 +182,7 @@ fn pass_through(
         validity: Default::default(),
         plan: None,
         seams: None,
+        junctions: None,
         stages,
         files,
     })
@@ -194,6 +202,8 @@ pub struct Prepared {
     pub config: BakeConfig,
     /// The automatic choice so far (the density), when `config.auto` asks for one.
     pub plan: Option<Plan>,
+    /// What the junction split cut (`None` when it did not run).
+    pub junctions: Option<scene::junctions::JunctionReport>,
     pub stages: Vec<StageTime>,
 }
 
@@ -259,14 +269,27 @@ fn prepare_loaded(
     }
     timed(&mut stages, "load", load_start);
 
-    let t = Instant::now();
-    let tracer = Tracer::new(&scene);
-    timed(&mut stages, "bvh", t);
-
     if let (Some(plan), Some(auto)) = (&mut plan, config.auto) {
         plan::choose_density(&scene, &mut config, plan, &auto.keep);
     }
     check_memory(&scene, input, &config)?;
+    // Receivers are cut at the density's texel size, before the tracer sees their triangles.
+    let mut junctions = None;
+    let scene = if config.atlas.split_junctions
+        && !atlas::reuses_input_uvs(&scene, &source, &config.atlas)
+    {
+        let t = Instant::now();
+        let (scene, report) = scene::junctions::split(scene, 1.0 / config.atlas.texels_per_unit);
+        junctions = Some(report);
+        timed(&mut stages, "junctions", t);
+        scene
+    } else {
+        scene
+    };
+
+    let t = Instant::now();
+    let tracer = Tracer::new(&scene);
+    timed(&mut stages, "bvh", t);
     let t = Instant::now();
     let atlas = atlas::build(&scene, &source, &config.atlas)?;
     timed(&mut stages, "atlas", t);
@@ -298,6 +321,7 @@ fn prepare_loaded(
         validity,
         config,
         plan,
+        junctions,
         stages,
     })
 }
@@ -347,6 +371,7 @@ fn compute_prepared(prepared: Prepared, progress: &dyn Progress) -> Result<Baked
         atlas,
         texels,
         validity,
+        junctions,
         ..
     } = prepared;
 
@@ -392,6 +417,7 @@ fn compute_prepared(prepared: Prepared, progress: &dyn Progress) -> Result<Baked
         config,
         plan,
         seams,
+        junctions,
         stages,
     })
 }
@@ -451,6 +477,7 @@ pub fn write(
         validity: baked.validity,
         plan: baked.plan,
         seams: baked.seams,
+        junctions: baked.junctions,
         stages: baked.stages,
         files,
     })

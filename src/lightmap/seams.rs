@@ -34,7 +34,8 @@
 //! - their lightmap UVs differ (another page, or another place on the page): an edge inside a
 //!   chart is filtered from the same texels on both sides and needs nothing.
 //!
-//! Edges that meet only partly (T-junctions) are not found.
+//! Edges that meet only partly (T-junctions) are not found. Edges on a junction, where the
+//! junction split cut a receiver under a wall (`scene::Split::junction_edges`), are no seams.
 //!
 //! ## Measure and stitch
 //!
@@ -201,7 +202,11 @@ pub fn find(scene: &Scene, atlas: &Atlas, params: &SeamParams) -> Seams {
     for group in half_edges.chunk_by(|x, y| x.0 == y.0) {
         for (i, &(_, ta, ka)) in group.iter().enumerate() {
             for &(_, tb, kb) in &group[i + 1..] {
-                if ta == tb {
+                // The two sides of a junction see different light (a wall stands there).
+                if ta == tb
+                    || scene.is_junction_edge(ta, ka as usize)
+                    || scene.is_junction_edge(tb, kb as usize)
+                {
                     continue;
                 }
                 // Corners of each triangle at P (where side A's edge starts) and at Q.
@@ -618,6 +623,7 @@ mod tests {
                 back: None,
                 has_uv1: false,
                 lightmap: None,
+                split: Default::default(),
             }],
             materials: vec![Material::default()],
             ..Scene::default()
