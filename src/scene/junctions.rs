@@ -605,14 +605,20 @@ fn split_instance(
             }
         });
         let own = pieces.get(&(t as u32));
-        if own.is_none() && on_edges.iter().all(Vec::is_empty) {
-            out.triangles.push(tris[t]);
-            out.source_triangle.push(inst.source_triangle[t]);
-            cut_bits.push([0, 0]);
-            continue;
-        }
         let id = patch_of[t];
         let cuts = patch_cuts.get(id as usize).and_then(Option::as_ref);
+        if own.is_none() && on_edges.iter().all(Vec::is_empty) {
+            // Untouched, but its edges may lie along a cut (a wall on a grid line).
+            let corners = tris[t].map(|v| {
+                patches
+                    .get(id as usize)
+                    .map_or(DVec2::ZERO, |p| p.to_2d(pos(v)))
+            });
+            out.triangles.push(tris[t]);
+            out.source_triangle.push(inst.source_triangle[t]);
+            cut_bits.push(cuts.map_or([0, 0], |c| cut_bits_of(corners, c, tol.snap)));
+            continue;
+        }
         let frame = match cuts {
             Some(_) => &patches[id as usize],
             None => &own_frame(tris[t].map(pos)),
@@ -639,23 +645,7 @@ fn split_instance(
                     }
                 };
             }
-            let mut bits = [0u8; 2];
-            if let Some(cuts) = cuts {
-                for k in 0..3 {
-                    let (p, q) = (face[k].0, face[(k + 1) % 3].0);
-                    for &([a, b], ext) in &cuts.segments {
-                        let (u, v) = (cuts.points[a as usize], cuts.points[b as usize]);
-                        let eps = 1e-3 * tol.snap;
-                        let on = |x: DVec2| distance_to_segment(x, u, v).0 <= eps;
-                        if on(p) && on(q) && on(0.5 * (p + q)) {
-                            bits[1] |= 1 << k;
-                            if !ext {
-                                bits[0] |= 1 << k;
-                            }
-                        }
-                    }
-                }
-            }
+            let bits = cuts.map_or([0, 0], |c| cut_bits_of(face.map(|f| f.0), c, tol.snap));
             out.triangles.push(tri);
             out.source_triangle.push(inst.source_triangle[t]);
             cut_bits.push(bits);
@@ -743,6 +733,31 @@ fn split_instance(
     out.split.sides = sides;
     out.split.junction_edges = cut_bits.iter().map(|b| b[0]).collect();
     Some(out)
+}
+
+/// Which edges of `face` (plane coordinates) lie along cuts: `[junction, any cut]`, bit `k`
+/// for edge `k`.
+fn cut_bits_of(face: [DVec2; 3], cuts: &Cuts, snap: f64) -> [u8; 2] {
+    let eps = 1e-3 * snap;
+    let on = |x: DVec2, junction: bool| {
+        cuts.segments.iter().any(|&([a, b], ext)| {
+            (!junction || !ext)
+                && distance_to_segment(x, cuts.points[a as usize], cuts.points[b as usize]).0 <= eps
+        })
+    };
+    let mut bits = [0u8; 2];
+    for k in 0..3 {
+        let (p, q) = (face[k], face[(k + 1) % 3]);
+        for (kind, junction) in [(0, true), (1, false)] {
+            if [0.0, 0.25, 0.5, 0.75, 1.0]
+                .iter()
+                .all(|&s| on(p.lerp(q, s), junction))
+            {
+                bits[kind] |= 1 << k;
+            }
+        }
+    }
+    bits
 }
 
 /// Welded id per vertex: vertices at the same position share one (+0.0 folds −0.0 into 0.0).
@@ -890,11 +905,14 @@ fn patch_cuts_of(
     // Segments lying along the patch border change nothing: leave them out.
     cuts.segments.retain(|&([a, b], _)| {
         let (p, q) = (cuts.points[a as usize], cuts.points[b as usize]);
-        !patch_edges.edges.iter().any(|&([u, v], border)| {
-            border
-                && distance_to_segment(p, u, v).0 <= 1e-6 * tol.snap
-                && distance_to_segment(q, u, v).0 <= 1e-6 * tol.snap
-        })
+        let on_border = |x: DVec2| {
+            patch_edges.edges.iter().any(|&([u, v], border)| {
+                border && distance_to_segment(x, u, v).0 <= 1e-6 * tol.snap
+            })
+        };
+        ![0.0, 0.25, 0.5, 0.75, 1.0]
+            .iter()
+            .all(|&s| on_border(p.lerp(q, s)))
     });
     if cuts.segments.is_empty() {
         return None;
@@ -1196,10 +1214,11 @@ mod tests {
         0.5 * (b - a).cross(c - a).length()
     }
 
-    /// No vertex of the instance lies strictly inside one of its triangles' edges.
+    /// No vertex the split added lies strictly inside an edge of the instance's triangles.
     fn assert_no_t_junctions(scene: &Scene, i: usize) {
         let inst = &scene.instances[i];
-        let vertices = &scene.positions[inst.vertices.start as usize..inst.vertices.end as usize];
+        let added = inst.vertices.end as usize - inst.split.blends.len();
+        let vertices = &scene.positions[added..inst.vertices.end as usize];
         for t in inst.triangles.clone() {
             let tri = scene.triangles[t as usize];
             for k in 0..3 {
@@ -1330,5 +1349,39 @@ mod tests {
         let (split, report) = split(scene, 0.1);
         assert_eq!(report, JunctionReport::default());
         assert_eq!(split.triangles, triangles);
+    }
+
+    #[test]
+    fn two_rooms_is_cut_along_every_junction_of_its_partition() {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/fixtures/two_rooms.gltf");
+        let (scene, _) = crate::scene::load(std::path::Path::new(path)).expect("fixture loads");
+        let area = |s: &Scene| -> f64 { (0..s.triangles.len()).map(|t| triangle_area(s, t)).sum() };
+        let before = area(&scene);
+        let (split, report) = split(scene, 1.0 / 16.0);
+        // Floor, and the shell's ceiling and side walls; nothing left whole or connected.
+        let cut: Vec<(u32, bool)> = split
+            .instances
+            .iter()
+            .filter(|i| !i.split.blends.is_empty())
+            .map(|i| (i.mesh, i.back_of.is_some()))
+            .collect();
+        assert_eq!(cut, [(0, false), (1, false)], "{report:?}");
+        assert_eq!(report.fallback_triangles, 0, "{report:?}");
+        assert_eq!(report.unseparated_edges, 0, "{report:?}");
+        assert_eq!(report.extensions, 1, "the doorway: {report:?}");
+        assert!((area(&split) - before).abs() < 1e-4 * before);
+        for i in 0..split.instances.len() {
+            assert_no_t_junctions(&split, i);
+        }
+        // Every floor triangle lies on one side of the wall at x = 0.
+        let floor = split
+            .instances
+            .iter()
+            .position(|i| i.mesh == 0)
+            .expect("floor");
+        for t in split.instances[floor].triangles.clone() {
+            let xs = split.triangles[t as usize].map(|v| split.positions[v as usize].x);
+            assert!(xs.iter().all(|&x| x <= 1e-6) || xs.iter().all(|&x| x >= -1e-6));
+        }
     }
 }
