@@ -8,6 +8,7 @@ mod denoise;
 mod form_factors;
 mod hardening;
 mod hierarchical;
+mod junctions;
 mod pipeline;
 mod plan;
 mod points;

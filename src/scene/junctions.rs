@@ -303,15 +303,18 @@ fn distance_to_segment(p: DVec2, a: DVec2, b: DVec2) -> (f64, f64) {
 }
 
 impl Cuts {
-    /// The index of the point at `p`: an existing point, patch vertex or edge point within
-    /// `snap`, or a new one.
+    /// The index of the point at `p`: an existing point, or a border vertex or border edge point
+    /// within `snap`, or a new one.
     fn point(&mut self, p: DVec2, patch: &PatchEdges, snap: f64) -> u32 {
         if let Some(i) = self.points.iter().position(|q| q.distance(p) <= snap) {
             return i as u32;
         }
+        // Only onto the border: inside the patch a cut stays exactly where the wall stands
+        // (spade splits the edges it crosses), at the border it must end on an edge.
         let nearest_vertex = patch
             .vertices
             .iter()
+            .filter(|v| v.1)
             .map(|&(v, border)| (v.distance(p), v, border))
             .filter(|x| x.0 <= snap)
             .min_by(|x, y| x.0.total_cmp(&y.0));
@@ -321,6 +324,7 @@ impl Cuts {
                 let nearest_edge = patch
                     .edges
                     .iter()
+                    .filter(|e| e.1)
                     .map(|&([a, b], border)| {
                         let (d, t) = distance_to_segment(p, a, b);
                         (d, a.lerp(b, t), border)
@@ -987,13 +991,15 @@ fn clip(a: DVec2, b: DVec2, c: [DVec2; 3], snap: f64) -> Option<[End; 2]> {
     if (s1 - s0) * a.distance(b) <= 1e-6 * snap {
         return None;
     }
+    // Clipped ends lie on the triangle's edges up to rounding; cut points inside stay put.
+    let near = 1e-6 * snap;
     let classify = |p: DVec2| {
-        if let Some(k) = (0..3).find(|&k| c[k].distance(p) <= 0.5 * snap) {
+        if let Some(k) = (0..3).find(|&k| c[k].distance(p) <= near) {
             return End::Corner(k);
         }
         let faces_at = (0..3)
             .map(|k| (k, distance_to_segment(p, c[k], c[(k + 1) % 3])))
-            .filter(|(_, (d, _))| *d <= 0.5 * snap)
+            .filter(|(_, (d, _))| *d <= near)
             .min_by(|x, y| x.1.0.total_cmp(&y.1.0));
         match faces_at {
             Some((k, (_, t))) => End::Edge(k, t),
