@@ -1278,13 +1278,30 @@ pub fn two_rooms() -> GltfBuilder {
     let shell_mesh = gltf.add_mesh("shell", walls.without_uv0(), shell);
     gltf.add_mesh_node("shell", shell_mesh);
 
-    // The partition faces +x (room B); its material is double-sided. Doorway: z ∈ [−0.4, 0.4],
-    // y ∈ [0, 1.6].
+    // The partition faces +x (room B); its material is double-sided.
+    add_partition_panel_camera(
+        &mut gltf,
+        0.0,
+        [partition_material, panel_material],
+        [Vec3::new(1.9, 1.5, 0.9), Vec3::new(-1.0, 0.5, -0.2)],
+    );
+    gltf
+}
+
+/// The partition of the two-room scenes in the plane x = z·`slope` (facing room B, 2 m high,
+/// doorway z ∈ [−0.4, 0.4], y ∈ [0, 1.6]), the emissive 1 × 0.8 m ceiling panel of room A and
+/// the camera (`[eye, target]`).
+fn add_partition_panel_camera(
+    gltf: &mut GltfBuilder,
+    slope: f32,
+    [partition_material, panel_material]: [usize; 2],
+    [eye, target]: [Vec3; 2],
+) {
+    // Written so that slope 0 gives the axis-aligned wall bit for bit (no −0.0 creeps in).
     let piece = |z0: f32, z1: f32, y0: f32, nz: u32, ny: u32| {
-        let origin = Vec3::new(0.0, y0, z1);
         Geometry::grid(
-            origin,
-            Vec3::NEG_Z * (z1 - z0),
+            Vec3::new(0.0, y0, z1) + Vec3::X * (z1 * slope),
+            Vec3::NEG_Z * (z1 - z0) + Vec3::X * (slope * (z0 - z1)),
             Vec3::Y * (2.0 - y0),
             nz,
             ny,
@@ -1301,8 +1318,7 @@ pub fn two_rooms() -> GltfBuilder {
     gltf.add_mesh_node("panel", panel_mesh);
 
     let camera = Camera::perspective("camera", 1.2, None);
-    gltf.add_camera_node(camera, Vec3::new(1.9, 1.5, 0.9), Vec3::new(-1.0, 0.5, -0.2));
-    gltf
+    gltf.add_camera_node(camera, eye, target);
 }
 
 /// `two_rooms` with a wall at an angle and a non-convex floor: the partition turned 20° about
@@ -1366,29 +1382,12 @@ pub fn two_rooms_angled() -> GltfBuilder {
     let shell_mesh = gltf.add_mesh("shell", walls, shell);
     gltf.add_mesh_node("shell", shell_mesh);
 
-    // The partition x = z·tan 20°, facing room B; doorway z ∈ [−0.4, 0.4], y ∈ [0, 1.6].
-    let slope = 20f32.to_radians().tan();
-    let piece = |z0: f32, z1: f32, y0: f32, nz: u32, ny: u32| {
-        Geometry::grid(
-            Vec3::new(z1 * slope, y0, z1),
-            Vec3::new(slope, 0.0, 1.0) * (z0 - z1),
-            Vec3::Y * (2.0 - y0),
-            nz,
-            ny,
-        )
-    };
-    let mut partition = piece(-1.0, -0.4, 0.0, 2, 4);
-    partition.append(&piece(0.4, 1.0, 0.0, 2, 4));
-    partition.append(&piece(-0.4, 0.4, 1.6, 2, 1));
-    let partition_mesh = gltf.add_mesh("partition", partition.without_uv0(), partition_material);
-    gltf.add_mesh_node("partition", partition_mesh);
-
-    let panel = Geometry::grid(Vec3::new(-1.5, 1.99, -0.4), Vec3::X, Vec3::Z * 0.8, 1, 1);
-    let panel_mesh = gltf.add_mesh("panel", panel.without_uv0(), panel_material);
-    gltf.add_mesh_node("panel", panel_mesh);
-
-    let camera = Camera::perspective("camera", 1.2, None);
-    gltf.add_camera_node(camera, Vec3::new(1.6, 1.4, -0.6), Vec3::new(0.0, 0.2, -0.1));
+    add_partition_panel_camera(
+        &mut gltf,
+        20f32.to_radians().tan(),
+        [partition_material, panel_material],
+        [Vec3::new(1.6, 1.4, -0.6), Vec3::new(0.0, 0.2, -0.1)],
+    );
     gltf
 }
 
