@@ -31,6 +31,10 @@ pub struct AtlasParams {
     pub max_page_size: u32,
     /// Empty texels between charts (room for dilation and bilinear filtering). At least 1.
     pub padding: u32,
+    /// Cut receivers where other surfaces meet them (`scene::junctions`), so no texel straddles
+    /// a wall and lightmap charts end at every junction. Has no effect when the input's
+    /// `TEXCOORD_1` is reused (its charts cannot change).
+    pub split_junctions: bool,
 }
 
 /// How the form factors of stored rows are computed (see the `transport` module of each).
@@ -285,6 +289,7 @@ impl BakeConfig {
                 instance_density: Vec::new(),
                 max_page_size: 1024,
                 padding: 2,
+                split_junctions: true,
             },
             technique: Technique::DEFAULT,
             transport: TransportParams {

@@ -12,8 +12,10 @@
 //! ```text
 //!  input.gltf ─ scene::load ──▶ Scene + Source        world-space triangles, materials, lights,
 //!                                                     cameras (all a renderer needs)
-//!             Tracer::new   ──▶ Tracer                obvhs CWBVH: closest hit, occlusion
 //!   ─ plan::choose_density ──▶ BakeConfig            texel density for the scene's area (auto)
+//!  ─ scene::junctions::split ▶ Scene                 receivers cut where other surfaces meet
+//!                                                     them (new vertices are blends: provenance)
+//!             Tracer::new   ──▶ Tracer                obvhs CWBVH: closest hit, occlusion
 //!            ─ atlas::build ──▶ Atlas                 xatlas charts + pages, or input TEXCOORD_1
 //!           ─ texels::build ──▶ Texels                one radiosity patch per covered texel
 //!       ─ texels::validity ──▶ Texels                 samples moved out of geometry, invalid marked,

@@ -1329,13 +1329,30 @@ pub fn two_rooms() -> GltfBuilder {
     let shell_mesh = gltf.add_mesh("shell", walls.without_uv0(), shell);
     gltf.add_mesh_node("shell", shell_mesh);
 
-    // The partition faces +x (room B); its material is double-sided. Doorway: z ∈ [−0.4, 0.4],
-    // y ∈ [0, 1.6].
+    // The partition faces +x (room B); its material is double-sided.
+    add_partition_panel_camera(
+        &mut gltf,
+        0.0,
+        [partition_material, panel_material],
+        [Vec3::new(1.9, 1.5, 0.9), Vec3::new(-1.0, 0.5, -0.2)],
+    );
+    gltf
+}
+
+/// The partition of the two-room scenes in the plane x = z·`slope` (facing room B, 2 m high,
+/// doorway z ∈ [−0.4, 0.4], y ∈ [0, 1.6]), the emissive 1 × 0.8 m ceiling panel of room A and
+/// the camera (`[eye, target]`).
+fn add_partition_panel_camera(
+    gltf: &mut GltfBuilder,
+    slope: f32,
+    [partition_material, panel_material]: [usize; 2],
+    [eye, target]: [Vec3; 2],
+) {
+    // Written so that slope 0 gives the axis-aligned wall bit for bit (no −0.0 creeps in).
     let piece = |z0: f32, z1: f32, y0: f32, nz: u32, ny: u32| {
-        let origin = Vec3::new(0.0, y0, z1);
         Geometry::grid(
-            origin,
-            Vec3::NEG_Z * (z1 - z0),
+            Vec3::new(0.0, y0, z1) + Vec3::X * (z1 * slope),
+            Vec3::NEG_Z * (z1 - z0) + Vec3::X * (slope * (z0 - z1)),
             Vec3::Y * (2.0 - y0),
             nz,
             ny,
@@ -1352,7 +1369,76 @@ pub fn two_rooms() -> GltfBuilder {
     gltf.add_mesh_node("panel", panel_mesh);
 
     let camera = Camera::perspective("camera", 1.2, None);
-    gltf.add_camera_node(camera, Vec3::new(1.9, 1.5, 0.9), Vec3::new(-1.0, 0.5, -0.2));
+    gltf.add_camera_node(camera, eye, target);
+}
+
+/// `two_rooms` with a wall at an angle and a non-convex floor: the partition turned 20° about
+/// the vertical (through the origin: x = z·tan 20°) and room B missing its (x > 1.2, z > 0.2)
+/// corner, so floor and ceiling are L-shaped hexagons (each a fan of 4 triangles from the
+/// inner corner) and the shell has six walls. Same materials, panel and doorway (z ∈ [−0.4,
+/// 0.4] along the wall, 1.6 m high) as `two_rooms`; the camera looks from room B at the
+/// wall's foot. Junctions that are not axis-aligned, cutting a non-convex receiver.
+pub fn two_rooms_angled() -> GltfBuilder {
+    let mut gltf = GltfBuilder::new("two_rooms_angled");
+    let shell = gltf.add_material(Material::grey("shell", 0.7));
+    let floor_material = gltf.add_material(Material::grey("floor", 0.5));
+    let partition_material = gltf.add_material(Material::grey("partition", 0.7).double_sided());
+    let panel_material = gltf
+        .add_material(Material::grey("panel", 0.8).emitting([1.0; 3], TWO_ROOMS_PANEL_RADIANCE));
+
+    let outline = [
+        Vec2::new(-2.0, -1.0),
+        Vec2::new(2.0, -1.0),
+        Vec2::new(2.0, 0.2),
+        Vec2::new(1.2, 0.2),
+        Vec2::new(1.2, 1.0),
+        Vec2::new(-2.0, 1.0),
+    ];
+    let inner_corner = 3;
+    let at = |p: Vec2, y: f32| Vec3::new(p.x, y, p.y);
+    // A triangle facing `up` (+y or −y), wound to face it.
+    let facing = |a: Vec3, b: Vec3, c: Vec3, normal: Vec3| {
+        let tri = if (b - a).cross(c - a).dot(normal) > 0.0 {
+            [a, b, c]
+        } else {
+            [a, c, b]
+        };
+        Geometry::new(&tri, Some(&[normal; 3]), None, &[0, 1, 2])
+    };
+    let fan = |y: f32, normal: Vec3| {
+        let mut g = Geometry::default();
+        let n = outline.len();
+        for k in 1..n - 1 {
+            let (i, j) = ((inner_corner + k) % n, (inner_corner + k + 1) % n);
+            g.append(&facing(
+                at(outline[inner_corner], y),
+                at(outline[i], y),
+                at(outline[j], y),
+                normal,
+            ));
+        }
+        g
+    };
+    let floor_mesh = gltf.add_mesh("floor", fan(0.0, Vec3::Y), floor_material);
+    gltf.add_mesh_node("floor", floor_mesh);
+    let mut walls = fan(2.0, Vec3::NEG_Y);
+    for k in 0..outline.len() {
+        let (a, b) = (outline[k], outline[(k + 1) % outline.len()]);
+        // The room lies left of each outline edge (x, z) → (−dz, dx).
+        let wall = Geometry::grid(at(a, 0.0), at(b - a, 0.0), Vec3::Y * 2.0, 2, 2).without_uv0();
+        let inward = Vec3::new(-(b - a).y, 0.0, (b - a).x).normalize();
+        let outward_facing = at(b - a, 0.0).cross(Vec3::Y).dot(inward) < 0.0;
+        walls.append(&if outward_facing { wall.flipped() } else { wall });
+    }
+    let shell_mesh = gltf.add_mesh("shell", walls, shell);
+    gltf.add_mesh_node("shell", shell_mesh);
+
+    add_partition_panel_camera(
+        &mut gltf,
+        20f32.to_radians().tan(),
+        [partition_material, panel_material],
+        [Vec3::new(1.6, 1.4, -0.6), Vec3::new(0.0, 0.2, -0.1)],
+    );
     gltf
 }
 
@@ -1950,6 +2036,7 @@ pub fn fixture_files() -> Vec<(&'static str, Vec<u8>)> {
         ("instanced.gltf", instanced().to_gltf_bytes()),
         ("textured.gltf", textured().to_gltf_bytes()),
         ("two_rooms.gltf", two_rooms().to_gltf_bytes()),
+        ("two_rooms_angled.gltf", two_rooms_angled().to_gltf_bytes()),
         ("sphere_on_floor.gltf", sphere_on_floor().to_gltf_bytes()),
         ("courtyard.gltf", courtyard().to_gltf_bytes()),
         ("lamp_room.gltf", lamp_room().to_gltf_bytes()),

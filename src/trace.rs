@@ -499,6 +499,7 @@ mod tests {
                 back: None,
                 has_uv1: false,
                 lightmap: None,
+                split: Default::default(),
             });
         };
         add(Vec3::Z, [0, 1, 2], None);
@@ -616,6 +617,7 @@ mod tests {
             back: None,
             has_uv1: false,
             lightmap: None,
+            split: Default::default(),
         });
         s.materials.push(Material::default());
         let tracer = Tracer::new(&s);

@@ -9,6 +9,7 @@ mod denoise;
 mod form_factors;
 mod hardening;
 mod hierarchical;
+mod junctions;
 mod pipeline;
 mod plan;
 mod points;

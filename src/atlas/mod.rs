@@ -105,6 +105,15 @@ pub(crate) fn page_side(texels: f32, max: u32) -> u32 {
     side.next_multiple_of(4).clamp(16.min(max), max)
 }
 
+/// [`build`] will reuse the input's `TEXCOORD_1` (so the charts cannot change).
+pub fn reuses_input_uvs(scene: &Scene, source: &Source, params: &AtlasParams) -> bool {
+    match params.uv {
+        UvMode::Unwrap => false,
+        UvMode::Existing => true,
+        UvMode::Auto => existing::reuse(scene, source, params).is_ok(),
+    }
+}
+
 /// Builds the atlas: reuses the input's `TEXCOORD_1` or unwraps, as `params.uv` says.
 pub fn build(scene: &Scene, source: &Source, params: &AtlasParams) -> Result<Atlas> {
     let atlas = match params.uv {

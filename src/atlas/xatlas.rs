@@ -261,6 +261,23 @@ fn blocks(scene: &Scene, inst: &Instance, mut triangles: Vec<u32>) -> Vec<Block>
         .collect()
 }
 
+/// [`blocks`] per side of a junction split (`Split::sides`): sides go to xatlas as separate
+/// meshes, so no chart crosses a junction.
+fn blocks_by_side(scene: &Scene, inst: &Instance, triangles: Vec<u32>) -> Vec<Block> {
+    let sides = &inst.split.sides;
+    if sides.is_empty() {
+        return blocks(scene, inst, triangles);
+    }
+    let mut by_side: std::collections::BTreeMap<u32, Vec<u32>> = Default::default();
+    for t in triangles {
+        by_side.entry(sides[t as usize]).or_default().push(t);
+    }
+    by_side
+        .into_values()
+        .flat_map(|side| blocks(scene, inst, side))
+        .collect()
+}
+
 /// Interleaves the low 10 bits of x, y, z.
 fn morton(p: glam::UVec3) -> u32 {
     let spread = |mut v: u32| {
@@ -352,6 +369,8 @@ fn planar_regions(
         ignored.push(0.5 * n.length() <= f64::from(f32::EPSILON));
     }
 
+    // Sides of a junction split never join one region.
+    let side = |t: u32| inst.split.sides.get(t as usize).copied().unwrap_or(0);
     let mut region_of = vec![u32::MAX; tris.len()];
     let (mut regions, mut rest) = (Vec::new(), Vec::new());
     let mut stack = Vec::new();
@@ -376,6 +395,7 @@ fn planar_regions(
             for k in 0..3 {
                 for &(_, u) in faces_on(w[k], w[(k + 1) % 3]) {
                     let joins = region_of[u as usize] == u32::MAX
+                        && side(u) == side(seed)
                         && !ignored[u as usize]
                         && normal[u as usize].dot(n) > 0.0
                         && local(u)
@@ -403,6 +423,7 @@ fn planar_regions(
                     directed.push([w[k], w[(k + 1) % 3]]);
                     let crossed = faces_on(w[k], w[(k + 1) % 3]).iter().any(|&(_, u)| {
                         region_of[u as usize] != seed
+                            && side(u) == side(seed)
                             && !ignored[u as usize]
                             && normal[u as usize].dot(n) >= CREASE_DOT
                     });
@@ -588,7 +609,7 @@ fn run_xatlas(
         let tpu = tpus[index];
         let (inst_regions, rest) = planar_regions(scene, index as u32, tpu, limits, excluded);
         regions.extend(inst_regions);
-        let inst_blocks = blocks(scene, inst, rest);
+        let inst_blocks = blocks_by_side(scene, inst, rest);
         for block in &inst_blocks {
             let (positions, normals, indices) = mesh_input(scene, inst, block, tpu);
             add_mesh(&atlas, &positions, &normals, &indices);
@@ -1242,6 +1263,7 @@ pub(super) mod tests {
                 back: None,
                 has_uv1: part.uv1.is_some(),
                 lightmap: None,
+                split: Default::default(),
             });
         };
         for part in parts {
@@ -1273,6 +1295,7 @@ pub(super) mod tests {
             instance_density: Vec::new(),
             max_page_size,
             padding: 2,
+            split_junctions: true,
         }
     }
 

@@ -44,6 +44,8 @@ pub struct BakeReport {
     pub plan: Option<Plan>,
     /// Seam discontinuity before and after stitching (`None` when stitching is off).
     pub seams: Option<lightmap::seams::SeamReport>,
+    /// What the junction split cut (`None` when it did not run).
+    pub junctions: Option<scene::junctions::JunctionReport>,
     pub stages: Vec<StageTime>,
     /// The files written, the glTF first.
     pub files: Vec<PathBuf>,
@@ -69,8 +71,12 @@ impl BakeReport {
             ),
             _ => String::new(),
         };
+        let junctions = self
+            .junctions
+            .as_ref()
+            .map_or(String::new(), |j| format!("; {}", j.brief()));
         format!(
-            "{} texels ({} moved out of geometry, {} invalid, {} divided by a wall) on {} page(s), {} triangles, {:.2} M rays, {} iterations, residual {:.1e}{}{}{plan}; {} (total {:.2}s)",
+            "{} texels ({} moved out of geometry, {} invalid, {} divided by a wall) on {} page(s), {} triangles, {:.2} M rays, {} iterations, residual {:.1e}{}{}{junctions}{plan}; {} (total {:.2}s)",
             self.texels,
             self.validity.moved,
             self.validity.invalid,
@@ -109,6 +115,7 @@ pub struct Baked {
     pub config: BakeConfig,
     pub plan: Option<Plan>,
     pub seams: Option<lightmap::seams::SeamReport>,
+    pub junctions: Option<scene::junctions::JunctionReport>,
     pub stages: Vec<StageTime>,
 }
 
@@ -175,6 +182,7 @@ fn pass_through(
         validity: Default::default(),
         plan: None,
         seams: None,
+        junctions: None,
         stages,
         files,
     })
@@ -197,6 +205,8 @@ pub struct Prepared {
     /// The density pilot's pair when the atlas stayed uniform: the first pilot of the
     /// transport choice.
     pub first_pilot: Option<pilot::PilotRuns>,
+    /// What the junction split cut (`None` when it did not run).
+    pub junctions: Option<scene::junctions::JunctionReport>,
     pub stages: Vec<StageTime>,
 }
 
@@ -262,14 +272,27 @@ fn prepare_loaded(
     }
     timed(&mut stages, "load", load_start);
 
-    let t = Instant::now();
-    let tracer = Tracer::new(&scene);
-    timed(&mut stages, "bvh", t);
-
     if let (Some(plan), Some(auto)) = (&mut plan, config.auto) {
         plan::choose_density(&scene, &mut config, plan, &auto.keep);
     }
     check_memory(&scene, input, &config)?;
+    // Receivers are cut at the density's texel size, before the tracer sees their triangles.
+    let mut junctions = None;
+    let scene = if config.atlas.split_junctions
+        && !atlas::reuses_input_uvs(&scene, &source, &config.atlas)
+    {
+        let t = Instant::now();
+        let (scene, report) = scene::junctions::split(scene, 1.0 / config.atlas.texels_per_unit);
+        junctions = Some(report);
+        timed(&mut stages, "junctions", t);
+        scene
+    } else {
+        scene
+    };
+
+    let t = Instant::now();
+    let tracer = Tracer::new(&scene);
+    timed(&mut stages, "bvh", t);
     let (mut atlas, mut texels, mut validity) =
         lay_out(&scene, &source, &tracer, &config, progress, &mut stages)?;
     let mut first_pilot = None;
@@ -307,6 +330,7 @@ fn prepare_loaded(
         config,
         plan,
         first_pilot,
+        junctions,
         stages,
     })
 }
@@ -394,6 +418,7 @@ fn compute_prepared(mut prepared: Prepared, progress: &dyn Progress) -> Result<B
         atlas,
         texels,
         validity,
+        junctions,
         ..
     } = prepared;
 
@@ -439,6 +464,7 @@ fn compute_prepared(mut prepared: Prepared, progress: &dyn Progress) -> Result<B
         config,
         plan,
         seams,
+        junctions,
         stages,
     })
 }
@@ -498,6 +524,7 @@ pub fn write(
         validity: baked.validity,
         plan: baked.plan,
         seams: baked.seams,
+        junctions: baked.junctions,
         stages: baked.stages,
         files,
     })

@@ -109,6 +109,10 @@ struct AtlasArgs {
     /// Where lightmap UVs come from.
     #[arg(long, value_enum, default_value = "auto")]
     uv: UvArg,
+    /// Keep receivers whole where other surfaces meet them (texels under a wall then straddle
+    /// it; the divided-texel cell map keeps their values right, a renderer's filtering does not).
+    #[arg(long)]
+    no_split_junctions: bool,
 }
 
 impl AtlasArgs {
@@ -121,6 +125,7 @@ impl AtlasArgs {
         c.atlas.max_page_size = self.max_page_size;
         c.atlas.padding = self.padding;
         c.atlas.uv = self.uv.mode();
+        c.atlas.split_junctions = !self.no_split_junctions;
         c
     }
 }
@@ -373,6 +378,11 @@ fn bake(args: &BakeArgs) -> Result<()> {
         for reason in &plan.reasons {
             println!("  - {reason}");
         }
+    }
+    if args.explain
+        && let Some(junctions) = &report.junctions
+    {
+        println!("  - {}", junctions.brief());
     }
     if !args.run.quiet {
         println!("{}", report.summary());

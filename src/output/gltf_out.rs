@@ -27,7 +27,7 @@ use std::path::{Component, Path};
 use serde_json::{Map, Value, json};
 
 use super::gltf_out_accessor::{
-    Elements, FLOAT, Layout, UNSIGNED_INT, UNSIGNED_SHORT, read_accessor,
+    BlendKind, Elements, FLOAT, Layout, UNSIGNED_INT, UNSIGNED_SHORT, read_accessor,
 };
 use super::{Staging, glb};
 use crate::atlas::{Atlas, InstanceUv};
@@ -413,8 +413,14 @@ impl<'a> Document<'a> {
                 .count();
             let inst = &scene.instances[instance];
             let original = original_primitive(inst.mesh, inst.primitive).expect("checked above");
-            let attributes =
+            let mut attributes =
                 self.read_attributes(original, inst.back_of.is_some(), moved_uv1(atlas, inst))?;
+            // Vertices a junction split added are blends of the primitive's own.
+            if !inst.split.blends.is_empty() {
+                for (name, _, elements) in &mut attributes {
+                    *elements = elements.with_blends(&inst.split.blends, BlendKind::of(name));
+                }
+            }
             let target = (
                 target_meshes[&(inst.node, inst.mesh)],
                 inst.primitive as usize,
@@ -1082,6 +1088,7 @@ mod tests {
             back: None,
             has_uv1: false,
             lightmap: None,
+            split: Default::default(),
         }
     }
 

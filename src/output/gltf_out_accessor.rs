@@ -6,6 +6,8 @@
 
 use serde_json::Value;
 
+use crate::scene::Blend;
+
 pub(super) const UNSIGNED_BYTE: u64 = 5121;
 pub(super) const UNSIGNED_SHORT: u64 = 5123;
 pub(super) const UNSIGNED_INT: u64 = 5125;
@@ -109,6 +111,37 @@ impl Layout {
         }
     }
 
+    /// Largest magnitude of the type (what a normalized component is divided by); 1 for floats.
+    fn unit(&self) -> f64 {
+        match self.component_type {
+            BYTE => 127.0,
+            UNSIGNED_BYTE => 255.0,
+            SHORT => 32767.0,
+            UNSIGNED_SHORT => 65535.0,
+            UNSIGNED_INT => u32::MAX as f64,
+            _ => 1.0,
+        }
+    }
+
+    /// Writes `value` into component `c`, rounded and clamped for integer types.
+    pub fn set_component(&self, element: &mut [u8], c: usize, value: f64) {
+        let o = self.component_offset(c);
+        let clamp = |lo: f64, hi: f64| value.round().clamp(lo, hi);
+        match self.component_type {
+            BYTE => element[o] = clamp(-128.0, 127.0) as i8 as u8,
+            UNSIGNED_BYTE => element[o] = clamp(0.0, 255.0) as u8,
+            SHORT => {
+                element[o..o + 2].copy_from_slice(&(clamp(-32768.0, 32767.0) as i16).to_le_bytes())
+            }
+            UNSIGNED_SHORT => {
+                element[o..o + 2].copy_from_slice(&(clamp(0.0, 65535.0) as u16).to_le_bytes())
+            }
+            UNSIGNED_INT => element[o..o + 4]
+                .copy_from_slice(&(clamp(0.0, u32::MAX as f64) as u32).to_le_bytes()),
+            _ => element[o..o + 4].copy_from_slice(&(value as f32).to_le_bytes()),
+        }
+    }
+
     /// Negates component `c` in place (signed types only; `-i8::MIN` saturates, which is the
     /// same normalized value).
     pub fn negate_component(&self, element: &mut [u8], c: usize) {
@@ -129,6 +162,28 @@ impl Layout {
                 element[o..o + 4].copy_from_slice(&v.to_le_bytes());
             }
             _ => {}
+        }
+    }
+}
+
+/// How an attribute's components blend (see [`Elements::with_blends`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum BlendKind {
+    /// Interpolated.
+    Linear,
+    /// The first `n` components are a unit vector (normal, tangent); any others are taken
+    /// from the vertex of largest weight.
+    Direction(usize),
+    /// Taken from the vertex of largest weight (joint indices).
+    Index,
+}
+
+impl BlendKind {
+    pub fn of(attribute: &str) -> BlendKind {
+        match attribute {
+            "NORMAL" | "TANGENT" => BlendKind::Direction(3),
+            name if name.starts_with("JOINTS_") => BlendKind::Index,
+            _ => BlendKind::Linear,
         }
     }
 }
@@ -155,6 +210,59 @@ impl Elements {
         let mut bytes = Vec::with_capacity(map.len() * self.layout.element_size());
         for &i in map {
             bytes.extend_from_slice(self.element(i as usize));
+        }
+        Elements {
+            layout: self.layout,
+            bytes,
+        }
+    }
+
+    /// `self` with the blended vertices of a junction split appended (element `len() + k` is
+    /// `blends[k]`), in the accessor's own component type. Components are interpolated;
+    /// `kind` says which are unit vectors (renormalised) and which are indices (`JOINTS_n`,
+    /// tangent handedness: taken from the vertex of largest weight).
+    pub fn with_blends(&self, blends: &[Blend], kind: BlendKind) -> Elements {
+        let size = self.layout.element_size();
+        let n = self.layout.component_count();
+        let mut bytes = Vec::with_capacity(self.bytes.len() + blends.len() * size);
+        bytes.extend_from_slice(&self.bytes);
+        let mut value = vec![0.0f64; n];
+        for blend in blends {
+            let dominant = (0..3)
+                .max_by(|&a, &b| {
+                    blend.weights[a]
+                        .total_cmp(&blend.weights[b])
+                        .then(b.cmp(&a))
+                })
+                .unwrap_or(0);
+            let mut element = self.element(blend.vertices[dominant] as usize).to_vec();
+            for (c, v) in value.iter_mut().enumerate() {
+                *v = (0..3)
+                    .map(|k| {
+                        let source = self.element(blend.vertices[k] as usize);
+                        f64::from(blend.weights[k]) * self.layout.component(source, c)
+                    })
+                    .sum();
+            }
+            let direction = match kind {
+                BlendKind::Direction(components) => components.min(n),
+                _ => 0,
+            };
+            // A unit vector stays one: in the decoded scale, renormalised, encoded again.
+            let length = value[..direction].iter().map(|v| v * v).sum::<f64>().sqrt();
+            let unit = self.layout.unit();
+            for (c, &v) in value.iter().enumerate() {
+                let v = if c < direction && length > 0.0 {
+                    v / length * unit
+                } else {
+                    v
+                };
+                let keep = matches!(kind, BlendKind::Index) || (direction > 0 && c >= direction);
+                if !keep {
+                    self.layout.set_component(&mut element, c, v);
+                }
+            }
+            bytes.extend_from_slice(&element);
         }
         Elements {
             layout: self.layout,

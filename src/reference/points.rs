@@ -227,6 +227,28 @@ impl PointReference {
         }
     }
 
+    /// The points in a strip beside a plane: `0 < (p − origin)·n̂ ≤ width`, on surfaces not
+    /// parallel to the plane (`|normal·n̂| < ½`). With the plane of a wall and `n̂` towards its
+    /// dark side, these are the floor, ceiling and side walls along the wall's foot, head and
+    /// edges: the junction strip, where a texel straddling the wall leaks.
+    pub fn in_strip(&self, origin: Vec3, normal: Vec3, width: f32) -> PointReference {
+        let n = normal.normalize_or_zero();
+        let keep: Vec<usize> = (0..self.points.len())
+            .filter(|&k| {
+                let p = &self.points[k];
+                let d = (p.position - origin).dot(n);
+                d > 0.0 && d <= width && p.normal.dot(n).abs() < 0.5
+            })
+            .collect();
+        PointReference {
+            points: keep.iter().map(|&k| self.points[k]).collect(),
+            mean: keep.iter().map(|&k| self.mean[k]).collect(),
+            std_error: keep.iter().map(|&k| self.std_error[k]).collect(),
+            hidden: self.hidden,
+            samples: self.samples,
+        }
+    }
+
     /// The CSV file (see the module docs); `f32` values print in their shortest exact form.
     pub fn to_csv(&self) -> String {
         let mut s = format!(

@@ -626,6 +626,7 @@ impl Loader<'_> {
             back: None,
             has_uv1,
             lightmap,
+            split: Default::default(),
         });
         Ok(instance)
     }

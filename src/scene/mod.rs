@@ -15,6 +15,7 @@
 
 mod camera;
 mod gltf_in;
+pub mod junctions;
 
 use std::ops::Range;
 use std::path::PathBuf;
@@ -84,6 +85,32 @@ pub struct Instance {
     /// The EXR page named by the primitive's `extras.lightmap.exr` (a baked scene; resolved
     /// against the glTF file's folder), for the renderer.
     pub lightmap: Option<PathBuf>,
+    /// What [`junctions::split`] changed (empty for the input as loaded).
+    pub split: Split,
+}
+
+/// How [`junctions::split`] cut an instance where other surfaces meet it.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Split {
+    /// The vertices it added, at the end of the instance's vertex range: local vertex
+    /// `source_vertices + k` is `blends[k]`, where `source_vertices` is the range's length less
+    /// `blends.len()`.
+    pub blends: Vec<Blend>,
+    /// Per triangle (empty when unsplit): triangles of different sides never share a chart,
+    /// so the lightmap charts end where another surface meets this one.
+    pub sides: Vec<u32>,
+    /// Per triangle (empty when unsplit): bit `k` is set when edge `k` (corner `k` to `k + 1`)
+    /// lies on a junction. The two sides of a junction see different light, so such an edge is
+    /// never stitched as a seam.
+    pub junction_edges: Vec<u8>,
+}
+
+/// A vertex blended from up to three source vertices (accessor elements) of its primitive:
+/// `Σ weights[i] · element[vertices[i]]` (unused slots have weight 0).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Blend {
+    pub vertices: [u32; 3],
+    pub weights: [f32; 3],
 }
 
 /// A material as the light transport sees it (linear RGB).
@@ -326,6 +353,16 @@ impl Scene {
                 .any(|m| m.emission.max_element() > 0.0)
     }
 
+    /// Edge `k` of scene triangle `t` lies on a junction (see [`Split::junction_edges`]).
+    pub fn is_junction_edge(&self, t: u32, k: usize) -> bool {
+        let inst = &self.instances[self.triangle_instance[t as usize] as usize];
+        let local = (t - inst.triangles.start) as usize;
+        inst.split
+            .junction_edges
+            .get(local)
+            .is_some_and(|bits| bits & (1 << k) != 0)
+    }
+
     /// Debug-build consistency check, run at the end of the loader.
     pub fn validate(&self) {
         let n = self.positions.len();
@@ -342,6 +379,21 @@ impl Scene {
             assert_eq!(inst.source_triangle.len(), inst.triangles.len());
             for t in inst.triangles.clone() {
                 assert_eq!(self.triangle_instance[t as usize], i as u32);
+            }
+            let triangles = inst.triangles.len();
+            assert!(inst.split.sides.is_empty() || inst.split.sides.len() == triangles);
+            assert!(
+                inst.split.junction_edges.is_empty()
+                    || inst.split.junction_edges.len() == triangles
+            );
+            let source_vertices = inst.vertices.len() - inst.split.blends.len();
+            for blend in &inst.split.blends {
+                assert!(
+                    blend
+                        .vertices
+                        .iter()
+                        .all(|&v| (v as usize) < source_vertices)
+                );
             }
         }
     }

@@ -1,0 +1,1393 @@
+//! Junction splitting: receivers are cut where other surfaces meet them, so no lightmap texel
+//! straddles a junction.
+//!
+//! Why: a texel holds one value and a renderer filters bilinearly between neighbours. Where a
+//! wall stands on a floor, a floor texel under the wall covers both rooms; the dark room's side
+//! then shows the lit room's light as a bright line along every junction (the divided-texel cell
+//! map of `texels::cuts` keeps the texel's value right for rays, not for a renderer's lookup).
+//! Cut along the junction, each side of the wall gets its own chart and its own texels.
+//!
+//! What [`split`] does, per flat patch of an instance (connected triangles in one plane whose
+//! neighbours in the mesh turn by 30° or more, so curved surfaces are left alone):
+//! 1. **Find the junctions**: every other triangle (any instance; a uniform grid finds the
+//!    candidates) that crosses the patch's plane or has an edge lying in it (a wall standing on
+//!    the floor; corners within [`TOUCH_TEXELS`] of the plane count as on it) gives a segment,
+//!    clipped to the patch's triangles. Coplanar triangles and single touching points give none.
+//! 2. **Make the cuts separate**: segment ends within [`SNAP_TEXELS`] merge, move onto patch
+//!    vertices and edges, and split segments they touch. A segment end left free inside the patch
+//!    (the jamb of a doorway: the floor runs on under the opening) is extended straight on to the
+//!    next segment or the patch's border; that extension is a cut too, but an ordinary seam
+//!    (stitched later), while junction edges are never stitched ([`Split::junction_edges`]).
+//! 3. **Retriangulate**: each triangle a cut touches is triangulated again with spade's
+//!    constrained Delaunay triangulation (robust predicates; crossing cuts split each other).
+//!    Points on a mesh edge are shared by both triangles on it — the other one is cut too, in
+//!    this patch or the next (no T-junctions) — and points on one edge closer than the snap
+//!    distance merge, so no sliver below a quarter texel appears along an edge. A triangle
+//!    whose pieces do not add up to its area is left whole (counted in the report).
+//! 4. **Sides**: the instance's triangles are grouped into sides, connected across edges that are
+//!    not cuts; the atlas never puts two sides into one chart.
+//!
+//! New vertices are blends of at most three source vertices of the same primitive
+//! ([`Blend`]); the output writer blends every attribute the same way, so the split exists only
+//! in the baked copy.
+
+use std::collections::BTreeMap;
+
+use glam::{DVec2, DVec3, Vec2, Vec3};
+use spade::{ConstrainedDelaunayTriangulation, Point2, Triangulation};
+
+use super::{Blend, Scene, Split};
+
+/// Cut end points closer than this merge, and move onto a patch vertex or edge this close
+/// (texels).
+pub const SNAP_TEXELS: f64 = 0.25;
+
+/// A corner this close to a patch's plane lies in it (texels): a wall standing on a floor.
+pub const TOUCH_TEXELS: f64 = 1.0 / 16.0;
+
+/// A patch is a receiver only when no neighbour of the same mesh continues it more gently than
+/// this (cosine of 30°): gentler folds belong to curved surfaces, which are left alone.
+const SMOOTH_DOT: f64 = 0.866;
+
+/// Grid cells per axis of the broad phase, at most.
+const MAX_GRID_CELLS: f64 = 64.0;
+
+/// What [`split`] did.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct JunctionReport {
+    /// Instances that were cut.
+    pub receivers: usize,
+    /// Junction segments inserted (after merging), and cuts extending free segment ends.
+    pub segments: usize,
+    pub extensions: usize,
+    /// Triangles replaced by their pieces, and how many triangles the scene gained.
+    pub triangles_split: usize,
+    pub triangles_added: usize,
+    /// Triangles left whole because their pieces did not add up to their area (robustness
+    /// fallback; the cell map of divided texels covers them).
+    pub fallback_triangles: usize,
+    /// Junction edges whose two sides stayed connected around the junction (the cell map of
+    /// divided texels covers them).
+    pub unseparated_edges: usize,
+}
+
+impl JunctionReport {
+    /// One phrase for the bake's summary line.
+    pub fn brief(&self) -> String {
+        format!(
+            "junctions: {} receiver(s) split ({} segments, {} extensions, {} triangles → +{}){}",
+            self.receivers,
+            self.segments,
+            self.extensions,
+            self.triangles_split,
+            self.triangles_added,
+            if self.fallback_triangles + self.unseparated_edges > 0 {
+                format!(
+                    ", {} triangles left whole, {} edges unseparated",
+                    self.fallback_triangles, self.unseparated_edges
+                )
+            } else {
+                String::new()
+            }
+        )
+    }
+}
+
+/// Cuts every instance of `scene` where other surfaces meet it (see the module docs); `texel`
+/// is the lightmap texel size in world units (snapping tolerances are fractions of it).
+pub fn split(scene: Scene, texel: f32) -> (Scene, JunctionReport) {
+    let texel = f64::from(texel);
+    let tol = Tolerances {
+        snap: SNAP_TEXELS * texel,
+        touch: TOUCH_TEXELS * texel,
+    };
+    let grid = Grid::new(&scene, tol.touch, texel);
+    let mut report = JunctionReport::default();
+    let splits: Vec<Option<InstanceSplit>> = (0..scene.instances.len())
+        .map(|i| split_instance(&scene, i as u32, &grid, tol, &mut report))
+        .collect();
+    if splits.iter().all(Option::is_none) {
+        return (scene, report);
+    }
+    (assemble(scene, splits, &mut report), report)
+}
+
+#[derive(Clone, Copy)]
+struct Tolerances {
+    snap: f64,
+    touch: f64,
+}
+
+/// The new triangulation of one instance, in instance-local vertices.
+struct InstanceSplit {
+    triangles: Vec<[u32; 3]>,
+    source_triangle: Vec<u32>,
+    split: Split,
+}
+
+/// Rebuilds the scene's vertex and triangle arrays with the split instances.
+fn assemble(
+    mut scene: Scene,
+    splits: Vec<Option<InstanceSplit>>,
+    report: &mut JunctionReport,
+) -> Scene {
+    let old_triangles = scene.triangles.len();
+    let (mut positions, mut normals, mut uv0, mut uv1) =
+        (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let (mut triangles, mut triangle_instance) = (Vec::new(), Vec::new());
+    for (i, (inst, split)) in scene.instances.iter_mut().zip(splits).enumerate() {
+        let range = inst.vertices.start as usize..inst.vertices.end as usize;
+        let first_vertex = positions.len() as u32;
+        positions.extend_from_slice(&scene.positions[range.clone()]);
+        normals.extend_from_slice(&scene.normals[range.clone()]);
+        uv0.extend_from_slice(&scene.uv0[range.clone()]);
+        uv1.extend_from_slice(&scene.uv1[range.clone()]);
+        let first_triangle = triangles.len() as u32;
+        match split {
+            None => triangles.extend(
+                scene.triangles[inst.triangles.start as usize..inst.triangles.end as usize]
+                    .iter()
+                    .map(|t| t.map(|v| v - inst.vertices.start + first_vertex)),
+            ),
+            Some(split) => {
+                let at = |v: u32| v as usize + range.start;
+                for blend in &split.split.blends {
+                    let mix3 = |a: &[Vec3]| {
+                        (0..3).fold(DVec3::ZERO, |s, k| {
+                            s + a[at(blend.vertices[k])].as_dvec3() * f64::from(blend.weights[k])
+                        })
+                    };
+                    let mix2 = |a: &[Vec2]| {
+                        (0..3).fold(DVec2::ZERO, |s, k| {
+                            s + a[at(blend.vertices[k])].as_dvec2() * f64::from(blend.weights[k])
+                        })
+                    };
+                    positions.push(mix3(&scene.positions).as_vec3());
+                    normals.push(mix3(&scene.normals).normalize_or_zero().as_vec3());
+                    uv0.push(mix2(&scene.uv0).as_vec2());
+                    uv1.push(mix2(&scene.uv1).as_vec2());
+                }
+                triangles.extend(split.triangles.iter().map(|t| t.map(|v| v + first_vertex)));
+                inst.source_triangle = split.source_triangle;
+                inst.split = split.split;
+            }
+        }
+        inst.vertices = first_vertex..positions.len() as u32;
+        inst.triangles = first_triangle..triangles.len() as u32;
+        triangle_instance.resize(triangles.len(), i as u32);
+    }
+    report.triangles_added = triangles.len() - old_triangles;
+    scene.positions = positions;
+    scene.normals = normals;
+    scene.uv0 = uv0;
+    scene.uv1 = uv1;
+    scene.triangles = triangles;
+    scene.triangle_instance = triangle_instance;
+    #[cfg(debug_assertions)]
+    scene.validate();
+    scene
+}
+
+/// Uniform grid of triangle bounding boxes: the broad phase that finds the triangles near a
+/// patch.
+struct Grid {
+    lo: DVec3,
+    cell: DVec3,
+    dims: [usize; 3],
+    cells: Vec<Vec<u32>>,
+}
+
+impl Grid {
+    fn new(scene: &Scene, margin: f64, texel: f64) -> Grid {
+        let (lo, hi) = scene.bounds();
+        let (lo, hi) = (lo.as_dvec3() - margin, hi.as_dvec3() + margin);
+        let extent = (hi - lo).max(DVec3::splat(texel));
+        let dims = (extent / (4.0 * texel))
+            .ceil()
+            .clamp(DVec3::ONE, DVec3::splat(MAX_GRID_CELLS));
+        let dims = [dims.x as usize, dims.y as usize, dims.z as usize];
+        let cell = extent / DVec3::new(dims[0] as f64, dims[1] as f64, dims[2] as f64);
+        let mut grid = Grid {
+            lo,
+            cell,
+            dims,
+            cells: vec![Vec::new(); dims[0] * dims[1] * dims[2]],
+        };
+        for (t, tri) in scene.triangles.iter().enumerate() {
+            let p = tri.map(|v| scene.positions[v as usize].as_dvec3());
+            let (a, b) = (p[0].min(p[1]).min(p[2]), p[0].max(p[1]).max(p[2]));
+            for c in grid.cells_of(a - margin, b + margin) {
+                grid.cells[c].push(t as u32);
+            }
+        }
+        grid
+    }
+
+    fn cells_of(&self, a: DVec3, b: DVec3) -> impl Iterator<Item = usize> + use<> {
+        let index = |p: DVec3| {
+            let q = ((p - self.lo) / self.cell).floor();
+            [q.x, q.y, q.z]
+                .iter()
+                .zip(self.dims)
+                .map(|(&q, d)| (q.max(0.0) as usize).min(d - 1))
+                .collect::<Vec<_>>()
+        };
+        let (i, j) = (index(a), index(b));
+        let dims = self.dims;
+        (i[2]..=j[2]).flat_map(move |z| {
+            let (i, j) = (i.clone(), j.clone());
+            (i[1]..=j[1])
+                .flat_map(move |y| (i[0]..=j[0]).map(move |x| (z * dims[1] + y) * dims[0] + x))
+        })
+    }
+
+    /// Triangles whose boxes may overlap the box `a..b`, ascending.
+    fn query(&self, a: DVec3, b: DVec3) -> Vec<u32> {
+        let mut found: Vec<u32> = self
+            .cells_of(a, b)
+            .flat_map(|c| self.cells[c].iter().copied())
+            .collect();
+        found.sort_unstable();
+        found.dedup();
+        found
+    }
+}
+
+/// A flat patch of an instance in its own plane coordinates.
+struct Patch {
+    /// Instance-local triangles.
+    triangles: Vec<u32>,
+    origin: DVec3,
+    axes: [DVec3; 2],
+    normal: DVec3,
+}
+
+impl Patch {
+    fn to_2d(&self, p: DVec3) -> DVec2 {
+        let d = p - self.origin;
+        DVec2::new(d.dot(self.axes[0]), d.dot(self.axes[1]))
+    }
+}
+
+/// Where a cut piece ends inside one triangle.
+#[derive(Clone, Copy, Debug)]
+enum End {
+    Corner(usize),
+    /// On edge `k` (corner `k` to `k + 1`) at parameter `t` from corner `k`.
+    Edge(usize, f64),
+    Inside(DVec2),
+}
+
+/// The cuts of one patch: a planar straight-line graph in the patch's coordinates.
+struct Cuts {
+    points: Vec<DVec2>,
+    on_border: Vec<bool>,
+    /// Point pairs; `true` for an extension of a free segment end.
+    segments: Vec<([u32; 2], bool)>,
+}
+
+/// The patch's edges in plane coordinates, with their border flag (one patch face on them).
+struct PatchEdges {
+    edges: Vec<([DVec2; 2], bool)>,
+    vertices: Vec<(DVec2, bool)>,
+}
+
+fn distance_to_segment(p: DVec2, a: DVec2, b: DVec2) -> (f64, f64) {
+    let d = b - a;
+    let t = if d.length_squared() > 0.0 {
+        ((p - a).dot(d) / d.length_squared()).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    ((a + d * t).distance(p), t)
+}
+
+impl Cuts {
+    /// The index of the point at `p`: an existing point, or a border vertex or border edge point
+    /// within `snap`, or a new one.
+    fn point(&mut self, p: DVec2, patch: &PatchEdges, snap: f64) -> u32 {
+        if let Some(i) = self.points.iter().position(|q| q.distance(p) <= snap) {
+            return i as u32;
+        }
+        // Only onto the border: inside the patch a cut stays exactly where the wall stands
+        // (spade splits the edges it crosses), at the border it must end on an edge.
+        let nearest_vertex = patch
+            .vertices
+            .iter()
+            .filter(|v| v.1)
+            .map(|&(v, border)| (v.distance(p), v, border))
+            .filter(|x| x.0 <= snap)
+            .min_by(|x, y| x.0.total_cmp(&y.0));
+        let (q, border) = match nearest_vertex {
+            Some((_, v, border)) => (v, border),
+            None => {
+                let nearest_edge = patch
+                    .edges
+                    .iter()
+                    .filter(|e| e.1)
+                    .map(|&([a, b], border)| {
+                        let (d, t) = distance_to_segment(p, a, b);
+                        (d, a.lerp(b, t), border)
+                    })
+                    .filter(|x| x.0 <= snap)
+                    .min_by(|x, y| x.0.total_cmp(&y.0));
+                match nearest_edge {
+                    Some((_, q, border)) => (q, border),
+                    None => (p, false),
+                }
+            }
+        };
+        self.points.push(q);
+        self.on_border.push(border);
+        (self.points.len() - 1) as u32
+    }
+
+    fn add(&mut self, a: u32, b: u32, extension: bool) {
+        let key = [a.min(b), a.max(b)];
+        if a != b
+            && !self
+                .segments
+                .iter()
+                .any(|(s, _)| [s[0].min(s[1]), s[0].max(s[1])] == key)
+        {
+            self.segments.push(([a, b], extension));
+        }
+    }
+
+    /// Splits every segment at the points lying on it (within `snap`), so segments meeting in a
+    /// T share a point.
+    fn split_at_points(&mut self, snap: f64) {
+        let mut s = 0;
+        while s < self.segments.len() {
+            let ([a, b], ext) = self.segments[s];
+            let (pa, pb) = (self.points[a as usize], self.points[b as usize]);
+            let on = (0..self.points.len() as u32).find(|&p| {
+                let (d, t) = distance_to_segment(self.points[p as usize], pa, pb);
+                p != a && p != b && d <= snap && t > 0.0 && t < 1.0
+            });
+            match on {
+                Some(p) => {
+                    self.segments[s] = ([a, p], ext);
+                    self.segments.push(([p, b], ext));
+                }
+                None => s += 1,
+            }
+        }
+    }
+
+    fn degree(&self, p: u32) -> usize {
+        self.segments.iter().filter(|(s, _)| s.contains(&p)).count()
+    }
+
+    /// Extends every free segment end (inside the patch, on no other segment) straight on to
+    /// the nearest segment or patch border.
+    fn extend_free_ends(&mut self, patch: &PatchEdges, snap: f64) {
+        let mut p = 0;
+        while p < self.points.len() as u32 {
+            if self.on_border[p as usize] || self.degree(p) != 1 {
+                p += 1;
+                continue;
+            }
+            let ([a, b], _) = *self
+                .segments
+                .iter()
+                .find(|(s, _)| s.contains(&p))
+                .expect("degree 1");
+            let q = if a == p { b } else { a };
+            let origin = self.points[p as usize];
+            let dir = (origin - self.points[q as usize]).normalize_or_zero();
+            let ray = |u: DVec2, v: DVec2| -> Option<f64> {
+                // origin + s·dir = u + r·(v − u), s > snap/2, r ∈ [0, 1]
+                let e = v - u;
+                let den = dir.perp_dot(e);
+                let w = u - origin;
+                if den.abs() <= 1e-12 * e.length() {
+                    // Parallel: a collinear segment (the other jamb of a doorway) is hit at
+                    // its nearer end.
+                    let collinear = w.perp_dot(dir).abs() <= 0.5 * snap;
+                    let s = w.dot(dir).min((v - origin).dot(dir));
+                    return (collinear && s > 0.5 * snap).then_some(s);
+                }
+                let s = w.perp_dot(e) / den;
+                let r = w.perp_dot(dir) / den;
+                (s > 0.5 * snap && (-1e-9..=1.0 + 1e-9).contains(&r)).then_some(s)
+            };
+            let mut best: Option<(f64, Option<usize>)> = None;
+            for (k, ([u, v], _)) in self.segments.iter().enumerate() {
+                if *u == p || *v == p {
+                    continue;
+                }
+                if let Some(s) = ray(self.points[*u as usize], self.points[*v as usize])
+                    && best.is_none_or(|b| s < b.0)
+                {
+                    best = Some((s, Some(k)));
+                }
+            }
+            for &([u, v], border) in &patch.edges {
+                if let Some(s) = ray(u, v).filter(|_| border)
+                    && best.is_none_or(|b| s < b.0)
+                {
+                    best = Some((s, None));
+                }
+            }
+            if let Some((s, _)) = best {
+                let hit = self.point(origin + dir * s, patch, snap);
+                self.add(p, hit, true);
+                self.split_at_points(snap);
+            }
+            p += 1;
+        }
+    }
+}
+
+/// Cuts one instance (see the module docs); `None` when nothing meets it.
+fn split_instance(
+    scene: &Scene,
+    index: u32,
+    grid: &Grid,
+    tol: Tolerances,
+    report: &mut JunctionReport,
+) -> Option<InstanceSplit> {
+    let inst = &scene.instances[index as usize];
+    let first = inst.vertices.start;
+    let tris: Vec<[u32; 3]> = scene.triangles
+        [inst.triangles.start as usize..inst.triangles.end as usize]
+        .iter()
+        .map(|t| t.map(|v| v - first))
+        .collect();
+    if tris.is_empty() {
+        return None;
+    }
+    let pos = |v: u32| scene.positions[(first + v) as usize].as_dvec3();
+    let weld = weld(&scene.positions[inst.vertices.start as usize..inst.vertices.end as usize]);
+    let welded = |t: usize| tris[t].map(|v| weld[v as usize]);
+    let edges = edge_list(tris.len(), welded);
+    let faces_at = |a: u32, b: u32| faces_on(&edges, a, b);
+    let normal: Vec<DVec3> = tris
+        .iter()
+        .map(|t| {
+            let [a, b, c] = t.map(pos);
+            (b - a).cross(c - a).normalize_or_zero()
+        })
+        .collect();
+
+    // Flat patches; a patch a neighbour continues gently is part of a curved surface.
+    let mut patch_of = vec![u32::MAX; tris.len()];
+    let mut patches: Vec<Patch> = Vec::new();
+    for seed in 0..tris.len() {
+        if patch_of[seed] != u32::MAX || normal[seed] == DVec3::ZERO {
+            continue;
+        }
+        let id = patches.len() as u32;
+        let n = normal[seed];
+        let origin = pos(tris[seed][0]);
+        let mut members = vec![seed as u32];
+        patch_of[seed] = id;
+        let mut k = 0;
+        while k < members.len() {
+            let w = welded(members[k] as usize);
+            k += 1;
+            for e in 0..3 {
+                for &(_, u, _) in faces_at(w[e], w[(e + 1) % 3]) {
+                    let u = u as usize;
+                    if patch_of[u] == u32::MAX
+                        && normal[u].dot(n) > 1.0 - 1e-9
+                        && tris[u]
+                            .iter()
+                            .all(|&v| (pos(v) - origin).dot(n).abs() <= tol.touch)
+                    {
+                        patch_of[u] = id;
+                        members.push(u as u32);
+                    }
+                }
+            }
+        }
+        members.sort_unstable();
+        let u = n.any_orthonormal_vector();
+        patches.push(Patch {
+            triangles: members,
+            origin,
+            axes: [u, n.cross(u)],
+            normal: n,
+        });
+    }
+    let receiver = |p: &Patch, id: u32| {
+        p.triangles.iter().all(|&t| {
+            let w = welded(t as usize);
+            (0..3).all(|e| {
+                faces_at(w[e], w[(e + 1) % 3]).iter().all(|&(_, u, _)| {
+                    patch_of[u as usize] == id || normal[u as usize].dot(p.normal) < SMOOTH_DOT
+                })
+            })
+        })
+    };
+
+    // Cuts per patch, clipped into its triangles; points on mesh edges collected per welded edge.
+    let mut pieces: BTreeMap<u32, Vec<[End; 2]>> = BTreeMap::new();
+    // Welded edge → (its length, parameters from the lower welded end).
+    let mut edge_points: BTreeMap<[u32; 2], (f64, Vec<f64>)> = BTreeMap::new();
+    let mut patch_cuts: Vec<Option<Cuts>> = Vec::with_capacity(patches.len());
+    for (id, patch) in patches.iter().enumerate() {
+        let cuts = receiver(patch, id as u32)
+            .then(|| patch_cuts_of(scene, index, patch, &tris, &weld, pos, grid, tol))
+            .flatten();
+        if let Some(cuts) = &cuts {
+            report.segments += cuts.segments.iter().filter(|s| !s.1).count();
+            report.extensions += cuts.segments.iter().filter(|s| s.1).count();
+            for &t in &patch.triangles {
+                let corners = tris[t as usize].map(|v| patch.to_2d(pos(v)));
+                let w = welded(t as usize);
+                for &([a, b], _) in &cuts.segments {
+                    let Some(ends) = clip(
+                        cuts.points[a as usize],
+                        cuts.points[b as usize],
+                        corners,
+                        tol.snap,
+                    ) else {
+                        continue;
+                    };
+                    for end in ends {
+                        if let End::Edge(k, s) = end {
+                            let key = [w[k], w[(k + 1) % 3]];
+                            let s = if key[0] < key[1] { s } else { 1.0 - s };
+                            let tri = tris[t as usize];
+                            let length = pos(tri[k]).distance(pos(tri[(k + 1) % 3]));
+                            edge_points
+                                .entry([key[0].min(key[1]), key[0].max(key[1])])
+                                .or_insert_with(|| (length, Vec::new()))
+                                .1
+                                .push(s);
+                        }
+                    }
+                    if !along_an_edge(ends) {
+                        pieces.entry(t).or_default().push(ends);
+                    }
+                }
+            }
+        }
+        patch_cuts.push(cuts);
+    }
+    if pieces.is_empty() && edge_points.is_empty() {
+        return None;
+    }
+    // Points on one edge closer than the snap distance merge; none next to a corner.
+    for (length, ts) in edge_points.values_mut() {
+        let gap = tol.snap / length.max(1e-300);
+        ts.sort_by(f64::total_cmp);
+        let mut merged: Vec<f64> = Vec::new();
+        for &t in ts.iter() {
+            if t > gap && t < 1.0 - gap && merged.last().is_none_or(|&m| t - m > gap) {
+                merged.push(t);
+            }
+        }
+        *ts = merged;
+    }
+    edge_points.retain(|_, (_, ts)| !ts.is_empty());
+
+    // Retriangulate every triangle with a cut or an edge point.
+    let mut out = InstanceSplit {
+        triangles: Vec::with_capacity(tris.len()),
+        source_triangle: Vec::with_capacity(tris.len()),
+        split: Split::default(),
+    };
+    let mut cut_bits: Vec<[u8; 2]> = Vec::with_capacity(tris.len()); // junction, any cut
+    let mut blends: BTreeMap<Vec<(u32, u32)>, u32> = BTreeMap::new();
+    let source_vertices = inst.vertices.end - first;
+    let mut any_split = false;
+    for t in 0..tris.len() {
+        let w = welded(t);
+        let on_edges: [Vec<f64>; 3] = std::array::from_fn(|k| {
+            let key = [w[k].min(w[(k + 1) % 3]), w[k].max(w[(k + 1) % 3])];
+            let ts = edge_points
+                .get(&key)
+                .map(|e| e.1.clone())
+                .unwrap_or_default();
+            if w[k] < w[(k + 1) % 3] {
+                ts
+            } else {
+                ts.iter().rev().map(|t| 1.0 - t).collect()
+            }
+        });
+        let own = pieces.get(&(t as u32));
+        let id = patch_of[t];
+        let cuts = patch_cuts.get(id as usize).and_then(Option::as_ref);
+        if own.is_none() && on_edges.iter().all(Vec::is_empty) {
+            // Untouched, but its edges may lie along a cut (a wall on a grid line).
+            let corners = tris[t].map(|v| {
+                patches
+                    .get(id as usize)
+                    .map_or(DVec2::ZERO, |p| p.to_2d(pos(v)))
+            });
+            out.triangles.push(tris[t]);
+            out.source_triangle.push(inst.source_triangle[t]);
+            cut_bits.push(cuts.map_or([0, 0], |c| cut_bits_of(corners, c, tol.snap)));
+            continue;
+        }
+        let frame = match cuts {
+            Some(_) => &patches[id as usize],
+            None => &own_frame(tris[t].map(pos)),
+        };
+        let corners = tris[t].map(|v| frame.to_2d(pos(v)));
+        let Some(faces) = retriangulate(corners, &on_edges, own.map_or(&[][..], Vec::as_slice))
+        else {
+            report.fallback_triangles += 1;
+            out.triangles.push(tris[t]);
+            out.source_triangle.push(inst.source_triangle[t]);
+            cut_bits.push([0, 0]);
+            continue;
+        };
+        any_split = true;
+        report.triangles_split += 1;
+        for face in faces {
+            let mut tri = [0u32; 3];
+            for (c, (p, end)) in face.iter().enumerate() {
+                tri[c] = match end {
+                    Some(End::Corner(k)) => tris[t][*k],
+                    _ => {
+                        let b = barycentric(*p, corners, *end);
+                        vertex_of(b, tris[t], source_vertices, &mut blends, &mut out.split)
+                    }
+                };
+            }
+            let bits = cuts.map_or([0, 0], |c| cut_bits_of(face.map(|f| f.0), c, tol.snap));
+            out.triangles.push(tri);
+            out.source_triangle.push(inst.source_triangle[t]);
+            cut_bits.push(bits);
+        }
+    }
+    if !any_split {
+        return None;
+    }
+    report.receivers += 1;
+
+    // Sides: connected across edges that are not cuts.
+    let blend_pos = |v: u32| -> [u64; 3] {
+        let p = if v < source_vertices {
+            pos(v)
+        } else {
+            let b = out.split.blends[(v - source_vertices) as usize];
+            (0..3).fold(DVec3::ZERO, |s, k| {
+                s + pos(b.vertices[k]) * f64::from(b.weights[k])
+            })
+        };
+        p.as_vec3()
+            .to_array()
+            .map(|c| u64::from((c + 0.0).to_bits()))
+    };
+    let mut keys: Vec<([u64; 3], u32)> = (0..source_vertices + out.split.blends.len() as u32)
+        .map(|v| (blend_pos(v), v))
+        .collect();
+    keys.sort_unstable();
+    let mut new_weld = vec![0u32; keys.len()];
+    for (id, same) in keys.chunk_by(|a, b| a.0 == b.0).enumerate() {
+        for &(_, v) in same {
+            new_weld[v as usize] = id as u32;
+        }
+    }
+    let new_welded = |t: usize| out.triangles[t].map(|v| new_weld[v as usize]);
+    let new_edges = edge_list(out.triangles.len(), new_welded);
+    let mut sides = vec![u32::MAX; out.triangles.len()];
+    let mut next_side = 0;
+    let mut stack = Vec::new();
+    let edge_index = |t: usize, a: u32, b: u32| {
+        let w = new_welded(t);
+        (0..3)
+            .find(|&k| {
+                let (x, y) = (w[k], w[(k + 1) % 3]);
+                (x, y) == (a, b) || (x, y) == (b, a)
+            })
+            .unwrap_or(0)
+    };
+    for seed in 0..out.triangles.len() {
+        if sides[seed] != u32::MAX {
+            continue;
+        }
+        sides[seed] = next_side;
+        stack.push(seed);
+        while let Some(t) = stack.pop() {
+            let w = new_welded(t);
+            for k in 0..3 {
+                if cut_bits[t][1] & (1 << k) != 0 {
+                    continue;
+                }
+                for &(_, u, _) in faces_on(&new_edges, w[k], w[(k + 1) % 3]) {
+                    let u = u as usize;
+                    let blocked = cut_bits[u][1] & (1 << edge_index(u, w[k], w[(k + 1) % 3])) != 0;
+                    if sides[u] == u32::MAX && !blocked {
+                        sides[u] = next_side;
+                        stack.push(u);
+                    }
+                }
+            }
+        }
+        next_side += 1;
+    }
+    for t in 0..out.triangles.len() {
+        let w = new_welded(t);
+        for k in 0..3 {
+            if cut_bits[t][0] & (1 << k) != 0
+                && faces_on(&new_edges, w[k], w[(k + 1) % 3])
+                    .iter()
+                    .any(|&(_, u, _)| u as usize != t && sides[u as usize] == sides[t])
+            {
+                report.unseparated_edges += 1;
+            }
+        }
+    }
+    out.split.sides = sides;
+    out.split.junction_edges = cut_bits.iter().map(|b| b[0]).collect();
+    Some(out)
+}
+
+/// Which edges of `face` (plane coordinates) lie along cuts: `[junction, any cut]`, bit `k`
+/// for edge `k`.
+fn cut_bits_of(face: [DVec2; 3], cuts: &Cuts, snap: f64) -> [u8; 2] {
+    let eps = 1e-3 * snap;
+    let on = |x: DVec2, junction: bool| {
+        cuts.segments.iter().any(|&([a, b], ext)| {
+            (!junction || !ext)
+                && distance_to_segment(x, cuts.points[a as usize], cuts.points[b as usize]).0 <= eps
+        })
+    };
+    let mut bits = [0u8; 2];
+    for k in 0..3 {
+        let (p, q) = (face[k], face[(k + 1) % 3]);
+        for (kind, junction) in [(0, true), (1, false)] {
+            if [0.0, 0.25, 0.5, 0.75, 1.0]
+                .iter()
+                .all(|&s| on(p.lerp(q, s), junction))
+            {
+                bits[kind] |= 1 << k;
+            }
+        }
+    }
+    bits
+}
+
+/// Welded id per vertex: vertices at the same position share one (+0.0 folds −0.0 into 0.0).
+fn weld(positions: &[Vec3]) -> Vec<u32> {
+    let key = |v: usize| (positions[v] + Vec3::ZERO).to_array().map(f32::to_bits);
+    let mut order: Vec<u32> = (0..positions.len() as u32).collect();
+    order.sort_unstable_by_key(|&v| (key(v as usize), v));
+    let mut weld = vec![0u32; positions.len()];
+    for (id, same) in order
+        .chunk_by(|&a, &b| key(a as usize) == key(b as usize))
+        .enumerate()
+    {
+        for &v in same {
+            weld[v as usize] = id as u32;
+        }
+    }
+    weld
+}
+
+/// Every edge as (welded end points ascending, triangle, corner it starts at), sorted.
+fn edge_list(triangles: usize, welded: impl Fn(usize) -> [u32; 3]) -> Vec<([u32; 2], u32, u8)> {
+    let mut edges = Vec::with_capacity(3 * triangles);
+    for t in 0..triangles {
+        let w = welded(t);
+        for k in 0..3 {
+            let (a, b) = (w[k], w[(k + 1) % 3]);
+            if a != b {
+                edges.push(([a.min(b), a.max(b)], t as u32, k as u8));
+            }
+        }
+    }
+    edges.sort_unstable();
+    edges
+}
+
+fn faces_on(edges: &[([u32; 2], u32, u8)], a: u32, b: u32) -> &[([u32; 2], u32, u8)] {
+    let e = [a.min(b), a.max(b)];
+    let lo = edges.partition_point(|x| x.0 < e);
+    let len = edges[lo..].partition_point(|x| x.0 == e);
+    &edges[lo..lo + len]
+}
+
+/// A one-triangle frame (for triangles outside any receiver that only get edge points).
+fn own_frame(p: [DVec3; 3]) -> Patch {
+    let n = (p[1] - p[0]).cross(p[2] - p[0]).normalize_or_zero();
+    let u = n.any_orthonormal_vector();
+    Patch {
+        triangles: Vec::new(),
+        origin: p[0],
+        axes: [u, n.cross(u)],
+        normal: n,
+    }
+}
+
+/// The junction segments of a receiver patch, snapped, split and with free ends extended.
+#[allow(clippy::too_many_arguments)]
+fn patch_cuts_of(
+    scene: &Scene,
+    index: u32,
+    patch: &Patch,
+    tris: &[[u32; 3]],
+    weld: &[u32],
+    pos: impl Fn(u32) -> DVec3 + Copy,
+    grid: &Grid,
+    tol: Tolerances,
+) -> Option<Cuts> {
+    // The patch's edges and vertices in plane coordinates.
+    let mut counted: BTreeMap<[u32; 2], (usize, [DVec2; 2])> = BTreeMap::new();
+    let (mut lo, mut hi) = (DVec3::INFINITY, DVec3::NEG_INFINITY);
+    let mut corners2d = Vec::with_capacity(patch.triangles.len());
+    for &t in &patch.triangles {
+        let tri = tris[t as usize];
+        let c = tri.map(|v| patch.to_2d(pos(v)));
+        corners2d.push(c);
+        for k in 0..3 {
+            let p = pos(tri[k]);
+            (lo, hi) = (lo.min(p), hi.max(p));
+            let (a, b) = (weld[tri[k] as usize], weld[tri[(k + 1) % 3] as usize]);
+            let entry = counted
+                .entry([a.min(b), a.max(b)])
+                .or_insert((0, [c[k], c[(k + 1) % 3]]));
+            entry.0 += 1;
+        }
+    }
+    let edges: Vec<([DVec2; 2], bool)> = counted.values().map(|&(n, e)| (e, n == 1)).collect();
+    let mut vertices: Vec<(DVec2, bool)> = Vec::new();
+    for &([a, b], border) in &edges {
+        for p in [a, b] {
+            match vertices.iter_mut().find(|(q, _)| *q == p) {
+                Some(v) => v.1 |= border,
+                None => vertices.push((p, border)),
+            }
+        }
+    }
+    let patch_edges = PatchEdges { edges, vertices };
+
+    // Segments where other triangles cross the plane or stand on it, clipped to the patch.
+    let mut cuts = Cuts {
+        points: Vec::new(),
+        on_border: Vec::new(),
+        segments: Vec::new(),
+    };
+    let inst = &scene.instances[index as usize];
+    let own = |g: u32| {
+        inst.triangles.contains(&g)
+            && patch
+                .triangles
+                .binary_search(&(g - inst.triangles.start))
+                .is_ok()
+    };
+    for g in grid.query(lo - tol.touch, hi + tol.touch) {
+        if own(g) {
+            continue;
+        }
+        let p = scene.triangles[g as usize].map(|v| scene.positions[v as usize].as_dvec3());
+        let Some([a, b]) = plane_segment(p, patch, tol.touch) else {
+            continue;
+        };
+        let (a, b) = (patch.to_2d(a), patch.to_2d(b));
+        let length = a.distance(b);
+        if length <= tol.snap {
+            continue;
+        }
+        // Parameter intervals of the segment inside the patch's triangles, merged.
+        let mut inside: Vec<[f64; 2]> = corners2d
+            .iter()
+            .filter_map(|&c| clip_interval(a, b, c, 1e-9 * tol.snap))
+            .collect();
+        inside.sort_by(|x, y| x[0].total_cmp(&y[0]));
+        let mut merged: Vec<[f64; 2]> = Vec::new();
+        for iv in inside {
+            match merged.last_mut() {
+                Some(m) if iv[0] <= m[1] + tol.snap / length => m[1] = m[1].max(iv[1]),
+                _ => merged.push(iv),
+            }
+        }
+        for [s0, s1] in merged {
+            if (s1 - s0) * length > tol.snap {
+                let i = cuts.point(a.lerp(b, s0), &patch_edges, tol.snap);
+                let j = cuts.point(a.lerp(b, s1), &patch_edges, tol.snap);
+                cuts.add(i, j, false);
+            }
+        }
+    }
+    // Segments lying along the patch border change nothing: leave them out.
+    cuts.segments.retain(|&([a, b], _)| {
+        let (p, q) = (cuts.points[a as usize], cuts.points[b as usize]);
+        let on_border = |x: DVec2| {
+            patch_edges.edges.iter().any(|&([u, v], border)| {
+                border && distance_to_segment(x, u, v).0 <= 1e-6 * tol.snap
+            })
+        };
+        ![0.0, 0.25, 0.5, 0.75, 1.0]
+            .iter()
+            .all(|&s| on_border(p.lerp(q, s)))
+    });
+    if cuts.segments.is_empty() {
+        return None;
+    }
+    cuts.split_at_points(tol.snap);
+    cuts.extend_free_ends(&patch_edges, tol.snap);
+    Some(cuts)
+}
+
+/// Where triangle `p` meets the patch's plane: a segment when it crosses the plane or has an
+/// edge in it (corners within `touch` count as in it); nothing when coplanar or touching at a
+/// point.
+fn plane_segment(p: [DVec3; 3], patch: &Patch, touch: f64) -> Option<[DVec3; 2]> {
+    let d = p.map(|q| (q - patch.origin).dot(patch.normal));
+    let side = d.map(|x| {
+        if x.abs() <= touch {
+            0
+        } else {
+            x.signum() as i32
+        }
+    });
+    if side.iter().all(|&s| s == 0) {
+        return None;
+    }
+    let mut points = Vec::with_capacity(3);
+    for k in 0..3 {
+        let j = (k + 1) % 3;
+        if side[k] == 0 {
+            points.push(p[k] - patch.normal * d[k]);
+        }
+        if side[k] * side[j] < 0 {
+            let s = d[k] / (d[k] - d[j]);
+            points.push(p[k].lerp(p[j], s));
+        }
+    }
+    match points[..] {
+        [a, b] => Some([a, b]),
+        _ => None,
+    }
+}
+
+/// The parameter interval of segment `a → b` inside the counter-clockwise triangle `c`
+/// (boundary included within `eps`).
+fn clip_interval(a: DVec2, b: DVec2, c: [DVec2; 3], eps: f64) -> Option<[f64; 2]> {
+    let d = b - a;
+    let (mut s0, mut s1) = (0.0f64, 1.0f64);
+    for k in 0..3 {
+        let e = c[(k + 1) % 3] - c[k];
+        let n = DVec2::new(-e.y, e.x).normalize_or_zero(); // inward for counter-clockwise
+        let num = n.dot(a - c[k]) + eps;
+        let den = n.dot(d);
+        if den.abs() < 1e-300 {
+            if num < 0.0 {
+                return None;
+            }
+        } else {
+            let s = -num / den;
+            if den > 0.0 {
+                s0 = s0.max(s);
+            } else {
+                s1 = s1.min(s);
+            }
+        }
+    }
+    (s1 > s0).then_some([s0, s1])
+}
+
+/// The piece of cut `a → b` inside triangle `c`, its ends classified; `None` when it misses or
+/// only touches it.
+fn clip(a: DVec2, b: DVec2, c: [DVec2; 3], snap: f64) -> Option<[End; 2]> {
+    let [s0, s1] = clip_interval(a, b, c, 1e-9 * snap)?;
+    if (s1 - s0) * a.distance(b) <= 1e-6 * snap {
+        return None;
+    }
+    // Clipped ends lie on the triangle's edges up to rounding; cut points inside stay put.
+    let near = 1e-6 * snap;
+    let classify = |p: DVec2| {
+        if let Some(k) = (0..3).find(|&k| c[k].distance(p) <= near) {
+            return End::Corner(k);
+        }
+        let faces_at = (0..3)
+            .map(|k| (k, distance_to_segment(p, c[k], c[(k + 1) % 3])))
+            .filter(|(_, (d, _))| *d <= near)
+            .min_by(|x, y| x.1.0.total_cmp(&y.1.0));
+        match faces_at {
+            Some((k, (_, t))) => End::Edge(k, t),
+            None => End::Inside(p),
+        }
+    };
+    Some([classify(a.lerp(b, s0)), classify(a.lerp(b, s1))])
+}
+
+/// Both ends on one edge of the triangle (its corners included): the piece runs along it.
+fn along_an_edge(ends: [End; 2]) -> bool {
+    let edges_of = |e: End| -> u8 {
+        match e {
+            End::Corner(k) => (1 << k) | (1 << ((k + 2) % 3)),
+            End::Edge(k, _) => 1 << k,
+            End::Inside(_) => 0,
+        }
+    };
+    edges_of(ends[0]) & edges_of(ends[1]) != 0
+}
+
+/// A new face: its corners in plane coordinates, with what each is (`None`: a crossing of
+/// two cuts).
+type Face = [(DVec2, Option<End>); 3];
+
+/// Triangulates triangle `c` again with the points on its edges (parameters from corner `k`,
+/// ascending) and the cut pieces inside it; `None` when the faces do not add up to its area.
+fn retriangulate(
+    c: [DVec2; 3],
+    on_edges: &[Vec<f64>; 3],
+    pieces: &[[End; 2]],
+) -> Option<Vec<Face>> {
+    let mut cdt: ConstrainedDelaunayTriangulation<Point2<f64>> =
+        ConstrainedDelaunayTriangulation::new();
+    let mut what: BTreeMap<usize, End> = BTreeMap::new();
+    let mut insert = |cdt: &mut ConstrainedDelaunayTriangulation<Point2<f64>>, p: DVec2, e: End| {
+        let h = cdt.insert(Point2::new(p.x, p.y)).ok()?;
+        what.entry(h.index()).or_insert(e);
+        Some(h)
+    };
+    let corner = [0, 1, 2].map(|k| insert(&mut cdt, c[k], End::Corner(k)));
+    let [Some(c0), Some(c1), Some(c2)] = corner else {
+        return None;
+    };
+    let corner = [c0, c1, c2];
+    let mut on_edge_handles: [Vec<(f64, spade::handles::FixedVertexHandle)>; 3] =
+        Default::default();
+    for k in 0..3 {
+        let mut chain = vec![corner[k]];
+        for &t in &on_edges[k] {
+            let h = insert(&mut cdt, c[k].lerp(c[(k + 1) % 3], t), End::Edge(k, t))?;
+            on_edge_handles[k].push((t, h));
+            chain.push(h);
+        }
+        chain.push(corner[(k + 1) % 3]);
+        for pair in chain.windows(2) {
+            cdt.add_constraint_and_split(pair[0], pair[1], |p| p);
+        }
+    }
+    for piece in pieces {
+        let mut handles = [corner[0]; 2];
+        for (h, end) in handles.iter_mut().zip(piece) {
+            *h = match *end {
+                End::Corner(k) => corner[k],
+                // The merged edge point nearest to where the cut meets the edge.
+                End::Edge(k, t) => on_edge_handles[k]
+                    .iter()
+                    .min_by(|x, y| (x.0 - t).abs().total_cmp(&(y.0 - t).abs()))
+                    .map(|x| x.1)?,
+                End::Inside(p) => insert(&mut cdt, p, End::Inside(p))?,
+            };
+        }
+        cdt.add_constraint_and_split(handles[0], handles[1], |p| p);
+    }
+    let area = 0.5 * (c[1] - c[0]).perp_dot(c[2] - c[0]);
+    let mut faces = Vec::new();
+    let mut total = 0.0;
+    for face in cdt.inner_faces() {
+        let v = face.vertices();
+        let p = v.map(|h| {
+            let q = h.position();
+            DVec2::new(q.x, q.y)
+        });
+        let a = 0.5 * (p[1] - p[0]).perp_dot(p[2] - p[0]);
+        if a <= 1e-9 * area {
+            continue;
+        }
+        total += a;
+        faces.push([0, 1, 2].map(|k| (p[k], what.get(&v[k].fix().index()).copied())));
+    }
+    ((total - area).abs() <= 1e-6 * area && faces.len() > 1).then_some(faces)
+}
+
+/// Barycentric weights of `p` in triangle `c`; points on an edge get exactly two weights.
+fn barycentric(p: DVec2, c: [DVec2; 3], end: Option<End>) -> [f64; 3] {
+    if let Some(End::Edge(k, t)) = end {
+        let mut w = [0.0; 3];
+        w[k] = 1.0 - t;
+        w[(k + 1) % 3] = t;
+        return w;
+    }
+    let area = (c[1] - c[0]).perp_dot(c[2] - c[0]);
+    let w1 = (p - c[0]).perp_dot(c[2] - c[0]) / area;
+    let w2 = (c[1] - c[0]).perp_dot(p - c[0]) / area;
+    let w = [1.0 - w1 - w2, w1, w2].map(|x: f64| x.max(0.0));
+    let sum: f64 = w.iter().sum();
+    w.map(|x| x / sum)
+}
+
+/// The local vertex for weights `w` over `tri`'s vertices: a source vertex, or the blend with
+/// these exact weights (created once, so triangles on both sides of an edge share it).
+fn vertex_of(
+    w: [f64; 3],
+    tri: [u32; 3],
+    source_vertices: u32,
+    blends: &mut BTreeMap<Vec<(u32, u32)>, u32>,
+    split: &mut Split,
+) -> u32 {
+    let mut parts: Vec<(u32, f32)> = (0..3)
+        .filter(|&k| w[k] > 0.0)
+        .map(|k| (tri[k], w[k] as f32))
+        .filter(|p| p.1 > 0.0)
+        .collect();
+    parts.sort_by_key(|p| p.0);
+    if let [(v, _)] = parts[..] {
+        return v;
+    }
+    let key: Vec<(u32, u32)> = parts.iter().map(|&(v, w)| (v, w.to_bits())).collect();
+    *blends.entry(key).or_insert_with(|| {
+        let mut blend = Blend {
+            vertices: [parts[0].0; 3],
+            weights: [0.0; 3],
+        };
+        for (k, &(v, w)) in parts.iter().enumerate() {
+            blend.vertices[k] = v;
+            blend.weights[k] = w;
+        }
+        split.blends.push(blend);
+        source_vertices + split.blends.len() as u32 - 1
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::{Instance, Material};
+
+    /// A scene of one instance per mesh (positions, triangles), normals from the first face.
+    fn scene_of(meshes: &[(Vec<Vec3>, Vec<[u32; 3]>)]) -> Scene {
+        let mut scene = Scene {
+            materials: vec![Material::default()],
+            ..Scene::default()
+        };
+        for (i, (positions, triangles)) in meshes.iter().enumerate() {
+            let first = scene.positions.len() as u32;
+            let first_triangle = scene.triangles.len() as u32;
+            let [a, b, c] = triangles[0].map(|v| positions[v as usize]);
+            let n = (b - a).cross(c - a).normalize();
+            scene.positions.extend(positions);
+            scene
+                .normals
+                .extend(std::iter::repeat_n(n, positions.len()));
+            scene
+                .uv0
+                .extend(positions.iter().map(|p| Vec2::new(p.x, p.z)));
+            scene
+                .uv1
+                .extend(std::iter::repeat_n(Vec2::ZERO, positions.len()));
+            scene
+                .triangles
+                .extend(triangles.iter().map(|t| t.map(|v| v + first)));
+            scene
+                .triangle_instance
+                .extend(std::iter::repeat_n(i as u32, triangles.len()));
+            scene.instances.push(Instance {
+                node: i as u32,
+                mesh: i as u32,
+                primitive: 0,
+                material: 0,
+                vertices: first..scene.positions.len() as u32,
+                triangles: first_triangle..scene.triangles.len() as u32,
+                source_triangle: (0..triangles.len() as u32).collect(),
+                back_of: None,
+                back: None,
+                has_uv1: false,
+                lightmap: None,
+                split: Split::default(),
+            });
+        }
+        scene.validate();
+        scene
+    }
+
+    /// A 4 × 4 floor in y = 0 facing +y, as two triangles.
+    fn floor() -> (Vec<Vec3>, Vec<[u32; 3]>) {
+        let p = vec![
+            Vec3::new(0.0, 0.0, 0.0),
+            Vec3::new(0.0, 0.0, 4.0),
+            Vec3::new(4.0, 0.0, 4.0),
+            Vec3::new(4.0, 0.0, 0.0),
+        ];
+        (p, vec![[0, 1, 2], [0, 2, 3]])
+    }
+
+    /// A wall in the plane x = `x` over z in `z0..z1`, 3 high, standing on the floor.
+    fn wall(x: f32, z0: f32, z1: f32) -> (Vec<Vec3>, Vec<[u32; 3]>) {
+        let p = vec![
+            Vec3::new(x, 0.0, z0),
+            Vec3::new(x, 0.0, z1),
+            Vec3::new(x, 3.0, z1),
+            Vec3::new(x, 3.0, z0),
+        ];
+        (p, vec![[0, 1, 2], [0, 2, 3]])
+    }
+
+    fn triangle_area(scene: &Scene, t: usize) -> f64 {
+        let [a, b, c] = scene.triangles[t].map(|v| scene.positions[v as usize].as_dvec3());
+        0.5 * (b - a).cross(c - a).length()
+    }
+
+    /// No vertex the split added lies strictly inside an edge of the instance's triangles.
+    fn assert_no_t_junctions(scene: &Scene, i: usize) {
+        let inst = &scene.instances[i];
+        let added = inst.vertices.end as usize - inst.split.blends.len();
+        let vertices = &scene.positions[added..inst.vertices.end as usize];
+        for t in inst.triangles.clone() {
+            let tri = scene.triangles[t as usize];
+            for k in 0..3 {
+                let (a, b) = (
+                    scene.positions[tri[k] as usize].as_dvec3(),
+                    scene.positions[tri[(k + 1) % 3] as usize].as_dvec3(),
+                );
+                for p in vertices {
+                    let p = p.as_dvec3();
+                    let s = (p - a).dot(b - a) / (b - a).length_squared();
+                    let off = (a + (b - a) * s).distance(p);
+                    assert!(
+                        !(off < 1e-5 && s > 1e-4 && s < 1.0 - 1e-4),
+                        "vertex {p} lies inside edge {a} – {b}"
+                    );
+                }
+            }
+        }
+    }
+
+    /// The floor's triangles lie on one side of x = 2 each (none straddles the wall).
+    fn assert_sides_of_wall(scene: &Scene, x: f32) {
+        let inst = &scene.instances[0];
+        let mut sides = [BTreeMap::new(), BTreeMap::new()];
+        for (local, t) in inst.triangles.clone().enumerate() {
+            let xs = scene.triangles[t as usize].map(|v| scene.positions[v as usize].x);
+            let west = xs.iter().all(|&v| v <= x + 1e-6);
+            let east = xs.iter().all(|&v| v >= x - 1e-6);
+            assert!(west != east, "triangle {t} straddles the wall: {xs:?}");
+            *sides[usize::from(east)]
+                .entry(inst.split.sides[local])
+                .or_insert(0) += 1;
+        }
+        // Each side of the wall is its own set of sides.
+        assert!(sides[0].keys().all(|s| !sides[1].contains_key(s)));
+    }
+
+    #[test]
+    fn a_wall_standing_on_a_floor_cuts_it_along_its_base() {
+        let scene = scene_of(&[floor(), wall(2.0, 0.0, 4.0)]);
+        let (split, report) = split(scene, 0.1);
+        assert_eq!(report.receivers, 1, "{report:?}");
+        assert_eq!(report.segments, 1);
+        assert_eq!(report.extensions, 0);
+        assert_eq!(report.unseparated_edges, 0);
+        let floor = &split.instances[0];
+        assert!(floor.triangles.len() > 2);
+        let area: f64 = floor
+            .triangles
+            .clone()
+            .map(|t| triangle_area(&split, t as usize))
+            .sum();
+        assert!((area - 16.0).abs() < 1e-5, "area {area}");
+        assert_sides_of_wall(&split, 2.0);
+        assert_no_t_junctions(&split, 0);
+        // The wall itself is untouched (the floor only meets its border).
+        assert_eq!(split.instances[1].triangles.len(), 2);
+        assert!(split.instances[1].split.blends.is_empty());
+        // New vertices are blends of the floor's own vertices, and junction edges are marked.
+        let blends = &floor.split.blends;
+        assert_eq!(
+            blends.len() + 4,
+            (floor.vertices.end - floor.vertices.start) as usize
+        );
+        for (k, b) in blends.iter().enumerate() {
+            let p = split.positions[floor.vertices.start as usize + 4 + k];
+            assert!((p.x - 2.0).abs() < 1e-6, "new vertex {p} off the wall");
+            assert!(b.vertices.iter().all(|&v| v < 4));
+            assert!((b.weights.iter().sum::<f32>() - 1.0).abs() < 1e-6);
+        }
+        let marked = floor
+            .triangles
+            .clone()
+            .flat_map(|t| (0..3).map(move |k| (t, k)))
+            .filter(|&(t, k)| split.is_junction_edge(t, k))
+            .count();
+        assert_eq!(
+            marked, 4,
+            "two triangles on each side of the base have it as an edge"
+        );
+    }
+
+    #[test]
+    fn a_doorway_is_closed_by_an_extension_that_is_no_junction() {
+        let scene = scene_of(&[floor(), wall(2.0, 0.0, 1.5), wall(2.0, 2.5, 4.0)]);
+        let (split, report) = split(scene, 0.1);
+        assert_eq!(report.receivers, 1, "{report:?}");
+        assert_eq!(report.segments, 2);
+        assert_eq!(
+            report.extensions, 1,
+            "the two free ends meet: one extension"
+        );
+        assert_eq!(report.unseparated_edges, 0);
+        assert_sides_of_wall(&split, 2.0);
+        assert_no_t_junctions(&split, 0);
+        // Under the doorway (z in 1.5..2.5) no edge is a junction.
+        let floor = &split.instances[0];
+        for t in floor.triangles.clone() {
+            let tri = split.triangles[t as usize];
+            for k in 0..3 {
+                let (a, b) = (
+                    split.positions[tri[k] as usize],
+                    split.positions[tri[(k + 1) % 3] as usize],
+                );
+                let mid = 0.5 * (a + b);
+                let in_doorway = (mid.x - 2.0).abs() < 1e-6 && mid.z > 1.5 && mid.z < 2.5;
+                if in_doorway {
+                    assert!(!split.is_junction_edge(t, k));
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn a_wall_beside_the_floor_or_a_touching_point_cuts_nothing() {
+        // Off the floor (x = 5) and a tetrahedron touching it at one corner.
+        let tip = (
+            vec![
+                Vec3::new(2.0, 0.0, 2.0),
+                Vec3::new(1.0, 1.0, 1.0),
+                Vec3::new(3.0, 1.0, 1.0),
+                Vec3::new(2.0, 1.0, 3.0),
+            ],
+            vec![[0, 1, 2], [0, 2, 3], [0, 3, 1]],
+        );
+        let scene = scene_of(&[floor(), wall(5.0, 0.0, 4.0), tip]);
+        let triangles = scene.triangles.clone();
+        let (split, report) = split(scene, 0.1);
+        assert_eq!(report, JunctionReport::default());
+        assert_eq!(split.triangles, triangles);
+    }
+
+    #[test]
+    fn two_rooms_is_cut_along_every_junction_of_its_partition() {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/fixtures/two_rooms.gltf");
+        let (scene, _) = crate::scene::load(std::path::Path::new(path)).expect("fixture loads");
+        let area = |s: &Scene| -> f64 { (0..s.triangles.len()).map(|t| triangle_area(s, t)).sum() };
+        let before = area(&scene);
+        let (split, report) = split(scene, 1.0 / 16.0);
+        // Floor, and the shell's ceiling and side walls; nothing left whole or connected.
+        let cut: Vec<(u32, bool)> = split
+            .instances
+            .iter()
+            .filter(|i| !i.split.blends.is_empty())
+            .map(|i| (i.mesh, i.back_of.is_some()))
+            .collect();
+        assert_eq!(cut, [(0, false), (1, false)], "{report:?}");
+        assert_eq!(report.fallback_triangles, 0, "{report:?}");
+        assert_eq!(report.unseparated_edges, 0, "{report:?}");
+        assert_eq!(report.extensions, 1, "the doorway: {report:?}");
+        assert!((area(&split) - before).abs() < 1e-4 * before);
+        for i in 0..split.instances.len() {
+            assert_no_t_junctions(&split, i);
+        }
+        // Every floor triangle lies on one side of the wall at x = 0.
+        let floor = split
+            .instances
+            .iter()
+            .position(|i| i.mesh == 0)
+            .expect("floor");
+        for t in split.instances[floor].triangles.clone() {
+            let xs = split.triangles[t as usize].map(|v| split.positions[v as usize].x);
+            assert!(xs.iter().all(|&x| x <= 1e-6) || xs.iter().all(|&x| x >= -1e-6));
+        }
+    }
+}
