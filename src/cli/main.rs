@@ -339,6 +339,7 @@ impl BakeArgs {
             max_page_size: Some(self.atlas.max_page_size),
             padding: Some(self.atlas.padding),
             uv: Some(value_name(self.atlas.uv)),
+            no_split_junctions: Some(self.atlas.no_split_junctions),
             rays: self.rays,
             light_samples: self.light_samples,
             sky: Some(Rgb::Rgb(self.sky.to_array())),
