@@ -501,8 +501,10 @@ fn check_memory(scene: &scene::Scene, input: &Path, config: &BakeConfig) -> Resu
     let tpu = config.atlas.texels_per_unit as f64;
     let texels = area * tpu * tpu;
     let bytes = texels * (200.0 + 8.0 * config.transport.gather_rays as f64);
-    const LIMIT: f64 = 16.0 * (1u64 << 30) as f64;
-    if bytes > LIMIT || texels > 1.0e8 {
+    let limit = config
+        .max_memory
+        .map_or(16.0 * (1u64 << 30) as f64, |m| m as f64);
+    if bytes > limit || texels > 1.0e8 {
         return Err(Error::Option(format!(
             "{}: {:.0} m² of surface at {} texels per unit is about {:.1} M texels needing about {:.1} GiB; \
              lower --texels-per-unit or --rays",

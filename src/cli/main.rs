@@ -194,6 +194,11 @@ struct BakeArgs {
     /// Seed of the random sample streams (output depends on it, never on --threads).
     #[arg(long, default_value_t = 0)]
     seed: u64,
+    /// Memory the bake may use, e.g. 512M or 8G (binary units) [default: the memory available
+    /// when it starts]. A bake whose estimated peak exceeds it switches to the matrix-free
+    /// gather solver when that fits (automatic choice only), or is refused before any heavy work.
+    #[arg(long, value_name = "SIZE", value_parser = parse_memory)]
+    max_memory: Option<u64>,
     #[command(flatten)]
     run: RunArgs,
 }
@@ -236,6 +241,14 @@ fn parse_rgb(s: &str) -> Result<Vec3, String> {
         [r, g, b] => Ok(Vec3::new(r, g, b)),
         _ => Err(format!("expected R,G,B or a single value, got {s:?}")),
     }
+}
+
+/// A size in bytes: a number with an optional unit (K, M, G, T, with or without "iB"), binary.
+fn parse_memory(s: &str) -> Result<u64, String> {
+    parse_size::Config::new()
+        .with_binary()
+        .parse_size(s)
+        .map_err(|e| format!("{s:?}: {e} (expected e.g. 512M or 8G)"))
 }
 
 impl Quality {
@@ -314,6 +327,7 @@ impl BakeArgs {
             });
         }
         c.output.seams = !self.no_seams;
+        c.max_memory = self.max_memory;
         Ok(c)
     }
 }
