@@ -798,8 +798,13 @@ fn non_finite_outputs(out: &Path) -> Vec<String> {
             }
         }
         if name.ends_with(".gltf") || name.ends_with(".glb") {
-            match gltf::import(&path) {
-                Ok((doc, buffers, _)) => {
+            // Buffers only: images are copied from the input as they are, damaged or not.
+            let imported = gltf::Gltf::open(&path).and_then(|g| {
+                let buffers = gltf::import_buffers(&g.document, Some(out), g.blob.clone())?;
+                Ok((g.document, buffers))
+            });
+            match imported {
+                Ok((doc, buffers)) => {
                     for a in doc.accessors() {
                         if a.data_type() != gltf::accessor::DataType::F32 || a.sparse().is_some() {
                             continue;

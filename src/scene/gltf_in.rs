@@ -43,6 +43,7 @@ pub fn load(path: &Path) -> Result<(Scene, Source)> {
         dir: path.parent().unwrap_or(Path::new("")),
     };
     check::mesh_references(&files, &json)?;
+    check::image_sources(&files, &json)?;
 
     let root: gltf::json::Root = serde_json::from_value(json.clone())
         .map_err(|e| Error::invalid(path, format!("not a valid glTF document: {e}")))?;

@@ -59,6 +59,25 @@ pub(super) fn mesh_references(files: &Files, json: &Value) -> Result<()> {
     Ok(())
 }
 
+/// Where each image's data comes from: glTF requires exactly one of `uri` and `bufferView`, and a
+/// `mimeType` with a `bufferView` (the gltf crate unwraps both).
+pub(super) fn image_sources(files: &Files, json: &Value) -> Result<()> {
+    let images = json.get("images").and_then(Value::as_array);
+    for (i, image) in images.into_iter().flatten().enumerate() {
+        let has = |key: &str| image.get(key).is_some_and(|v| !v.is_null());
+        let problem = match (has("uri"), has("bufferView")) {
+            (false, false) => "has neither a uri nor a bufferView",
+            (true, true) => "has both a uri and a bufferView (glTF allows one)",
+            (false, true) if !has("mimeType") => {
+                "has a bufferView but no mimeType (glTF requires one)"
+            }
+            _ => continue,
+        };
+        return Err(files.invalid(format!("image {i} {problem}")));
+    }
+    Ok(())
+}
+
 /// Byte ranges: every buffer view lies inside its buffer, every accessor (and its sparse
 /// storage) inside its buffer view, with a stride no smaller than an element and a count of at
 /// least one. All in checked u64 arithmetic.
