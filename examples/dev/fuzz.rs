@@ -563,7 +563,9 @@ fn mutate_bytes(d: &mut Dice, m: &mut Model) -> String {
             let Some(bytes) = data.get_mut(at..at + size) else {
                 return format!("indices {a} element {element} outside its blob");
             };
-            bytes.copy_from_slice(&value.to_le_bytes()[..size]);
+            for (k, b) in bytes.iter_mut().enumerate() {
+                *b = value.to_le_bytes()[k % 4];
+            }
             set_blob(m, &label, data);
             format!("indices accessor {a} element {element} = {value}")
         }
@@ -1007,7 +1009,7 @@ fn main() {
     let seeds = load_seeds();
     let started = Instant::now();
     let scratch = tempfile::tempdir().unwrap();
-    let (mut cases, mut loaded, mut baked, mut slow) = (0u64, 0u64, 0u64, 0u64);
+    let (mut cases, mut loaded, mut baked, mut slow, mut skipped) = (0u64, 0, 0, 0, 0);
     let failures = Arc::new(Mutex::new(Vec::<String>::new()));
     let mut last_report = Instant::now();
     let mut case = args.first;
@@ -1019,24 +1021,34 @@ fn main() {
         {
             break;
         }
-        let mut d = Dice(Rng::new(args.seed, case, 0xF022));
-        let seed = &seeds[d.below(seeds.len())];
-        let mut model = seed.model.clone();
-        let mut log = vec![format!("seed {}", seed.name)];
-        let edits = *d.pick(&[1, 1, 1, 2, 2, 3]);
-        for _ in 0..edits {
-            let what = if d.chance(0.55) {
-                mutate_json(&mut d, &mut model)
-            } else {
-                mutate_bytes(&mut d, &mut model)
-            };
-            log.push(what);
-        }
         let dir = scratch.path().join(format!("case{case}"));
         let input_dir = dir.join("in");
         std::fs::create_dir_all(&input_dir).unwrap();
-        let input = write_case(&mut d, &model, &input_dir, &mut log);
-        let options = bake_options(&mut d);
+        let made = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            let mut d = Dice(Rng::new(args.seed, case, 0xF022));
+            let seed = &seeds[d.below(seeds.len())];
+            let mut model = seed.model.clone();
+            let mut log = vec![format!("seed {}", seed.name)];
+            let edits = *d.pick(&[1, 1, 1, 2, 2, 3]);
+            for _ in 0..edits {
+                let what = if d.chance(0.55) {
+                    mutate_json(&mut d, &mut model)
+                } else {
+                    mutate_bytes(&mut d, &mut model)
+                };
+                log.push(what);
+            }
+            let input = write_case(&mut d, &model, &input_dir, &mut log);
+            (input, log, bake_options(&mut d))
+        }));
+        // A bug of the fuzzer's own mutations (its panic is printed) skips the case, not the run.
+        let Ok((input, log, options)) = made else {
+            eprintln!("case {case}: skipped (the fuzzer's mutation panicked)");
+            skipped += 1;
+            std::fs::remove_dir_all(&dir).ok();
+            case += 1;
+            continue;
+        };
         let checked = run_case(&args, &input, &dir, &options);
         cases += 1;
         if args.verbose {
@@ -1097,7 +1109,7 @@ fn main() {
     }
     let failures = failures.lock().unwrap();
     println!(
-        "fuzz seed {} cases {}..{}: {cases} cases in {:.0}s ({loaded} loaded, {baked} baked, {slow} slower than {}s), {} failures",
+        "fuzz seed {} cases {}..{}: {cases} cases in {:.0}s ({loaded} loaded, {baked} baked, {slow} slower than {}s, {skipped} skipped), {} failures",
         args.seed,
         args.first,
         case,
