@@ -426,23 +426,30 @@ fn image_without_a_source_or_mime_type_is_an_error() {
     let text = std::fs::read_to_string(fixture("textured.gltf")).unwrap();
     let json: Value = serde_json::from_str(&text).unwrap();
     assert!(json["images"][0]["bufferView"].is_u64());
-    let edits: [(&str, fn(&mut Value)); 3] = [
-        ("image 0 has a bufferView but no mimeType", |image| {
-            image.as_object_mut().unwrap().remove("mimeType");
-        }),
-        ("image 0 has neither a uri nor a bufferView", |image| {
-            image.as_object_mut().unwrap().remove("bufferView");
-        }),
-        ("image 0 has both a uri and a bufferView", |image| {
-            image["uri"] = json!("checker.png");
-        }),
-    ];
-    for (needle, edit) in edits {
+    let refused = |edit: &dyn Fn(&mut serde_json::Map<String, Value>), needle: &str| {
         let mut case = Case {
             json: json.clone(),
             bin: Vec::new(),
         };
-        edit(&mut case.json["images"][0]);
+        edit(case.json["images"][0].as_object_mut().unwrap());
         case.refused(&[needle]);
-    }
+    };
+    refused(
+        &|image| {
+            image.remove("mimeType");
+        },
+        "image 0 has a bufferView but no mimeType",
+    );
+    refused(
+        &|image| {
+            image.remove("bufferView");
+        },
+        "image 0 has neither a uri nor a bufferView",
+    );
+    refused(
+        &|image| {
+            image.insert("uri".into(), json!("checker.png"));
+        },
+        "image 0 has both a uri and a bufferView",
+    );
 }

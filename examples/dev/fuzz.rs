@@ -150,7 +150,7 @@ fn unpack_glb(bytes: &[u8]) -> Option<Model> {
 
 fn pack_glb(json: &[u8], bin: Option<&[u8]>) -> Vec<u8> {
     let pad = |v: &mut Vec<u8>, byte: u8| {
-        while v.len() % 4 != 0 {
+        while !v.len().is_multiple_of(4) {
             v.push(byte);
         }
     };
@@ -183,7 +183,7 @@ impl Dice {
         if n == 0 {
             0
         } else {
-            (self.0.next_u32() as u64 * n as u64 >> 32) as usize
+            ((self.0.next_u32() as u64 * n as u64) >> 32) as usize
         }
     }
     fn chance(&mut self, p: f32) -> bool {
@@ -273,8 +273,14 @@ fn bad_value(d: &mut Dice, root: &Value) -> Value {
         15 => json!(i64::MIN),
         16 => json!(1_000_000_000u64),
         17 => json!(1e39), // beyond f32: infinity once read as one
-        18 => json!(len(*d.pick(&arrays))),
-        19 => json!(len(*d.pick(&arrays)).saturating_sub(1)),
+        18 => {
+            let array = *d.pick(&arrays);
+            json!(len(array))
+        }
+        19 => {
+            let array = *d.pick(&arrays);
+            json!(len(array).saturating_sub(1))
+        }
         20 => json!([1e39, -1e39, 0.0]),
         _ => json!(-3.5),
     }

@@ -174,12 +174,11 @@ pub fn fit(
     let with_pilot = |e: MemoryEstimate| pilot_peak.map_or(e, |p| larger(p, e));
     let stored = with_pilot(sizes.estimate(config.technique, rays, held, held_rays));
     let gather = with_pilot(sizes.estimate(Technique::Gather, rays, held, held_rays));
-    if let (Some(plan), Some(auto)) = (plan, config.auto) {
-        if let Some(message) =
+    if let (Some(plan), Some(auto)) = (plan, config.auto)
+        && let Some(message) =
             plan::fit_memory(&stored, &gather, limit as f64, config, plan, &auto.keep)
-        {
-            progress.warn(&format!("{}: {message}", input.display()));
-        }
+    {
+        progress.warn(&format!("{}: {message}", input.display()));
     }
     let chosen = if config.technique == Technique::Gather {
         gather
