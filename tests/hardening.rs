@@ -453,3 +453,27 @@ fn image_without_a_source_or_mime_type_is_an_error() {
         "image 0 has both a uri and a bufferView",
     );
 }
+
+/// Found by the fuzzer (seed 0, case 777: a node moved to another mesh, leaving a mesh with an
+/// infinite coordinate unused): data the bake does not read is copied to the output, where a
+/// non-finite float breaks the glTF validator. Every float accessor is checked.
+#[test]
+fn non_finite_float_in_an_unused_accessor_is_an_error() {
+    let mut case = Case::floor();
+    let offset = case.bin.len();
+    case.bin.extend(
+        [1.0f32, f32::INFINITY, 0.0]
+            .iter()
+            .flat_map(|v| v.to_le_bytes()),
+    );
+    case.json["buffers"][0]["byteLength"] = json!(case.bin.len());
+    let views = case.json["bufferViews"].as_array_mut().unwrap();
+    views.push(json!({"buffer": 0, "byteOffset": offset, "byteLength": 12}));
+    let view = views.len() - 1;
+    let accessors = case.json["accessors"].as_array_mut().unwrap();
+    accessors.push(json!({"bufferView": view, "componentType": 5126, "count": 1, "type": "VEC3"}));
+    let accessor = accessors.len() - 1;
+    case.refused(&[&format!(
+        "accessor {accessor}: element 0 is not finite (glTF requires finite floats)"
+    )]);
+}

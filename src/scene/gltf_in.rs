@@ -65,6 +65,7 @@ pub fn load(path: &Path) -> Result<(Scene, Source)> {
     loader.load_scene()?;
     let mut scene = loader.scene;
     textures::add_materials(&files, &document, &json, &buffers, &mut scene)?;
+    check::finite_floats(&files, &document, &buffers)?;
     if json_list_contains(&json, "extensionsUsed", "KHR_texture_transform") {
         warn(
             &mut scene,
