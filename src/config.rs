@@ -273,6 +273,9 @@ pub struct BakeConfig {
     /// Choose density, method, rays and tolerance from the scene for a target error
     /// ([`crate::plan`]); `None` uses the settings above as they are.
     pub auto: Option<AutoParams>,
+    /// Bytes the bake may use at its peak ([`crate::plan::memory_estimate`]); `None`: the
+    /// memory the machine has available when the bake starts.
+    pub max_memory: Option<u64>,
 }
 
 impl BakeConfig {
@@ -312,6 +315,7 @@ impl BakeConfig {
                 seams: true,
             },
             auto: None,
+            max_memory: None,
         }
     }
     /// Fast look at the lighting: coarse texels, few rays.

@@ -1,5 +1,6 @@
 //! Library errors, sorted by fault (as exrs does): the input is invalid, the input uses something
-//! lightbake does not support, the file system failed, or the caller cancelled.
+//! lightbake does not support, the bake would not fit in memory, the file system failed, or the
+//! caller cancelled.
 
 use std::path::PathBuf;
 
@@ -25,6 +26,11 @@ pub enum Error {
         #[source]
         source: std::io::Error,
     },
+
+    /// The bake would need more memory than it may use (`BakeConfig::max_memory`); refused
+    /// before any heavy work.
+    #[error("{}: {message}", path.display())]
+    Memory { path: PathBuf, message: String },
 
     /// The caller's [`crate::Progress::aborted`] returned true.
     #[error("aborted")]

@@ -50,10 +50,12 @@
 //!                                    rows; gather (matrix-free) and hierarchical make their own
 //!                                    transport as they iterate
 //!   lightmap, output
-//!   plan                             pure decisions of the automatic choice (no solving)
+//!   plan                             pure decisions of the automatic choice (no solving),
+//!                                    the estimate of a bake's peak memory
 //!   bake                             prepare/compute/write; `light`: the one dispatch of a
 //!                                    Technique to transport and solver; `pilot`: the pilot runs
-//!                                    and the final bake that reuses them
+//!                                    and the final bake that reuses them; `memory`: the
+//!                                    estimate against `--max-memory` (refuse, or gather)
 //!   build                            many scenes from a manifest: `bake` options by name, a
 //!                                    content-addressed cache, a JSON report, the error gate
 //!   reference, render                beside the pipeline (reference uses bake's prepare)

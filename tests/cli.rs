@@ -88,6 +88,7 @@ fn help_explains_every_option() {
         "--quiet",
         "--tolerance",
         "--solver",
+        "--max-memory",
     ] {
         assert!(help.contains(flag), "{flag} missing from help");
     }
@@ -176,6 +177,11 @@ fn absurd_options_are_refused() {
         &fixture("cornell_box.gltf"),
         &["--max-page-size", "0"],
         "page size",
+    );
+    fails(
+        &fixture("cornell_box.gltf"),
+        &["--max-memory", "lots"],
+        "expected e.g. 512M or 8G",
     );
 }
 

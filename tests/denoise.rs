@@ -158,7 +158,9 @@ fn keeps_hard_shadow_edges() {
         &mut denoised.lightmap,
         &noise,
         &DenoiseParams::default(),
-    );
+        &lightbake::NoProgress,
+    )
+    .unwrap();
     let (blurred, _) = change_outside_edge_band(&denoised, &raw.lightmap, EDGE_BAND);
     assert!(
         blurred > 0.06,

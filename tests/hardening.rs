@@ -315,3 +315,165 @@ fn scene_with_nothing_to_bake_is_written_through() {
         assert!(scene.triangles.is_empty());
     }
 }
+
+/// Runs `lightbake bake` on a fixture into `<dir>/out` with `extra` options.
+fn bake_fixture(name: &str, dir: &Path, extra: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_lightbake"))
+        .args(["bake", fixture(name).to_str().unwrap(), "-o"])
+        .arg(dir.join("out"))
+        .args(extra)
+        .output()
+        .expect("run lightbake")
+}
+
+/// A bake that needs more memory than `--max-memory` is refused before any heavy work, with
+/// the estimate and the limit in the message, and leaves nothing behind.
+#[test]
+fn bake_beyond_the_memory_limit_is_refused() {
+    let dir = scratch();
+    let start = std::time::Instant::now();
+    let options = ["--no-auto", "--quality", "high", "--max-memory", "64M"];
+    let o = bake_fixture("cornell_box.gltf", dir.path(), &options);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    for needle in [
+        "cornell_box.gltf: the bake would need about",
+        "above the memory limit 64.0 MiB",
+        "rows ",
+        "use --solver gather",
+    ] {
+        assert!(
+            err.contains(needle),
+            "stderr should mention {needle:?}: {err}"
+        );
+    }
+    // High quality stores 1024 rays for each of about 7 700 texels: 60 MiB of entries, and
+    // about twice that while they are built.
+    let estimate: f64 = err
+        .split("need about ")
+        .nth(1)
+        .and_then(|s| s.split(" MiB").next())
+        .and_then(|s| s.parse().ok())
+        .unwrap_or_else(|| panic!("no estimate in MiB: {err}"));
+    assert!(estimate > 120.0, "{err}");
+    // Refused before the transport (after loading, 0.03 s): the whole bake takes about 3 s.
+    assert!(start.elapsed().as_secs_f64() < 1.0, "{:?}", start.elapsed());
+    let out = dir.path().join("out");
+    assert!(!out.exists() || list_files(&out).is_empty());
+}
+
+/// The estimated peak the automatic choice reports with `--explain`, in MiB.
+fn explained_peak(stdout: &str) -> f64 {
+    stdout
+        .split("memory: estimated peak ")
+        .nth(1)
+        .and_then(|s| s.split(" MiB").next())
+        .and_then(|s| s.parse().ok())
+        .unwrap_or_else(|| panic!("no memory estimate in --explain: {stdout}"))
+}
+
+/// Just below the stored rows' estimate, the automatic choice switches to the matrix-free
+/// gather solver (a warning and `--explain` say so); far below, the bake is refused.
+#[test]
+fn automatic_choice_switches_to_gather_when_rows_do_not_fit() {
+    // A 2% target at draft density: a final bake at K = 192 follows the pilot.
+    let options = ["--quality", "draft", "--target-error", "0.02", "--explain"];
+    let dir = scratch();
+    let o = bake_fixture("cornell_box.gltf", dir.path(), &options);
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(out.contains("montecarlo/jacobi"), "{out}");
+    let peak = explained_peak(&out);
+
+    let limit = format!("{}K", ((peak - 1.0) * 1024.0) as u64);
+    let dir = scratch();
+    let o = bake_fixture(
+        "cornell_box.gltf",
+        dir.path(),
+        &[&options[..], &["--max-memory", &limit]].concat(),
+    );
+    let (out, err) = (
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr),
+    );
+    assert!(o.status.success(), "{err}");
+    assert!(
+        err.contains("warning") && err.contains("solver gather: the estimated peak"),
+        "{err}"
+    );
+    assert!(
+        out.contains("  - solver gather: the estimated peak"),
+        "{out}"
+    );
+    assert!(out.contains("montecarlo/gather"), "{out}");
+
+    let dir = scratch();
+    let o = bake_fixture(
+        "cornell_box.gltf",
+        dir.path(),
+        &[&options[..], &["--max-memory", "4M"]].concat(),
+    );
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(err.contains("above the memory limit 4.00 MiB"), "{err}");
+}
+
+/// Found by the fuzzer (seed 100, case 4779): an image in a bufferView without its mimeType
+/// reached an `unwrap` in the gltf crate (exit 101). glTF requires the mimeType there, and
+/// exactly one of uri and bufferView.
+#[test]
+fn image_without_a_source_or_mime_type_is_an_error() {
+    let text = std::fs::read_to_string(fixture("textured.gltf")).unwrap();
+    let json: Value = serde_json::from_str(&text).unwrap();
+    assert!(json["images"][0]["bufferView"].is_u64());
+    let refused = |edit: &dyn Fn(&mut serde_json::Map<String, Value>), needle: &str| {
+        let mut case = Case {
+            json: json.clone(),
+            bin: Vec::new(),
+        };
+        edit(case.json["images"][0].as_object_mut().unwrap());
+        case.refused(&[needle]);
+    };
+    refused(
+        &|image| {
+            image.remove("mimeType");
+        },
+        "image 0 has a bufferView but no mimeType",
+    );
+    refused(
+        &|image| {
+            image.remove("bufferView");
+        },
+        "image 0 has neither a uri nor a bufferView",
+    );
+    refused(
+        &|image| {
+            image.insert("uri".into(), json!("checker.png"));
+        },
+        "image 0 has both a uri and a bufferView",
+    );
+}
+
+/// Found by the fuzzer (seed 0, case 777: a node moved to another mesh, leaving a mesh with an
+/// infinite coordinate unused): data the bake does not read is copied to the output, where a
+/// non-finite float breaks the glTF validator. Every float accessor is checked.
+#[test]
+fn non_finite_float_in_an_unused_accessor_is_an_error() {
+    let mut case = Case::floor();
+    let offset = case.bin.len();
+    case.bin.extend(
+        [1.0f32, f32::INFINITY, 0.0]
+            .iter()
+            .flat_map(|v| v.to_le_bytes()),
+    );
+    case.json["buffers"][0]["byteLength"] = json!(case.bin.len());
+    let views = case.json["bufferViews"].as_array_mut().unwrap();
+    views.push(json!({"buffer": 0, "byteOffset": offset, "byteLength": 12}));
+    let view = views.len() - 1;
+    let accessors = case.json["accessors"].as_array_mut().unwrap();
+    accessors.push(json!({"bufferView": view, "componentType": 5126, "count": 1, "type": "VEC3"}));
+    let accessor = accessors.len() - 1;
+    case.refused(&[&format!(
+        "accessor {accessor}: element 0 is not finite (glTF requires finite floats)"
+    )]);
+}

@@ -173,3 +173,70 @@ fn a_failed_bake_leaves_nothing_behind() {
     assert!(matches!(r, Err(lightbake::Error::Aborted)), "{r:?}");
     assert!(list_files(&out).is_empty());
 }
+
+/// A caller that has cancelled: every check point sees it.
+struct Cancelled;
+
+impl lightbake::Progress for Cancelled {
+    fn aborted(&self) -> bool {
+        true
+    }
+}
+
+/// Validity and the denoiser, the long per-texel stages outside transport, stop on a cancelled
+/// run (a SIGINT or SIGTERM in the CLI) instead of finishing their loop; values stay unchanged.
+#[test]
+fn validity_and_denoise_stop_when_cancelled() {
+    use lightbake::lightmap::denoise::{DenoiseParams, denoise};
+    use lightbake::texels::validity::{ValidityParams, fix};
+    let mut config = quick();
+    config.transport.validity = false;
+    let mut p = lightbake::prepare(
+        &fixture("cornell_box.gltf"),
+        &config,
+        &lightbake::NoProgress,
+    )
+    .unwrap();
+    let before = p.texels.position.clone();
+    let r = fix(
+        &mut p.texels,
+        &p.scene,
+        &p.tracer,
+        &ValidityParams::default(),
+        &Cancelled,
+    );
+    assert!(matches!(r, Err(lightbake::Error::Aborted)), "{r:?}");
+    assert_eq!(p.texels.position, before);
+    let r = fix(
+        &mut p.texels,
+        &p.scene,
+        &p.tracer,
+        &ValidityParams::default(),
+        &lightbake::NoProgress,
+    );
+    assert!(r.unwrap().moved > 0, "the control moves sample points");
+
+    let mut values: Vec<glam::Vec3> = (0..p.texels.len())
+        .map(|i| glam::Vec3::splat((i % 7) as f32))
+        .collect();
+    let original = values.clone();
+    let noise = vec![1.0; values.len()];
+    let r = denoise(
+        &p.texels,
+        &mut values,
+        &noise,
+        &DenoiseParams::default(),
+        &Cancelled,
+    );
+    assert!(matches!(r, Err(lightbake::Error::Aborted)), "{r:?}");
+    assert_eq!(values, original);
+    denoise(
+        &p.texels,
+        &mut values,
+        &noise,
+        &DenoiseParams::default(),
+        &lightbake::NoProgress,
+    )
+    .unwrap();
+    assert_ne!(values, original, "the control filters");
+}

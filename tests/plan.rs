@@ -313,3 +313,71 @@ fn punctual_resolution_error_is_sampled() {
     assert!(edges.sampled > 0.03, "{edges:?}");
     assert!(edges.border_share < 0.05, "{edges:?}");
 }
+
+/// The memory estimate grows with what is stored, and the gather switch respects a solver the
+/// user fixed.
+#[test]
+fn memory_estimate_and_the_gather_switch() {
+    use lightbake::config::{Keep, Technique};
+    use lightbake::plan::{self, MemoryInputs, Plan};
+    let inputs = MemoryInputs {
+        input_bytes: 1e6,
+        vertices: 1e4,
+        triangles: 2e4,
+        texels: 1e5,
+        page_texels: 2e5,
+        held_entries: 0.0,
+        built_entries: 1e5 * 256.0,
+        held_runs: 0.0,
+        technique: Technique::DEFAULT,
+    };
+    let stored = plan::memory_estimate(&inputs);
+    let parts = stored.scene + stored.bvh + stored.texels + stored.pages + stored.rows;
+    assert_eq!(stored.total(), parts);
+    // 25.6 M entries of 8 bytes, built in chunks then concatenated.
+    assert!(stored.rows >= 8.0 * 25.6e6 * 2.0, "{stored:?}");
+    let gather = plan::memory_estimate(&MemoryInputs {
+        built_entries: 0.0,
+        technique: Technique::Gather,
+        ..inputs
+    });
+    assert!(gather.total() < stored.total() / 2.0);
+    let southwell = plan::memory_estimate(&MemoryInputs {
+        technique: Technique::from_names("montecarlo", "southwell").unwrap(),
+        ..inputs
+    });
+    assert!(southwell.rows > stored.rows, "the transposed copy counts");
+
+    let limit = (gather.total() + stored.total()) / 2.0;
+    let mut config = lightbake::BakeConfig::medium();
+    let mut plan = Plan::default();
+    let message = plan::fit_memory(
+        &stored,
+        &gather,
+        limit,
+        &mut config,
+        &mut plan,
+        &Keep::default(),
+    );
+    assert!(message.is_some());
+    assert_eq!(config.technique, Technique::Gather);
+    let mut config = lightbake::BakeConfig::medium();
+    let keep = Keep {
+        solver: true,
+        ..Keep::default()
+    };
+    let message = plan::fit_memory(&stored, &gather, limit, &mut config, &mut plan, &keep);
+    assert!(message.is_none());
+    assert_eq!(config.technique, Technique::DEFAULT);
+    // Nothing fits: no switch either (the caller refuses).
+    let message = plan::fit_memory(
+        &stored,
+        &gather,
+        1.0,
+        &mut config,
+        &mut plan,
+        &Keep::default(),
+    );
+    assert!(message.is_none());
+    assert_eq!(config.technique, Technique::DEFAULT);
+}

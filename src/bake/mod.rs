@@ -5,6 +5,7 @@
 //! solution through the one dispatch of [`light`], denoise, pages), then [`write`].
 
 pub mod light;
+pub mod memory;
 pub mod pilot;
 
 use std::path::{Path, PathBuf};
@@ -275,7 +276,14 @@ fn prepare_loaded(
     if let (Some(plan), Some(auto)) = (&mut plan, config.auto) {
         plan::choose_density(&scene, &mut config, plan, &auto.keep);
     }
-    check_memory(&scene, input, &config)?;
+    // The limit is read once: the machine's available memory changes as the bake allocates.
+    config.max_memory = Some(memory::limit(&config));
+    memory::check(
+        input,
+        &memory::Sizes::predicted(&scene, &source, &config),
+        &config,
+        config.max_memory.unwrap_or(u64::MAX),
+    )?;
     // Receivers are cut at the density's texel size, before the tracer sees their triangles.
     let mut junctions = None;
     let scene = if config.atlas.split_junctions
@@ -364,7 +372,7 @@ fn lay_out(
             seed: config.transport.seed,
             ..Default::default()
         };
-        texels::validity::fix(&mut texels, scene, tracer, &params)
+        texels::validity::fix(&mut texels, scene, tracer, &params, progress)?
     } else {
         Default::default()
     };
@@ -387,6 +395,10 @@ fn compute_prepared(mut prepared: Prepared, progress: &dyn Progress) -> Result<B
         prepared.stages.clone(),
     );
 
+    let input = prepared.source.path.as_path();
+    let sizes = memory::Sizes::counted(&prepared.scene, &prepared.source, &prepared.texels);
+    let limit = config.max_memory.unwrap_or(u64::MAX);
+    memory::check(input, &sizes, &config, limit)?;
     let mut pilot = None;
     if let (Some(plan), Some(auto)) = (&mut plan, config.auto) {
         let t = Instant::now();
@@ -394,6 +406,15 @@ fn compute_prepared(mut prepared: Prepared, progress: &dyn Progress) -> Result<B
         config.validate()?;
         timed(&mut stages, "plan", t);
     }
+    memory::fit(
+        input,
+        &sizes,
+        &mut config,
+        plan.as_mut(),
+        pilot.as_ref().map(|p| (p.gather_rays, p.enough)),
+        limit,
+        progress,
+    )?;
 
     let t = Instant::now();
     // With a plan, the pilot bakes are part of the result (a ray-weighted mean).
@@ -436,7 +457,13 @@ fn compute_prepared(mut prepared: Prepared, progress: &dyn Progress) -> Result<B
             light_samples,
             ..config.transport.clone()
         };
-        lightmap::denoise::denoise_bake(&texels, &transport, &mut lightmap, &noise_model);
+        lightmap::denoise::denoise_bake(
+            &texels,
+            &transport,
+            &mut lightmap,
+            &noise_model,
+            progress,
+        )?;
     }
     timed(&mut stages, "denoise", t);
     let t = Instant::now();
@@ -444,12 +471,14 @@ fn compute_prepared(mut prepared: Prepared, progress: &dyn Progress) -> Result<B
     let mut pages = LightmapPages::from_texels(&texels, &lightmap);
     lightmap::dilate(&mut pages, config.atlas.padding.max(2) * 2);
     timed(&mut stages, "dilate", t);
+    check_aborted(progress)?;
     let t = Instant::now();
     let seams = config
         .output
         .seams
         .then(|| lightmap::seams::stitch_bake(&scene, &atlas, &mut pages, &Default::default()));
     timed(&mut stages, "seams", t);
+    check_aborted(progress)?;
 
     Ok(Baked {
         scene,
@@ -564,28 +593,6 @@ fn refuse_overwriting_input(input: &Path, out_dir: &Path) -> Result<()> {
                 input.display()
             )));
         }
-    }
-    Ok(())
-}
-
-/// Texel budget: about 200 bytes per texel in the pipeline plus 8 bytes per gathering ray of
-/// form-factor row; refuse densities that would not fit before allocating anything.
-fn check_memory(scene: &scene::Scene, input: &Path, config: &BakeConfig) -> Result<()> {
-    let area = plan::surface_area(scene);
-    let tpu = config.atlas.texels_per_unit as f64;
-    let texels = area * tpu * tpu;
-    let bytes = texels * (200.0 + 8.0 * config.transport.gather_rays as f64);
-    const LIMIT: f64 = 16.0 * (1u64 << 30) as f64;
-    if bytes > LIMIT || texels > 1.0e8 {
-        return Err(Error::Option(format!(
-            "{}: {:.0} m² of surface at {} texels per unit is about {:.1} M texels needing about {:.1} GiB; \
-             lower --texels-per-unit or --rays",
-            input.display(),
-            area,
-            tpu,
-            texels * 1e-6,
-            bytes / (1u64 << 30) as f64
-        )));
     }
     Ok(())
 }

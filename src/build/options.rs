@@ -41,6 +41,8 @@ pub struct Options {
     pub no_seams: Option<bool>,
     pub exposure: Option<f32>,
     pub seed: Option<u64>,
+    /// Memory the bake may use, e.g. `"512M"`, `"8G"` (binary units) or bytes.
+    pub max_memory: Option<String>,
 }
 
 /// A colour given as one value or three.
@@ -133,8 +135,20 @@ impl Options {
             });
         }
         c.output.seams = !self.no_seams.unwrap_or(false);
+        if let Some(size) = &self.max_memory {
+            c.max_memory =
+                Some(parse_memory(size).map_err(|e| Error::Option(format!("max-memory {e}")))?);
+        }
         Ok(c)
     }
+}
+
+/// A memory size as `--max-memory` takes it: `512M`, `8G` (binary units) or bytes.
+pub fn parse_memory(s: &str) -> std::result::Result<u64, String> {
+    parse_size::Config::new()
+        .with_binary()
+        .parse_size(s)
+        .map_err(|e| format!("{s:?}: {e} (expected e.g. 512M or 8G)"))
 }
 
 fn expected(option: &str, value: &str, names: &[&str]) -> Error {

@@ -205,6 +205,11 @@ struct BakeArgs {
     /// Seed of the random sample streams (output depends on it, never on --threads).
     #[arg(long, default_value_t = 0)]
     seed: u64,
+    /// Memory the bake may use, e.g. 512M or 8G (binary units) [default: the memory available
+    /// when it starts]. A bake whose estimated peak exceeds it switches to the matrix-free
+    /// gather solver when that fits (automatic choice only), or is refused before any heavy work.
+    #[arg(long, value_name = "SIZE", value_parser = lightbake::build::options::parse_memory)]
+    max_memory: Option<u64>,
     #[command(flatten)]
     gate: GateArgs,
     #[command(flatten)]
@@ -296,6 +301,8 @@ fn parse_rgb(s: &str) -> Result<Vec3, String> {
     }
 }
 
+/// A size in bytes: a number with an optional unit (K, M, G, T, with or without "iB"), binary.
+
 impl Quality {
     fn preset(self) -> BakeConfig {
         match self {
@@ -355,6 +362,7 @@ impl BakeArgs {
             no_seams: Some(self.no_seams),
             exposure: Some(self.exposure),
             seed: Some(self.seed),
+            max_memory: self.max_memory.map(|bytes| bytes.to_string()),
         }
     }
 

@@ -48,6 +48,7 @@
 //! a pure function of the input, computed in parallel.
 
 use std::f32::consts::PI;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 use glam::{DMat3, DVec3, Vec3};
 use rayon::prelude::*;
@@ -55,6 +56,7 @@ use rayon::prelude::*;
 use crate::config::TransportParams;
 use crate::texels::{NO_TEXEL, Texels};
 use crate::transport::Transport;
+use crate::{Error, Progress, Result};
 
 /// Filter settings (see the table in the module docs).
 #[derive(Clone, Debug)]
@@ -106,7 +108,8 @@ pub fn denoise_bake(
     transport: &Transport,
     lightmap: &mut [Vec3],
     params: &TransportParams,
-) {
+    progress: &dyn Progress,
+) -> Result<()> {
     // Without emitters or sky, direct light is punctual only, and that is exact.
     let sampled_direct =
         params.sky.max_element() > 0.0 || texels.emission.iter().any(|e| e.max_element() > 0.0);
@@ -127,12 +130,25 @@ pub fn denoise_bake(
             expected_noise(v - direct, direct, params.gather_rays, light_samples)
         })
         .collect();
-    denoise(texels, lightmap, &noise, &DenoiseParams::default());
+    denoise(
+        texels,
+        lightmap,
+        &noise,
+        &DenoiseParams::default(),
+        progress,
+    )
 }
 
 /// Filters `values` (indexed like `texels`) in place; `noise[i]` is [`expected_noise`] of texel
 /// `i`. Invalid texels (`texels.invalid`) are neither read nor changed: fill them afterwards.
-pub fn denoise(texels: &Texels, values: &mut [Vec3], noise: &[f32], params: &DenoiseParams) {
+/// Stops with [`Error::Aborted`] (values unchanged) soon after `progress` is aborted.
+pub fn denoise(
+    texels: &Texels,
+    values: &mut [Vec3],
+    noise: &[f32],
+    params: &DenoiseParams,
+    progress: &dyn Progress,
+) -> Result<()> {
     assert_eq!(values.len(), texels.len());
     assert_eq!(noise.len(), texels.len());
     let mut valid = vec![true; texels.len()];
@@ -140,9 +156,15 @@ pub fn denoise(texels: &Texels, values: &mut [Vec3], noise: &[f32], params: &Den
         valid[i as usize] = false;
     }
     let input: &[Vec3] = values;
+    let aborted = AtomicBool::new(false);
     let filtered: Vec<Vec3> = (0..texels.len())
         .into_par_iter()
         .map(|i| {
+            // Once per texel: a filter window of tens of texels each, so the check costs nothing.
+            if aborted.load(Ordering::Relaxed) || progress.aborted() {
+                aborted.store(true, Ordering::Relaxed);
+                return input[i];
+            }
             if valid[i] {
                 filter_texel(texels, input, noise, &valid, params, i)
             } else {
@@ -150,7 +172,11 @@ pub fn denoise(texels: &Texels, values: &mut [Vec3], noise: &[f32], params: &Den
             }
         })
         .collect();
+    if aborted.into_inner() {
+        return Err(Error::Aborted);
+    }
     values.copy_from_slice(&filtered);
+    Ok(())
 }
 
 fn filter_texel(
@@ -247,6 +273,7 @@ fn filter_texel(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::NoProgress;
     use crate::atlas::PageSize;
 
     /// A `w × h` flat chart on y = 0 (texel size 0.1), facing up.
@@ -290,10 +317,10 @@ mod tests {
         };
         let before = rms(&v);
         let noise = vec![0.12; t.len()];
-        denoise(&t, &mut v, &noise, &DenoiseParams::default());
+        denoise(&t, &mut v, &noise, &DenoiseParams::default(), &NoProgress).unwrap();
         assert!(rms(&v) < before / 2.0, "{} -> {}", before, rms(&v));
         let mut c = vec![Vec3::splat(2.0); t.len()];
-        denoise(&t, &mut c, &noise, &DenoiseParams::default());
+        denoise(&t, &mut c, &noise, &DenoiseParams::default(), &NoProgress).unwrap();
         assert!(c.iter().all(|x| (x.x - 2.0).abs() < 1e-5));
     }
 
@@ -303,7 +330,7 @@ mod tests {
         let step = |i: usize| if t.xy[i][0] < 8 { 1.0 } else { 0.0 };
         let mut v: Vec<Vec3> = (0..t.len()).map(|i| Vec3::splat(step(i))).collect();
         let noise: Vec<f32> = (0..t.len()).map(|i| 0.1 * step(i)).collect();
-        denoise(&t, &mut v, &noise, &DenoiseParams::default());
+        denoise(&t, &mut v, &noise, &DenoiseParams::default(), &NoProgress).unwrap();
         for (i, x) in v.iter().enumerate() {
             assert!((x.x - step(i)).abs() < 0.01, "texel {:?}: {}", t.xy[i], x.x);
         }
@@ -328,7 +355,14 @@ mod tests {
         };
         let mut v: Vec<Vec3> = (0..t.len()).map(|i| Vec3::splat(region(i))).collect();
         // Noise so large the range kernel would mix everything.
-        denoise(&t, &mut v, &vec![100.0; t.len()], &DenoiseParams::default());
+        denoise(
+            &t,
+            &mut v,
+            &vec![100.0; t.len()],
+            &DenoiseParams::default(),
+            &NoProgress,
+        )
+        .unwrap();
         for (i, x) in v.iter().enumerate() {
             assert_eq!(x.x, region(i), "texel {:?}", t.xy[i]);
         }

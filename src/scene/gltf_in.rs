@@ -43,6 +43,7 @@ pub fn load(path: &Path) -> Result<(Scene, Source)> {
         dir: path.parent().unwrap_or(Path::new("")),
     };
     check::mesh_references(&files, &json)?;
+    check::image_sources(&files, &json)?;
 
     let root: gltf::json::Root = serde_json::from_value(json.clone())
         .map_err(|e| Error::invalid(path, format!("not a valid glTF document: {e}")))?;
@@ -64,6 +65,7 @@ pub fn load(path: &Path) -> Result<(Scene, Source)> {
     loader.load_scene()?;
     let mut scene = loader.scene;
     textures::add_materials(&files, &document, &json, &buffers, &mut scene)?;
+    check::finite_floats(&files, &document, &buffers)?;
     if json_list_contains(&json, "extensionsUsed", "KHR_texture_transform") {
         warn(
             &mut scene,

@@ -37,6 +37,8 @@
 //! rays jitter within the candidate cell around its new point (`Texels::jitter` = 1/G), not
 //! over the whole footprint, which would start some of them back inside the solid.
 
+use std::sync::atomic::{AtomicBool, Ordering};
+
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 
@@ -45,6 +47,7 @@ use super::cuts::{self, page_neighbours};
 use crate::sampling::{Rng, cosine_hemisphere, frame, hammersley};
 use crate::scene::Scene;
 use crate::trace::Tracer;
+use crate::{Error, Progress, Result};
 
 /// Random-stream purpose of the probe directions (distinct from the transport's streams).
 const PURPOSE: u64 = 0x7a11_d17e;
@@ -86,20 +89,33 @@ pub struct ValidityReport {
 
 /// Moves sample points out of geometry, records invalid texels in `texels.invalid`, then keeps
 /// the samples of texels another surface divides on one side (`cuts::divide`).
+/// Stops with [`Error::Aborted`] soon after `progress` is aborted.
 pub fn fix(
     texels: &mut Texels,
     scene: &Scene,
     tracer: &Tracer,
     params: &ValidityParams,
-) -> ValidityReport {
+    progress: &dyn Progress,
+) -> Result<ValidityReport> {
     let rays = params.rays.max(1);
     let grid = params.grid.max(1);
     let limit = (MAX_BACK * rays as f32) as u32;
     let texels_ref = &*texels;
+    let aborted = AtomicBool::new(false);
     let outcome: Vec<(Option<Vec3>, bool)> = (0..texels.len())
         .into_par_iter()
-        .map(|i| probe_texel(texels_ref, tracer, i, rays, grid, limit, params.seed))
+        .map(|i| {
+            // Once per texel: a few dozen rays each, so the check costs nothing.
+            if aborted.load(Ordering::Relaxed) || progress.aborted() {
+                aborted.store(true, Ordering::Relaxed);
+                return (None, false);
+            }
+            probe_texel(texels_ref, tracer, i, rays, grid, limit, params.seed)
+        })
         .collect();
+    if aborted.into_inner() {
+        return Err(Error::Aborted);
+    }
     let mut report = ValidityReport::default();
     texels.invalid.clear();
     for (i, (moved, invalid)) in outcome.into_iter().enumerate() {
@@ -118,7 +134,7 @@ pub fn fix(
     let divided = cuts::divide(texels, scene, tracer, grid);
     report.moved += divided.moved;
     report.divided = divided.divided;
-    report
+    Ok(report)
 }
 
 /// (new position if moved, invalid) for texel `i`.

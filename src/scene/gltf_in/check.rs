@@ -59,6 +59,63 @@ pub(super) fn mesh_references(files: &Files, json: &Value) -> Result<()> {
     Ok(())
 }
 
+/// Where each image's data comes from: glTF requires exactly one of `uri` and `bufferView`, and a
+/// `mimeType` with a `bufferView` (the gltf crate unwraps both).
+pub(super) fn image_sources(files: &Files, json: &Value) -> Result<()> {
+    let images = json.get("images").and_then(Value::as_array);
+    for (i, image) in images.into_iter().flatten().enumerate() {
+        let has = |key: &str| image.get(key).is_some_and(|v| !v.is_null());
+        let problem = match (has("uri"), has("bufferView")) {
+            (false, false) => "has neither a uri nor a bufferView",
+            (true, true) => "has both a uri and a bufferView (glTF allows one)",
+            (false, true) if !has("mimeType") => {
+                "has a bufferView but no mimeType (glTF requires one)"
+            }
+            _ => continue,
+        };
+        return Err(files.invalid(format!("image {i} {problem}")));
+    }
+    Ok(())
+}
+
+/// Every float accessor holds finite numbers (the glTF validator requires it), also those the
+/// bake does not read: the output copies them, and must stay valid. Runs after the scene is
+/// loaded, so a primitive's own data is reported with the primitive's name first; buffers
+/// already match their `byteLength` and accessors their views ([`byte_ranges`]). Sparse
+/// accessors are left to the reader.
+pub(super) fn finite_floats(
+    files: &Files,
+    document: &gltf::Document,
+    buffers: &[Vec<u8>],
+) -> Result<()> {
+    for accessor in document.accessors() {
+        let (Some(view), None) = (accessor.view(), accessor.sparse()) else {
+            continue;
+        };
+        if accessor.data_type() != gltf::accessor::DataType::F32 {
+            continue;
+        }
+        let size = accessor.size();
+        let stride = view.stride().unwrap_or(size);
+        let data = &buffers[view.buffer().index()];
+        let start = view.offset() + accessor.offset();
+        for e in 0..accessor.count() {
+            let at = start + e * stride;
+            let element = data.get(at..at + size).unwrap_or(&[]);
+            let finite = (element.chunks_exact(4))
+                .all(|w| f32::from_le_bytes([w[0], w[1], w[2], w[3]]).is_finite());
+            if !finite {
+                let message = format!(
+                    "accessor {}: element {e} is not finite (glTF requires finite floats)",
+                    accessor.index()
+                );
+                return Err(files.invalid(message));
+            }
+        }
+    }
+    Ok(())
+}
+
 /// Byte ranges: every buffer view lies inside its buffer, every accessor (and its sparse
 /// storage) inside its buffer view, with a stride no smaller than an element and a count of at
 /// least one. All in checked u64 arithmetic.

@@ -1,0 +1,213 @@
+//! The memory check: a bake's estimated peak ([`plan::memory_estimate`]) against its limit
+//! (`BakeConfig::max_memory`, or the memory the machine has available), before any heavy work:
+//! before the atlas (texels predicted from the surface area), before light transport (texels
+//! counted) and once the automatic choice has chosen the rays (where it may switch to the
+//! matrix-free gather solver).
+
+use std::path::Path;
+
+use crate::config::{BakeConfig, Technique};
+use crate::plan::{self, MemoryEstimate, MemoryInputs, PILOT_RAYS, Plan, format_bytes};
+use crate::texels::Texels;
+use crate::{Error, Progress, Result, scene};
+
+/// The memory a bake may use: `config.max_memory`, or what the machine has available now
+/// (sysinfo; unlimited where it cannot tell).
+pub fn limit(config: &BakeConfig) -> u64 {
+    config.max_memory.unwrap_or_else(|| {
+        let available = sysinfo::System::new().ok().map(|mut system| {
+            system.refresh_memory();
+            system.available_memory()
+        });
+        match available {
+            Some(bytes) if bytes > 0 => bytes,
+            _ => u64::MAX,
+        }
+    })
+}
+
+/// The sizes of a scene and its texels, before rows and pilot runs are counted in.
+#[derive(Clone, Copy, Debug)]
+pub struct Sizes {
+    input_bytes: f64,
+    vertices: f64,
+    triangles: f64,
+    texels: f64,
+    page_texels: f64,
+}
+
+impl Sizes {
+    /// Before the atlas: texels from the surface area at the density, pages twice that
+    /// (charts and gutters cover about half of a page).
+    pub fn predicted(scene: &scene::Scene, source: &scene::Source, config: &BakeConfig) -> Sizes {
+        let tpu = config.atlas.texels_per_unit as f64;
+        let texels = plan::surface_area(scene) * tpu * tpu;
+        Sizes {
+            texels,
+            page_texels: 2.0 * texels,
+            ..Sizes::loaded(scene, source)
+        }
+    }
+
+    /// Once the texels exist.
+    pub fn counted(scene: &scene::Scene, source: &scene::Source, texels: &Texels) -> Sizes {
+        Sizes {
+            texels: texels.len() as f64,
+            page_texels: (texels.pages.iter())
+                .map(|p| p.width as f64 * p.height as f64)
+                .sum(),
+            ..Sizes::loaded(scene, source)
+        }
+    }
+
+    fn loaded(scene: &scene::Scene, source: &scene::Source) -> Sizes {
+        let json = source.json.to_string().len();
+        let buffers: usize = source.buffers.iter().map(Vec::len).sum();
+        Sizes {
+            input_bytes: (json + buffers) as f64,
+            vertices: scene.positions.len() as f64,
+            triangles: scene.triangles.len() as f64,
+            texels: 0.0,
+            page_texels: 0.0,
+        }
+    }
+
+    /// The peak of a bake with `technique` at `rays` per texel (mean), holding `held` pilot
+    /// runs of `held_rays` each while it builds its rows.
+    fn estimate(
+        &self,
+        technique: Technique,
+        rays: f64,
+        held: f64,
+        held_rays: f64,
+    ) -> MemoryEstimate {
+        let n = self.texels;
+        plan::memory_estimate(&MemoryInputs {
+            input_bytes: self.input_bytes,
+            vertices: self.vertices,
+            triangles: self.triangles,
+            texels: n,
+            page_texels: self.page_texels,
+            held_entries: held * held_rays * n,
+            built_entries: plan::entries_per_texel(technique, n, rays) * n,
+            held_runs: held,
+            technique,
+        })
+    }
+
+    /// The pilot's peak: its second run built while the first is held, or with a `second`
+    /// pilot at 4× the rays, its second pair's second run while the first pair and the other
+    /// run are held.
+    fn pilot_peak(&self, second: bool) -> MemoryEstimate {
+        let k = PILOT_RAYS as f64;
+        match second {
+            false => self.estimate(Technique::DEFAULT, k, 1.0, k),
+            true => self.estimate(Technique::DEFAULT, 4.0 * k, 3.0, (2.0 * k + 4.0 * k) / 3.0),
+        }
+    }
+
+    /// The least a bake of `config` can need: with the automatic choice of rays, its pilot
+    /// (the first pair held while the second is built, the worst case) and a final bake with
+    /// the gather solver when the solver may switch; otherwise the configured bake.
+    fn least(&self, config: &BakeConfig) -> MemoryEstimate {
+        let k = PILOT_RAYS as f64;
+        let configured = self.estimate(
+            config.technique,
+            config.transport.gather_rays as f64,
+            0.0,
+            0.0,
+        );
+        let Some(auto) = config.auto else {
+            return configured;
+        };
+        // The automatic choice makes the method Monte Carlo unless the user fixed it.
+        let monte_carlo = config.technique.is_monte_carlo() || !auto.keep.method;
+        let pilot = !auto.keep.rays && monte_carlo;
+        let worst_pilot = self.pilot_peak(true);
+        let last = if monte_carlo && !auto.keep.solver {
+            Technique::Gather
+        } else {
+            config.technique
+        };
+        let rays = config.transport.gather_rays as f64;
+        match pilot {
+            true => larger(worst_pilot, self.estimate(last, rays, 2.0, 4.0 * k)),
+            false => self.estimate(last, rays, 0.0, 0.0),
+        }
+    }
+}
+
+fn larger(a: MemoryEstimate, b: MemoryEstimate) -> MemoryEstimate {
+    if a.total() >= b.total() { a } else { b }
+}
+
+/// Refuses a bake of `sizes` that cannot fit in `limit` whatever the automatic choice does.
+pub fn check(input: &Path, sizes: &Sizes, config: &BakeConfig, limit: u64) -> Result<()> {
+    let least = sizes.least(config);
+    refuse_above(input, &least, limit, config)
+}
+
+/// Once the rays are chosen (`pilot`: gathering rays of each reused pilot run, and whether
+/// no further bake follows; the plan's per-texel rays count when it has them): switches the automatic choice to the gather solver when the stored
+/// rows do not fit and it does (with a warning), and refuses what still does not fit.
+pub fn fit(
+    input: &Path,
+    sizes: &Sizes,
+    config: &mut BakeConfig,
+    plan: Option<&mut Plan>,
+    pilot: Option<(u32, bool)>,
+    limit: u64,
+    progress: &dyn Progress,
+) -> Result<()> {
+    let (held, held_rays, more) = match pilot {
+        Some((k, enough)) => (2.0, k as f64, !enough),
+        None => (0.0, 0.0, true),
+    };
+    let texel_rays = plan.as_ref().and_then(|p| p.texel_rays.as_ref());
+    let rays = match texel_rays {
+        Some(r) if !r.0.is_empty() => r.0.iter().map(|&k| k as f64).sum::<f64>() / r.0.len() as f64,
+        _ => config.transport.gather_rays as f64,
+    };
+    let rays = if more { rays } else { 0.0 };
+    // The pilot's own peak is past, but it counts: the estimate is the bake's.
+    let pilot_peak = pilot.map(|(k, _)| sizes.pilot_peak(k > PILOT_RAYS));
+    let with_pilot = |e: MemoryEstimate| pilot_peak.map_or(e, |p| larger(p, e));
+    let stored = with_pilot(sizes.estimate(config.technique, rays, held, held_rays));
+    let gather = with_pilot(sizes.estimate(Technique::Gather, rays, held, held_rays));
+    if let (Some(plan), Some(auto)) = (plan, config.auto)
+        && let Some(message) =
+            plan::fit_memory(&stored, &gather, limit as f64, config, plan, &auto.keep)
+    {
+        progress.warn(&format!("{}: {message}", input.display()));
+    }
+    let chosen = if config.technique == Technique::Gather {
+        gather
+    } else {
+        stored
+    };
+    refuse_above(input, &chosen, limit, config)
+}
+
+fn refuse_above(
+    input: &Path,
+    estimate: &MemoryEstimate,
+    limit: u64,
+    config: &BakeConfig,
+) -> Result<()> {
+    if estimate.total() <= limit as f64 {
+        return Ok(());
+    }
+    let hint = if config.technique.is_monte_carlo() && config.technique != Technique::Gather {
+        "lower --texels-per-unit or --rays, use --solver gather, or raise --max-memory"
+    } else {
+        "lower --texels-per-unit or --rays, or raise --max-memory"
+    };
+    Err(Error::Memory {
+        path: input.to_path_buf(),
+        message: format!(
+            "the bake would need about {} at its peak, above the memory limit {} ({hint})",
+            estimate.describe(),
+            format_bytes(limit as f64)
+        ),
+    })
+}
