@@ -301,8 +301,6 @@ fn parse_rgb(s: &str) -> Result<Vec3, String> {
     }
 }
 
-/// A size in bytes: a number with an optional unit (K, M, G, T, with or without "iB"), binary.
-
 impl Quality {
     fn preset(self) -> BakeConfig {
         match self {
