@@ -355,15 +355,24 @@ impl Cuts {
     }
 
     /// Splits every segment at the points lying on it (within `snap`), so segments meeting in a
-    /// T share a point.
+    /// T share a point. A point within `snap` of an end is not split at: two such points close
+    /// together would otherwise split each other's pieces for ever (a 64k-triangle interior
+    /// ran out of memory there), and the piece would be a sliver anyway.
     fn split_at_points(&mut self, snap: f64) {
         let mut s = 0;
         while s < self.segments.len() {
             let ([a, b], ext) = self.segments[s];
             let (pa, pb) = (self.points[a as usize], self.points[b as usize]);
             let on = (0..self.points.len() as u32).find(|&p| {
-                let (d, t) = distance_to_segment(self.points[p as usize], pa, pb);
-                p != a && p != b && d <= snap && t > 0.0 && t < 1.0
+                let q = self.points[p as usize];
+                let (d, t) = distance_to_segment(q, pa, pb);
+                p != a
+                    && p != b
+                    && d <= snap
+                    && t > 0.0
+                    && t < 1.0
+                    && q.distance(pa) > snap
+                    && q.distance(pb) > snap
             });
             match on {
                 Some(p) => {
