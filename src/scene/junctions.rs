@@ -1156,6 +1156,30 @@ mod tests {
     use super::*;
     use crate::scene::{Instance, Material};
 
+    /// Points near a segment's ends or near each other split it into no sliver (the fuzzer's
+    /// out-of-memory case was pieces splitting each other without end).
+    #[test]
+    fn segments_are_not_split_into_slivers() {
+        let snap = 0.01;
+        let mut cuts = Cuts {
+            points: vec![
+                DVec2::ZERO,
+                DVec2::X,
+                DVec2::new(0.995, 0.002),
+                DVec2::new(0.5, 0.003),
+                DVec2::new(0.5004, -0.003),
+            ],
+            on_border: vec![false; 5],
+            segments: vec![([0, 1], false)],
+        };
+        cuts.split_at_points(snap);
+        assert_eq!(cuts.segments.len(), 2, "{:?}", cuts.segments);
+        for ([a, b], _) in &cuts.segments {
+            let length = cuts.points[*a as usize].distance(cuts.points[*b as usize]);
+            assert!(length > snap, "{:?}", cuts.segments);
+        }
+    }
+
     /// A scene of one instance per mesh (positions, triangles), normals from the first face.
     fn scene_of(meshes: &[(Vec<Vec3>, Vec<[u32; 3]>)]) -> Scene {
         let mut scene = Scene {
