@@ -355,32 +355,35 @@ impl Cuts {
     }
 
     /// Splits every segment at the points lying on it (within `snap`), so segments meeting in a
-    /// T share a point. A point within `snap` of an end is not split at: two such points close
-    /// together would otherwise split each other's pieces for ever (a 64k-triangle interior
-    /// ran out of memory there), and the piece would be a sliver anyway.
+    /// T share a point. Each segment is cut once into a chain along its own line (pieces are not
+    /// cut again: near-coincident points split each other's pieces for ever — a 64k-triangle
+    /// interior ran out of memory there), and no piece is shorter than `snap` (no sliver).
     fn split_at_points(&mut self, snap: f64) {
-        let mut s = 0;
-        while s < self.segments.len() {
-            let ([a, b], ext) = self.segments[s];
+        for ([a, b], ext) in std::mem::take(&mut self.segments) {
             let (pa, pb) = (self.points[a as usize], self.points[b as usize]);
-            let on = (0..self.points.len() as u32).find(|&p| {
-                let q = self.points[p as usize];
-                let (d, t) = distance_to_segment(q, pa, pb);
-                p != a
-                    && p != b
-                    && d <= snap
-                    && t > 0.0
-                    && t < 1.0
-                    && q.distance(pa) > snap
-                    && q.distance(pb) > snap
-            });
-            match on {
-                Some(p) => {
-                    self.segments[s] = ([a, p], ext);
-                    self.segments.push(([p, b], ext));
+            let mut on: Vec<(f64, u32)> = (0..self.points.len() as u32)
+                .filter_map(|p| {
+                    let q = self.points[p as usize];
+                    let (d, t) = distance_to_segment(q, pa, pb);
+                    (p != a
+                        && p != b
+                        && d <= snap
+                        && t > 0.0
+                        && t < 1.0
+                        && q.distance(pa) > snap
+                        && q.distance(pb) > snap)
+                        .then_some((t, p))
+                })
+                .collect();
+            on.sort_by(|x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)));
+            let mut from = a;
+            for (_, p) in on {
+                if self.points[p as usize].distance(self.points[from as usize]) > snap {
+                    self.segments.push(([from, p], ext));
+                    from = p;
                 }
-                None => s += 1,
             }
+            self.segments.push(([from, b], ext));
         }
     }
 
