@@ -59,6 +59,7 @@
 //!   build                            many scenes from a manifest: `bake` options by name, a
 //!                                    content-addressed cache, a JSON report, the error gate
 //!   reference, render                beside the pipeline (reference uses bake's prepare)
+//!   view                             the viewer page: a bake in three.js, served on 127.0.0.1
 //! ```
 //!
 //! Beside the pipeline: [`reference`](mod@reference) (the path tracer every accuracy figure is measured
@@ -67,7 +68,8 @@
 //! never glTF JSON) and [`metrics`] (the error measures of every accuracy figure). The
 //! reference also measures what a renderer shows: [`reference::points`] path-traces random
 //! visible surface points and reads the written bake there as a renderer does (`TEXCOORD_1`,
-//! bilinear lookup in the EXR page).
+//! bilinear lookup in the EXR page). [`view`] serves a page that shows a bake in a browser with
+//! three.js (vendored, offline), loaded exactly as a three.js user would load it.
 //!
 //! ## Conventions
 //!
@@ -100,6 +102,7 @@ pub mod solve;
 pub mod texels;
 pub mod trace;
 pub mod transport;
+pub mod view;
 
 #[cfg(feature = "testing")]
 #[doc(hidden)]

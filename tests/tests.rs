@@ -18,3 +18,4 @@ mod reference;
 mod render;
 mod seams;
 mod solvers;
+mod view;

@@ -6,6 +6,7 @@ mod interrupt;
 mod progress;
 mod reference;
 mod render;
+mod view;
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -45,6 +46,9 @@ enum Command {
     /// Bake every scene a manifest (lightbake.toml) lists, skipping those whose outputs are up
     /// to date.
     Build(build::Args),
+    /// Serve a viewer page of a baked scene on 127.0.0.1 (three.js, offline): lit, lightmap,
+    /// albedo, texel density, chart borders and, with --points, the per-point error.
+    View(view::Args),
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -408,6 +412,7 @@ fn main() -> ExitCode {
         Command::Reference(args) => reference::run(args),
         Command::Bake(args) => bake(args),
         Command::Compare(args) => compare::run(args),
+        Command::View(args) => view::run(args),
         Command::Build(args) => build::run(args),
     };
     match result {

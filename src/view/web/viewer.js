@@ -1,0 +1,290 @@
+// lightbake's viewer page: the baked glTF drawn by three.js as a renderer would draw it.
+// The four settings that make three.js show a lightbake bake right are marked "(renderer)".
+
+import * as THREE from 'three';
+import { GLTFLoader } from 'three/addons/loaders/GLTFLoader.js';
+import { EXRLoader } from 'three/addons/loaders/EXRLoader.js';
+import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
+
+const canvas = document.getElementById('canvas');
+const status = document.getElementById('status');
+const renderer = new THREE.WebGLRenderer({ canvas, antialias: false, preserveDrawingBuffer: true });
+renderer.setPixelRatio(window.devicePixelRatio);
+renderer.outputColorSpace = THREE.SRGBColorSpace;
+// The exposure slider scales linear radiance before the sRGB encoding; no curve.
+renderer.toneMapping = THREE.LinearToneMapping;
+
+const camera = new THREE.PerspectiveCamera(45, 1, 0.01, 1000);
+const controls = new OrbitControls(camera, canvas);
+const scene = new THREE.Scene();
+const overlays = { charts: new THREE.Group(), error: new THREE.Group() };
+
+/** Per mesh: its material for each view. */
+const meshes = [];
+/** The glTF cameras, in scene order. */
+const cameras = [];
+
+async function load() {
+  const info = await (await fetch('/info.json')).json();
+  const sceneUrl = new URL(info.scene, location.href);
+  const gltf = await new GLTFLoader().loadAsync(sceneUrl.href);
+  scene.add(gltf.scene);
+  gltf.scene.updateMatrixWorld(true);
+
+  // The bake already holds all light: punctual lights would count direct light twice.
+  const lights = [];
+  gltf.scene.traverse((o) => { if (o.isLight) lights.push(o); });
+  lights.forEach((l) => l.removeFromParent());
+
+  const pages = new Map();
+  const loadPage = (name) => {
+    if (!pages.has(name)) pages.set(name, loadExr(new URL(encodePath(name), sceneUrl).href));
+    return pages.get(name);
+  };
+  const found = [];
+  gltf.scene.traverse((o) => {
+    if (o.isMesh) found.push(o);
+    if (o.isCamera) cameras.push(o);
+  });
+  for (const mesh of found) {
+    const page = mesh.geometry.userData.lightmap?.exr;
+    const lightMap = page === undefined ? null : await loadPage(page);
+    meshes.push({ mesh, views: materials(mesh.material, lightMap) });
+    if (lightMap) overlays.charts.add(chartBorders(mesh));
+  }
+  scene.add(overlays.charts, overlays.error);
+  if (info.points) overlays.error.add(await pointErrors());
+
+  frameScene(gltf.scene);
+  const select = document.getElementById('camera');
+  cameras.forEach((c, i) => select.add(new Option(c.name || `camera ${i}`, i)));
+  if (info.points) document.querySelector('#view option[value=error]').disabled = false;
+}
+
+/** An EXR page as a float texture, as the glTF's PNG pages are laid out. */
+async function loadExr(url) {
+  const texture = await new EXRLoader().setDataType(THREE.HalfFloatType).loadAsync(url);
+  // (renderer) EXRLoader leaves the last EXR row first; glTF images (and lightbake's pages)
+  // have row 0 at the top, and glTF textures are not flipped on upload.
+  const { data, width, height } = texture.image;
+  const row = width * 4;
+  const flipped = new data.constructor(data.length);
+  for (let y = 0; y < height; y++) flipped.set(data.subarray(y * row, (y + 1) * row), (height - 1 - y) * row);
+  texture.image.data = flipped;
+  texture.flipY = false;
+  texture.colorSpace = THREE.LinearSRGBColorSpace;
+  texture.minFilter = texture.magFilter = THREE.LinearFilter;
+  texture.generateMipmaps = false;
+  texture.wrapS = texture.wrapT = THREE.ClampToEdgeWrapping;
+  texture.channel = 1; // (renderer) the lightmap UVs are TEXCOORD_1
+  texture.needsUpdate = true;
+  return texture;
+}
+
+function encodePath(path) {
+  return path.split('/').map(encodeURIComponent).join('/');
+}
+
+/** The materials of one mesh for each view; `source` is GLTFLoader's. */
+function materials(source, lightMap) {
+  const surface = {
+    side: source.side,
+    vertexColors: source.vertexColors,
+    transparent: source.transparent,
+    opacity: source.opacity,
+    alphaTest: source.alphaTest,
+  };
+  // (renderer) a Lambert material without lights shades albedo × irradiance/π; a texel holds
+  // H/π, so lightMapIntensity = π gives albedo × lightmap.
+  const lit = lightMap ? { lightMap, lightMapIntensity: Math.PI } : {};
+  const views = {
+    lit: new THREE.MeshLambertMaterial({
+      ...surface, ...lit, color: source.color, map: source.map,
+      emissive: source.emissive, emissiveMap: source.emissiveMap,
+      emissiveIntensity: source.emissiveIntensity,
+    }),
+    lightmap: new THREE.MeshLambertMaterial({ ...surface, ...lit, vertexColors: false }),
+    albedo: new THREE.MeshBasicMaterial({ ...surface, color: source.color, map: source.map }),
+    density: lightMap ? texelChecker(lightMap, source.side) : new THREE.MeshBasicMaterial({ color: 0x202020 }),
+  };
+  views.charts = views.lightmap;
+  views.error = views.lightmap;
+  return views;
+}
+
+/** The lightmap texels as a checker (grey tones follow the lightmap, dimmed on odd texels). */
+function texelChecker(lightMap, side) {
+  return new THREE.ShaderMaterial({
+    side,
+    uniforms: {
+      lightMap: { value: lightMap },
+      size: { value: new THREE.Vector2(lightMap.image.width, lightMap.image.height) },
+    },
+    vertexShader: `
+      attribute vec2 uv1;
+      varying vec2 vUv1;
+      void main() {
+        vUv1 = uv1;
+        gl_Position = projectionMatrix * modelViewMatrix * vec4(position, 1.0);
+      }`,
+    fragmentShader: `
+      uniform sampler2D lightMap;
+      uniform vec2 size;
+      varying vec2 vUv1;
+      void main() {
+        vec2 texel = floor(vUv1 * size);
+        float odd = mod(texel.x + texel.y, 2.0);
+        vec3 value = texture2D(lightMap, vUv1).rgb;
+        float grey = clamp(dot(value, vec3(0.2126, 0.7152, 0.0722)), 0.0, 1.0);
+        gl_FragColor = vec4(vec3(0.25 + 0.75 * grey) * mix(1.0, 0.55, odd), 1.0);
+      }`,
+  });
+}
+
+/** The chart borders of a mesh: TEXCOORD_1 edges used by one triangle only (lightbake splits
+ *  vertices at chart seams, so those are chart or mesh borders). */
+function chartBorders(mesh) {
+  const g = mesh.geometry;
+  const index = g.index ? g.index.array : [...Array(g.attributes.position.count).keys()];
+  const count = new Map();
+  for (let t = 0; t + 2 < index.length; t += 3) {
+    for (let k = 0; k < 3; k++) {
+      const a = index[t + k], b = index[t + (k + 1) % 3];
+      const key = a < b ? `${a},${b}` : `${b},${a}`;
+      count.set(key, (count.get(key) || 0) + 1);
+    }
+  }
+  const p = g.attributes.position;
+  const points = [];
+  for (const [key, n] of count) {
+    if (n !== 1) continue;
+    for (const v of key.split(',')) points.push(new THREE.Vector3().fromBufferAttribute(p, +v));
+  }
+  const lines = new THREE.LineSegments(
+    new THREE.BufferGeometry().setFromPoints(points),
+    new THREE.LineBasicMaterial({ color: 0xff3030, depthFunc: THREE.LessEqualDepth, toneMapped: false }),
+  );
+  lines.matrixAutoUpdate = false;
+  lines.matrix.copy(mesh.matrixWorld);
+  return lines;
+}
+
+/** The point reference's points, coloured by the bake's relative error there: green 0,
+ *  yellow 10%, red 30% and above, grey where no baked surface lies under the point. */
+async function pointErrors() {
+  const { points } = await (await fetch('/points.json')).json();
+  const positions = [], colors = [];
+  for (const p of points) {
+    positions.push(...p.position);
+    const c = p.error === null ? new THREE.Color(0.5, 0.5, 0.5)
+      : new THREE.Color().setHSL(Math.max(0, 1 - p.error / 0.3) / 3, 1, 0.5);
+    colors.push(c.r, c.g, c.b);
+  }
+  const g = new THREE.BufferGeometry();
+  g.setAttribute('position', new THREE.Float32BufferAttribute(positions, 3));
+  g.setAttribute('color', new THREE.Float32BufferAttribute(colors, 3));
+  const errors = points.filter((p) => p.error !== null).map((p) => p.error).sort((a, b) => a - b);
+  overlays.error.userData.median = errors[Math.floor(errors.length / 2)];
+  return new THREE.Points(g, new THREE.PointsMaterial({
+    size: 6, sizeAttenuation: false, vertexColors: true, toneMapped: false,
+  }));
+}
+
+function frameScene(root) {
+  const box = new THREE.Box3().setFromObject(root);
+  const center = box.getCenter(new THREE.Vector3());
+  const radius = Math.max(box.getSize(new THREE.Vector3()).length() / 2, 1e-3);
+  camera.near = radius / 1000;
+  camera.far = radius * 100;
+  camera.position.copy(center).add(new THREE.Vector3(0.6, 0.5, 1).normalize().multiplyScalar(radius * 2.5));
+  controls.target.copy(center);
+  camera.updateProjectionMatrix();
+  controls.update();
+}
+
+/** Puts the orbit camera where glTF camera `i` is (orbiting from there). */
+function useCamera(i) {
+  const c = cameras[i];
+  if (!c) return;
+  c.getWorldPosition(camera.position);
+  c.getWorldQuaternion(camera.quaternion);
+  camera.fov = c.isPerspectiveCamera ? c.fov : camera.fov;
+  camera.near = c.near;
+  camera.far = c.far;
+  const distance = controls.target.distanceTo(camera.position) || 1;
+  controls.target.copy(camera.position)
+    .add(new THREE.Vector3(0, 0, -distance).applyQuaternion(camera.quaternion));
+  camera.updateProjectionMatrix();
+}
+
+function setView(view) {
+  for (const { mesh, views } of meshes) mesh.material = views[view];
+  overlays.charts.visible = view === 'charts';
+  overlays.error.visible = view === 'error';
+  const median = overlays.error.userData.median;
+  status.textContent = view === 'error' && median !== undefined
+    ? `point error: green 0, yellow 10%, red ≥ 30%; median ${(median * 100).toFixed(1)}%`
+    : `${meshes.length} meshes, ${cameras.length} cameras`;
+}
+
+function setExposure(stops) {
+  renderer.toneMappingExposure = 2 ** stops;
+  document.getElementById('stops').textContent = `${stops} EV`;
+}
+
+function resize() {
+  const w = canvas.clientWidth, h = canvas.clientHeight;
+  if (canvas.width !== Math.round(w * renderer.getPixelRatio())) renderer.setSize(w, h, false);
+  camera.aspect = w / Math.max(h, 1);
+  camera.updateProjectionMatrix();
+}
+
+function draw() {
+  resize();
+  renderer.render(scene, camera);
+}
+
+/** The current view drawn into a float target: linear radiance, rows from the top, RGB. */
+function readLinear(width, height) {
+  const target = new THREE.WebGLRenderTarget(width, height, { type: THREE.FloatType });
+  const aspect = camera.aspect;
+  camera.aspect = width / height;
+  camera.updateProjectionMatrix();
+  renderer.setRenderTarget(target);
+  renderer.render(scene, camera);
+  const rgba = new Float32Array(width * height * 4);
+  renderer.readRenderTargetPixels(target, 0, 0, width, height, rgba);
+  renderer.setRenderTarget(null);
+  target.dispose();
+  camera.aspect = aspect;
+  camera.updateProjectionMatrix();
+  const rgb = new Array(width * height * 3);
+  for (let y = 0; y < height; y++) {
+    for (let x = 0; x < width; x++) {
+      const from = ((height - 1 - y) * width + x) * 4, to = (y * width + x) * 3;
+      rgb[to] = rgba[from]; rgb[to + 1] = rgba[from + 1]; rgb[to + 2] = rgba[from + 2];
+    }
+  }
+  return rgb;
+}
+
+const cameraSelect = document.getElementById('camera');
+const viewSelect = document.getElementById('view');
+const exposure = document.getElementById('exposure');
+cameraSelect.addEventListener('change', () => useCamera(+cameraSelect.value));
+viewSelect.addEventListener('change', () => setView(viewSelect.value));
+exposure.addEventListener('input', () => setExposure(+exposure.value));
+
+// What a test drives: the same controls as the panel, and the pixels.
+window.lightbake = {
+  ready: load().then(() => {
+    setView(viewSelect.value);
+    setExposure(+exposure.value);
+    renderer.setAnimationLoop(() => { controls.update(); draw(); });
+  }).catch((e) => { status.textContent = `failed: ${e.message}`; throw e; }),
+  cameras: () => cameras.map((c) => c.name),
+  setCamera(i) { cameraSelect.value = i; useCamera(i); draw(); },
+  setView(view) { viewSelect.value = view; setView(view); draw(); },
+  setExposure(stops) { exposure.value = stops; setExposure(stops); draw(); },
+  readLinear,
+};

@@ -1,0 +1,212 @@
+//! `lightbake view` in a real browser: a draft bake of the Cornell box opened in headless
+//! Chromium (Debian's `chromium`, driven by Node's playwright-core through
+//! `tests/view_browser.js`). The lit view from the glTF camera must match `lightbake render`
+//! of the same camera, and every view must draw something else.
+//!
+//! Runs only when `LIGHTBAKE_BROWSER_TEST` names the `node_modules` directory holding
+//! playwright-core (`.ci/run` sets it, so CI always runs it); without it the test says so
+//! and passes, since it needs a browser and Node. With `LIGHTBAKE_GALLERY` set to a directory
+//! it also copies each view's picture there (`examples/gallery/view_<view>.png`).
+
+use std::io::{BufRead, BufReader};
+use std::path::Path;
+use std::process::{Child, ChildStdout, Command, Stdio};
+
+use glam::Vec3;
+use lightbake::metrics;
+
+use crate::util::{fixture, scratch};
+
+/// The views the page offers without a point reference, in the panel's order.
+const VIEWS: [&str; 5] = ["lit", "lightmap", "albedo", "density", "charts"];
+const SIZE: u32 = 128;
+/// The browser draws the lit view at SUPER × SIZE and its SUPER × SUPER pixel means are the
+/// image (16 regular samples per pixel, as `render`'s 16 jittered ones anti-alias it).
+const SUPER: u32 = 4;
+/// Side of the pixel blocks whose means are compared: the two sampling patterns still differ
+/// along edges.
+const BLOCK: u32 = 4;
+/// Largest relative RMS difference of block means between the browser's lit view and
+/// `render`, both as shown at exposure 0 (clamped at 1). Measured 0.68% (SwiftShader in
+/// Chromium 156, three.js r187); each wrong setting measured far above it: nearest instead of
+/// linear filtering 2.2%, EXR rows not flipped 48%, `lightMapIntensity` 1 instead of π 57%,
+/// TEXCOORD_0 instead of TEXCOORD_1 69%.
+const TOLERANCE: f32 = 0.015;
+/// Fraction of pixels (by more than 8 of 255 in a channel) a view switch must change; the
+/// chart borders change least (thin lines over the lightmap view).
+const MIN_CHANGED: f32 = 0.01;
+
+/// The `lightbake view` server (and its stdout, kept open), ended when dropped.
+struct Server(Child, BufReader<ChildStdout>);
+
+impl Drop for Server {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+fn lightbake(args: &[&str]) {
+    let out = Command::new(env!("CARGO_BIN_EXE_lightbake"))
+        .args(args)
+        .output()
+        .expect("run lightbake");
+    assert!(
+        out.status.success(),
+        "lightbake {args:?}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+/// Starts `lightbake view` on a free port; returns it and the URL it printed.
+fn view(scene: &Path) -> (Server, String) {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_lightbake"))
+        .args(["view", scene.to_str().unwrap(), "--port", "0"])
+        .stdout(Stdio::piped())
+        .spawn()
+        .expect("start lightbake view");
+    let stdout = BufReader::new(child.stdout.take().unwrap());
+    let mut server = Server(child, stdout);
+    let mut url = String::new();
+    server.1.read_line(&mut url).unwrap();
+    assert!(url.starts_with("http://127.0.0.1:"), "printed {url:?}");
+    (server, url.trim().to_string())
+}
+
+/// Means of `block` × `block` pixel blocks of a `size`² image.
+fn blocks(rgb: &[Vec3], size: u32, block: u32) -> Vec<Vec3> {
+    let n = size / block;
+    (0..n * n)
+        .map(|b| {
+            let (bx, by) = (b % n * block, b / n * block);
+            let sum: Vec3 = (0..block * block)
+                .map(|k| rgb[((by + k / block) * size + bx + k % block) as usize])
+                .sum();
+            sum / (block * block) as f32
+        })
+        .collect()
+}
+
+#[test]
+fn viewer_page_in_chromium_matches_render_and_every_view_differs() {
+    let Some(node_path) = std::env::var_os("LIGHTBAKE_BROWSER_TEST") else {
+        eprintln!("skipped: set LIGHTBAKE_BROWSER_TEST to playwright-core's node_modules");
+        return;
+    };
+    let dir = scratch();
+    let (out, shots) = (dir.path().join("out"), dir.path().join("shots"));
+    std::fs::create_dir(&shots).unwrap();
+    let scene = fixture("cornell_box.gltf");
+    let baked = out.join("cornell_box.gltf");
+    let size = format!("{SIZE}x{SIZE}");
+    let (baked_s, shots_s) = (baked.to_str().unwrap(), shots.to_str().unwrap());
+    lightbake(&[
+        "bake",
+        scene.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--quality",
+        "draft",
+        "--quiet",
+    ]);
+    let rendered = dir.path().join("render.exr");
+    lightbake(&[
+        "render",
+        baked_s,
+        "--camera",
+        "0",
+        "--size",
+        &size,
+        "-o",
+        rendered.to_str().unwrap(),
+        "--quiet",
+    ]);
+
+    let (_server, url) = view(&baked);
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/view_browser.js");
+    let side = SIZE.to_string();
+    let node = Command::new("node")
+        .arg(&script)
+        .args([
+            url.as_str(),
+            shots_s,
+            &side,
+            &side,
+            &(SIZE * SUPER).to_string(),
+        ])
+        .args(VIEWS)
+        .env("NODE_PATH", &node_path)
+        .output()
+        .expect("run node");
+    assert!(
+        node.status.success(),
+        "{}",
+        String::from_utf8_lossy(&node.stderr)
+    );
+
+    // The lit view against render.
+    let lit: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(shots.join("lit.json")).unwrap()).unwrap();
+    let fine: Vec<Vec3> = lit["rgb"]
+        .as_array()
+        .unwrap()
+        .chunks(3)
+        .map(|c| Vec3::from_array(std::array::from_fn(|k| c[k].as_f64().unwrap() as f32)))
+        .collect();
+    let browser = blocks(&fine, SIZE * SUPER, SUPER);
+    let render = lightbake::output::read_exr(&rendered).unwrap();
+    assert_eq!(
+        (render.width, render.height, browser.len()),
+        (SIZE, SIZE, (SIZE * SIZE) as usize)
+    );
+    // What the page shows at exposure 0: radiance above 1 is white (the emitter, 17).
+    let shown = |v: &[Vec3]| v.iter().map(|x| x.min(Vec3::ONE)).collect::<Vec<_>>();
+    let (browser, render) = (shown(&browser), shown(&render.rgb));
+    let difference = metrics::rmse_over_rms(
+        &blocks(&browser, SIZE, BLOCK),
+        &blocks(&render, SIZE, BLOCK),
+        &[],
+    );
+    eprintln!(
+        "browser vs render: {:.2}% over {BLOCK}x{BLOCK} blocks, {:.2}% per pixel, bias {:+.2}%",
+        difference * 100.0,
+        metrics::rmse_over_rms(&browser, &render, &[]) * 100.0,
+        metrics::relative_bias(&browser, &render, &[]) * 100.0
+    );
+    assert!(difference < TOLERANCE, "{difference}");
+
+    // Each view draws another image than the one before it; the chart borders are also
+    // checked against the lightmap view they are drawn over (the smallest change).
+    let image = |view: &str| {
+        image::open(shots.join(format!("{view}.png")))
+            .unwrap()
+            .to_rgb8()
+    };
+    for pair in VIEWS.windows(2).chain([["lightmap", "charts"].as_slice()]) {
+        let (a, b) = (image(pair[0]), image(pair[1]));
+        assert_eq!(a.dimensions(), (SIZE, SIZE));
+        let changed = a
+            .pixels()
+            .zip(b.pixels())
+            .filter(|(p, q)| p.0.iter().zip(q.0).any(|(x, y)| x.abs_diff(y) > 8))
+            .count() as f32
+            / (SIZE * SIZE) as f32;
+        eprintln!(
+            "{} -> {}: {:.1}% of pixels changed",
+            pair[0],
+            pair[1],
+            changed * 100.0
+        );
+        assert!(changed > MIN_CHANGED, "{pair:?}: {changed}");
+    }
+    if let Some(gallery) = std::env::var_os("LIGHTBAKE_GALLERY") {
+        for view in VIEWS {
+            let name = format!("view_{view}.png");
+            std::fs::copy(
+                shots.join(format!("{view}.png")),
+                Path::new(&gallery).join(name),
+            )
+            .unwrap();
+        }
+    }
+}
