@@ -1,7 +1,8 @@
 //! `lightbake view` in a real browser: a draft bake of the Cornell box opened in headless
 //! Chromium (Debian's `chromium`, driven by Node's playwright-core through
 //! `tests/view_browser.js`). The lit view from the glTF camera must match `lightbake render`
-//! of the same camera, and every view must draw something else.
+//! of the same camera, and every view must draw something else (the point-error view with a
+//! point reference of 300 points).
 //!
 //! Runs only when `LIGHTBAKE_BROWSER_TEST` names the `node_modules` directory holding
 //! playwright-core (`.ci/run` sets it, so CI always runs it); without it the test says so
@@ -17,8 +18,8 @@ use lightbake::metrics;
 
 use crate::util::{fixture, scratch};
 
-/// The views the page offers without a point reference, in the panel's order.
-const VIEWS: [&str; 5] = ["lit", "lightmap", "albedo", "density", "charts"];
+/// The views the page offers (the last with a point reference), in the panel's order.
+const VIEWS: [&str; 6] = ["lit", "lightmap", "albedo", "density", "charts", "error"];
 const SIZE: u32 = 128;
 /// The browser draws the lit view at SUPER × SIZE and its SUPER × SUPER pixel means are the
 /// image (16 regular samples per pixel, as `render`'s 16 jittered ones anti-alias it).
@@ -58,10 +59,12 @@ fn lightbake(args: &[&str]) {
     );
 }
 
-/// Starts `lightbake view` on a free port; returns it and the URL it printed.
-fn view(scene: &Path) -> (Server, String) {
+/// Starts `lightbake view` with a point reference on a free port; returns it and the URL it
+/// printed.
+fn view(scene: &Path, points: &Path) -> (Server, String) {
     let mut child = Command::new(env!("CARGO_BIN_EXE_lightbake"))
-        .args(["view", scene.to_str().unwrap(), "--port", "0"])
+        .args(["view", scene.to_str().unwrap(), "--port", "0", "--points"])
+        .arg(points)
         .stdout(Stdio::piped())
         .spawn()
         .expect("start lightbake view");
@@ -122,7 +125,19 @@ fn viewer_page_in_chromium_matches_render_and_every_view_differs() {
         "--quiet",
     ]);
 
-    let (_server, url) = view(&baked);
+    let points = dir.path().join("points.csv");
+    lightbake(&[
+        "reference",
+        scene.to_str().unwrap(),
+        "--points",
+        "300",
+        "--spp",
+        "256",
+        "-o",
+        points.to_str().unwrap(),
+    ]);
+
+    let (_server, url) = view(&baked, &points);
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/view_browser.js");
     let side = SIZE.to_string();
     let node = Command::new("node")
@@ -175,14 +190,19 @@ fn viewer_page_in_chromium_matches_render_and_every_view_differs() {
     );
     assert!(difference < TOLERANCE, "{difference}");
 
-    // Each view draws another image than the one before it; the chart borders are also
-    // checked against the lightmap view they are drawn over (the smallest change).
+    // Each view draws another image than the one before it; the chart borders and the point
+    // errors are also checked against the lightmap view they are drawn over (the smallest
+    // changes).
     let image = |view: &str| {
         image::open(shots.join(format!("{view}.png")))
             .unwrap()
             .to_rgb8()
     };
-    for pair in VIEWS.windows(2).chain([["lightmap", "charts"].as_slice()]) {
+    let over_lightmap = [["lightmap", "charts"], ["lightmap", "error"]];
+    for pair in VIEWS
+        .windows(2)
+        .chain(over_lightmap.iter().map(|p| p.as_slice()))
+    {
         let (a, b) = (image(pair[0]), image(pair[1]));
         assert_eq!(a.dimensions(), (SIZE, SIZE));
         let changed = a

@@ -53,7 +53,7 @@ async function load() {
     if (lightMap) overlays.charts.add(chartBorders(mesh));
   }
   scene.add(overlays.charts, overlays.error);
-  if (info.points) overlays.error.add(await pointErrors());
+  if (info.points) overlays.error.add(await pointErrors(gltf.scene));
 
   frameScene(gltf.scene);
   const select = document.getElementById('camera');
@@ -171,11 +171,13 @@ function chartBorders(mesh) {
 
 /** The point reference's points, coloured by the bake's relative error there: green 0,
  *  yellow 10%, red 30% and above, grey where no baked surface lies under the point. */
-async function pointErrors() {
+async function pointErrors(root) {
   const { points } = await (await fetch('/points.json')).json();
+  // Lifted off their surface a little, or the depth test hides half of them.
+  const lift = new THREE.Box3().setFromObject(root).getSize(new THREE.Vector3()).length() * 1e-3;
   const positions = [], colors = [];
   for (const p of points) {
-    positions.push(...p.position);
+    positions.push(...p.position.map((x, k) => x + p.normal[k] * lift));
     const c = p.error === null ? new THREE.Color(0.5, 0.5, 0.5)
       : new THREE.Color().setHSL(Math.max(0, 1 - p.error / 0.3) / 3, 1, 0.5);
     colors.push(c.r, c.g, c.b);
@@ -186,7 +188,7 @@ async function pointErrors() {
   const errors = points.filter((p) => p.error !== null).map((p) => p.error).sort((a, b) => a - b);
   overlays.error.userData.median = errors[Math.floor(errors.length / 2)];
   return new THREE.Points(g, new THREE.PointsMaterial({
-    size: 6, sizeAttenuation: false, vertexColors: true, toneMapped: false,
+    size: 4, sizeAttenuation: false, vertexColors: true, toneMapped: false,
   }));
 }
 
