@@ -287,3 +287,18 @@ fn cli_bake_has_the_gate_too() {
         Some(3)
     );
 }
+
+#[test]
+fn a_damaged_error_map_is_rebaked() {
+    let dir = scratch();
+    let mut manifest = project(dir.path());
+    manifest.scenes[1].config.output.error_map = true;
+    let first = lightbake::build(&manifest, &NoProgress);
+    assert_eq!(statuses(&first), [Status::Baked, Status::Baked]);
+    let map = dir.path().join("baked/b/b_lightmap0_error.exr");
+    assert!(!dir.path().join("baked/a/a_lightmap0_error.exr").exists());
+    std::fs::write(&map, b"damaged").unwrap();
+    let second = lightbake::build(&manifest, &NoProgress);
+    assert_eq!(statuses(&second), [Status::Skipped, Status::Baked]);
+    assert!(lightbake::output::read_exr(&map).is_ok());
+}
