@@ -226,6 +226,9 @@ pub struct OutputParams {
     /// Stitch UV seams after dilation (`lightmap::seams`): least squares on the texels along
     /// chart cuts through smooth surfaces, so both sides filter to the same value.
     pub seams: bool,
+    /// Also write each page's per-texel error estimate (`plan::error_map`) as
+    /// `<page>_error.exr`.
+    pub error_map: bool,
 }
 
 /// Which settings the user fixed; the automatic choice ([`crate::plan`]) leaves those alone.
@@ -313,6 +316,7 @@ impl BakeConfig {
                 preview_exposure: 0.0,
                 rgbm: false,
                 seams: true,
+                error_map: false,
             },
             auto: None,
             max_memory: None,

@@ -55,12 +55,16 @@
 //!   over-predicted the courtyard (8.6% predicted, 6.2% measured) and spot_and_directional
 //!   (3.0% predicted resolution, 2.4% measured in all).
 //!
+//! - **Error map** ([`error_map`], `--error-map`): the same two parts texel by texel, written
+//!   beside each page so an artist sees where a bake is weak and whether texels or rays would help.
+//!
 //! The pilot costs nothing extra when its bakes suffice and a few solves otherwise (Cornell
 //! box, 7167 texels, medium: 4 pilot bakes, 0.3 s, and no further bake). It measures the scene
 //! rather than guessing from it: closed rooms with bright emitters need far more rays than a
 //! sunlit terrain at the same target. The denoiser's gain is not counted (it lowers the error
 //! at low K and leaves it at high K), so the choice errs towards more rays.
 
+pub mod error_map;
 pub mod punctual;
 
 use glam::Vec3;

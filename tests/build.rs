@@ -287,3 +287,62 @@ fn cli_bake_has_the_gate_too() {
         Some(3)
     );
 }
+
+#[test]
+fn a_damaged_error_map_is_rebaked() {
+    let dir = scratch();
+    let mut manifest = project(dir.path());
+    manifest.scenes[1].config.output.error_map = true;
+    let first = lightbake::build(&manifest, &NoProgress);
+    assert_eq!(statuses(&first), [Status::Baked, Status::Baked]);
+    let map = dir.path().join("baked/b/b_lightmap0_error.exr");
+    assert!(!dir.path().join("baked/a/a_lightmap0_error.exr").exists());
+    std::fs::write(&map, b"damaged").unwrap();
+    let second = lightbake::build(&manifest, &NoProgress);
+    assert_eq!(statuses(&second), [Status::Skipped, Status::Baked]);
+    assert!(lightbake::output::read_exr(&map).is_ok());
+}
+
+/// Three scenes baked one at a time and two at a time: the same report (but for the times)
+/// and the same bytes in every output directory.
+#[test]
+fn scenes_side_by_side_bake_as_one_after_another() {
+    let run = |jobs: usize| {
+        let dir = scratch();
+        let mut manifest = project(dir.path());
+        std::fs::copy(fixture("cornell_box.glb"), dir.path().join("levels/c.glb")).unwrap();
+        let mut c = manifest.scenes[1].clone();
+        c.path = "levels/c.glb".into();
+        c.input = dir.path().join(&c.path);
+        c.output = dir.path().join("baked/c");
+        c.config.output.error_map = true;
+        manifest.scenes.push(c);
+        manifest.jobs = Some(jobs);
+        let mut report = lightbake::build(&manifest, &NoProgress);
+        for s in &mut report.scenes {
+            assert_eq!(s.status, Status::Baked, "{s:?}");
+            s.seconds = 0.0;
+        }
+        let files: Vec<(String, Vec<u8>)> = ["a", "b", "c"]
+            .iter()
+            .flat_map(|d| {
+                let out = dir.path().join("baked").join(d);
+                crate::util::list_files(&out)
+                    .into_iter()
+                    .map(move |f| (format!("{d}/{f}"), std::fs::read(out.join(&f)).unwrap()))
+            })
+            .collect();
+        (report, files)
+    };
+    let (one, one_files) = run(1);
+    let (two, two_files) = run(2);
+    assert_eq!(one, two);
+    assert!(one_files.len() >= 12, "{}", one_files.len());
+    assert_eq!(
+        one_files.iter().map(|f| &f.0).collect::<Vec<_>>(),
+        two_files.iter().map(|f| &f.0).collect::<Vec<_>>()
+    );
+    for (a, b) in one_files.iter().zip(&two_files) {
+        assert!(a.1 == b.1, "{} differs", a.0);
+    }
+}

@@ -381,3 +381,68 @@ fn memory_estimate_and_the_gather_switch() {
     assert!(message.is_none());
     assert_eq!(config.technique, Technique::DEFAULT);
 }
+
+/// `--error-map` on `spot_and_directional`: each page's map is written beside it (in the
+/// build cache's outputs, not in the glTF), finite, and the box's sun-shadow edge on the floor
+/// (x = 1.2 for z in −1.0 … −0.5: the box's top edge at x = 0.9 seen along the light) is
+/// marked weaker than the evenly lit back wall.
+#[test]
+fn the_error_map_marks_a_shadow_edge_above_an_evenly_lit_wall() {
+    let input = fixture("spot_and_directional.gltf");
+    let options = lightbake::build::options::Options {
+        error_map: Some(true),
+        ..Default::default()
+    };
+    let config = options.config().unwrap();
+    let baked = lightbake::compute(&input, &config, &NoProgress).unwrap();
+    let map = baked.error_map.clone().expect("an error map");
+    let t = &baked.texels;
+    let at = |i: usize| {
+        let page = &map.pages[t.page[i] as usize];
+        let [x, y] = t.xy[i];
+        page.rgb[(y * page.width + x) as usize]
+    };
+    let size = 1.0 / baked.config.atlas.texels_per_unit;
+    let (mut edge, mut wall) = (Vec::new(), Vec::new());
+    for i in 0..t.len() {
+        let (p, n) = (t.position[i], t.normal[i]);
+        let e = at(i);
+        assert!(e.is_finite() && e.min_element() >= 0.0, "texel {i}: {e}");
+        assert!((e.z - e.x.hypot(e.y)).abs() <= 1e-5 * e.z.max(1.0));
+        if n.y > 0.9 && p.y < 0.01 && (p.x - 1.2).abs() < size && (-1.0..-0.5).contains(&p.z) {
+            edge.push(e);
+        }
+        if n.z > 0.9 && p.z < -1.99 && (0.5..1.5).contains(&p.y) && p.x.abs() < 1.0 {
+            wall.push(e);
+        }
+    }
+    assert!(
+        edge.len() >= 4 && wall.len() >= 20,
+        "{} {}",
+        edge.len(),
+        wall.len()
+    );
+    // Total (B) and resolution part (R): the mean along the edge against the wall's median.
+    for (part, factor) in [(2, 3.0), (0, 10.0)] {
+        let edge_mean = edge.iter().map(|e| e[part]).sum::<f32>() / edge.len() as f32;
+        let wall_median = metrics::median(&wall.iter().map(|e| e[part]).collect::<Vec<_>>());
+        assert!(
+            edge_mean > factor * wall_median,
+            "channel {part}: shadow edge {edge_mean}, wall {wall_median}"
+        );
+    }
+
+    let dir = scratch();
+    let report = lightbake::write(baked, &input, dir.path(), &config, &NoProgress).unwrap();
+    let name = "spot_and_directional_lightmap0_error.exr";
+    assert!(
+        report.files.iter().any(|f| f.ends_with(name)),
+        "{:?}",
+        report.files
+    );
+    let back = lightbake::output::read_exr(&dir.path().join(name)).unwrap();
+    assert!(back.rgb.iter().all(|v| v.is_finite()));
+    assert!(back.rgb.iter().any(|v| v.z > 0.0));
+    let gltf = std::fs::read_to_string(dir.path().join("spot_and_directional.gltf")).unwrap();
+    assert!(!gltf.contains("_error"));
+}

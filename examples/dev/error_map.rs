@@ -1,6 +1,9 @@
 //! Where a bake's error against the reference sits: overall relative RMSE and mean bias, the
 //! texels contributing most to the squared error (position, normal, bake vs reference), and for
-//! `two_rooms` the mean of room B's floor away from the doorway (the leak criterion).
+//! `two_rooms` the mean of room B's floor away from the doorway (the leak criterion), and how
+//! the bake's own error map (`--error-map`, `plan::error_map`) ranks the texels: the measured
+//! error per decile of the estimate (texel values only: the map's resolution part, what a
+//! lookup between texel centres misses, is not in a texel-level comparison).
 //!
 //!     cargo run --release --example error_map [scene.gltf] [texels-per-unit] [K] [ref samples] [hierarchical]
 //!
@@ -30,6 +33,7 @@ fn main() -> lightbake::Result<()> {
         config.technique = lightbake::config::Technique::Hierarchical;
     }
     config.transport.validity = std::env::var_os("NO_VALIDITY").is_none();
+    config.output.error_map = true;
     let baked = compute(&path, &config, &NoProgress)?;
     let params = ReferenceParams {
         samples_per_pass: 32,
@@ -63,6 +67,7 @@ fn main() -> lightbake::Result<()> {
             100.0 * metrics::noise_over_mean(&reference.std_error, r, &outside)
         );
     }
+    estimate_by_decile(&baked, r);
     // Each texel's share of the squared error.
     let sq: Vec<f64> = (0..n)
         .map(|i| {
@@ -98,4 +103,34 @@ fn main() -> lightbake::Result<()> {
         }
     }
     Ok(())
+}
+
+/// The measured relative error of the texels (channel mean, floored as the map's: 5% of the
+/// mean light), by decile of the map's estimated total (noise and resolution together) at the
+/// texel.
+fn estimate_by_decile(baked: &lightbake::Baked, reference: &[Vec3]) {
+    let Some(map) = &baked.error_map else { return };
+    let t = &baked.texels;
+    let level = |v: Vec3| v.element_sum() / 3.0;
+    let mean = reference.iter().map(|&v| level(v)).sum::<f32>() / reference.len() as f32;
+    let mut pairs: Vec<(f32, f32)> = (0..t.len())
+        .filter(|&i| t.invalid.binary_search(&(i as u32)).is_err())
+        .map(|i| {
+            let page = &map.pages[t.page[i] as usize];
+            let [x, y] = t.xy[i];
+            let estimate = page.rgb[(y * page.width + x) as usize];
+            let measured = level((baked.lightmap[i] - reference[i]).abs())
+                / (level(reference[i]) + 0.05 * mean);
+            (estimate.z, measured)
+        })
+        .collect();
+    pairs.sort_by(|a, b| a.0.total_cmp(&b.0));
+    println!("error map decile: mean estimated total, mean measured texel error");
+    for (d, chunk) in pairs.chunks(pairs.len().div_ceil(10).max(1)).enumerate() {
+        let n = chunk.len() as f32;
+        let (e, m) = chunk
+            .iter()
+            .fold((0.0, 0.0), |(e, m), p| (e + p.0, m + p.1));
+        println!("  {d}: {:6.2}% {:6.2}%", 100.0 * e / n, 100.0 * m / n);
+    }
 }

@@ -137,6 +137,53 @@ impl Sizes {
     }
 }
 
+/// The peak a bake of `input` with `config` is expected to reach, in bytes, for running bakes
+/// side by side (`build`): texels predicted from the surface area at the automatic density, a
+/// pilot pair held while the final rows are built at the configured rays (the automatic choice
+/// may choose others), the gather solver's peak where those rows would not fit the bake's limit
+/// and it may switch; never above that limit (a bake that would exceed it is refused).
+pub fn expected_peak(input: &Path, config: &BakeConfig) -> Result<u64> {
+    let (scene, source) = scene::load(input)?;
+    let mut config = config.clone();
+    if let Some(auto) = config.auto {
+        plan::choose_density(&scene, &mut config, &mut Plan::default(), &auto.keep);
+    }
+    let limit = limit(&config);
+    let sizes = Sizes::predicted(&scene, &source, &config);
+    let expected = sizes.expected(&config, limit as f64).total();
+    Ok((expected.ceil() as u64).min(limit))
+}
+
+impl Sizes {
+    /// See [`expected_peak`].
+    fn expected(&self, config: &BakeConfig, limit: f64) -> MemoryEstimate {
+        let rays = config.transport.gather_rays as f64;
+        let Some(auto) = config.auto else {
+            return self.estimate(config.technique, rays, 0.0, 0.0);
+        };
+        // The automatic choice makes the method Monte Carlo unless the user fixed it.
+        let technique = match auto.keep.method || config.technique.is_monte_carlo() {
+            true => config.technique,
+            false => Technique::DEFAULT,
+        };
+        let monte_carlo = technique.is_monte_carlo();
+        let pilot = !auto.keep.rays && monte_carlo;
+        let (held, held_rays) = if pilot {
+            (2.0, PILOT_RAYS as f64)
+        } else {
+            (0.0, 0.0)
+        };
+        let mut last = self.estimate(technique, rays, held, held_rays);
+        if last.total() > limit && monte_carlo && !auto.keep.solver {
+            last = self.estimate(Technique::Gather, rays, held, held_rays);
+        }
+        match pilot {
+            true => larger(self.pilot_peak(false), last),
+            false => last,
+        }
+    }
+}
+
 fn larger(a: MemoryEstimate, b: MemoryEstimate) -> MemoryEstimate {
     if a.total() >= b.total() { a } else { b }
 }

@@ -13,7 +13,7 @@ use std::time::Instant;
 
 use glam::Vec3;
 
-use crate::config::{BakeConfig, TransportParams};
+use crate::config::{BakeConfig, FormFactors, Technique, TransportParams};
 use crate::lightmap::{self, LightmapPages};
 use crate::output::{self, PageFiles, Staging};
 use crate::plan::{self, Plan};
@@ -111,6 +111,9 @@ pub struct Baked {
     /// `H/π` per texel (what the pages hold before dilation and seam stitching).
     pub lightmap: Vec<Vec3>,
     pub pages: LightmapPages,
+    /// Per page, each texel's estimated relative error: resolution, noise and total in R, G, B
+    /// (`config.output.error_map`; [`plan::error_map`]).
+    pub error_map: Option<LightmapPages>,
     pub validity: texels::validity::ValidityReport,
     /// The settings the bake ran with: `config` with the automatic choices applied.
     pub config: BakeConfig,
@@ -418,12 +421,16 @@ fn compute_prepared(mut prepared: Prepared, progress: &dyn Progress) -> Result<B
 
     let t = Instant::now();
     // With a plan, the pilot bakes are part of the result (a ray-weighted mean).
+    let last = pilot::final_bake(surfaces, &config, plan.as_ref(), pilot, progress)?;
+    // Before denoising: the error map shows the noise the denoiser was given.
+    let noise = (config.output.error_map).then(|| texel_noise(surfaces.texels, &config, &last));
     let pilot::FinalBake {
         transport,
         solution,
         gather_rays,
         light_samples,
-    } = pilot::final_bake(surfaces, &config, plan.as_ref(), pilot, progress)?;
+        ..
+    } = last;
     if !solution.converged {
         progress.warn(&format!(
             "the solver stopped on the iteration cap ({}) at residual {:.2e}, above the tolerance {:.1e}",
@@ -451,7 +458,8 @@ fn compute_prepared(mut prepared: Prepared, progress: &dyn Progress) -> Result<B
         .zip(&transport.direct)
         .map(|(h, d)| if config.transport.indirect_only { (*h - *d).max(Vec3::ZERO) } else { *h } / std::f32::consts::PI)
         .collect();
-    if config.transport.denoise && config.technique.is_monte_carlo() {
+    let denoised = config.transport.denoise && config.technique.is_monte_carlo();
+    if denoised {
         let noise_model = TransportParams {
             gather_rays,
             light_samples,
@@ -468,6 +476,11 @@ fn compute_prepared(mut prepared: Prepared, progress: &dyn Progress) -> Result<B
     timed(&mut stages, "denoise", t);
     let t = Instant::now();
     texels::validity::fill_invalid(&texels, &mut lightmap);
+    let error_map = noise.map(|sigma| {
+        let noise_level = plan.as_ref().and_then(|p| p.predicted_noise);
+        let map = plan::error_map::error_map(&texels, &lightmap, &sigma, denoised, noise_level);
+        LightmapPages::from_texels(&texels, &map)
+    });
     let mut pages = LightmapPages::from_texels(&texels, &lightmap);
     lightmap::dilate(&mut pages, config.atlas.padding.max(2) * 2);
     timed(&mut stages, "dilate", t);
@@ -489,6 +502,7 @@ fn compute_prepared(mut prepared: Prepared, progress: &dyn Progress) -> Result<B
         solution,
         lightmap,
         pages,
+        error_map,
         validity,
         config,
         plan,
@@ -496,6 +510,46 @@ fn compute_prepared(mut prepared: Prepared, progress: &dyn Progress) -> Result<B
         junctions,
         stages,
     })
+}
+
+/// Standard deviation per texel and channel of the stored values (`H/π`) of `bake` before
+/// denoising, for the error map ([`plan::error_map`]): the texel's own variance where the bake
+/// stored Monte Carlo rows, the denoiser's model for the matrix-free gatherer, none for the
+/// deterministic methods.
+fn texel_noise(texels: &texels::Texels, config: &BakeConfig, bake: &pilot::FinalBake) -> Vec<Vec3> {
+    let h = &bake.solution.irradiance;
+    let emitters = texels.emission.iter().any(|e| e.max_element() > 0.0);
+    let sky = config.transport.sky;
+    let sigma = match config.technique {
+        Technique::Stored {
+            form_factors: FormFactors::MonteCarlo,
+            ..
+        } => {
+            let samples = plan::error_map::Samples {
+                rays: &bake.texel_gather_rays,
+                light_per_ray: match emitters {
+                    true => bake.light_samples as f32 / bake.gather_rays.max(1) as f32,
+                    false => 0.0,
+                },
+            };
+            plan::error_map::gathering_noise(&bake.transport, texels, h, sky, &samples)
+        }
+        Technique::Gather => {
+            // As the denoiser: without emitters and sky, direct light is exact.
+            let sampled = emitters || sky.max_element() > 0.0;
+            let l = if sampled {
+                bake.light_samples.max(1)
+            } else {
+                0
+            };
+            plan::error_map::modelled_noise(h, &bake.transport.direct, bake.gather_rays, l)
+        }
+        _ => vec![Vec3::ZERO; h.len()],
+    };
+    sigma
+        .into_iter()
+        .map(|s| s / std::f32::consts::PI)
+        .collect()
 }
 
 /// Writes a computed bake: EXR + PNG pages and the glTF, atomically.
@@ -528,6 +582,17 @@ pub fn write(
             staging.write(&format!("{stem}_lightmap{k}_rgbm.png"), &png)?;
         }
         page_files.push(files);
+    }
+    // Beside the pages, referenced by nothing in the glTF.
+    for (k, page) in baked
+        .error_map
+        .iter()
+        .flat_map(|m| m.pages.iter().enumerate())
+    {
+        staging.write(
+            &format!("{stem}_lightmap{k}_error.exr"),
+            &output::write_exr(page, false, input)?,
+        )?;
     }
     output::write_gltf(
         &baked.scene,

@@ -262,6 +262,9 @@ pub struct FinalBake {
     /// denoiser's noise model.
     pub gather_rays: u32,
     pub light_samples: u32,
+    /// Gathering rays per texel, all runs together (fewer where the plan's `texel_rays` cut
+    /// them): what each texel's noise falls with.
+    pub texel_gather_rays: Vec<f32>,
 }
 
 /// The final bake of `config`, reusing the pilot: the result is the mean of the pilot runs and
@@ -293,11 +296,16 @@ pub fn final_bake(
             transport,
             solution,
         } = bake()?;
+        let texel_gather_rays = match texel_rays {
+            Some(r) => r.iter().map(|&k| k as f32).collect(),
+            None => vec![k as f32; surfaces.texels.len()],
+        };
         return Ok(FinalBake {
             transport,
             solution,
             gather_rays: k,
             light_samples: l,
+            texel_gather_rays,
         });
     };
     let mut runs: Vec<(f32, Lit)> = pilot
@@ -319,6 +327,7 @@ pub fn final_bake(
         _ => w,
     };
     let (mut h, mut direct) = (vec![Vec3::ZERO; n], vec![Vec3::ZERO; n]);
+    let mut texel_gather_rays = vec![0.0; n];
     let (mut rays, mut converged) = (0, true);
     for i in 0..n {
         let total: f32 = runs
@@ -326,6 +335,7 @@ pub fn final_bake(
             .enumerate()
             .map(|(r, run)| weight(r, run.0, i))
             .sum();
+        texel_gather_rays[i] = total;
         for (r, (w, run)) in runs.iter().enumerate() {
             let w = weight(r, *w, i) / total;
             h[i] += run.solution.irradiance[i] * w;
@@ -349,5 +359,6 @@ pub fn final_bake(
         solution,
         gather_rays: k_total,
         light_samples: l_total,
+        texel_gather_rays,
     })
 }

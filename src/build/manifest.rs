@@ -48,6 +48,7 @@ impl Manifest {
         Ok(Manifest {
             scenes,
             force: false,
+            jobs: None,
         })
     }
 }

@@ -3,8 +3,12 @@
 //! [`cache`]), and a [`BuildReport`] says what happened in a form tools read (JSON, with a
 //! schema in `src/build/report.schema.json`).
 //!
-//! Scenes run one after another, each with all threads; a failing scene is reported and the
-//! others still run. A scene is skipped when the hash of its input files, its effective options
+//! Scenes the cache does not vouch for are baked side by side as memory allows: up to
+//! [`Manifest::jobs`] at once, in manifest order, the next starting only when its expected peak
+//! (`bake::memory::expected_peak`) fits beside those running within the memory available when
+//! the build began. Each scene's memory limit is fixed then too, so what a bake chooses and
+//! writes, and the report (in manifest order), do not depend on what ran beside it. A failing
+//! scene is reported and the others still run. A scene is skipped when the hash of its input files, its effective options
 //! and lightbake's version matches the record beside its outputs and the outputs are intact.
 
 pub mod cache;
@@ -12,7 +16,7 @@ mod manifest;
 pub mod options;
 
 use std::path::PathBuf;
-use std::sync::Mutex;
+use std::sync::{Condvar, Mutex};
 use std::time::Instant;
 
 use serde::{Deserialize, Serialize};
@@ -25,6 +29,9 @@ pub struct Manifest {
     pub scenes: Vec<ManifestScene>,
     /// Bake every scene even where the cache says its outputs are up to date.
     pub force: bool,
+    /// Most scenes baked at once (`None`: as many as the rayon pool has threads); fewer run
+    /// when their expected peaks do not fit the memory available.
+    pub jobs: Option<usize>,
 }
 
 /// One scene of a build.
@@ -163,44 +170,195 @@ impl SceneResult {
 }
 
 /// Bakes every scene of `manifest` that is not up to date (see the module docs). Never stops
-/// early: a scene's failure is in its report. Cancelling through `progress` fails the scene
-/// under way and every scene after it.
+/// early: a scene's failure is in its report. Cancelling through `progress` fails the scenes
+/// under way and every scene after them.
 pub fn build(manifest: &Manifest, progress: &dyn Progress) -> BuildReport {
-    let scenes = manifest
-        .scenes
-        .iter()
-        .map(|scene| {
-            let start = Instant::now();
-            let (status, result, error) = match build_scene(scene, manifest.force, progress) {
-                Ok((status, result)) => (status, result, None),
-                Err(e) => (Status::Failed, SceneResult::default(), Some(e.to_string())),
-            };
-            SceneReport {
-                path: scene.path.clone(),
-                status,
-                seconds: start.elapsed().as_secs_f64(),
-                result,
-                error,
-            }
+    let available = crate::bake::memory::limit(&BakeConfig::default());
+    // Each scene's memory limit is fixed now: read as each bake starts, it would depend on
+    // what the others running beside it hold (and the automatic choice on it).
+    let configs: Vec<BakeConfig> = (manifest.scenes.iter())
+        .map(|scene| BakeConfig {
+            max_memory: Some(scene.config.max_memory.unwrap_or(available)),
+            ..scene.config.clone()
         })
         .collect();
+    let mut reports: Vec<Option<SceneReport>> = vec![None; manifest.scenes.len()];
+    let mut pending = Vec::new();
+    for (k, scene) in manifest.scenes.iter().enumerate() {
+        let start = Instant::now();
+        match look_up(scene, manifest.force, progress) {
+            Ok(Lookup::Hit(result)) => {
+                reports[k] = Some(scene_report(scene, start, Ok((Status::Skipped, result))))
+            }
+            Ok(Lookup::Miss(key)) => pending.push(Pending {
+                scene: k,
+                key,
+                seconds: start.elapsed().as_secs_f64(),
+            }),
+            Err(e) => reports[k] = Some(scene_report(scene, start, Err(e))),
+        }
+    }
+    let jobs = manifest.jobs.unwrap_or_else(rayon::current_num_threads);
+    let jobs = jobs.clamp(1, pending.len().max(1));
+    let bake = |p: &Pending| {
+        let start = Instant::now();
+        let scene = &manifest.scenes[p.scene];
+        let result = bake_scene(scene, &configs[p.scene], &p.key, progress);
+        let mut report = scene_report(scene, start, result.map(|r| (Status::Baked, r)));
+        report.seconds += p.seconds;
+        report
+    };
+    if jobs == 1 {
+        for p in &pending {
+            reports[p.scene] = Some(bake(p));
+        }
+    } else {
+        let peaks: Vec<u64> = (pending.iter())
+            .map(|p| {
+                let scene = &manifest.scenes[p.scene];
+                crate::bake::memory::expected_peak(&scene.input, &configs[p.scene])
+                    .unwrap_or(available)
+            })
+            .collect();
+        for (p, report) in pending
+            .iter()
+            .zip(side_by_side(&pending, &peaks, available, jobs, bake))
+        {
+            reports[p.scene] = Some(report);
+        }
+    }
     BuildReport {
         lightbake: env!("CARGO_PKG_VERSION").to_string(),
-        scenes,
+        scenes: reports
+            .into_iter()
+            .map(|r| r.expect("every scene reported"))
+            .collect(),
     }
 }
 
-fn build_scene(
+/// A scene the cache did not vouch for: its key, and the seconds spent finding out.
+struct Pending {
+    scene: usize,
+    key: String,
+    seconds: f64,
+}
+
+/// Runs `run` on every item, at most `jobs` at once, starting them in order: the next starts
+/// when a slot is free and its expected peak (`peaks`) fits `budget` beside the peaks of those
+/// running (or nothing runs: a scene above the budget runs alone). Results in item order. The
+/// bakes share the global rayon pool: work stealing hands the threads of a finished or waiting
+/// bake to those still running, where a fixed split would leave them idle.
+fn side_by_side<T: Sync, R: Send>(
+    items: &[T],
+    peaks: &[u64],
+    budget: u64,
+    jobs: usize,
+    run: impl Fn(&T) -> R + Sync,
+) -> Vec<R> {
+    let slots = Slots {
+        state: Mutex::new((0, 0, 0)),
+        changed: Condvar::new(),
+    };
+    let results: Vec<Mutex<Option<R>>> = items.iter().map(|_| Mutex::new(None)).collect();
+    std::thread::scope(|s| {
+        for _ in 0..jobs.min(items.len()) {
+            s.spawn(|| {
+                while let Some(k) = slots.take(peaks, budget, jobs) {
+                    *results[k].lock().unwrap() = Some(run(&items[k]));
+                    slots.give_back(peaks[k]);
+                }
+            });
+        }
+    });
+    results
+        .into_iter()
+        .map(|r| r.into_inner().unwrap().expect("every item ran"))
+        .collect()
+}
+
+/// The admission of [`side_by_side`]: (next item, items running, their peaks' sum).
+struct Slots {
+    state: Mutex<(usize, usize, u64)>,
+    changed: Condvar,
+}
+
+impl Slots {
+    /// Waits until the next item may start, and takes it (`None`: none is left).
+    fn take(&self, peaks: &[u64], budget: u64, jobs: usize) -> Option<usize> {
+        let mut state = self.state.lock().unwrap();
+        loop {
+            let (next, running, held) = *state;
+            if next >= peaks.len() {
+                return None;
+            }
+            if fits(held, peaks[next], budget, running, jobs) {
+                *state = (next + 1, running + 1, held + peaks[next]);
+                return Some(next);
+            }
+            state = self.changed.wait(state).unwrap();
+        }
+    }
+
+    fn give_back(&self, peak: u64) {
+        let mut state = self.state.lock().unwrap();
+        state.1 -= 1;
+        state.2 -= peak;
+        self.changed.notify_all();
+    }
+}
+
+/// Whether a bake expected to peak at `peak` may start beside `running` bakes holding `held`.
+fn fits(held: u64, peak: u64, budget: u64, running: usize, jobs: usize) -> bool {
+    running == 0 || (running < jobs && held.saturating_add(peak) <= budget)
+}
+
+/// A scene's report line from what became of it.
+fn scene_report(
     scene: &ManifestScene,
-    force: bool,
-    progress: &dyn Progress,
-) -> Result<(Status, SceneResult)> {
+    start: Instant,
+    outcome: Result<(Status, SceneResult)>,
+) -> SceneReport {
+    let (status, result, error) = match outcome {
+        Ok((status, result)) => (status, result, None),
+        Err(e) => (Status::Failed, SceneResult::default(), Some(e.to_string())),
+    };
+    SceneReport {
+        path: scene.path.clone(),
+        status,
+        seconds: start.elapsed().as_secs_f64(),
+        result,
+        error,
+    }
+}
+
+/// What the cache says of a scene.
+enum Lookup {
+    /// Up to date: the recorded figures.
+    Hit(SceneResult),
+    /// To be baked: the key to record.
+    Miss(String),
+}
+
+fn look_up(scene: &ManifestScene, force: bool, progress: &dyn Progress) -> Result<Lookup> {
     if progress.aborted() {
         return Err(crate::Error::Aborted);
     }
     let key = cache::key(&scene.input, &scene.config)?;
-    if !force && let Some(record) = cache::hit(&scene.output, &key) {
-        return Ok((Status::Skipped, record.result));
+    match cache::hit(&scene.output, &key) {
+        Some(record) if !force => Ok(Lookup::Hit(record.result)),
+        _ => Ok(Lookup::Miss(key)),
+    }
+}
+
+/// Bakes `scene` with `config` (its own, the memory limit fixed) and records `key` with it.
+fn bake_scene(
+    scene: &ManifestScene,
+    config: &BakeConfig,
+    key: &str,
+    progress: &dyn Progress,
+) -> Result<SceneResult> {
+    if progress.aborted() {
+        return Err(crate::Error::Aborted);
     }
     // A record left from an earlier bake must not vouch for half-written new outputs.
     let _ = std::fs::remove_file(scene.output.join(cache::RECORD));
@@ -208,10 +366,10 @@ fn build_scene(
         inner: progress,
         seen: Mutex::default(),
     };
-    let report = crate::bake(&scene.input, &scene.output, &scene.config, &warnings)?;
+    let report = crate::bake(&scene.input, &scene.output, config, &warnings)?;
     let result = SceneResult::of(&report, warnings.seen.into_inner().unwrap_or_default());
-    cache::store(&scene.output, &key, &report.files, &result)?;
-    Ok((Status::Baked, result))
+    cache::store(&scene.output, key, &report.files, &result)?;
+    Ok(result)
 }
 
 /// Passes everything on to `inner` and keeps the warnings.
@@ -253,6 +411,32 @@ mod tests {
             warnings: warnings.iter().map(|w| w.to_string()).collect(),
             ..SceneResult::default()
         }
+    }
+
+    #[test]
+    fn side_by_side_keeps_the_order_the_slots_and_the_budget() {
+        use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
+        // Peaks of 3, 3, 5, 1, 1 and 9 units in a budget of 8, at most 3 at once.
+        let peaks = [3, 3, 5, 1, 1, 9];
+        let (running, held) = (AtomicUsize::new(0), AtomicU64::new(0));
+        let (most_running, most_held) = (AtomicUsize::new(0), AtomicU64::new(0));
+        let items: Vec<usize> = (0..peaks.len()).collect();
+        let out = side_by_side(&items, &peaks, 8, 3, |&k| {
+            let r = running.fetch_add(1, Ordering::SeqCst) + 1;
+            let h = held.fetch_add(peaks[k], Ordering::SeqCst) + peaks[k];
+            most_running.fetch_max(r, Ordering::SeqCst);
+            // The one above the budget runs alone.
+            assert!(h <= 8 || r == 1, "item {k}: {r} running, {h} held");
+            std::thread::sleep(std::time::Duration::from_millis(20));
+            held.fetch_sub(peaks[k], Ordering::SeqCst);
+            running.fetch_sub(1, Ordering::SeqCst);
+            most_held.fetch_max(h, Ordering::SeqCst);
+            10 * k
+        });
+        assert_eq!(out, [0, 10, 20, 30, 40, 50]);
+        assert!(most_running.load(Ordering::SeqCst) >= 2);
+        assert!(most_running.load(Ordering::SeqCst) <= 3);
+        assert!(fits(0, 100, 8, 0, 1) && !fits(3, 6, 8, 1, 3) && !fits(1, 1, 8, 3, 3));
     }
 
     #[test]

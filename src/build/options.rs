@@ -35,6 +35,7 @@ pub struct Options {
     pub indirect_only: Option<bool>,
     pub float: Option<bool>,
     pub rgbm: Option<bool>,
+    pub error_map: Option<bool>,
     pub no_split_junctions: Option<bool>,
     pub no_validity: Option<bool>,
     pub no_denoise: Option<bool>,
@@ -117,6 +118,7 @@ impl Options {
         c.output.float = self.float.unwrap_or(false);
         c.output.preview_exposure = self.exposure.unwrap_or(0.0);
         c.output.rgbm = self.rgbm.unwrap_or(false);
+        c.output.error_map = self.error_map.unwrap_or(false);
         c.atlas.split_junctions = !self.no_split_junctions.unwrap_or(false);
         c.transport.validity = !self.no_validity.unwrap_or(false);
         c.transport.denoise = !self.no_denoise.unwrap_or(false);

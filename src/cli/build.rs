@@ -21,6 +21,11 @@ pub struct Args {
     /// Write what happened to each scene as JSON (schema: src/build/report.schema.json).
     #[arg(long, value_name = "FILE.json")]
     report: Option<PathBuf>,
+    /// Most scenes baked at once [default: as many as threads]; fewer run side by side when
+    /// their estimated peak memory does not fit the memory available. Outputs and the report
+    /// are the same for any N.
+    #[arg(long, value_name = "N")]
+    jobs: Option<usize>,
     #[command(flatten)]
     gate: GateArgs,
     #[command(flatten)]
@@ -37,6 +42,7 @@ pub fn run(args: &Args) -> Result<()> {
     let mut manifest = Manifest::load(&args.manifest)
         .with_context(|| format!("reading the manifest {}", args.manifest.display()))?;
     manifest.force = args.force;
+    manifest.jobs = args.jobs;
     let bars = Bars::new(args.run.quiet);
     let report = lightbake::build(&manifest, &bars);
     if let Some(path) = &args.report {

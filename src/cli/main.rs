@@ -194,6 +194,10 @@ struct BakeArgs {
     /// decode rgb = RGB/255 · A/255 · 8).
     #[arg(long)]
     rgbm: bool,
+    /// Also write each page's per-texel error estimate as <stem>_lightmap<k>_error.exr:
+    /// relative resolution error, noise and total in R, G, B (see the README's "Error map").
+    #[arg(long)]
+    error_map: bool,
     /// Keep texel sample points where they are even inside geometry (to measure leaks).
     #[arg(long)]
     no_validity: bool,
@@ -359,6 +363,7 @@ impl BakeArgs {
             indirect_only: Some(self.indirect_only),
             float: Some(self.float),
             rgbm: Some(self.rgbm),
+            error_map: Some(self.error_map),
             no_validity: Some(self.no_validity),
             no_denoise: Some(self.no_denoise),
             no_seams: Some(self.no_seams),

@@ -27,7 +27,10 @@ impl Progress for Bars {
         );
         bar.set_prefix(stage.to_string());
         bar.enable_steady_tick(Duration::from_millis(200));
-        *self.bar.lock().unwrap() = Some(bar);
+        // Scenes baked side by side (`build --jobs`) share the one bar: the latest stage shows.
+        if let Some(old) = self.bar.lock().unwrap().replace(bar) {
+            old.finish_and_clear();
+        }
     }
     fn advance(&self, n: u64) {
         if let Some(bar) = &*self.bar.lock().unwrap() {
