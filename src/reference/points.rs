@@ -62,7 +62,7 @@ use crate::lightmap::Page;
 use crate::lights::triangle_area;
 use crate::render::RenderScene;
 use crate::sampling::{Rng, sample_cdf, triangle_point};
-use crate::scene::Scene;
+use crate::scene::{Scene, SurfacePoint};
 use crate::texels::Texels;
 use crate::texels::validity::{self, MAX_BACK};
 use crate::trace::Tracer;
@@ -327,6 +327,11 @@ pub struct Lookup {
     pub value: Vec3,
     /// A texel of the bilinear footprint with a positive weight is black in every channel.
     pub touches_black: bool,
+    /// Where it was read: the index into [`RenderScene::pages`] and the `TEXCOORD_1` there.
+    pub page: u32,
+    pub uv: Vec2,
+    /// The baked surface's interpolated vertex normal at the point.
+    pub shading_normal: Vec3,
 }
 
 /// Reads the baked lightmap at every point as a renderer does (see the module docs); `None`
@@ -335,30 +340,33 @@ pub fn look_up(baked: &RenderScene, points: &[Point]) -> Vec<Option<Lookup>> {
     points
         .par_iter()
         .map(|p| {
-            let (instance, uv) = locate(&baked.scene, &baked.tracer, p)?;
-            let page = baked.page(instance)?;
-            Some(lookup_page(page, uv))
+            let sp = locate(&baked.scene, &baked.tracer, p)?;
+            let k = baked.instance_page[sp.instance as usize]?;
+            Some(lookup_page(&baked.pages[k as usize], k, &sp))
         })
         .collect()
 }
 
-fn lookup_page(page: &Page, uv: Vec2) -> Lookup {
+fn lookup_page(page: &Page, k: u32, sp: &SurfacePoint) -> Lookup {
     let touches_black = page
-        .footprint(uv)
+        .footprint(sp.uv1)
         .iter()
         .any(|&(k, w)| w > 0.0 && page.rgb[k].max_element() <= 0.0);
     Lookup {
-        value: page.bilinear(uv),
+        value: page.bilinear(sp.uv1),
         touches_black,
+        page: k,
+        uv: sp.uv1,
+        shading_normal: sp.n,
     }
 }
 
-/// The instance and interpolated `TEXCOORD_1` of the front-facing baked surface under `p`.
-fn locate(scene: &Scene, tracer: &Tracer, p: &Point) -> Option<(u32, Vec2)> {
+/// The front-facing baked surface under `p` (instance, interpolated `TEXCOORD_1` and normal).
+fn locate(scene: &Scene, tracer: &Tracer, p: &Point) -> Option<SurfacePoint> {
     let reach = LOCATE_OFFSETS * tracer.epsilon;
     let facing = |t: u32, b: Vec2| {
         let sp = scene.surface_point(t, b);
-        (sp.n_geo.dot(p.normal) > 0.9).then_some((sp.instance, sp.uv1))
+        (sp.n_geo.dot(p.normal) > 0.9).then_some(sp)
     };
     let hit = tracer.closest(p.position + p.normal * reach, -p.normal, 2.0 * reach);
     if let Some(hit) = hit
