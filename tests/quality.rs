@@ -393,3 +393,71 @@ fn rgbm_pages_are_written_and_decode_to_the_lightmap() {
         }
     }
 }
+
+/// A renderer reads texel centres: a partly covered texel at a chart border must hold its
+/// chart's light at its centre, not at its covered part's centroid (`lightmap::borders`). On the
+/// Cornell box's texels, a lightmap that is exactly linear in space (each texel given the
+/// linear function at its own sample point) is read back at random surface points whose
+/// bilinear footprint blends a partly covered texel: after `borders::extrapolate` the lookups
+/// match the function; laid out as solved they do not.
+#[test]
+fn lookups_beside_chart_borders_read_the_light_at_the_point() {
+    use lightbake::lightmap::{LightmapPages, borders};
+    use lightbake::sampling::{Rng, triangle_point};
+    use lightbake::texels::NO_TEXEL;
+
+    let mut config = BakeConfig::draft();
+    config.atlas.texels_per_unit = 16.0;
+    let p = lightbake::prepare(&fixture("cornell_box.gltf"), &config, &NoProgress).unwrap();
+    let (scene, t) = (&p.scene, &p.texels);
+    // Light rising across the box: linear on every planar chart.
+    let f = |q: Vec3| 2.0 + 0.2 * q.x - 0.15 * q.y + 0.1 * q.z;
+    let values: Vec<Vec3> = t.position.iter().map(|&q| Vec3::splat(f(q))).collect();
+    let raw = LightmapPages::from_texels(t, &values);
+    let mut fixed = raw.clone();
+    borders::extrapolate(scene, t, &values, &mut fixed);
+
+    // Points whose bilinear taps are all solved texels (not moved by validity, not invalid),
+    // at least one of them partly covered.
+    let moved = |i: u32| t.jitter[i as usize] < 1.0 || t.invalid.binary_search(&i).is_ok();
+    let partial = |i: u32| {
+        let i = i as usize;
+        t.area[i] < 0.99 * t.du[i].cross(t.dv[i]).length()
+    };
+    let (mut err_raw, mut err_fixed, mut n) = (0.0f64, 0.0f64, 0);
+    let mut rng = Rng::new(7, 0, 0);
+    for _ in 0..200_000 {
+        let tri = (rng.next_f32() * scene.triangles.len() as f32) as usize % scene.triangles.len();
+        let b = triangle_point(rng.next_vec2());
+        let page = t.triangle_page[tri] as usize;
+        let size = t.pages[page];
+        let [a, b1, c] = t.triangle_uv[tri];
+        let texel_uv = a * (1.0 - b.x - b.y) + b1 * b.x + c * b.y;
+        let uv = texel_uv / glam::Vec2::new(size.width as f32, size.height as f32);
+        let taps = raw.pages[page].footprint(uv);
+        let ids: Vec<u32> = (taps.iter())
+            .filter(|&&(_, w)| w > 0.0)
+            .map(|&(k, _)| t.index[page][k])
+            .collect();
+        if ids.iter().any(|&i| i == NO_TEXEL || moved(i)) || !ids.iter().any(|&i| partial(i)) {
+            continue;
+        }
+        let expected = f(scene.surface_point(tri as u32, b).p);
+        err_raw += ((raw.pages[page].bilinear(uv).x - expected) as f64).powi(2);
+        err_fixed += ((fixed.pages[page].bilinear(uv).x - expected) as f64).powi(2);
+        n += 1;
+    }
+    let rms = |e: f64| (e / n.max(1) as f64).sqrt();
+    eprintln!(
+        "{n} lookups beside borders: RMS error {:.5} as solved, {:.5} at texel centres",
+        rms(err_raw),
+        rms(err_fixed)
+    );
+    assert!(n > 1000, "{n}");
+    assert!(
+        rms(err_fixed) < 0.25 * rms(err_raw),
+        "{} -> {}",
+        rms(err_raw),
+        rms(err_fixed)
+    );
+}

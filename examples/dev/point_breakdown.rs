@@ -105,18 +105,42 @@ fn main() {
     }
     let n = total.n.max(1) as f64;
     let rel = |sq: f64| (sq / (3.0 * n)).sqrt() / mean_ref * 100.0;
-    println!("{out}: {} points, relative RMSE {:.2}%", total.n, rel(total.sq));
+    println!(
+        "{out}: {} points, relative RMSE {:.2}%",
+        total.n,
+        rel(total.sq)
+    );
     println!(
         "| cause | points | share of sq. error | adds RMSE | bias | ref. noise | bake noise |"
     );
     println!("|---|---:|---:|---:|---:|---:|---:|");
     for (name, s) in CAUSES.iter().zip(&sums) {
-        print_row(name, s.n, s.sq, total.sq, rel(s.sq), s.x, s.r, s.ref_noise, s.bake_noise);
+        print_row(
+            name,
+            s.n,
+            s.sq,
+            total.sq,
+            rel(s.sq),
+            s.x,
+            s.r,
+            s.ref_noise,
+            s.bake_noise,
+        );
     }
     println!("| *each cause alone (a point counts under every cause that holds)* |||||||");
     for (name, s) in CAUSES.iter().zip(&flagged) {
         let name = format!("any {name}");
-        print_row(&name, s.n, s.sq, total.sq, rel(s.sq), s.x, s.r, s.ref_noise, s.bake_noise);
+        print_row(
+            &name,
+            s.n,
+            s.sq,
+            total.sq,
+            rel(s.sq),
+            s.x,
+            s.r,
+            s.ref_noise,
+            s.bake_noise,
+        );
     }
     print_row(
         "all",
@@ -166,12 +190,21 @@ fn causes(
         l.touches_black && lit,
         taps.iter().any(|&(t, _)| cover[t] == 0.0),
         taps.iter().any(|&(t, _)| cover[t] < 1.0),
-        near_other_surface(baked, p.position, p.normal, texel_size(baked, l, page.width)),
+        near_other_surface(
+            baked,
+            p.position,
+            p.normal,
+            texel_size(baked, l, page.width),
+        ),
         l.shading_normal.dot(p.normal) < 1f32.to_radians().cos(),
         hi - lo > 0.3 * scale,
     ];
     let bits = (flags.iter().enumerate()).fold(0, |b, (c, &f)| b | (f as u32) << c);
-    if bits == 0 { 1 << (CAUSES.len() - 1) } else { bits }
+    if bits == 0 {
+        1 << (CAUSES.len() - 1)
+    } else {
+        bits
+    }
 }
 
 /// World size of one texel side at the lookup (from the page's texel count over the
@@ -208,7 +241,10 @@ fn near_other_surface(baked: &RenderScene, p: Vec3, n: Vec3, reach: f32) -> bool
     (0..8).any(|k| {
         let a = k as f32 * std::f32::consts::TAU / 8.0;
         let dir = t * a.cos() + b * a.sin();
-        baked.tracer.closest(p + n * 2.0 * eps, dir, reach).is_some()
+        baked
+            .tracer
+            .closest(p + n * 2.0 * eps, dir, reach)
+            .is_some()
     })
 }
 
@@ -234,7 +270,8 @@ fn coverage(baked: &RenderScene) -> Vec<Vec<f32>> {
         for y in lo.y as u32..hi.y as u32 {
             for x in lo.x as u32..hi.x as u32 {
                 let s = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
-                let w = [(a, b), (b, c), (c, a)].map(|(p, q)| (q - p).perp_dot(s - p) * area.signum());
+                let w =
+                    [(a, b), (b, c), (c, a)].map(|(p, q)| (q - p).perp_dot(s - p) * area.signum());
                 if w.iter().all(|&w| w >= 0.0) {
                     hits[k as usize][((y / SUB) * page.width + x / SUB) as usize] += 1;
                 }
@@ -242,6 +279,10 @@ fn coverage(baked: &RenderScene) -> Vec<Vec<f32>> {
         }
     }
     (hits.into_iter())
-        .map(|h| h.into_iter().map(|c| (c as f32 / (SUB * SUB) as f32).min(1.0)).collect())
+        .map(|h| {
+            h.into_iter()
+                .map(|c| (c as f32 / (SUB * SUB) as f32).min(1.0))
+                .collect()
+        })
         .collect()
 }
