@@ -29,8 +29,7 @@
 //!            ─ solve::solve ──▶ Solution              H = H_direct + F·(ρH), iterated
 //!     or solve::gather, solve::hierarchical ──▶ Transport (no rows) + Solution
 //!     ─ lightmap::denoise  ──▶ H/π per texel         edge-aware, Monte Carlo only
-//! ─ LightmapPages::from_texels ▶ LightmapPages         H/π per texel (border texels: their chart's
-//!                                                     plane at the texel centre), dilated into gutters
+//! ─ LightmapPages::from_texels ▶ LightmapPages         H/π per texel, dilated into the gutters
 //!         ─ lightmap::seams ──▶ LightmapPages         UV seams stitched (least squares)
 //!                  ─ output ──▶ .exr + .png pages, .gltf/.bin or .glb (every file format
 //!                                                     lightbake writes: exr, png, rgbm, glb, gltf)

@@ -469,7 +469,6 @@ fn compute_prepared(mut prepared: Prepared, progress: &dyn Progress) -> Result<B
     let t = Instant::now();
     texels::validity::fill_invalid(&texels, &mut lightmap);
     let mut pages = LightmapPages::from_texels(&texels, &lightmap);
-    lightmap::borders::extrapolate(&scene, &texels, &lightmap, &mut pages);
     lightmap::dilate(&mut pages, config.atlas.padding.max(2) * 2);
     timed(&mut stages, "dilate", t);
     check_aborted(progress)?;

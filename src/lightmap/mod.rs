@@ -3,7 +3,6 @@
 //! A texel stores `H/π` (irradiance over π): the radiance a white Lambertian surface would
 //! reflect, so a renderer shades with `baseColor × lightmap + emission`.
 
-pub mod borders;
 pub mod denoise;
 mod dilate;
 pub mod seams;
