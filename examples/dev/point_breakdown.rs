@@ -66,15 +66,6 @@ fn main() {
         .map(|(m, _)| m.element_sum() as f64 / 3.0)
         .sum::<f64>()
         / lookups.iter().flatten().count().max(1) as f64;
-    #[derive(Default, Clone, Copy)]
-    struct Sums {
-        n: usize,
-        sq: f64,
-        x: f64,
-        r: f64,
-        ref_noise: f64,
-        bake_noise: f64,
-    }
     let mut sums = [Sums::default(); CAUSES.len()];
     let mut flagged = [Sums::default(); CAUSES.len()];
     let mut total = Sums::default();
@@ -115,55 +106,37 @@ fn main() {
     );
     println!("|---|---:|---:|---:|---:|---:|---:|");
     for (name, s) in CAUSES.iter().zip(&sums) {
-        print_row(
-            name,
-            s.n,
-            s.sq,
-            total.sq,
-            rel(s.sq),
-            s.x,
-            s.r,
-            s.ref_noise,
-            s.bake_noise,
-        );
+        print_row(name, s, &total, &rel);
     }
     println!("| *each cause alone (a point counts under every cause that holds)* |||||||");
     for (name, s) in CAUSES.iter().zip(&flagged) {
-        let name = format!("any {name}");
-        print_row(
-            &name,
-            s.n,
-            s.sq,
-            total.sq,
-            rel(s.sq),
-            s.x,
-            s.r,
-            s.ref_noise,
-            s.bake_noise,
-        );
+        print_row(&format!("any {name}"), s, &total, &rel);
     }
-    print_row(
-        "all",
-        total.n,
-        total.sq,
-        total.sq,
-        rel(total.sq),
-        total.x,
-        total.r,
-        total.ref_noise,
-        total.bake_noise,
-    );
+    print_row("all", &total, &total, &rel);
 }
 
-#[allow(clippy::too_many_arguments)]
-fn print_row(name: &str, n: usize, sq: f64, all: f64, adds: f64, x: f64, r: f64, rn: f64, bn: f64) {
+/// Sums over the points of one cause (channels summed).
+#[derive(Default, Clone, Copy)]
+struct Sums {
+    n: usize,
+    sq: f64,
+    x: f64,
+    r: f64,
+    ref_noise: f64,
+    bake_noise: f64,
+}
+
+/// One table row: `rel` turns a sum of squares into the relative RMSE it adds.
+fn print_row(name: &str, s: &Sums, total: &Sums, rel: &dyn Fn(f64) -> f64) {
     let pct = |a: f64, b: f64| if b > 0.0 { a / b * 100.0 } else { 0.0 };
     println!(
-        "| {name} | {n} | {:.1}% | {adds:.2}% | {:+.2}% | {:.0}% | {:.0}% |",
-        pct(sq, all),
-        pct(x - r, r),
-        pct(rn, sq),
-        pct(bn, sq),
+        "| {name} | {} | {:.1}% | {:.2}% | {:+.2}% | {:.0}% | {:.0}% |",
+        s.n,
+        pct(s.sq, total.sq),
+        rel(s.sq),
+        pct(s.x - s.r, s.r),
+        pct(s.ref_noise, s.sq),
+        pct(s.bake_noise, s.sq),
     );
 }
 
