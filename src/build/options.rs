@@ -36,6 +36,7 @@ pub struct Options {
     pub float: Option<bool>,
     pub rgbm: Option<bool>,
     pub no_split_junctions: Option<bool>,
+    pub no_shadow_cuts: Option<bool>,
     pub no_validity: Option<bool>,
     pub no_denoise: Option<bool>,
     pub no_seams: Option<bool>,
@@ -118,6 +119,7 @@ impl Options {
         c.output.preview_exposure = self.exposure.unwrap_or(0.0);
         c.output.rgbm = self.rgbm.unwrap_or(false);
         c.atlas.split_junctions = !self.no_split_junctions.unwrap_or(false);
+        c.atlas.shadow_cuts = !self.no_shadow_cuts.unwrap_or(false);
         c.transport.validity = !self.no_validity.unwrap_or(false);
         c.transport.denoise = !self.no_denoise.unwrap_or(false);
         if !no_auto {

@@ -36,6 +36,7 @@ use std::collections::BTreeMap;
 use glam::{DVec2, DVec3, Vec2, Vec3};
 use spade::{ConstrainedDelaunayTriangulation, Point2, Triangulation};
 
+use super::shadow_cuts::ShadowCutter;
 use super::{Blend, Scene, Split};
 
 /// Cut end points closer than this merge, and move onto a patch vertex or edge this close
@@ -69,18 +70,37 @@ pub struct JunctionReport {
     /// Junction edges whose two sides stayed connected around the junction (the cell map of
     /// divided texels covers them).
     pub unseparated_edges: usize,
+    /// Shadow outline cuts inserted ([`super::shadow_cuts`]; counted among `segments` too),
+    /// the boundary samples that chose them, and outline stretches left out (work bounds).
+    pub shadow_segments: usize,
+    pub shadow_samples: usize,
+    pub shadow_skipped: usize,
 }
 
 impl JunctionReport {
     /// One phrase for the bake's summary line.
     pub fn brief(&self) -> String {
         format!(
-            "junctions: {} receiver(s) split ({} segments, {} extensions, {} triangles → +{}){}",
+            "junctions: {} receiver(s) split ({} segments, {} extensions, {} triangles → +{}){}{}",
             self.receivers,
             self.segments,
             self.extensions,
             self.triangles_split,
             self.triangles_added,
+            if self.shadow_samples > 0 {
+                format!(
+                    ", {} of the segments along shadow outlines ({} samples{})",
+                    self.shadow_segments,
+                    self.shadow_samples,
+                    if self.shadow_skipped > 0 {
+                        format!(", {} stretches left out", self.shadow_skipped)
+                    } else {
+                        String::new()
+                    }
+                )
+            } else {
+                String::new()
+            },
             if self.fallback_triangles + self.unseparated_edges > 0 {
                 format!(
                     ", {} triangles left whole, {} edges unseparated",
@@ -96,16 +116,30 @@ impl JunctionReport {
 /// Cuts every instance of `scene` where other surfaces meet it (see the module docs); `texel`
 /// is the lightmap texel size in world units (snapping tolerances are fractions of it).
 pub fn split(scene: Scene, texel: f32) -> (Scene, JunctionReport) {
+    split_with(scene, texel, None)
+}
+
+/// [`split`], cutting along the shadow outlines `shadows` finds too (see
+/// [`super::shadow_cuts`]).
+pub fn split_with(
+    scene: Scene,
+    texel: f32,
+    shadows: Option<&ShadowCutter>,
+) -> (Scene, JunctionReport) {
     let texel = f64::from(texel);
     let tol = Tolerances {
+        texel,
         snap: SNAP_TEXELS * texel,
         touch: TOUCH_TEXELS * texel,
     };
     let grid = Grid::new(&scene, tol.touch, texel);
     let mut report = JunctionReport::default();
     let splits: Vec<Option<InstanceSplit>> = (0..scene.instances.len())
-        .map(|i| split_instance(&scene, i as u32, &grid, tol, &mut report))
+        .map(|i| split_instance(&scene, i as u32, &grid, tol, shadows, &mut report))
         .collect();
+    if let Some(shadows) = shadows {
+        (report.shadow_samples, report.shadow_skipped) = shadows.work();
+    }
     if splits.iter().all(Option::is_none) {
         return (scene, report);
     }
@@ -114,6 +148,7 @@ pub fn split(scene: Scene, texel: f32) -> (Scene, JunctionReport) {
 
 #[derive(Clone, Copy)]
 struct Tolerances {
+    texel: f64,
     snap: f64,
     touch: f64,
 }
@@ -254,18 +289,22 @@ impl Grid {
 }
 
 /// A flat patch of an instance in its own plane coordinates.
-struct Patch {
+pub(super) struct Patch {
     /// Instance-local triangles.
     triangles: Vec<u32>,
-    origin: DVec3,
+    pub(super) origin: DVec3,
     axes: [DVec3; 2],
-    normal: DVec3,
+    pub(super) normal: DVec3,
 }
 
 impl Patch {
-    fn to_2d(&self, p: DVec3) -> DVec2 {
+    pub(super) fn to_2d(&self, p: DVec3) -> DVec2 {
         let d = p - self.origin;
         DVec2::new(d.dot(self.axes[0]), d.dot(self.axes[1]))
+    }
+
+    pub(super) fn to_3d(&self, p: DVec2) -> DVec3 {
+        self.origin + self.axes[0] * p.x + self.axes[1] * p.y
     }
 }
 
@@ -458,6 +497,7 @@ fn split_instance(
     index: u32,
     grid: &Grid,
     tol: Tolerances,
+    shadows: Option<&ShadowCutter>,
     report: &mut JunctionReport,
 ) -> Option<InstanceSplit> {
     let inst = &scene.instances[index as usize];
@@ -541,7 +581,11 @@ fn split_instance(
     let mut patch_cuts: Vec<Option<Cuts>> = Vec::with_capacity(patches.len());
     for (id, patch) in patches.iter().enumerate() {
         let cuts = receiver(patch, id as u32)
-            .then(|| patch_cuts_of(scene, index, patch, &tris, &weld, pos, grid, tol))
+            .then(|| {
+                patch_cuts_of(
+                    scene, index, patch, &tris, &weld, pos, grid, tol, shadows, report,
+                )
+            })
             .flatten();
         if let Some(cuts) = &cuts {
             report.segments += cuts.segments.iter().filter(|s| !s.1).count();
@@ -839,6 +883,8 @@ fn patch_cuts_of(
     pos: impl Fn(u32) -> DVec3 + Copy,
     grid: &Grid,
     tol: Tolerances,
+    shadows: Option<&ShadowCutter>,
+    report: &mut JunctionReport,
 ) -> Option<Cuts> {
     // The patch's edges and vertices in plane coordinates.
     let mut counted: BTreeMap<[u32; 2], (usize, [DVec2; 2])> = BTreeMap::new();
@@ -897,25 +943,22 @@ fn patch_cuts_of(
         if length <= tol.snap {
             continue;
         }
-        // Parameter intervals of the segment inside the patch's triangles, merged.
-        let mut inside: Vec<[f64; 2]> = corners2d
-            .iter()
-            .filter_map(|&c| clip_interval(a, b, c, 1e-9 * tol.snap))
-            .collect();
-        inside.sort_by(|x, y| x[0].total_cmp(&y[0]));
-        let mut merged: Vec<[f64; 2]> = Vec::new();
-        for iv in inside {
-            match merged.last_mut() {
-                Some(m) if iv[0] <= m[1] + tol.snap / length => m[1] = m[1].max(iv[1]),
-                _ => merged.push(iv),
-            }
-        }
-        for [s0, s1] in merged {
+        for [s0, s1] in inside_intervals(a, b, &corners2d, tol.snap) {
             if (s1 - s0) * length > tol.snap {
                 let i = cuts.point(a.lerp(b, s0), &patch_edges, tol.snap);
                 let j = cuts.point(a.lerp(b, s1), &patch_edges, tol.snap);
                 cuts.add(i, j, false);
             }
+        }
+    }
+    // Shadow outlines of punctual lights: cuts never stitched, as junctions are.
+    if let Some(shadows) = shadows {
+        for [a, b] in shadows.patch_cuts(patch, &corners2d, tol.texel, tol.touch) {
+            let i = cuts.point(a, &patch_edges, tol.snap);
+            let j = cuts.point(b, &patch_edges, tol.snap);
+            let before = cuts.segments.len();
+            cuts.add(i, j, false);
+            report.shadow_segments += cuts.segments.len() - before;
         }
     }
     // Segments lying along the patch border change nothing: leave them out.
@@ -936,6 +979,30 @@ fn patch_cuts_of(
     cuts.split_at_points(tol.snap);
     cuts.extend_free_ends(&patch_edges, tol.snap);
     Some(cuts)
+}
+
+/// Parameter intervals of segment `a → b` inside the triangles `corners` (plane coordinates),
+/// merged across gaps up to `snap`.
+pub(super) fn inside_intervals(
+    a: DVec2,
+    b: DVec2,
+    corners: &[[DVec2; 3]],
+    snap: f64,
+) -> Vec<[f64; 2]> {
+    let length = a.distance(b);
+    let mut inside: Vec<[f64; 2]> = corners
+        .iter()
+        .filter_map(|&c| clip_interval(a, b, c, 1e-9 * snap))
+        .collect();
+    inside.sort_by(|x, y| x[0].total_cmp(&y[0]));
+    let mut merged: Vec<[f64; 2]> = Vec::new();
+    for iv in inside {
+        match merged.last_mut() {
+            Some(m) if iv[0] <= m[1] + snap / length => m[1] = m[1].max(iv[1]),
+            _ => merged.push(iv),
+        }
+    }
+    merged
 }
 
 /// Where triangle `p` meets the patch's plane: a segment when it crosses the plane or has an

@@ -16,6 +16,7 @@
 mod camera;
 mod gltf_in;
 pub mod junctions;
+pub mod shadow_cuts;
 
 use std::ops::Range;
 use std::path::PathBuf;
