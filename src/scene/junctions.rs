@@ -323,6 +323,9 @@ struct Cuts {
     on_border: Vec<bool>,
     /// Point pairs; `true` for an extension of a free segment end.
     segments: Vec<([u32; 2], bool)>,
+    /// Some cuts follow shadow outlines: the patch's border bounds its sides too, as a shadow
+    /// that ends at a crease (a wall's shadow climbing a box) is no closed cut of the instance.
+    shadow: bool,
 }
 
 /// The patch's edges in plane coordinates, with their border flag (one patch face on them).
@@ -647,6 +650,7 @@ fn split_instance(
         split: Split::default(),
     };
     let mut cut_bits: Vec<[u8; 2]> = Vec::with_capacity(tris.len()); // junction, any cut
+    let mut out_patch: Vec<u32> = Vec::with_capacity(tris.len());
     let mut blends: BTreeMap<Vec<(u32, u32)>, u32> = BTreeMap::new();
     let source_vertices = inst.vertices.end - first;
     let mut any_split = false;
@@ -677,6 +681,7 @@ fn split_instance(
             out.triangles.push(tris[t]);
             out.source_triangle.push(inst.source_triangle[t]);
             cut_bits.push(cuts.map_or([0, 0], |c| cut_bits_of(corners, c, tol.snap)));
+            out_patch.push(id);
             continue;
         }
         let frame = match cuts {
@@ -690,6 +695,7 @@ fn split_instance(
             out.triangles.push(tris[t]);
             out.source_triangle.push(inst.source_triangle[t]);
             cut_bits.push([0, 0]);
+            out_patch.push(id);
             continue;
         };
         any_split = true;
@@ -709,6 +715,7 @@ fn split_instance(
             out.triangles.push(tri);
             out.source_triangle.push(inst.source_triangle[t]);
             cut_bits.push(bits);
+            out_patch.push(id);
         }
     }
     if !any_split {
@@ -716,7 +723,13 @@ fn split_instance(
     }
     report.receivers += 1;
 
-    // Sides: connected across edges that are not cuts.
+    // Sides: connected across edges that are not cuts, nor borders of a patch with shadow cuts.
+    let shadowed = |id: u32| {
+        patch_cuts
+            .get(id as usize)
+            .and_then(Option::as_ref)
+            .is_some_and(|c| c.shadow)
+    };
     let blend_pos = |v: u32| -> [u64; 3] {
         let p = if v < source_vertices {
             pos(v)
@@ -768,7 +781,9 @@ fn split_instance(
                 }
                 for &(_, u, _) in faces_on(&new_edges, w[k], w[(k + 1) % 3]) {
                     let u = u as usize;
-                    let blocked = cut_bits[u][1] & (1 << edge_index(u, w[k], w[(k + 1) % 3])) != 0;
+                    let blocked = cut_bits[u][1] & (1 << edge_index(u, w[k], w[(k + 1) % 3])) != 0
+                        || (out_patch[u] != out_patch[t]
+                            && (shadowed(out_patch[u]) || shadowed(out_patch[t])));
                     if sides[u] == u32::MAX && !blocked {
                         sides[u] = next_side;
                         stack.push(u);
@@ -921,6 +936,7 @@ fn patch_cuts_of(
         points: Vec::new(),
         on_border: Vec::new(),
         segments: Vec::new(),
+        shadow: false,
     };
     let inst = &scene.instances[index as usize];
     let own = |g: u32| {
@@ -959,6 +975,7 @@ fn patch_cuts_of(
             let before = cuts.segments.len();
             cuts.add(i, j, false);
             report.shadow_segments += cuts.segments.len() - before;
+            cuts.shadow = true;
         }
     }
     // Segments lying along the patch border change nothing: leave them out.
@@ -1241,6 +1258,7 @@ mod tests {
             ],
             on_border: vec![false; 5],
             segments: vec![([0, 1], false)],
+            shadow: false,
         };
         cuts.split_at_points(snap);
         assert_eq!(cuts.segments.len(), 2, "{:?}", cuts.segments);
