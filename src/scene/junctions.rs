@@ -1241,7 +1241,7 @@ fn vertex_of(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::scene::{Instance, Material};
+    use crate::scene::{Instance, LightKind, Material};
 
     /// Points near a segment's ends or near each other split it into no sliver (the fuzzer's
     /// out-of-memory case was pieces splitting each other without end).
@@ -1509,6 +1509,145 @@ mod tests {
         for t in split.instances[floor].triangles.clone() {
             let xs = split.triangles[t as usize].map(|v| split.positions[v as usize].x);
             assert!(xs.iter().all(|&x| x <= 1e-6) || xs.iter().all(|&x| x >= -1e-6));
+        }
+    }
+
+    /// A closed box from `lo` to `hi`, faces counter-clockwise seen from outside.
+    fn cuboid(lo: Vec3, hi: Vec3) -> (Vec<Vec3>, Vec<[u32; 3]>) {
+        let mut p = Vec::new();
+        let mut t = Vec::new();
+        for axis in 0..3 {
+            for high in [false, true] {
+                let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
+                let corner = |a: bool, b: bool| {
+                    let mut c = lo;
+                    c[axis] = if high { hi[axis] } else { lo[axis] };
+                    c[u] = if a { hi[u] } else { lo[u] };
+                    c[v] = if b { hi[v] } else { lo[v] };
+                    c
+                };
+                let first = p.len() as u32;
+                p.extend([
+                    corner(false, false),
+                    corner(true, false),
+                    corner(true, true),
+                ]);
+                p.push(corner(false, true));
+                // (u, v, axis) is right-handed: counter-clockwise in (u, v) faces +axis.
+                let quad = [[0, 1, 2], [0, 2, 3]].map(|q: [u32; 3]| q.map(|k| k + first));
+                t.extend(if high {
+                    quad
+                } else {
+                    quad.map(|q| [q[0], q[2], q[1]])
+                });
+            }
+        }
+        (p, t)
+    }
+
+    /// Whether the segment from `o` along `d` (unit) hits a triangle of `scene`.
+    fn blocked(scene: &Scene, o: Vec3, d: Vec3) -> bool {
+        scene.triangles.iter().any(|t| {
+            let [a, b, c] = t.map(|v| scene.positions[v as usize]);
+            let (e1, e2) = (b - a, c - a);
+            let q = d.cross(e2);
+            let det = e1.dot(q);
+            if det.abs() < 1e-9 {
+                return false;
+            }
+            let s = (o - a) / det;
+            let (u, r) = (s.dot(q), d.dot(s.cross(e1)));
+            u >= 0.0 && r >= 0.0 && u + r <= 1.0 && e2.dot(s.cross(e1)) > 1e-5
+        })
+    }
+
+    /// Total length of the floor's (instance 0) never-stitched cut edges on the line x = `x`.
+    fn cut_length_at(scene: &Scene, x: f32) -> f32 {
+        let inst = &scene.instances[0];
+        let mut length = 0.0;
+        for t in inst.triangles.clone() {
+            let tri = scene.triangles[t as usize].map(|v| scene.positions[v as usize]);
+            for k in 0..3 {
+                let (a, b) = (tri[k], tri[(k + 1) % 3]);
+                if scene.is_junction_edge(t, k) && (a.x - x).abs() < 1e-4 && (b.x - x).abs() < 1e-4
+                {
+                    length += a.distance(b);
+                }
+            }
+        }
+        length / 2.0 // each edge from both of its triangles
+    }
+
+    /// A 1 m box on the floor under a sun travelling along (1, −2, 0) casts a shadow reaching
+    /// 0.5 m past its side x = 2: the floor is cut along that outline (x = 2.5, 1 m long). With
+    /// a roof at 3 m whose shadow covers x = 2..3.5, the box's outline lies in shadow and is
+    /// not cut; the roof's own outline (x = 3.5, across the floor) is.
+    #[test]
+    fn a_box_on_a_floor_under_a_sun_is_cut_along_its_shadow_outline() {
+        let sun = crate::scene::Light {
+            name: None,
+            kind: LightKind::Directional,
+            position: Vec3::ZERO,
+            direction: Vec3::new(1.0, -2.0, 0.0).normalize(),
+            intensity: Vec3::ONE,
+            range: None,
+        };
+        let roof = (
+            vec![
+                Vec3::new(0.5, 3.0, 0.0),
+                Vec3::new(2.0, 3.0, 0.0),
+                Vec3::new(2.0, 3.0, 4.0),
+                Vec3::new(0.5, 3.0, 4.0),
+            ],
+            vec![[0, 1, 2], [0, 2, 3]],
+        );
+        let cube = cuboid(Vec3::new(1.0, 0.0, 1.0), Vec3::new(2.0, 1.0, 2.0));
+        for with_roof in [false, true] {
+            let mut meshes = vec![floor(), cube.clone()];
+            if with_roof {
+                meshes.push(roof.clone());
+            }
+            let mut scene = scene_of(&meshes);
+            scene.lights.push(sun.clone());
+            let shadows_of = scene.clone();
+            let light_at = |_: usize, p: Vec3, n: Vec3| {
+                let l = -sun.direction;
+                let lit = n.dot(l) > 0.0 && !blocked(&shadows_of, p + n * 1e-4, l);
+                if lit { n.dot(l) } else { 0.0 }
+            };
+            let cutter = ShadowCutter::new(&scene, &light_at);
+            let (split, report) = split_with(scene, 0.1, Some(&cutter));
+            assert_eq!(report.fallback_triangles, 0, "{report:?}");
+            let (outline, roof_outline) = (cut_length_at(&split, 2.5), cut_length_at(&split, 3.5));
+            if with_roof {
+                assert!(
+                    outline < 1e-3,
+                    "{outline} m cut in the roof's shadow: {report:?}"
+                );
+                assert!(
+                    (roof_outline - 4.0).abs() < 1e-3,
+                    "{roof_outline}: {report:?}"
+                );
+            } else {
+                assert!((outline - 1.0).abs() < 1e-3, "{outline}: {report:?}");
+                assert_eq!(roof_outline, 0.0);
+                // The sides of the cut do not meet: the shadow is a side of its own.
+                let inst = &split.instances[0];
+                let side_at = |x: f32| {
+                    let p = Vec2::new(x, 1.5);
+                    inst.triangles.clone().find_map(|t| {
+                        let c = split.triangles[t as usize].map(|v| {
+                            Vec2::new(split.positions[v as usize].x, split.positions[v as usize].z)
+                        });
+                        let inside = (0..3)
+                            .all(|k| (c[(k + 1) % 3] - c[k]).perp_dot(p - c[k]) <= 0.0)
+                            || (0..3).all(|k| (c[(k + 1) % 3] - c[k]).perp_dot(p - c[k]) >= 0.0);
+                        inside.then(|| inst.split.sides[(t - inst.triangles.start) as usize])
+                    })
+                };
+                assert!(side_at(2.45).is_some());
+                assert_ne!(side_at(2.45), side_at(2.55));
+            }
         }
     }
 }

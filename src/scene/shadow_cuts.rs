@@ -147,7 +147,13 @@ impl<'a> ShadowCutter<'a> {
                 }
                 for [s0, s1] in inside_intervals(p, q, corners, 0.25 * texel) {
                     if (s1 - s0) * length >= texel {
-                        self.boundaries(patch, l, [p.lerp(q, s0), p.lerp(q, s1)], texel, &mut pieces);
+                        self.boundaries(
+                            patch,
+                            l,
+                            [p.lerp(q, s0), p.lerp(q, s1)],
+                            texel,
+                            &mut pieces,
+                        );
                     }
                 }
             }
@@ -188,7 +194,13 @@ impl<'a> ShadowCutter<'a> {
             }
             let (lit, jump) = if ex > 0.0 { (x, ex) } else { (y, ey) };
             let total: f32 = (0..self.lights.len())
-                .map(|k| if k == l { jump } else { (self.light_at)(k, lit, n) })
+                .map(|k| {
+                    if k == l {
+                        jump
+                    } else {
+                        (self.light_at)(k, lit, n)
+                    }
+                })
                 .sum();
             jump >= MIN_JUMP * total
         };
@@ -265,7 +277,11 @@ fn project(
 /// vertices), sorted; positions weld across instances, so a solid made of several primitives
 /// is closed.
 fn scene_edges(scene: &Scene) -> Vec<([u32; 2], u32, [u32; 2])> {
-    let key = |v: u32| (scene.positions[v as usize] + Vec3::ZERO).to_array().map(f32::to_bits);
+    let key = |v: u32| {
+        (scene.positions[v as usize] + Vec3::ZERO)
+            .to_array()
+            .map(f32::to_bits)
+    };
     let mut order: Vec<u32> = (0..scene.positions.len() as u32).collect();
     order.sort_unstable_by_key(|&v| (key(v), v));
     let mut weld = vec![0u32; scene.positions.len()];
@@ -285,11 +301,7 @@ fn scene_edges(scene: &Scene) -> Vec<([u32; 2], u32, [u32; 2])> {
         for k in 0..3 {
             let (a, b) = (weld[tri[k] as usize], weld[tri[(k + 1) % 3] as usize]);
             if a != b {
-                edges.push((
-                    [a.min(b), a.max(b)],
-                    t as u32,
-                    [tri[k], tri[(k + 1) % 3]],
-                ));
+                edges.push(([a.min(b), a.max(b)], t as u32, [tri[k], tri[(k + 1) % 3]]));
             }
         }
     }
@@ -299,7 +311,11 @@ fn scene_edges(scene: &Scene) -> Vec<([u32; 2], u32, [u32; 2])> {
 
 /// The edges of `edges` on the outline seen from the light: between a triangle facing it and
 /// one facing away, or with one triangle only (an open boundary).
-fn silhouette(scene: &Scene, edges: &[([u32; 2], u32, [u32; 2])], toward: Toward) -> Vec<[DVec3; 2]> {
+fn silhouette(
+    scene: &Scene,
+    edges: &[([u32; 2], u32, [u32; 2])],
+    toward: Toward,
+) -> Vec<[DVec3; 2]> {
     let pos = |v: u32| scene.positions[v as usize].as_dvec3();
     let facing = |t: u32| {
         let [a, b, c] = scene.triangles[t as usize].map(pos);
