@@ -17,4 +17,5 @@ mod quality;
 mod reference;
 mod render;
 mod seams;
+mod shadow_cuts;
 mod solvers;
