@@ -969,7 +969,7 @@ fn patch_cuts_of(
     }
     // Shadow outlines of punctual lights: cuts never stitched, as junctions are.
     if let Some(shadows) = shadows {
-        for [a, b] in shadows.patch_cuts(patch, &corners2d, tol.texel, tol.touch) {
+        for [a, b] in shadows.patch_cuts(patch, &corners2d, (lo, hi), tol.texel, tol.touch) {
             let i = cuts.point(a, &patch_edges, tol.snap);
             let j = cuts.point(b, &patch_edges, tol.snap);
             let before = cuts.segments.len();

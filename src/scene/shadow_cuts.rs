@@ -66,6 +66,8 @@ struct Source {
     /// The direction light travels (a sun), or the light's position.
     kind: Toward,
     silhouette: Vec<[DVec3; 2]>,
+    /// The silhouette edges binned by their bounding boxes.
+    grid: EdgeGrid,
 }
 
 #[derive(Clone, Copy)]
@@ -93,7 +95,12 @@ impl<'a> ShadowCutter<'a> {
                 } else {
                     Vec::new()
                 };
-                Source { kind, silhouette }
+                let grid = EdgeGrid::new(&silhouette, scene.bounds());
+                Source {
+                    kind,
+                    silhouette,
+                    grid,
+                }
             })
             .collect();
         ShadowCutter {
@@ -116,6 +123,7 @@ impl<'a> ShadowCutter<'a> {
         &self,
         patch: &Patch,
         corners: &[[DVec2; 3]],
+        (low, high): (DVec3, DVec3),
         texel: f64,
         touch: f64,
     ) -> Vec<[DVec2; 2]> {
@@ -133,7 +141,23 @@ impl<'a> ShadowCutter<'a> {
                 }
                 _ => continue,
             };
-            for &[a, b] in &light.silhouette {
+            // Only edges in the box of the space between the patch (box `low..high`) and the
+            // light can shadow it.
+            let (from, to) = match light.kind {
+                Toward::Direction(d) => {
+                    let (lo, hi) = (light.grid.lo, light.grid.lo + light.grid.extent);
+                    let pick = |k: usize| match d[k] {
+                        x if x > 0.0 => (lo[k], high[k]),
+                        x if x < 0.0 => (low[k], hi[k]),
+                        _ => (low[k], high[k]),
+                    };
+                    let [x, y, z] = [0, 1, 2].map(pick);
+                    (DVec3::new(x.0, y.0, z.0), DVec3::new(x.1, y.1, z.1))
+                }
+                Toward::Position(p) => (low.min(p), high.max(p)),
+            };
+            for e in light.grid.query(from - touch, to + touch) {
+                let [a, b] = light.silhouette[e as usize];
                 let Some([a, b]) = project(patch, light.kind, height, a, b, touch) else {
                     continue;
                 };
@@ -333,4 +357,69 @@ fn silhouette(
         }
     }
     out
+}
+
+/// Grid cells per axis at most.
+const GRID_CELLS: f64 = 32.0;
+
+/// Edges binned by their bounding boxes in a uniform grid over the scene.
+struct EdgeGrid {
+    lo: DVec3,
+    extent: DVec3,
+    dims: [usize; 3],
+    cells: Vec<Vec<u32>>,
+}
+
+impl EdgeGrid {
+    fn new(edges: &[[DVec3; 2]], (lo, hi): (Vec3, Vec3)) -> EdgeGrid {
+        let (lo, hi) = (lo.as_dvec3(), hi.as_dvec3());
+        let extent = (hi - lo).max(DVec3::splat(1e-9));
+        let side = extent.max_element();
+        let dims = (extent / side * GRID_CELLS)
+            .ceil()
+            .clamp(DVec3::ONE, DVec3::splat(GRID_CELLS));
+        let mut grid = EdgeGrid {
+            lo,
+            extent,
+            dims: [dims.x as usize, dims.y as usize, dims.z as usize],
+            cells: vec![Vec::new(); (dims.x * dims.y * dims.z) as usize],
+        };
+        for (e, [a, b]) in edges.iter().enumerate() {
+            for c in grid.cells_of(a.min(*b), a.max(*b)) {
+                grid.cells[c].push(e as u32);
+            }
+        }
+        grid
+    }
+
+    fn cells_of(&self, a: DVec3, b: DVec3) -> Vec<usize> {
+        let index = |p: DVec3| -> [usize; 3] {
+            let q = ((p - self.lo) / self.extent).to_array();
+            std::array::from_fn(|k| {
+                ((q[k] * self.dims[k] as f64).floor().max(0.0) as usize).min(self.dims[k] - 1)
+            })
+        };
+        let (i, j) = (index(a), index(b));
+        let mut out = Vec::new();
+        for z in i[2]..=j[2] {
+            for y in i[1]..=j[1] {
+                for x in i[0]..=j[0] {
+                    out.push((z * self.dims[1] + y) * self.dims[0] + x);
+                }
+            }
+        }
+        out
+    }
+
+    /// Edges whose boxes may overlap the box `a..b`, ascending.
+    fn query(&self, a: DVec3, b: DVec3) -> Vec<u32> {
+        let mut found: Vec<u32> = self
+            .cells_of(a, b)
+            .into_iter()
+            .flat_map(|c| self.cells[c].iter().copied())
+            .collect();
+        found.sort_unstable();
+        found.dedup();
+        found
+    }
 }
