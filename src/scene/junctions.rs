@@ -36,6 +36,7 @@ use std::collections::BTreeMap;
 use glam::{DVec2, DVec3, Vec2, Vec3};
 use spade::{ConstrainedDelaunayTriangulation, Point2, Triangulation};
 
+use super::geometry::{BoxGrid, Plane, clip_interval, inside_intervals};
 use super::shadow_cuts::ShadowCutter;
 use super::{Blend, Scene, Split};
 
@@ -132,7 +133,7 @@ pub fn split_with(
         snap: SNAP_TEXELS * texel,
         touch: TOUCH_TEXELS * texel,
     };
-    let grid = Grid::new(&scene, tol.touch, texel);
+    let grid = triangle_grid(&scene, tol.touch, texel);
     let mut report = JunctionReport::default();
     let splits: Vec<Option<InstanceSplit>> = (0..scene.instances.len())
         .map(|i| split_instance(&scene, i as u32, &grid, tol, shadows, &mut report))
@@ -223,89 +224,28 @@ fn assemble(
     scene
 }
 
-/// Uniform grid of triangle bounding boxes: the broad phase that finds the triangles near a
-/// patch.
-struct Grid {
-    lo: DVec3,
-    cell: DVec3,
-    dims: [usize; 3],
-    cells: Vec<Vec<u32>>,
-}
-
-impl Grid {
-    fn new(scene: &Scene, margin: f64, texel: f64) -> Grid {
-        let (lo, hi) = scene.bounds();
-        let (lo, hi) = (lo.as_dvec3() - margin, hi.as_dvec3() + margin);
-        let extent = (hi - lo).max(DVec3::splat(texel));
-        let dims = (extent / (4.0 * texel))
-            .ceil()
-            .clamp(DVec3::ONE, DVec3::splat(MAX_GRID_CELLS));
-        let dims = [dims.x as usize, dims.y as usize, dims.z as usize];
-        let cell = extent / DVec3::new(dims[0] as f64, dims[1] as f64, dims[2] as f64);
-        let mut grid = Grid {
-            lo,
-            cell,
-            dims,
-            cells: vec![Vec::new(); dims[0] * dims[1] * dims[2]],
-        };
-        for (t, tri) in scene.triangles.iter().enumerate() {
-            let p = tri.map(|v| scene.positions[v as usize].as_dvec3());
-            let (a, b) = (p[0].min(p[1]).min(p[2]), p[0].max(p[1]).max(p[2]));
-            for c in grid.cells_of(a - margin, b + margin) {
-                grid.cells[c].push(t as u32);
-            }
-        }
-        grid
+/// The broad phase that finds the triangles near a patch: their bounding boxes in a grid.
+fn triangle_grid(scene: &Scene, margin: f64, texel: f64) -> BoxGrid {
+    let (lo, hi) = scene.bounds();
+    let (lo, hi) = (lo.as_dvec3() - margin, hi.as_dvec3() + margin);
+    let extent = (hi - lo).max(DVec3::splat(texel));
+    let dims = (extent / (4.0 * texel))
+        .ceil()
+        .clamp(DVec3::ONE, DVec3::splat(MAX_GRID_CELLS));
+    let mut grid = BoxGrid::new(lo, extent, dims);
+    for (t, tri) in scene.triangles.iter().enumerate() {
+        let p = tri.map(|v| scene.positions[v as usize].as_dvec3());
+        let (a, b) = (p[0].min(p[1]).min(p[2]), p[0].max(p[1]).max(p[2]));
+        grid.insert(t as u32, a - margin, b + margin);
     }
-
-    fn cells_of(&self, a: DVec3, b: DVec3) -> impl Iterator<Item = usize> + use<> {
-        let index = |p: DVec3| {
-            let q = ((p - self.lo) / self.cell).floor();
-            [q.x, q.y, q.z]
-                .iter()
-                .zip(self.dims)
-                .map(|(&q, d)| (q.max(0.0) as usize).min(d - 1))
-                .collect::<Vec<_>>()
-        };
-        let (i, j) = (index(a), index(b));
-        let dims = self.dims;
-        (i[2]..=j[2]).flat_map(move |z| {
-            let (i, j) = (i.clone(), j.clone());
-            (i[1]..=j[1])
-                .flat_map(move |y| (i[0]..=j[0]).map(move |x| (z * dims[1] + y) * dims[0] + x))
-        })
-    }
-
-    /// Triangles whose boxes may overlap the box `a..b`, ascending.
-    fn query(&self, a: DVec3, b: DVec3) -> Vec<u32> {
-        let mut found: Vec<u32> = self
-            .cells_of(a, b)
-            .flat_map(|c| self.cells[c].iter().copied())
-            .collect();
-        found.sort_unstable();
-        found.dedup();
-        found
-    }
+    grid
 }
 
 /// A flat patch of an instance in its own plane coordinates.
-pub(super) struct Patch {
+struct Patch {
     /// Instance-local triangles.
     triangles: Vec<u32>,
-    pub(super) origin: DVec3,
-    axes: [DVec3; 2],
-    pub(super) normal: DVec3,
-}
-
-impl Patch {
-    pub(super) fn to_2d(&self, p: DVec3) -> DVec2 {
-        let d = p - self.origin;
-        DVec2::new(d.dot(self.axes[0]), d.dot(self.axes[1]))
-    }
-
-    pub(super) fn to_3d(&self, p: DVec2) -> DVec3 {
-        self.origin + self.axes[0] * p.x + self.axes[1] * p.y
-    }
+    plane: Plane,
 }
 
 /// Where a cut piece ends inside one triangle.
@@ -498,7 +438,7 @@ impl Cuts {
 fn split_instance(
     scene: &Scene,
     index: u32,
-    grid: &Grid,
+    grid: &BoxGrid,
     tol: Tolerances,
     shadows: Option<&ShadowCutter>,
     report: &mut JunctionReport,
@@ -561,9 +501,11 @@ fn split_instance(
         let u = n.any_orthonormal_vector();
         patches.push(Patch {
             triangles: members,
-            origin,
-            axes: [u, n.cross(u)],
-            normal: n,
+            plane: Plane {
+                origin,
+                axes: [u, n.cross(u)],
+                normal: n,
+            },
         });
     }
     let receiver = |p: &Patch, id: u32| {
@@ -571,7 +513,8 @@ fn split_instance(
             let w = welded(t as usize);
             (0..3).all(|e| {
                 faces_at(w[e], w[(e + 1) % 3]).iter().all(|&(_, u, _)| {
-                    patch_of[u as usize] == id || normal[u as usize].dot(p.normal) < SMOOTH_DOT
+                    patch_of[u as usize] == id
+                        || normal[u as usize].dot(p.plane.normal) < SMOOTH_DOT
                 })
             })
         })
@@ -594,7 +537,7 @@ fn split_instance(
             report.segments += cuts.segments.iter().filter(|s| !s.1).count();
             report.extensions += cuts.segments.iter().filter(|s| s.1).count();
             for &t in &patch.triangles {
-                let corners = tris[t as usize].map(|v| patch.to_2d(pos(v)));
+                let corners = tris[t as usize].map(|v| patch.plane.to_2d(pos(v)));
                 let w = welded(t as usize);
                 for &([a, b], _) in &cuts.segments {
                     let Some(ends) = clip(
@@ -676,7 +619,7 @@ fn split_instance(
             let corners = tris[t].map(|v| {
                 patches
                     .get(id as usize)
-                    .map_or(DVec2::ZERO, |p| p.to_2d(pos(v)))
+                    .map_or(DVec2::ZERO, |p| p.plane.to_2d(pos(v)))
             });
             out.triangles.push(tris[t]);
             out.source_triangle.push(inst.source_triangle[t]);
@@ -688,7 +631,7 @@ fn split_instance(
             Some(_) => &patches[id as usize],
             None => &own_frame(tris[t].map(pos)),
         };
-        let corners = tris[t].map(|v| frame.to_2d(pos(v)));
+        let corners = tris[t].map(|v| frame.plane.to_2d(pos(v)));
         let Some(faces) = retriangulate(corners, &on_edges, own.map_or(&[][..], Vec::as_slice))
         else {
             report.fallback_triangles += 1;
@@ -881,9 +824,11 @@ fn own_frame(p: [DVec3; 3]) -> Patch {
     let u = n.any_orthonormal_vector();
     Patch {
         triangles: Vec::new(),
-        origin: p[0],
-        axes: [u, n.cross(u)],
-        normal: n,
+        plane: Plane {
+            origin: p[0],
+            axes: [u, n.cross(u)],
+            normal: n,
+        },
     }
 }
 
@@ -896,7 +841,7 @@ fn patch_cuts_of(
     tris: &[[u32; 3]],
     weld: &[u32],
     pos: impl Fn(u32) -> DVec3 + Copy,
-    grid: &Grid,
+    grid: &BoxGrid,
     tol: Tolerances,
     shadows: Option<&ShadowCutter>,
     report: &mut JunctionReport,
@@ -907,7 +852,7 @@ fn patch_cuts_of(
     let mut corners2d = Vec::with_capacity(patch.triangles.len());
     for &t in &patch.triangles {
         let tri = tris[t as usize];
-        let c = tri.map(|v| patch.to_2d(pos(v)));
+        let c = tri.map(|v| patch.plane.to_2d(pos(v)));
         corners2d.push(c);
         for k in 0..3 {
             let p = pos(tri[k]);
@@ -954,7 +899,7 @@ fn patch_cuts_of(
         let Some([a, b]) = plane_segment(p, patch, tol.touch) else {
             continue;
         };
-        let (a, b) = (patch.to_2d(a), patch.to_2d(b));
+        let (a, b) = (patch.plane.to_2d(a), patch.plane.to_2d(b));
         let length = a.distance(b);
         if length <= tol.snap {
             continue;
@@ -969,7 +914,7 @@ fn patch_cuts_of(
     }
     // Shadow outlines of punctual lights: cuts never stitched, as junctions are.
     if let Some(shadows) = shadows {
-        for [a, b] in shadows.patch_cuts(patch, &corners2d, (lo, hi), tol.texel, tol.touch) {
+        for [a, b] in shadows.patch_cuts(&patch.plane, &corners2d, (lo, hi), tol.texel, tol.touch) {
             let i = cuts.point(a, &patch_edges, tol.snap);
             let j = cuts.point(b, &patch_edges, tol.snap);
             let before = cuts.segments.len();
@@ -998,35 +943,11 @@ fn patch_cuts_of(
     Some(cuts)
 }
 
-/// Parameter intervals of segment `a → b` inside the triangles `corners` (plane coordinates),
-/// merged across gaps up to `snap`.
-pub(super) fn inside_intervals(
-    a: DVec2,
-    b: DVec2,
-    corners: &[[DVec2; 3]],
-    snap: f64,
-) -> Vec<[f64; 2]> {
-    let length = a.distance(b);
-    let mut inside: Vec<[f64; 2]> = corners
-        .iter()
-        .filter_map(|&c| clip_interval(a, b, c, 1e-9 * snap))
-        .collect();
-    inside.sort_by(|x, y| x[0].total_cmp(&y[0]));
-    let mut merged: Vec<[f64; 2]> = Vec::new();
-    for iv in inside {
-        match merged.last_mut() {
-            Some(m) if iv[0] <= m[1] + snap / length => m[1] = m[1].max(iv[1]),
-            _ => merged.push(iv),
-        }
-    }
-    merged
-}
-
 /// Where triangle `p` meets the patch's plane: a segment when it crosses the plane or has an
 /// edge in it (corners within `touch` count as in it); nothing when coplanar or touching at a
 /// point.
 fn plane_segment(p: [DVec3; 3], patch: &Patch, touch: f64) -> Option<[DVec3; 2]> {
-    let d = p.map(|q| (q - patch.origin).dot(patch.normal));
+    let d = p.map(|q| (q - patch.plane.origin).dot(patch.plane.normal));
     let side = d.map(|x| {
         if x.abs() <= touch {
             0
@@ -1041,7 +962,7 @@ fn plane_segment(p: [DVec3; 3], patch: &Patch, touch: f64) -> Option<[DVec3; 2]>
     for k in 0..3 {
         let j = (k + 1) % 3;
         if side[k] == 0 {
-            points.push(p[k] - patch.normal * d[k]);
+            points.push(p[k] - patch.plane.normal * d[k]);
         }
         if side[k] * side[j] < 0 {
             let s = d[k] / (d[k] - d[j]);
@@ -1052,32 +973,6 @@ fn plane_segment(p: [DVec3; 3], patch: &Patch, touch: f64) -> Option<[DVec3; 2]>
         [a, b] => Some([a, b]),
         _ => None,
     }
-}
-
-/// The parameter interval of segment `a → b` inside the counter-clockwise triangle `c`
-/// (boundary included within `eps`).
-fn clip_interval(a: DVec2, b: DVec2, c: [DVec2; 3], eps: f64) -> Option<[f64; 2]> {
-    let d = b - a;
-    let (mut s0, mut s1) = (0.0f64, 1.0f64);
-    for k in 0..3 {
-        let e = c[(k + 1) % 3] - c[k];
-        let n = DVec2::new(-e.y, e.x).normalize_or_zero(); // inward for counter-clockwise
-        let num = n.dot(a - c[k]) + eps;
-        let den = n.dot(d);
-        if den.abs() < 1e-300 {
-            if num < 0.0 {
-                return None;
-            }
-        } else {
-            let s = -num / den;
-            if den > 0.0 {
-                s0 = s0.max(s);
-            } else {
-                s1 = s1.min(s);
-            }
-        }
-    }
-    (s1 > s0).then_some([s0, s1])
 }
 
 /// The piece of cut `a → b` inside triangle `c`, its ends classified; `None` when it misses or

@@ -14,6 +14,7 @@
 //! output glTF as an extra single-sided primitive.
 
 mod camera;
+mod geometry;
 mod gltf_in;
 pub mod junctions;
 pub mod shadow_cuts;

@@ -30,7 +30,7 @@ use std::cell::Cell;
 
 use glam::{DVec2, DVec3, Vec3};
 
-use super::junctions::{Patch, inside_intervals};
+use super::geometry::{BoxGrid, Plane, inside_intervals};
 use super::{LightKind, Scene};
 
 /// A shadow edge is cut only where the light's jump is at least this share of all punctual
@@ -56,6 +56,8 @@ pub type LightAt<'a> = dyn Fn(usize, Vec3, Vec3) -> f32 + 'a;
 /// The scene's punctual lights and their silhouette edges, ready to cut receiver patches.
 pub struct ShadowCutter<'a> {
     lights: Vec<Source>,
+    /// The scene's bounding box.
+    bounds: (DVec3, DVec3),
     light_at: &'a LightAt<'a>,
     samples: Cell<usize>,
     skipped: Cell<usize>,
@@ -67,7 +69,7 @@ struct Source {
     kind: Toward,
     silhouette: Vec<[DVec3; 2]>,
     /// The silhouette edges binned by their bounding boxes.
-    grid: EdgeGrid,
+    grid: BoxGrid,
 }
 
 #[derive(Clone, Copy)]
@@ -80,6 +82,8 @@ impl<'a> ShadowCutter<'a> {
     /// Finds every light's silhouette edges in `scene`; `light_at` answers the shadow rays.
     pub fn new(scene: &Scene, light_at: &'a LightAt<'a>) -> ShadowCutter<'a> {
         let edges = scene_edges(scene);
+        let bounds = scene.bounds();
+        let bounds = (bounds.0.as_dvec3(), bounds.1.as_dvec3());
         let lights = scene
             .lights
             .iter()
@@ -95,7 +99,7 @@ impl<'a> ShadowCutter<'a> {
                 } else {
                     Vec::new()
                 };
-                let grid = EdgeGrid::new(&silhouette, scene.bounds());
+                let grid = edge_grid(&silhouette, bounds);
                 Source {
                     kind,
                     silhouette,
@@ -105,6 +109,7 @@ impl<'a> ShadowCutter<'a> {
             .collect();
         ShadowCutter {
             lights,
+            bounds,
             light_at,
             samples: Cell::new(0),
             skipped: Cell::new(0),
@@ -121,7 +126,7 @@ impl<'a> ShadowCutter<'a> {
     /// corners within `touch` of the plane) in plane coordinates.
     pub(super) fn patch_cuts(
         &self,
-        patch: &Patch,
+        patch: &Plane,
         corners: &[[DVec2; 3]],
         (low, high): (DVec3, DVec3),
         texel: f64,
@@ -145,7 +150,7 @@ impl<'a> ShadowCutter<'a> {
             // light can shadow it.
             let (from, to) = match light.kind {
                 Toward::Direction(d) => {
-                    let (lo, hi) = (light.grid.lo, light.grid.lo + light.grid.extent);
+                    let (lo, hi) = self.bounds;
                     let pick = |k: usize| match d[k] {
                         x if x > 0.0 => (lo[k], high[k]),
                         x if x < 0.0 => (low[k], hi[k]),
@@ -194,7 +199,7 @@ impl<'a> ShadowCutter<'a> {
     /// a texel long, appended to `pieces`.
     fn boundaries(
         &self,
-        patch: &Patch,
+        patch: &Plane,
         l: usize,
         [p, q]: [DVec2; 2],
         texel: f64,
@@ -252,7 +257,7 @@ impl<'a> ShadowCutter<'a> {
 /// The part of edge `a`–`b` between the patch's plane and the light (`height` above the plane),
 /// projected onto the plane from the light; `None` when none is, or the edge lies in the plane.
 fn project(
-    patch: &Patch,
+    patch: &Plane,
     toward: Toward,
     height: f64,
     a: DVec3,
@@ -359,67 +364,18 @@ fn silhouette(
     out
 }
 
-/// Grid cells per axis at most.
+/// Grid cells per axis (of the longest) at most.
 const GRID_CELLS: f64 = 32.0;
 
-/// Edges binned by their bounding boxes in a uniform grid over the scene.
-struct EdgeGrid {
-    lo: DVec3,
-    extent: DVec3,
-    dims: [usize; 3],
-    cells: Vec<Vec<u32>>,
-}
-
-impl EdgeGrid {
-    fn new(edges: &[[DVec3; 2]], (lo, hi): (Vec3, Vec3)) -> EdgeGrid {
-        let (lo, hi) = (lo.as_dvec3(), hi.as_dvec3());
-        let extent = (hi - lo).max(DVec3::splat(1e-9));
-        let side = extent.max_element();
-        let dims = (extent / side * GRID_CELLS)
-            .ceil()
-            .clamp(DVec3::ONE, DVec3::splat(GRID_CELLS));
-        let mut grid = EdgeGrid {
-            lo,
-            extent,
-            dims: [dims.x as usize, dims.y as usize, dims.z as usize],
-            cells: vec![Vec::new(); (dims.x * dims.y * dims.z) as usize],
-        };
-        for (e, [a, b]) in edges.iter().enumerate() {
-            for c in grid.cells_of(a.min(*b), a.max(*b)) {
-                grid.cells[c].push(e as u32);
-            }
-        }
-        grid
+/// `edges` binned by their bounding boxes over the scene's box `(lo, hi)`.
+fn edge_grid(edges: &[[DVec3; 2]], (lo, hi): (DVec3, DVec3)) -> BoxGrid {
+    let extent = (hi - lo).max(DVec3::splat(1e-9));
+    let dims = (extent / extent.max_element() * GRID_CELLS)
+        .ceil()
+        .clamp(DVec3::ONE, DVec3::splat(GRID_CELLS));
+    let mut grid = BoxGrid::new(lo, extent, dims);
+    for (e, [a, b]) in edges.iter().enumerate() {
+        grid.insert(e as u32, a.min(*b), a.max(*b));
     }
-
-    fn cells_of(&self, a: DVec3, b: DVec3) -> Vec<usize> {
-        let index = |p: DVec3| -> [usize; 3] {
-            let q = ((p - self.lo) / self.extent).to_array();
-            std::array::from_fn(|k| {
-                ((q[k] * self.dims[k] as f64).floor().max(0.0) as usize).min(self.dims[k] - 1)
-            })
-        };
-        let (i, j) = (index(a), index(b));
-        let mut out = Vec::new();
-        for z in i[2]..=j[2] {
-            for y in i[1]..=j[1] {
-                for x in i[0]..=j[0] {
-                    out.push((z * self.dims[1] + y) * self.dims[0] + x);
-                }
-            }
-        }
-        out
-    }
-
-    /// Edges whose boxes may overlap the box `a..b`, ascending.
-    fn query(&self, a: DVec3, b: DVec3) -> Vec<u32> {
-        let mut found: Vec<u32> = self
-            .cells_of(a, b)
-            .into_iter()
-            .flat_map(|c| self.cells[c].iter().copied())
-            .collect();
-        found.sort_unstable();
-        found.dedup();
-        found
-    }
+    grid
 }
