@@ -27,6 +27,10 @@
 //! 4. **Sides**: the instance's triangles are grouped into sides, connected across edges that are
 //!    not cuts; the atlas never puts two sides into one chart.
 //!
+//! [`split_with`] cuts along the hard shadow outlines of punctual lights too
+//! ([`super::shadow_cuts`]): they join step 2 as segments that are never stitched, and a patch
+//! with such cuts is bounded by its border in step 4 as well.
+//!
 //! New vertices are blends of at most three source vertices of the same primitive
 //! ([`Blend`]); the output writer blends every attribute the same way, so the split exists only
 //! in the baked copy.

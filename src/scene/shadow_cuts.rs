@@ -122,11 +122,12 @@ impl<'a> ShadowCutter<'a> {
         (self.samples.get(), self.skipped.get())
     }
 
-    /// The shadow cut pieces of `patch` (its triangles `corners` in plane coordinates, its
-    /// corners within `touch` of the plane) in plane coordinates.
+    /// The shadow cut pieces of the patch in `plane` (its triangles `corners` in plane
+    /// coordinates, its box `low..high`, its corners within `touch` of the plane), in plane
+    /// coordinates.
     pub(super) fn patch_cuts(
         &self,
-        patch: &Plane,
+        plane: &Plane,
         corners: &[[DVec2; 3]],
         (low, high): (DVec3, DVec3),
         texel: f64,
@@ -140,9 +141,9 @@ impl<'a> ShadowCutter<'a> {
         for (l, light) in self.lights.iter().enumerate() {
             // Height of the light above the plane (infinite for a sun in front of it).
             let height = match light.kind {
-                Toward::Direction(d) if d.dot(patch.normal) < -1e-6 => f64::INFINITY,
-                Toward::Position(p) if (p - patch.origin).dot(patch.normal) > touch => {
-                    (p - patch.origin).dot(patch.normal)
+                Toward::Direction(d) if d.dot(plane.normal) < -1e-6 => f64::INFINITY,
+                Toward::Position(p) if (p - plane.origin).dot(plane.normal) > touch => {
+                    (p - plane.origin).dot(plane.normal)
                 }
                 _ => continue,
             };
@@ -163,10 +164,10 @@ impl<'a> ShadowCutter<'a> {
             };
             for e in light.grid.query(from - touch, to + touch) {
                 let [a, b] = light.silhouette[e as usize];
-                let Some([a, b]) = project(patch, light.kind, height, a, b, touch) else {
+                let Some([a, b]) = project(plane, light.kind, height, a, b, touch) else {
                     continue;
                 };
-                let (p, q) = (patch.to_2d(a), patch.to_2d(b));
+                let (p, q) = (plane.to_2d(a), plane.to_2d(b));
                 let length = p.distance(q);
                 if length < texel
                     || p.max(q).cmplt(lo - texel).any()
@@ -177,7 +178,7 @@ impl<'a> ShadowCutter<'a> {
                 for [s0, s1] in inside_intervals(p, q, corners, 0.25 * texel) {
                     if (s1 - s0) * length >= texel {
                         self.boundaries(
-                            patch,
+                            plane,
                             l,
                             [p.lerp(q, s0), p.lerp(q, s1)],
                             texel,
@@ -199,7 +200,7 @@ impl<'a> ShadowCutter<'a> {
     /// a texel long, appended to `pieces`.
     fn boundaries(
         &self,
-        patch: &Plane,
+        plane: &Plane,
         l: usize,
         [p, q]: [DVec2; 2],
         texel: f64,
@@ -211,9 +212,9 @@ impl<'a> ShadowCutter<'a> {
             return;
         }
         self.samples.set(self.samples.get() + steps);
-        let n = patch.normal.as_vec3();
+        let n = plane.normal.as_vec3();
         let side = (q - p).perp().normalize() * (0.5 * texel);
-        let at = |s: DVec2| patch.to_3d(s).as_vec3();
+        let at = |s: DVec2| plane.to_3d(s).as_vec3();
         let boundary = |i: usize| {
             let s = p.lerp(q, (i as f64 + 0.5) / steps as f64);
             let (x, y) = (at(s + side), at(s - side));
@@ -257,7 +258,7 @@ impl<'a> ShadowCutter<'a> {
 /// The part of edge `a`–`b` between the patch's plane and the light (`height` above the plane),
 /// projected onto the plane from the light; `None` when none is, or the edge lies in the plane.
 fn project(
-    patch: &Plane,
+    plane: &Plane,
     toward: Toward,
     height: f64,
     a: DVec3,
@@ -265,8 +266,8 @@ fn project(
     touch: f64,
 ) -> Option<[DVec3; 2]> {
     let (da, db) = (
-        (a - patch.origin).dot(patch.normal),
-        (b - patch.origin).dot(patch.normal),
+        (a - plane.origin).dot(plane.normal),
+        (b - plane.origin).dot(plane.normal),
     );
     if da.abs() <= touch && db.abs() <= touch {
         return None; // a junction
@@ -293,9 +294,9 @@ fn project(
     }
     let onto = |s: f64| {
         let x = a.lerp(b, s);
-        let d = (x - patch.origin).dot(patch.normal);
+        let d = (x - plane.origin).dot(plane.normal);
         match toward {
-            Toward::Direction(dir) => x - dir * (d / dir.dot(patch.normal)),
+            Toward::Direction(dir) => x - dir * (d / dir.dot(plane.normal)),
             Toward::Position(light) => light + (x - light) * (height / (height - d)),
         }
     };
