@@ -4,7 +4,7 @@
 use glam::{DVec2, DVec3};
 
 /// A plane with orthonormal axes: 2D coordinates in it.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Debug)]
 pub(super) struct Plane {
     pub(super) origin: DVec3,
     pub(super) axes: [DVec3; 2],
