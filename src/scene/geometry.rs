@@ -1,7 +1,7 @@
 //! Plane frames, segment clipping and a box grid: what the junction split
 //! ([`super::junctions`]) and the shadow cuts ([`super::shadow_cuts`]) share.
 
-use glam::{DVec2, DVec3};
+use glam::{DVec2, DVec3, Vec3};
 
 /// A plane with orthonormal axes: 2D coordinates in it.
 #[derive(Clone, Debug)]
@@ -128,4 +128,21 @@ impl BoxGrid {
         found.dedup();
         found
     }
+}
+
+/// Welded id per vertex: vertices at the same position share one (+0.0 folds −0.0 into 0.0).
+pub(super) fn weld(positions: &[Vec3]) -> Vec<u32> {
+    let key = |v: usize| (positions[v] + Vec3::ZERO).to_array().map(f32::to_bits);
+    let mut order: Vec<u32> = (0..positions.len() as u32).collect();
+    order.sort_unstable_by_key(|&v| (key(v as usize), v));
+    let mut weld = vec![0u32; positions.len()];
+    for (id, same) in order
+        .chunk_by(|&a, &b| key(a as usize) == key(b as usize))
+        .enumerate()
+    {
+        for &v in same {
+            weld[v as usize] = id as u32;
+        }
+    }
+    weld
 }

@@ -40,7 +40,7 @@ use std::collections::BTreeMap;
 use glam::{DVec2, DVec3, Vec2, Vec3};
 use spade::{ConstrainedDelaunayTriangulation, Point2, Triangulation};
 
-use super::geometry::{BoxGrid, Plane, clip_interval, inside_intervals};
+use super::geometry::{BoxGrid, Plane, clip_interval, inside_intervals, weld};
 use super::shadow_cuts::ShadowCutter;
 use super::{Blend, Scene, Split};
 
@@ -780,23 +780,6 @@ fn cut_bits_of(face: [DVec2; 3], cuts: &Cuts, snap: f64) -> [u8; 2] {
         }
     }
     bits
-}
-
-/// Welded id per vertex: vertices at the same position share one (+0.0 folds −0.0 into 0.0).
-fn weld(positions: &[Vec3]) -> Vec<u32> {
-    let key = |v: usize| (positions[v] + Vec3::ZERO).to_array().map(f32::to_bits);
-    let mut order: Vec<u32> = (0..positions.len() as u32).collect();
-    order.sort_unstable_by_key(|&v| (key(v as usize), v));
-    let mut weld = vec![0u32; positions.len()];
-    for (id, same) in order
-        .chunk_by(|&a, &b| key(a as usize) == key(b as usize))
-        .enumerate()
-    {
-        for &v in same {
-            weld[v as usize] = id as u32;
-        }
-    }
-    weld
 }
 
 /// Every edge as (welded end points ascending, triangle, corner it starts at), sorted.

@@ -30,7 +30,7 @@ use std::cell::Cell;
 
 use glam::{DVec2, DVec3, Vec3};
 
-use super::geometry::{BoxGrid, Plane, inside_intervals};
+use super::geometry::{BoxGrid, Plane, inside_intervals, weld};
 use super::{LightKind, Scene};
 
 /// A shadow edge is cut only where the light's jump is at least this share of all punctual
@@ -307,19 +307,7 @@ fn project(
 /// vertices), sorted; positions weld across instances, so a solid made of several primitives
 /// is closed.
 fn scene_edges(scene: &Scene) -> Vec<([u32; 2], u32, [u32; 2])> {
-    let key = |v: u32| {
-        (scene.positions[v as usize] + Vec3::ZERO)
-            .to_array()
-            .map(f32::to_bits)
-    };
-    let mut order: Vec<u32> = (0..scene.positions.len() as u32).collect();
-    order.sort_unstable_by_key(|&v| (key(v), v));
-    let mut weld = vec![0u32; scene.positions.len()];
-    for (id, same) in order.chunk_by(|&a, &b| key(a) == key(b)).enumerate() {
-        for &v in same {
-            weld[v as usize] = id as u32;
-        }
-    }
+    let weld = weld(&scene.positions);
     let mut edges = Vec::with_capacity(3 * scene.triangles.len());
     for (t, tri) in scene.triangles.iter().enumerate() {
         if scene.instances[scene.triangle_instance[t] as usize]
