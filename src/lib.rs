@@ -114,7 +114,9 @@ pub mod testing;
 
 mod bake;
 
-pub use bake::{BakeReport, Baked, Prepared, StageTime, bake, compute, prepare, write};
+pub use bake::{
+    BakeReport, Baked, Prepared, StageTime, bake, compute, kept, prepare, relight, write,
+};
 pub use build::{BuildReport, Manifest, build};
 pub use config::BakeConfig;
 pub use error::{Error, Result};
