@@ -14,7 +14,14 @@
 //!   its light samples from the emitters' power, so scaling one emissive material among
 //!   several (or switching one off) moves samples between them there, and the two differ by
 //!   the Monte Carlo noise of those samples, not by a bias. Scaling every emissive material by
-//!   one factor keeps the sampling as it was.
+//!   one factor keeps the sampling as it was. The texels are the bake's: the shadow cuts
+//!   (`scene::shadow_cuts`) follow the outlines of the baked lights' shadows that carry at
+//!   least a tenth of the light there, so when the balance of lights changes a fresh bake may
+//!   cut other outlines (and lay out other texels); the relight keeps the baked cuts and warns.
+//!   Measured (`tests/relight.rs`, draft, float pages): relit and fresh pages differ by 2e-8
+//!   (relative L1; lights scaled and tinted one by one, a wall colour, shadow cuts off), 2e-8
+//!   (both lights halved and a floor colour, shadow cuts on) and 6e-8 (the Cornell light ×3) —
+//!   float rounding: the same system, solved with the same sweeps.
 //! - **Layers** ([`plan_layers`], [`solve_layers`]): one lightmap per light, one for the
 //!   emissive materials and one for the sky, or named groups of them. Each layer's direct
 //!   light is solved with the full solve's solver and, for Jacobi and Gauss–Seidel, exactly its
@@ -144,6 +151,19 @@ pub fn relight(
 
     let t = Instant::now();
     let scale = apply(&settings, edits, &mut texels, &material)?;
+    let lights = &scale[..settings.lights.len()];
+    if settings.split_junctions
+        && settings.shadow_cuts
+        && lights
+            .iter()
+            .any(|s| *s != lights[0] || s.min_element() != s.max_element())
+    {
+        progress.warn(&format!(
+            "{}: the shadow cuts follow the baked lights' shadow outlines (those at least {:.0}% of the light there); with the lights' balance changed, a fresh bake may cut other outlines",
+            gltf.display(),
+            crate::scene::shadow_cuts::MIN_JUMP * 100.0
+        ));
+    }
     let planned = layers
         .map(|groups| plan_layers(&settings, groups))
         .transpose()?;
