@@ -233,7 +233,8 @@ fn layer_sum_error(baked: &lightbake::Baked) -> (f32, f32) {
 
 #[test]
 fn layers_sum_to_the_lightmap_within_float_rounding() {
-    // A sun and a sky (courtyard), two punctual lights in one group (lamp room), an emitter.
+    // A sun and a sky (courtyard), two punctual lights in one group (lamp room), an emitter
+    // and a sky (the Cornell box is open at the front).
     let cases: [(&str, Vec3, Option<Vec<LayerGroup>>, usize); 3] = [
         ("courtyard.gltf", Vec3::new(0.2, 0.3, 0.5), Some(vec![]), 2),
         (
@@ -245,7 +246,7 @@ fn layers_sum_to_the_lightmap_within_float_rounding() {
             }]),
             1,
         ),
-        ("cornell_box.gltf", Vec3::ZERO, Some(vec![]), 1),
+        ("cornell_box.gltf", Vec3::splat(0.1), Some(vec![]), 2),
     ];
     for (name, sky, layers, count) in cases {
         let mut config = quick();
@@ -436,4 +437,77 @@ fn keeping_needs_stored_monte_carlo_rows() {
     .unwrap_err()
     .to_string();
     assert!(e.contains("stored Monte Carlo rows"), "{e}");
+}
+
+/// A closed 4 × 3 × 4 m room lit by two small ceiling panels of different emissive materials.
+fn two_panel_room() -> lightbake::testing::GltfBuilder {
+    use lightbake::testing::{Face, Geometry, GltfBuilder, Material};
+    let mut g = GltfBuilder::new("two_panels");
+    let room_m = g.add_material(Material::grey("room", 0.6));
+    let warm = g.add_material(Material::grey("warm", 0.8).emitting([1.0, 0.8, 0.6], 15.0));
+    let cool = g.add_material(Material::grey("cool", 0.8).emitting([0.6, 0.8, 1.0], 15.0));
+    let (min, max) = (Vec3::new(-2.0, 0.0, -2.0), Vec3::new(2.0, 3.0, 2.0));
+    let mut room = Geometry::box_face(min, max, Face::PosX, 4, 3).flipped();
+    for face in [Face::NegX, Face::PosY, Face::NegY, Face::PosZ, Face::NegZ] {
+        room.append(&Geometry::box_face(min, max, face, 4, 3).flipped());
+    }
+    let mesh = g.add_mesh("room", room, room_m);
+    let panel = |x: f32| {
+        Geometry::grid(
+            Vec3::new(x, 2.99, -0.25),
+            Vec3::X * 0.5,
+            Vec3::Z * 0.5,
+            1,
+            1,
+        )
+    };
+    g.add_primitive(mesh, panel(-1.25), warm);
+    g.add_primitive(mesh, panel(0.75), cool);
+    g.add_mesh_node("room", mesh);
+    g
+}
+
+/// One emissive material scaled among two: a fresh bake draws its light samples by the
+/// emitters' new power, so it casts other rays than the kept bake did. The two then differ by
+/// the Monte Carlo noise, not by a bias: measured against the difference of two fresh bakes
+/// with different seeds (the noise of a bake compared with a bake).
+#[test]
+fn relit_emission_among_several_emitters_is_within_the_noise() {
+    let dir = scratch();
+    let input = dir.path().join("two_panels.gltf");
+    two_panel_room().write_gltf(&input).unwrap();
+    let kept_dir = dir.path().join("kept");
+    bake(&input, &kept_dir, &kept_config(), &NoProgress).unwrap();
+    let gltf = kept_dir.join("two_panels.gltf");
+    let edits = Edits {
+        emission: vec![("warm".into(), 4.0)],
+        ..Default::default()
+    };
+    let relit_dir = dir.path().join("relit");
+    relight(&gltf, &relit_dir, &edits, None, &NoProgress).unwrap();
+
+    let edited_dir = dir.path().join("edited");
+    std::fs::create_dir_all(&edited_dir).unwrap();
+    let mut json: Value = serde_json::from_slice(&std::fs::read(&input).unwrap()).unwrap();
+    let strength = &mut json["materials"][1]["extensions"]["KHR_materials_emissive_strength"]["emissiveStrength"];
+    *strength = json!(strength.as_f64().unwrap() * 4.0);
+    let edited = edited_dir.join("two_panels.gltf");
+    std::fs::write(&edited, serde_json::to_vec(&json).unwrap()).unwrap();
+    let mut config = kept::read(&gltf).unwrap().settings.config().unwrap();
+    config.output.float = true;
+    let fresh = |seed: u64, name: &str| {
+        let out = dir.path().join(name);
+        let mut c = config.clone();
+        c.transport.seed = seed;
+        bake(&edited, &out, &c, &NoProgress).unwrap();
+        pages(&out, "two_panels")
+    };
+    let (a, b) = (fresh(0, "fresh"), fresh(1, "fresh_other_seed"));
+    let relit = pages(&relit_dir, "two_panels");
+    let (against_fresh, noise) = (page_difference(&relit, &a), page_difference(&b, &a));
+    println!(
+        "two panels, warm ×4: relit vs fresh {against_fresh:.2e}, fresh vs fresh (another seed) {noise:.2e}"
+    );
+    assert!(against_fresh > 1e-6, "the sampling should have changed");
+    assert!(against_fresh < noise, "{against_fresh} vs noise {noise}");
 }

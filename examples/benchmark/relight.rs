@@ -119,8 +119,14 @@ pub fn measure(name: &str, gltf: &Path, work: &Path) -> RelightRow {
     };
     let relit_dir = dir.join("relit");
     let t = Instant::now();
-    lightbake::relight::relight(&out, &relit_dir, &edits, None, &NoProgress).expect("relight");
+    let relit =
+        lightbake::relight::relight(&out, &relit_dir, &edits, None, &NoProgress).expect("relight");
     let relight_seconds = t.elapsed().as_secs_f64();
+    eprintln!(
+        "   bake: {}\n   relight: {}",
+        report.summary(),
+        relit.summary()
+    );
     let t = Instant::now();
     let layered =
         lightbake::relight::relight(&out, &dir.join("layers"), &edits, Some(&[]), &NoProgress)

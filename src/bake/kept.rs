@@ -17,8 +17,8 @@
 //! Body sections:
 //!
 //! 1. settings: u64 length + UTF-8 JSON ([`Settings`]): the settings the bake ran with (the
-//!    automatic choices applied: method, solver, rays, light samples, tolerance, density,
-//!    per-texel rays), the glTF it belongs to, and the lights and materials by name with their
+//!    automatic choices applied: method, solver, rays, light samples, tolerance, density; a
+//!    kept bake casts the chosen rays at every texel), the glTF it belongs to, and the lights and materials by name with their
 //!    baked values (the relit values are relative to them).
 //! 2. texels: u32 texel count `n`, u32 source count `S`, u32 page count, then per page
 //!    u32 width and height; then arrays of `n`: page (u32), x and y (2 × u32), position,
@@ -82,8 +82,6 @@ pub struct Settings {
     pub seed: u64,
     pub validity: bool,
     pub denoise: bool,
-    /// Gathering rays per texel where the plan cut them (`None`: `gather_rays` everywhere).
-    pub texel_rays: Option<Vec<u32>>,
     pub tolerance: f32,
     pub max_iterations: u32,
     pub float: bool,
@@ -125,7 +123,7 @@ pub struct MaterialEntry {
 
 impl Settings {
     /// The settings of a bake of `scene` with `config` (the automatic choices applied).
-    pub fn new(scene: &Scene, config: &BakeConfig, texel_rays: Option<&[u32]>, gltf: &str) -> Self {
+    pub fn new(scene: &Scene, config: &BakeConfig, gltf: &str) -> Self {
         let (t, a, o) = (&config.transport, &config.atlas, &config.output);
         let lights = (scene.lights.iter().enumerate())
             .map(|(k, l)| LightEntry {
@@ -173,7 +171,6 @@ impl Settings {
             seed: t.seed,
             validity: t.validity,
             denoise: t.denoise,
-            texel_rays: texel_rays.map(<[u32]>::to_vec),
             tolerance: config.solve.tolerance,
             max_iterations: config.solve.max_iterations,
             float: o.float,

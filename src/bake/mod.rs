@@ -124,8 +124,6 @@ pub struct Baked {
     pub junctions: Option<scene::junctions::JunctionReport>,
     /// Per-light layers (`config.output.layers`; [`relight`]).
     pub layers: Vec<relight::LayerPages>,
-    /// Per texel, gathering rays where the plan cut them (kept with the transport).
-    pub texel_rays: Option<Vec<u32>>,
     pub stages: Vec<StageTime>,
 }
 
@@ -429,6 +427,29 @@ fn compute_prepared(mut prepared: Prepared, progress: &dyn Progress) -> Result<B
         config.validate()?;
         timed(&mut stages, "plan", t);
     }
+    // A kept transport (and layers) must describe the lightmap written: one run's rows, so the
+    // pilot runs are not mixed in (their rays are spent on the choice only), and every texel
+    // casts the chosen rays, so the kept settings say all a fresh bake needs to cast the same
+    // (`--no-auto` with them).
+    let kept = config.output.keep_transport || config.output.layers.is_some();
+    if kept {
+        config.transport.split_direct = true;
+        if let Some(plan) = plan.as_mut() {
+            if let Some(runs) = pilot.take() {
+                plan.discarded_rays += runs.runs.iter().map(|r| r.transport.rays).sum::<u64>();
+                // The one run casts what the pilot pair and the final bake would have together.
+                let t = &mut config.transport;
+                let own = !runs.enough as u32;
+                t.gather_rays = own * t.gather_rays + 2 * runs.gather_rays;
+                t.light_samples = own * t.light_samples + 2 * runs.light_samples;
+                plan.reasons.push(format!(
+                    "kept transport: one bake at K={} and L={} (the pilot bakes' rays and the final bake's together), the pilot bakes not mixed in",
+                    t.gather_rays, t.light_samples
+                ));
+            }
+            plan.texel_rays = None;
+        }
+    }
     memory::fit(
         input,
         &sizes,
@@ -438,20 +459,9 @@ fn compute_prepared(mut prepared: Prepared, progress: &dyn Progress) -> Result<B
         limit,
         progress,
     )?;
-    // A kept transport (and layers) must describe the lightmap written: one run's rows, so the
-    // pilot runs are not mixed in (their rays are spent on the choice only).
-    let kept = config.output.keep_transport || config.output.layers.is_some();
     if kept {
-        config.validate()?;
-        config.transport.split_direct = true;
-        if let (Some(runs), Some(plan)) = (pilot.take(), plan.as_mut()) {
-            plan.discarded_rays += runs.runs.iter().map(|r| r.transport.rays).sum::<u64>();
-        }
+        config.validate()?; // the memory limit may have asked for the gather solver
     }
-    let texel_rays = plan
-        .as_ref()
-        .and_then(|p| p.texel_rays.as_ref())
-        .map(|r| r.0.clone());
 
     let t = Instant::now();
     // With a plan, the pilot bakes are part of the result (a ray-weighted mean).
@@ -520,7 +530,7 @@ fn compute_prepared(mut prepared: Prepared, progress: &dyn Progress) -> Result<B
     let mut layers = Vec::new();
     if let Some(groups) = &config.output.layers {
         let t = Instant::now();
-        let settings = kept::Settings::new(&scene, &config, None, "");
+        let settings = kept::Settings::new(&scene, &config, "");
         let planned = relight::plan_layers(&settings, groups)?;
         let seams = (config.output.seams)
             .then(|| lightmap::seams::find(&scene, &atlas, &Default::default()));
@@ -564,7 +574,6 @@ fn compute_prepared(mut prepared: Prepared, progress: &dyn Progress) -> Result<B
         seams,
         junctions,
         layers,
-        texel_rays,
         stages,
     })
 }
@@ -704,7 +713,7 @@ fn keep_with_gltf(
         false => format!("{stem}.gltf"),
     };
     let config = &baked.config;
-    let settings = kept::Settings::new(&baked.scene, config, baked.texel_rays.as_deref(), &name);
+    let settings = kept::Settings::new(&baked.scene, config, &name);
     if !layer_files.is_empty() {
         let gltf = staging.read(&name)?;
         let edited = relight::edit_gltf(&gltf, input, |json| {
