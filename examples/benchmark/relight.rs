@@ -91,6 +91,7 @@ pub fn measure(name: &str, gltf: &Path, work: &Path) -> RelightRow {
     });
     config.output.keep_transport = true;
     config.output.layers = Some(Vec::new());
+    config.output.float = true; // relit and fresh pages compared without half-float rounding
     let baked_dir = dir.join("baked");
     let t = Instant::now();
     let report = bake(gltf, &baked_dir, &config, &NoProgress).expect("bake");
@@ -135,8 +136,7 @@ pub fn measure(name: &str, gltf: &Path, work: &Path) -> RelightRow {
 
     // The edited scene, baked afresh with the kept settings.
     let edited = edited_input(gltf, &dir, &emissive, floor.as_deref());
-    let mut fresh_config = settings.config().expect("kept settings");
-    fresh_config.output.float = settings.float;
+    let fresh_config = settings.config().expect("kept settings");
     let fresh_dir = dir.join("fresh");
     let t = Instant::now();
     bake(&edited, &fresh_dir, &fresh_config, &NoProgress).expect("fresh bake");
