@@ -254,6 +254,25 @@ pub struct LayerGroup {
     pub members: Vec<String>,
 }
 
+impl LayerGroup {
+    /// A group as the command line and manifests give it: `NAME=MEMBER,MEMBER…`.
+    pub fn parse(spec: &str) -> crate::Result<LayerGroup> {
+        let bad = || crate::Error::Option(format!("layer {spec:?}: expected GROUP=NAME,NAME…"));
+        let (name, members) = spec.split_once('=').ok_or_else(bad)?;
+        let members: Vec<String> = (members.split(','))
+            .map(|m| m.trim().to_string())
+            .filter(|m| !m.is_empty())
+            .collect();
+        if name.trim().is_empty() || members.is_empty() {
+            return Err(bad());
+        }
+        Ok(LayerGroup {
+            name: name.trim().to_string(),
+            members,
+        })
+    }
+}
+
 /// Which settings the user fixed; the automatic choice ([`crate::plan`]) leaves those alone.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Keep {

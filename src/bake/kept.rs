@@ -349,12 +349,9 @@ pub fn path_beside(gltf: &Path) -> PathBuf {
 pub fn read(gltf: &Path) -> Result<Kept> {
     let path = path_beside(gltf);
     let bytes = std::fs::read(&path).map_err(|e| {
-        Error::io(
+        Error::invalid(
             &path,
-            std::io::Error::new(
-                e.kind(),
-                format!("{e} (bake with --keep-transport to write it)"),
-            ),
+            format!("cannot read it ({e}): bake with --keep-transport to write it"),
         )
     })?;
     let bad = |what: String| Error::invalid(&path, what);

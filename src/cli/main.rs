@@ -386,14 +386,13 @@ impl BakeArgs {
             exposure: Some(self.exposure),
             seed: Some(self.seed),
             max_memory: self.max_memory.map(|bytes| bytes.to_string()),
+            keep_transport: Some(self.keep_transport),
+            layers: self.layers.specs(),
         }
     }
 
     fn config(&self) -> Result<BakeConfig> {
-        let mut config = self.options().config()?;
-        config.output.keep_transport = self.keep_transport;
-        config.output.layers = self.layers.groups()?;
-        Ok(config)
+        Ok(self.options().config()?)
     }
 }
 

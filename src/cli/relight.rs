@@ -3,7 +3,7 @@
 
 use std::path::PathBuf;
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Context, Result};
 use glam::Vec3;
 use lightbake::config::LayerGroup;
 use lightbake::relight::Edits;
@@ -47,30 +47,23 @@ pub struct LayerArgs {
 }
 
 impl LayerArgs {
+    /// As a manifest gives it: `None` without `--layers`, else the groups given.
+    pub fn specs(&self) -> Option<Vec<String>> {
+        (!self.layers.is_empty()).then(|| {
+            self.layers
+                .iter()
+                .filter(|s| !s.is_empty())
+                .cloned()
+                .collect()
+        })
+    }
+
     /// `None` without `--layers`, else the named groups.
     pub fn groups(&self) -> Result<Option<Vec<LayerGroup>>> {
-        if self.layers.is_empty() {
-            return Ok(None);
-        }
-        let groups = (self.layers.iter().filter(|s| !s.is_empty()))
-            .map(|spec| {
-                let Some((name, members)) = spec.split_once('=') else {
-                    bail!("--layers {spec:?}: expected GROUP=NAME,NAME…");
-                };
-                let members: Vec<String> = (members.split(','))
-                    .map(|m| m.trim().to_string())
-                    .filter(|m| !m.is_empty())
-                    .collect();
-                if name.trim().is_empty() || members.is_empty() {
-                    bail!("--layers {spec:?}: expected a group name and at least one member");
-                }
-                Ok(LayerGroup {
-                    name: name.trim().to_string(),
-                    members,
-                })
-            })
-            .collect::<Result<_>>()?;
-        Ok(Some(groups))
+        let specs = self
+            .specs()
+            .map(|s| s.iter().map(|s| LayerGroup::parse(s)).collect());
+        Ok(specs.transpose()?)
     }
 }
 
