@@ -20,6 +20,8 @@ pub(crate) struct ChunkRows {
     pub(crate) f: Vec<f32>,
     pub(crate) escape: Vec<f32>,
     pub(crate) direct: Vec<Vec3>,
+    /// `direct` by source, when split ([`Transport::direct_terms`]).
+    pub(crate) terms: Vec<Vec3>,
     pub(crate) rays: u64,
 }
 
@@ -85,6 +87,7 @@ pub(crate) fn build(
         direct: Vec::with_capacity(n),
         rays: 0,
         rows_carry_emission: false,
+        ..Default::default()
     };
     t.row_start.push(0);
     for c in chunks {
@@ -97,6 +100,7 @@ pub(crate) fn build(
         t.f.extend(c.f);
         t.escape.extend(c.escape);
         t.direct.extend(c.direct);
+        t.direct_terms.extend(c.terms);
         t.rays += c.rays;
     }
     Ok(t)
