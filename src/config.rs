@@ -233,6 +233,9 @@ pub struct OutputParams {
     /// Also write each page's per-texel error estimate (`plan::error_map`) as
     /// `<page>_error.exr`.
     pub error_map: bool,
+    /// Also write directional pages (L1 spherical harmonics of the incident radiance,
+    /// `lightmap::directional`) from a final gather with this many rays per texel.
+    pub directional: Option<u32>,
 }
 
 /// Which settings the user fixed; the automatic choice ([`crate::plan`]) leaves those alone.
@@ -322,6 +325,7 @@ impl BakeConfig {
                 rgbm: false,
                 seams: true,
                 error_map: false,
+                directional: None,
             },
             auto: None,
             max_memory: None,
@@ -379,6 +383,13 @@ impl BakeConfig {
             return Err(Option(format!(
                 "gather rays must be within 1..=1048576, got {}",
                 t.gather_rays
+            )));
+        }
+        if let Some(rays) = self.output.directional
+            && (rays == 0 || rays > 1 << 20)
+        {
+            return Err(Option(format!(
+                "directional rays must be within 1..=1048576, got {rays}"
             )));
         }
         if t.light_samples > 1 << 20 {
