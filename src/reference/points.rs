@@ -168,6 +168,30 @@ pub fn trace(
     params: &ReferenceParams,
     progress: &dyn Progress,
 ) -> Result<Reference> {
+    trace_with((scene, texels, tracer), points, false, params, progress)
+}
+
+/// [`trace`] about each point's `shading_normal` taken as a perturbed normal (a normal map's):
+/// light from below the surface (the point's geometric `normal`) counts as zero. The irradiance
+/// a renderer should reconstruct there from directional pages (`lightmap::directional`).
+pub fn trace_perturbed(
+    scene: &Scene,
+    texels: &Texels,
+    tracer: &Tracer,
+    points: &[Point],
+    params: &ReferenceParams,
+    progress: &dyn Progress,
+) -> Result<Reference> {
+    trace_with((scene, texels, tracer), points, true, params, progress)
+}
+
+fn trace_with(
+    (scene, texels, tracer): (&Scene, &Texels, &Tracer),
+    points: &[Point],
+    perturbed: bool,
+    params: &ReferenceParams,
+    progress: &dyn Progress,
+) -> Result<Reference> {
     let eps = tracer.epsilon;
     let sample: &ItemSample = &|paths, i, sample, rays| {
         let mut rng = Rng::new(
@@ -179,6 +203,7 @@ pub fn trace(
         paths.reflected(
             p.position + p.normal * eps,
             p.shading_normal,
+            perturbed.then_some(p.normal),
             &mut rng,
             rays,
         )
