@@ -78,7 +78,7 @@ use crate::transport::Surfaces;
 use crate::{Error, Progress, Result, metrics};
 
 /// The names of the four coefficient pages, in storage order.
-pub const NAMES: [&str; 4] = ["L0", "L1x", "L1y", "L1z"];
+pub const NAMES: [&str; 4] = crate::scene::DIRECTIONAL_PAGES;
 /// How the pages are read, as the glTF extras state it.
 pub const CONVENTION: &str =
     "E(n)/pi = max(0, L0 + L1x*n.x + L1y*n.y + L1z*n.z), n world-space unit normal";

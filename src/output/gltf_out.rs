@@ -1107,6 +1107,7 @@ mod tests {
             back: None,
             has_uv1: false,
             lightmap: None,
+            directional: None,
             split: Default::default(),
         }
     }
