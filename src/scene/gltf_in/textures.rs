@@ -131,13 +131,16 @@ fn surface(m: &Value) -> Surface {
     s
 }
 
+/// A decoded image: width, height, linear texels (row 0 at the top).
+type Decoded = (u32, u32, Vec<Vec3>);
+
 /// Decodes each image once and stores each (image, sampler) pair once in `scene.textures`.
 struct TextureCache<'a> {
     files: &'a Files<'a>,
     buffers: &'a [Vec<u8>],
     /// Decoded linear texels by (image index, sRGB-encoded); `None` when the image could not
     /// be decoded.
-    images: BTreeMap<(usize, bool), Option<(u32, u32, Vec<Vec3>)>>,
+    images: BTreeMap<(usize, bool), Option<Decoded>>,
     /// Scene texture index by (image, sampler, sRGB-encoded).
     textures: BTreeMap<(usize, Option<usize>, bool), Option<u32>>,
 }
@@ -215,7 +218,7 @@ impl TextureCache<'_> {
         image: &gltf::Image,
         srgb: bool,
         scene: &mut Scene,
-    ) -> Result<Option<(u32, u32, Vec<Vec3>)>> {
+    ) -> Result<Option<Decoded>> {
         let i = image.index();
         let (bytes, what) = match image.source() {
             gltf::image::Source::Uri { uri, .. } => {
@@ -263,7 +266,7 @@ fn wrap(mode: gltf::texture::WrappingMode) -> Wrap {
 
 /// Decodes a PNG or JPEG to linear RGB (alpha dropped), row 0 at the top: through the sRGB
 /// transfer function when `srgb` (colours), as stored otherwise (normal maps).
-fn decode(bytes: &[u8], srgb: bool) -> image::ImageResult<(u32, u32, Vec<Vec3>)> {
+fn decode(bytes: &[u8], srgb: bool) -> image::ImageResult<Decoded> {
     use image::DynamicImage as D;
     let srgb_to_linear = |c: f32| if srgb { srgb_to_linear(c) } else { c };
     let image = image::load_from_memory(bytes)?;
