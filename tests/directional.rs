@@ -158,3 +158,63 @@ fn tilted_normals_match_the_path_tracer_within_the_truncation_error() {
         }
     }
 }
+
+/// The normal map of `testing::normal_mapped_wall` read as glTF means it (linear, +y up the
+/// image, tangent frame from `TEXCOORD_0`, here mirrored in v): its domes bulge out of the wall.
+#[test]
+fn normal_maps_tilt_the_shading_normal_as_domes() {
+    let dir = crate::util::scratch();
+    let input = dir.path().join("wall.gltf");
+    lightbake::testing::normal_mapped_wall()
+        .write_gltf(&input)
+        .unwrap();
+    let (scene, _) = lightbake::scene::load(&input).unwrap();
+    let tracer = Tracer::new(&scene);
+    // The dome of the cell at the wall's lower left: centre (−1.25, 0.25), radius 0.225 m.
+    let normal_at = |x: f32, y: f32| {
+        let hit = tracer
+            .closest(Vec3::new(x, y, 0.0), Vec3::NEG_Z, 10.0)
+            .unwrap();
+        let sp = scene.surface_point(hit.triangle, hit.bary);
+        scene.shading_normal(hit.triangle, &sp)
+    };
+    let right = normal_at(-1.15, 0.25);
+    let up = normal_at(-1.25, 0.35);
+    let down = normal_at(-1.25, 0.15);
+    let flat = normal_at(-1.5 + 0.49, 0.49);
+    assert!(right.x > 0.3 && right.y.abs() < 0.05, "{right}");
+    assert!(up.y > 0.3 && up.x.abs() < 0.05, "{up}");
+    assert!(down.y < -0.3 && down.x.abs() < 0.05, "{down}");
+    assert!(flat.distance(Vec3::Z) < 0.02, "{flat}");
+}
+
+/// With directional pages the renderer shades the domes: the side facing the light is much
+/// brighter than the other, beyond the lightmap's own falloff (what the plain render shows).
+#[test]
+fn directional_pages_shade_normal_mapped_bumps() {
+    let dir = crate::util::scratch();
+    let input = dir.path().join("wall.gltf");
+    lightbake::testing::normal_mapped_wall()
+        .write_gltf(&input)
+        .unwrap();
+    let mut config = BakeConfig::draft();
+    config.output.directional = Some(64);
+    let out = dir.path().join("out");
+    lightbake::bake(&input, &out, &config, &NoProgress).unwrap();
+    let mut scene = lightbake::render::RenderScene::load(&out.join("wall.gltf")).unwrap();
+    let options = lightbake::render::RenderOptions::default();
+    // The top row's second dome (centre (−0.75, 1.75)); the light at (−1.3, 1.9, −0.75) is to
+    // its left, at a grazing angle.
+    let look = |scene: &lightbake::render::RenderScene, x: f32, y: f32| {
+        let mut rng = lightbake::sampling::Rng::new(0, 0, 0);
+        let l = scene.radiance(Vec3::new(x, y, 0.0), Vec3::NEG_Z, &options, &mut rng);
+        l.element_sum() / 3.0
+    };
+    let ratio = |scene: &lightbake::render::RenderScene| {
+        look(scene, -0.9, 1.75) / look(scene, -0.6, 1.75)
+    };
+    let directional = ratio(&scene);
+    scene.ignore_directional();
+    let plain = ratio(&scene);
+    assert!(directional > 2.0 * plain, "{directional} vs {plain}");
+}
