@@ -210,9 +210,8 @@ fn directional_pages_shade_normal_mapped_bumps() {
         let l = scene.radiance(Vec3::new(x, y, 0.0), Vec3::NEG_Z, &options, &mut rng);
         l.element_sum() / 3.0
     };
-    let ratio = |scene: &lightbake::render::RenderScene| {
-        look(scene, -0.9, 1.75) / look(scene, -0.6, 1.75)
-    };
+    let ratio =
+        |scene: &lightbake::render::RenderScene| look(scene, -0.9, 1.75) / look(scene, -0.6, 1.75);
     let directional = ratio(&scene);
     scene.ignore_directional();
     let plain = ratio(&scene);
