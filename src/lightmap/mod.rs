@@ -1,7 +1,8 @@
 //! Stage 7 — `LightmapPages`: the solution laid back into page images, dilated, seams stitched.
 //!
 //! A texel stores `H/π` (irradiance over π): the radiance a white Lambertian surface would
-//! reflect, so a renderer shades with `baseColor × lightmap + emission`.
+//! reflect, so a renderer shades with `baseColor × lightmap + emission`. With `--directional`,
+//! [`directional`] adds pages of L1 spherical harmonics of the incident radiance.
 
 pub mod denoise;
 mod dilate;
