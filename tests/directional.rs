@@ -8,7 +8,7 @@ use std::f32::consts::PI;
 use glam::Vec3;
 use lightbake::lightmap::directional::{self, DirectionalParams, Gatherer, Sh1};
 use lightbake::reference::ReferenceParams;
-use lightbake::reference::points::{self, Point};
+use lightbake::reference::points::{self, Normals, Point};
 use lightbake::sampling::frame;
 use lightbake::trace::Tracer;
 use lightbake::transport::Surfaces;
@@ -102,8 +102,10 @@ pub fn tilted_errors(name: &str, tilts: &[f32]) -> Vec<TiltErrors> {
                     shading_normal: m,
                 })
                 .collect();
+            let surfaces = (&baked.scene, t, &tracer);
             let traced =
-                points::trace_perturbed(&baked.scene, t, &tracer, &pts, &reference, &NoProgress).unwrap();
+                points::trace_about(surfaces, &pts, Normals::Perturbed, &reference, &NoProgress)
+                    .unwrap();
             let l1: Vec<Vec3> = ids
                 .iter()
                 .zip(&normals)
