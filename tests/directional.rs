@@ -161,15 +161,21 @@ fn tilted_normals_match_the_path_tracer_within_the_truncation_error() {
     }
 }
 
-/// The normal map of `testing::normal_mapped_wall` read as glTF means it (linear, +y up the
-/// image, tangent frame from `TEXCOORD_0`, here mirrored in v): its domes bulge out of the wall.
-#[test]
-fn normal_maps_tilt_the_shading_normal_as_domes() {
+/// `testing::normal_mapped_wall` written into a scratch folder.
+fn wall() -> (tempfile::TempDir, std::path::PathBuf) {
     let dir = crate::util::scratch();
     let input = dir.path().join("wall.gltf");
     lightbake::testing::normal_mapped_wall()
         .write_gltf(&input)
         .unwrap();
+    (dir, input)
+}
+
+/// The normal map of `testing::normal_mapped_wall` read as glTF means it (linear, +y up the
+/// image, tangent frame from `TEXCOORD_0`, here mirrored in v): its domes bulge out of the wall.
+#[test]
+fn normal_maps_tilt_the_shading_normal_as_domes() {
+    let (_dir, input) = wall(); // the folder lives as long as the test
     let (scene, _) = lightbake::scene::load(&input).unwrap();
     let tracer = Tracer::new(&scene);
     // The dome of the cell at the wall's lower left: centre (−1.25, 0.25), radius 0.225 m.
@@ -194,11 +200,7 @@ fn normal_maps_tilt_the_shading_normal_as_domes() {
 /// brighter than the other, beyond the lightmap's own falloff (what the plain render shows).
 #[test]
 fn directional_pages_shade_normal_mapped_bumps() {
-    let dir = crate::util::scratch();
-    let input = dir.path().join("wall.gltf");
-    lightbake::testing::normal_mapped_wall()
-        .write_gltf(&input)
-        .unwrap();
+    let (dir, input) = wall();
     let mut config = BakeConfig::draft();
     config.output.directional = Some(64);
     let out = dir.path().join("out");
