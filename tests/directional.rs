@@ -36,7 +36,7 @@ pub struct TiltErrors {
 
 /// The coefficients of texel `i` as the pages hold them.
 fn coefficients(baked: &Baked, i: usize) -> Sh1 {
-    let (pages, _) = baked
+    let (pages, ..) = baked
         .directional
         .as_ref()
         .expect("baked with directional pages");

@@ -127,8 +127,9 @@ pub struct Baked {
     /// (`config.output.error_map`; [`plan::error_map`]).
     pub error_map: Option<LightmapPages>,
     /// The directional pages ([`lightmap::directional::NAMES`]), dilated and stitched like
-    /// `pages`, and their agreement with the lightmap (`config.output.directional`).
-    pub directional: Option<([LightmapPages; 4], lightmap::directional::Agreement)>,
+    /// `pages`, their agreement with the lightmap and the gather's rays
+    /// (`config.output.directional`).
+    pub directional: Option<([LightmapPages; 4], lightmap::directional::Agreement, u64)>,
     pub validity: texels::validity::ValidityReport,
     /// The settings the bake ran with: `config` with the automatic choices applied.
     pub config: BakeConfig,
@@ -554,7 +555,7 @@ fn compute_prepared(mut prepared: Prepared, progress: &dyn Progress) -> Result<B
             }
         }
         timed(&mut stages, "directional pages", t);
-        (pages, agreement)
+        (pages, agreement, gathered.rays)
     });
 
     Ok(Baked {
@@ -635,7 +636,7 @@ pub fn write(
             png: format!("{stem}_lightmap{k}.png"),
             directional: None,
         };
-        if let Some((pages, _)) = &baked.directional {
+        if let Some((pages, ..)) = &baked.directional {
             let names = lightmap::directional::NAMES.map(|c| format!("{stem}_lightmap{k}_{c}.exr"));
             for (name, pages) in names.iter().zip(pages) {
                 staging.write(
@@ -686,8 +687,11 @@ pub fn write(
         triangles: baked.scene.triangles.len(),
         texels: baked.texels.len(),
         pages: baked.pages.pages.len(),
-        // Every ray cast, the pilot bakes that are not part of the result included.
-        rays: baked.transport.rays + baked.plan.as_ref().map_or(0, |p| p.discarded_rays),
+        // Every ray cast, the pilot bakes that are not part of the result and the directional
+        // gather included.
+        rays: baked.transport.rays
+            + baked.plan.as_ref().map_or(0, |p| p.discarded_rays)
+            + baked.directional.as_ref().map_or(0, |d| d.2),
         iterations: baked.solution.history.len(),
         residual: baked.solution.residual(),
         converged: baked.solution.converged,
@@ -695,7 +699,7 @@ pub fn write(
         plan: baked.plan,
         seams: baked.seams,
         junctions: baked.junctions,
-        directional: baked.directional.map(|(_, a)| a),
+        directional: baked.directional.map(|(_, a, _)| a),
         stages: baked.stages,
         files,
     })
