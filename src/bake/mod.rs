@@ -4,6 +4,7 @@
 //! [`compute`] (the automatic choice with its pilot runs in [`pilot`], light transport and its
 //! solution through the one dispatch of [`light`], denoise, pages), then [`write`].
 
+pub mod distributed;
 pub mod light;
 pub mod memory;
 pub mod pilot;
@@ -404,6 +405,25 @@ pub fn compute(input: &Path, config: &BakeConfig, progress: &dyn Progress) -> Re
 
 /// [`compute`] from the prepared stages.
 fn compute_prepared(mut prepared: Prepared, progress: &dyn Progress) -> Result<Baked> {
+    let lit = light(&mut prepared, progress, &light::by_technique)?;
+    finish(prepared, lit, progress)
+}
+
+/// The settings chosen for the final bake and its light, before denoising.
+pub(crate) struct Lighting {
+    config: BakeConfig,
+    plan: Option<Plan>,
+    stages: Vec<StageTime>,
+    last: pilot::FinalBake,
+}
+
+/// The automatic choice (pilot runs included) and the final bake, whose transport and solution
+/// `lit` makes (on this machine, [`light::by_technique`]; or [`distributed`]).
+pub(crate) fn light(
+    prepared: &mut Prepared,
+    progress: &dyn Progress,
+    lit: light::LightFn,
+) -> Result<Lighting> {
     let first = prepared.first_pilot.take();
     let surfaces = prepared.surfaces();
     let (mut config, mut plan, mut stages) = (
@@ -435,9 +455,34 @@ fn compute_prepared(mut prepared: Prepared, progress: &dyn Progress) -> Result<B
 
     let t = Instant::now();
     // With a plan, the pilot bakes are part of the result (a ray-weighted mean).
-    let last = pilot::final_bake(surfaces, &config, plan.as_ref(), pilot, progress)?;
+    let last = pilot::final_bake(surfaces, &config, plan.as_ref(), pilot, progress, lit)?;
+    if !last.solution.converged {
+        progress.warn(&format!(
+            "the solver stopped on the iteration cap ({}) at residual {:.2e}, above the tolerance {:.1e}",
+            last.solution.history.len(),
+            last.solution.residual(),
+            config.solve.tolerance
+        ));
+    }
+    timed(&mut stages, "transport+solve", t);
+    Ok(Lighting {
+        config,
+        plan,
+        stages,
+        last,
+    })
+}
+
+/// Denoising, dilation and seams of a lit bake.
+pub(crate) fn finish(prepared: Prepared, lit: Lighting, progress: &dyn Progress) -> Result<Baked> {
+    let Lighting {
+        config,
+        plan,
+        mut stages,
+        last,
+    } = lit;
     // Before denoising: the error map shows the noise the denoiser was given.
-    let noise = (config.output.error_map).then(|| texel_noise(surfaces.texels, &config, &last));
+    let noise = (config.output.error_map).then(|| texel_noise(&prepared.texels, &config, &last));
     let pilot::FinalBake {
         transport,
         solution,
@@ -445,15 +490,6 @@ fn compute_prepared(mut prepared: Prepared, progress: &dyn Progress) -> Result<B
         light_samples,
         ..
     } = last;
-    if !solution.converged {
-        progress.warn(&format!(
-            "the solver stopped on the iteration cap ({}) at residual {:.2e}, above the tolerance {:.1e}",
-            solution.history.len(),
-            solution.residual(),
-            config.solve.tolerance
-        ));
-    }
-    timed(&mut stages, "transport+solve", t);
     let Prepared {
         scene,
         source,
