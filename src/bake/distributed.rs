@@ -294,7 +294,8 @@ struct Exchange {
     waited: Duration,
     rows_seconds: f64,
     sweeps_seconds: f64,
-    /// Left running when connecting timed out; joined otherwise.
+    /// Joined when the exchange ends (a clean shutdown sends what is in flight); left running
+    /// when connecting timed out or a process was lost.
     timely: Option<JoinHandle<std::result::Result<(), String>>>,
 }
 
@@ -447,14 +448,16 @@ impl Exchange {
     fn round(&mut self, share: Share) -> Result<Vec<Share>> {
         self.round += 1;
         let lost = |exchange: &mut Exchange| {
+            // Not joined: timely's threads end when the other processes close their
+            // connections, and a hung one might not.
+            exchange.timely = None;
             let missing: Vec<String> = (exchange.arrived.lock().unwrap().iter().enumerate())
                 .filter(|&(p, &rounds)| rounds < exchange.round && p != exchange.process)
                 .map(|(p, _)| format!("{p} ({})", exchange.addresses[p]))
                 .collect();
-            let why = exchange.join();
             Error::Cluster(format!(
-                "process {} lost contact with process {} in exchange {} (it died or its \
-                 network failed): {why}",
+                "process {} lost contact with process {} in exchange {} (the first carries \
+                 direct light, then one per sweep): it died or its network failed",
                 exchange.process,
                 missing.join(", "),
                 exchange.round,

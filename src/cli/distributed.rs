@@ -72,11 +72,23 @@ impl Args {
     }
 }
 
+/// Silences the panics of timely's threads: a lost connection panics them by design (that is
+/// how timely fails the other processes), and the bake's error names the lost process.
+pub fn quiet_timely_panics() {
+    let previous = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        let thread = std::thread::current();
+        if !thread.name().is_some_and(|n| n.starts_with("timely")) {
+            previous(info);
+        }
+    }));
+}
+
 /// The line a distributed process prints about its share of the work.
 pub fn summary(report: &DistributedReport, process: usize) -> String {
     format!(
         "process {process} of {}: rows {}..{} built in {:.2}s, {} sweeps in {:.2}s ({:.2}s of it in \
-         exchanges), {:.3} MB sent per sweep, {:.3} MB in all",
+         exchanges), {} bytes sent per sweep, {} in all",
         report.processes,
         report.rows.start,
         report.rows.end,
@@ -84,8 +96,8 @@ pub fn summary(report: &DistributedReport, process: usize) -> String {
         report.sweeps,
         report.sweeps_seconds,
         report.exchange_seconds,
-        report.bytes_per_sweep as f64 * 1e-6,
-        report.bytes_sent as f64 * 1e-6
+        report.bytes_per_sweep,
+        report.bytes_sent
     )
 }
 

@@ -398,6 +398,7 @@ fn bake(args: &BakeArgs) -> Result<()> {
     let report = match args.cluster.cluster()? {
         None => lightbake::bake(&args.scene, &args.output, &config, &bars).with_context(failed)?,
         Some(cluster) => {
+            distributed::quiet_timely_panics();
             let shared =
                 lightbake::distributed::bake(&args.scene, &args.output, &config, &cluster, &bars)
                     .with_context(failed)?;
