@@ -433,12 +433,52 @@ fn print_predictions(model: &Model) {
     }
 }
 
-/// Time per stage (stacked) and memory per machine against machines, for each bandwidth.
+/// Time per stage and memory per machine against machines (stacked bars), for each bandwidth.
 fn chart(path: &Path, model: &Model) -> Result<(), Box<dyn std::error::Error>> {
     font::register();
     let root = BitMapBackend::new(path, (1200, 420)).into_drawing_area();
     root.fill(&WHITE)?;
     let panels = root.split_evenly((1, 3));
+    let machines: Vec<usize> = std::iter::once(1).chain(MACHINES).collect();
+    for ((name, bandwidth), panel) in BANDWIDTHS.iter().zip(panels.iter()) {
+        let times: Vec<Vec<f64>> = machines
+            .iter()
+            .map(|&p| model.time(TEXELS, p, *bandwidth).to_vec())
+            .collect();
+        let caption = format!("time per machine, {name}");
+        let y = "seconds (one thread each)";
+        stacked(panel, &caption, y, &machines, &times, &STAGES)?;
+    }
+    let memory: Vec<Vec<f64>> = machines
+        .iter()
+        .map(|&p| {
+            let all = model.memory(TEXELS, p) / 1e9;
+            let shared = model.shared_bytes * TEXELS / 1e9;
+            vec![shared, all - shared]
+        })
+        .collect();
+    let parts = ["held by every machine", "its rows"];
+    stacked(
+        &panels[2],
+        "memory per machine",
+        "GB",
+        &machines,
+        &memory,
+        &parts,
+    )?;
+    root.present()?;
+    Ok(())
+}
+
+/// One panel of stacked bars: per machine count, `bars[i]` stacked in the order of `labels`.
+fn stacked(
+    panel: &DrawingArea<BitMapBackend, plotters::coord::Shift>,
+    caption: &str,
+    y_desc: &str,
+    machines: &[usize],
+    bars: &[Vec<f64>],
+    labels: &[&str],
+) -> Result<(), Box<dyn std::error::Error>> {
     let colors = [
         RGBColor(150, 150, 150),
         RGBColor(31, 119, 180),
@@ -446,64 +486,13 @@ fn chart(path: &Path, model: &Model) -> Result<(), Box<dyn std::error::Error>> {
         RGBColor(214, 39, 40),
         RGBColor(148, 103, 189),
     ];
-    let machines: Vec<usize> = std::iter::once(1).chain(MACHINES).collect();
-    let x = |i: usize| i as f64;
-    for ((name, bandwidth), panel) in BANDWIDTHS.iter().zip(panels.iter()) {
-        let totals: Vec<[f64; 5]> = machines
-            .iter()
-            .map(|&p| model.time(TEXELS, p, *bandwidth))
-            .collect();
-        let top = totals
-            .iter()
-            .map(|t| t.iter().sum::<f64>())
-            .fold(0.0, f64::max)
-            * 1.1;
-        let mut chart = ChartBuilder::on(panel)
-            .caption(format!("time per machine, {name}"), ("sans-serif", 18))
-            .margin(8)
-            .x_label_area_size(32)
-            .y_label_area_size(56)
-            .build_cartesian_2d(-0.5..machines.len() as f64 - 0.5, 0.0..top)?;
-        chart
-            .configure_mesh()
-            .x_labels(machines.len())
-            .x_label_formatter(&|v| {
-                machines
-                    .get(v.round() as usize)
-                    .map_or(String::new(), |m| m.to_string())
-            })
-            .x_desc("machines")
-            .y_desc("seconds (one thread each)")
-            .draw()?;
-        for (stage, color) in STAGES.iter().zip(colors) {
-            let k = STAGES.iter().position(|s| s == stage).unwrap();
-            chart
-                .draw_series(totals.iter().enumerate().map(|(i, t)| {
-                    let below: f64 = t[..k].iter().sum();
-                    Rectangle::new(
-                        [(x(i) - 0.35, below), (x(i) + 0.35, below + t[k])],
-                        color.filled(),
-                    )
-                }))?
-                .label(*stage)
-                .legend(move |(x, y)| {
-                    Rectangle::new([(x, y - 5), (x + 12, y + 5)], color.filled())
-                });
-        }
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::UpperRight)
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .draw()?;
-    }
-    let memory: Vec<f64> = machines
+    let top = bars
         .iter()
-        .map(|&p| model.memory(TEXELS, p) / 1e9)
-        .collect();
-    let top = memory.iter().cloned().fold(0.0, f64::max) * 1.1;
-    let mut chart = ChartBuilder::on(&panels[2])
-        .caption("memory per machine", ("sans-serif", 18))
+        .map(|b| b.iter().sum::<f64>())
+        .fold(0.0, f64::max)
+        * 1.15;
+    let mut chart = ChartBuilder::on(panel)
+        .caption(caption, ("sans-serif", 18))
         .margin(8)
         .x_label_area_size(32)
         .y_label_area_size(56)
@@ -517,33 +506,25 @@ fn chart(path: &Path, model: &Model) -> Result<(), Box<dyn std::error::Error>> {
                 .map_or(String::new(), |m| m.to_string())
         })
         .x_desc("machines")
-        .y_desc("GB")
+        .y_desc(y_desc)
         .draw()?;
-    let shared = model.shared_bytes * TEXELS / 1e9;
-    chart
-        .draw_series(memory.iter().enumerate().map(|(i, m)| {
-            Rectangle::new(
-                [(x(i) - 0.35, 0.0), (x(i) + 0.35, shared.min(*m))],
-                colors[0].filled(),
-            )
-        }))?
-        .label("held by every machine")
-        .legend(move |(x, y)| Rectangle::new([(x, y - 5), (x + 12, y + 5)], colors[0].filled()));
-    chart
-        .draw_series(memory.iter().enumerate().map(|(i, m)| {
-            Rectangle::new(
-                [(x(i) - 0.35, shared.min(*m)), (x(i) + 0.35, *m)],
-                colors[1].filled(),
-            )
-        }))?
-        .label("its rows")
-        .legend(move |(x, y)| Rectangle::new([(x, y - 5), (x + 12, y + 5)], colors[1].filled()));
+    for (k, (label, color)) in labels.iter().zip(colors).enumerate() {
+        chart
+            .draw_series(bars.iter().enumerate().map(|(i, b)| {
+                let (x, below) = (i as f64, b[..k].iter().sum::<f64>());
+                Rectangle::new(
+                    [(x - 0.35, below), (x + 0.35, below + b[k])],
+                    color.filled(),
+                )
+            }))?
+            .label(*label)
+            .legend(move |(x, y)| Rectangle::new([(x, y - 5), (x + 12, y + 5)], color.filled()));
+    }
     chart
         .configure_series_labels()
         .position(SeriesLabelPosition::UpperRight)
         .background_style(WHITE.mix(0.85))
         .border_style(BLACK)
         .draw()?;
-    root.present()?;
     Ok(())
 }
