@@ -94,8 +94,30 @@ pub fn bake(
         refuse_overwriting_input(input, out_dir)?;
     }
     let config = distributable(config)?;
+    let t = Instant::now();
+    let (scene, source) = super::load(input, progress)?;
+    if scene.triangles.is_empty() {
+        // Nothing to share: process 0 writes the scene through as one process would.
+        let bake = match cluster.process {
+            0 => Some(super::pass_through(&source, input, out_dir, progress, t)?),
+            _ => None,
+        };
+        return Ok(DistributedReport {
+            bake,
+            processes: cluster.addresses.len(),
+            rows: 0..0,
+            sweeps: 0,
+            bytes_per_sweep: 0,
+            bytes_sent: 0,
+            rows_seconds: 0.0,
+            sweeps_seconds: 0.0,
+            exchange_seconds: 0.0,
+        });
+    }
     let mut exchange = Exchange::connect(cluster)?;
-    let result = bake_connected(input, out_dir, &config, &mut exchange, progress);
+    let processes = exchange.processes;
+    let prepared = super::prepare_loaded(scene, source, input, &config, processes, progress, t);
+    let result = prepared.and_then(|p| bake_connected(p, out_dir, &config, &mut exchange, progress));
     if let Err(e) = &result
         && !matches!(e, Error::Cluster(_))
     {
@@ -124,7 +146,8 @@ fn distributable(config: &BakeConfig) -> Result<BakeConfig> {
     }
     let mut config = config.clone();
     if let Some(auto) = &mut config.auto {
-        // The memory switch to the matrix-free solver is about one machine's rows.
+        // Only stored rows are sharded: the memory check refuses a shard that does not fit
+        // rather than switching to the matrix-free solver.
         auto.keep.method = true;
         auto.keep.solver = true;
     }
@@ -132,13 +155,14 @@ fn distributable(config: &BakeConfig) -> Result<BakeConfig> {
 }
 
 fn bake_connected(
-    input: &Path,
+    mut prepared: super::Prepared,
     out_dir: &Path,
     config: &BakeConfig,
     exchange: &mut Exchange,
     progress: &dyn Progress,
 ) -> Result<DistributedReport> {
-    let mut prepared = super::prepare(input, config, progress)?;
+    let input = prepared.source.path.clone();
+    let input = input.as_path();
     let exchange_cell = RefCell::new(&mut *exchange);
     let shared = |surfaces: Surfaces,
                   config: &BakeConfig,

@@ -140,7 +140,7 @@ pub fn bake(
     if scene.triangles.is_empty() {
         return pass_through(&source, input, out_dir, progress, t);
     }
-    let prepared = prepare_loaded(scene, source, input, config, progress, t)?;
+    let prepared = prepare_loaded(scene, source, input, config, 1, progress, t)?;
     let baked = compute_prepared(prepared, progress)?;
     write(baked, input, out_dir, config, progress)
 }
@@ -213,6 +213,8 @@ pub struct Prepared {
     /// What the junction split cut (`None` when it did not run).
     pub junctions: Option<scene::junctions::JunctionReport>,
     pub stages: Vec<StageTime>,
+    /// Processes sharing the final bake's rows (1 on one machine): memory is checked per process.
+    pub processes: usize,
 }
 
 impl Prepared {
@@ -242,7 +244,7 @@ pub fn prepare(input: &Path, config: &BakeConfig, progress: &dyn Progress) -> Re
     if scene.triangles.is_empty() {
         return Err(Error::invalid(input, "the scene has no triangles"));
     }
-    prepare_loaded(scene, source, input, config, progress, t)
+    prepare_loaded(scene, source, input, config, 1, progress, t)
 }
 
 /// Loads `input` and hands the loader's warnings to `progress`.
@@ -254,12 +256,14 @@ fn load(input: &Path, progress: &dyn Progress) -> Result<(scene::Scene, scene::S
     Ok((scene, source))
 }
 
-/// [`prepare`] from a loaded scene with triangles (loading began at `load_start`).
+/// [`prepare`] from a loaded scene with triangles (loading began at `load_start`), for one of
+/// `processes` processes sharing the final rows.
 fn prepare_loaded(
     scene: scene::Scene,
     source: scene::Source,
     input: &Path,
     config: &BakeConfig,
+    processes: usize,
     progress: &dyn Progress,
     load_start: Instant,
 ) -> Result<Prepared> {
@@ -284,7 +288,7 @@ fn prepare_loaded(
     config.max_memory = Some(memory::limit(&config));
     memory::check(
         input,
-        &memory::Sizes::predicted(&scene, &source, &config),
+        &memory::Sizes::predicted(&scene, &source, &config).per_process(processes),
         &config,
         config.max_memory.unwrap_or(u64::MAX),
     )?;
@@ -358,6 +362,7 @@ fn prepare_loaded(
         first_pilot,
         junctions,
         stages,
+        processes,
     })
 }
 
@@ -433,7 +438,8 @@ pub(crate) fn light(
     );
 
     let input = prepared.source.path.as_path();
-    let sizes = memory::Sizes::counted(&prepared.scene, &prepared.source, &prepared.texels);
+    let sizes = memory::Sizes::counted(&prepared.scene, &prepared.source, &prepared.texels)
+        .per_process(prepared.processes);
     let limit = config.max_memory.unwrap_or(u64::MAX);
     memory::check(input, &sizes, &config, limit)?;
     let mut pilot = None;
