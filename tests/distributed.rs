@@ -296,3 +296,77 @@ fn an_unreachable_host_fails_after_the_timeout() {
         );
     }
 }
+
+/// `--max-memory` is checked per process: each process builds only its share of the final
+/// rows, so a limit that refuses the bake on one process admits it on two (the rows dominate
+/// at 2048 rays), and two processes still refuse a limit below their share.
+#[test]
+fn the_memory_limit_is_checked_per_process() {
+    let scene = fixture("cornell_box.gltf");
+    let scene = scene.to_str().unwrap();
+    let bake = |dir: &Path, limit: &str, processes: &str| {
+        let out = dir.join(format!("{limit}_{processes}"));
+        let options = ["--quality", "draft", "--no-auto", "--rays", "2048"];
+        let args = [
+            "bake",
+            scene,
+            "-o",
+            out.to_str().unwrap(),
+            "--max-memory",
+            limit,
+        ];
+        let o = run(&[&args[..], &options, &["--processes", processes]].concat());
+        (o, out)
+    };
+    let dir = scratch();
+    let (one, out) = bake(dir.path(), "26M", "1");
+    let err = text(&one.stderr);
+    assert!(!one.status.success(), "one process fit in 26 MiB: {err}");
+    assert!(err.contains("above the memory limit 26.0 MiB"), "{err}");
+    assert!(!err.contains("per process"), "{err}");
+    assert!(!out.exists());
+    let (two, out) = bake(dir.path(), "26M", "2");
+    assert!(two.status.success(), "{}", text(&two.stderr));
+    outputs(&out);
+    let (tight, out) = bake(dir.path(), "18M", "2");
+    let err = text(&tight.stderr);
+    assert!(
+        !tight.status.success(),
+        "two processes fit in 18 MiB: {err}"
+    );
+    assert!(err.contains("per process of 2"), "{err}");
+    assert!(!out.exists());
+}
+
+/// A scene with no triangles is written through by process 0, as one process writes it.
+#[test]
+fn a_scene_with_nothing_to_bake_is_written_through() {
+    let text_of = std::fs::read_to_string(fixture("cornell_box.gltf")).unwrap();
+    let mut json: serde_json::Value = serde_json::from_str(&text_of).unwrap();
+    for mesh in json["meshes"].as_array_mut().unwrap() {
+        for primitive in mesh["primitives"].as_array_mut().unwrap() {
+            primitive["mode"] = serde_json::json!(0);
+        }
+    }
+    let dir = scratch();
+    let input = dir.path().join("points.gltf");
+    std::fs::write(&input, json.to_string()).unwrap();
+    let input = input.to_str().unwrap();
+    let one = dir.path().join("one");
+    let o = run(&["bake", input, "-o", one.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let expected = outputs(&one);
+    let two = dir.path().join("two");
+    let o = run(&[
+        "bake",
+        input,
+        "-o",
+        two.to_str().unwrap(),
+        "--processes",
+        "2",
+    ]);
+    let err = text(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(err.contains("nothing to bake"), "{err}");
+    assert_eq!(outputs(&two), expected);
+}

@@ -117,7 +117,8 @@ pub fn bake(
     let mut exchange = Exchange::connect(cluster)?;
     let processes = exchange.processes;
     let prepared = super::prepare_loaded(scene, source, input, &config, processes, progress, t);
-    let result = prepared.and_then(|p| bake_connected(p, out_dir, &config, &mut exchange, progress));
+    let result =
+        prepared.and_then(|p| bake_connected(p, out_dir, &config, &mut exchange, progress));
     if let Err(e) = &result
         && !matches!(e, Error::Cluster(_))
     {
