@@ -1,6 +1,6 @@
 //! Library errors, sorted by fault (as exrs does): the input is invalid, the input uses something
-//! lightbake does not support, the bake would not fit in memory, the file system failed, or the
-//! caller cancelled.
+//! lightbake does not support, the bake would not fit in memory, the file system failed, a
+//! process of a distributed bake failed or could not be reached, or the caller cancelled.
 
 use std::path::PathBuf;
 
@@ -31,6 +31,10 @@ pub enum Error {
     /// before any heavy work.
     #[error("{}: {message}", path.display())]
     Memory { path: PathBuf, message: String },
+
+    /// A distributed bake lost a process or could not reach one; the message names it.
+    #[error("distributed bake: {0}")]
+    Cluster(String),
 
     /// The caller's [`crate::Progress::aborted`] returned true.
     #[error("aborted")]

@@ -64,7 +64,10 @@
 //!                                    estimate against `--max-memory` (refuse, or gather);
 //!                                    `kept`: the kept transport's file (`--keep-transport`);
 //!                                    `relight`: a kept bake solved again with other light and
-//!                                    material values, and per-light layers
+//!                                    material values, and per-light layers;
+//!                                    `distributed`: the same bake over several processes
+//!                                    (timely dataflow): rows sharded, the radiosity vector
+//!                                    exchanged every sweep, process 0 finishes and writes
 //!   build                            many scenes from a manifest: `bake` options by name, a
 //!                                    content-addressed cache, a JSON report, the error gate
 //!   reference, render                beside the pipeline (reference uses bake's prepare)
@@ -120,7 +123,8 @@ pub mod testing;
 mod bake;
 
 pub use bake::{
-    BakeReport, Baked, Prepared, StageTime, bake, compute, kept, prepare, relight, write,
+    BakeReport, Baked, Prepared, StageTime, bake, compute, distributed, kept, prepare, relight,
+    write,
 };
 pub use build::{BuildReport, Manifest, build};
 pub use config::BakeConfig;

@@ -181,7 +181,8 @@ fn every_bake_option_is_a_manifest_key() {
         .output()
         .unwrap();
     let help = String::from_utf8(help.stdout).unwrap();
-    // How the run is watched or gated is for the command line, not what is baked.
+    // How the run is watched, gated or spread over processes is for the command line, not
+    // what is baked.
     let not_options = [
         "output",
         "explain",
@@ -190,6 +191,10 @@ fn every_bake_option_is_a_manifest_key() {
         "help",
         "max-error",
         "deny-warnings",
+        "processes",
+        "hosts",
+        "process",
+        "connect-timeout",
     ];
     let names: Vec<&str> = help
         .split_whitespace()

@@ -7,6 +7,7 @@ mod build;
 mod cli;
 mod denoise;
 mod directional;
+mod distributed;
 mod form_factors;
 mod hardening;
 mod hierarchical;

@@ -3,7 +3,7 @@
 //! [`solve::solve`]; the matrix-free gatherer and the hierarchy make their transport as they
 //! solve ([`solve::gather`], [`solve::hierarchical`]).
 
-use crate::config::{SolveParams, Technique, TransportParams};
+use crate::config::{BakeConfig, SolveParams, Technique, TransportParams};
 use crate::solve::{self, Solution};
 use crate::transport::{self, Surfaces, Transport};
 use crate::{Progress, Result};
@@ -13,6 +13,29 @@ use crate::{Progress, Result};
 pub struct Lit {
     pub transport: Transport,
     pub solution: Solution,
+}
+
+/// What makes the final bake's transport and solution from the planned settings and the
+/// per-texel rays: [`by_technique`] on this machine, or a distributed solve
+/// ([`super::distributed`]).
+pub type LightFn<'a> =
+    &'a dyn Fn(Surfaces, &BakeConfig, Option<&[u32]>, &dyn Progress) -> Result<Lit>;
+
+/// [`transport_and_solve`] with `config`'s technique and parameters.
+pub fn by_technique(
+    surfaces: Surfaces,
+    config: &BakeConfig,
+    texel_rays: Option<&[u32]>,
+    progress: &dyn Progress,
+) -> Result<Lit> {
+    transport_and_solve(
+        surfaces,
+        config.technique,
+        &config.transport,
+        texel_rays,
+        &config.solve,
+        progress,
+    )
 }
 
 /// Light transport and its solution with `technique`; `texel_rays` as in [`transport::build`].

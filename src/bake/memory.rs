@@ -2,7 +2,9 @@
 //! (`BakeConfig::max_memory`, or the memory the machine has available), before any heavy work:
 //! before the atlas (texels predicted from the surface area), before light transport (texels
 //! counted) and once the automatic choice has chosen the rays (where it may switch to the
-//! matrix-free gather solver).
+//! matrix-free gather solver). A distributed bake's estimate is per process: its share of the
+//! final rows, and whole what every process holds (scene, BVH, texels, pilot runs, the
+//! radiosity vectors and the exchange's buffers).
 
 use std::path::Path;
 
@@ -34,7 +36,14 @@ pub struct Sizes {
     triangles: f64,
     texels: f64,
     page_texels: f64,
+    /// Processes sharing the final bake's rows (1 on one machine).
+    processes: f64,
 }
+
+/// Per texel of a distributed bake, on every process: the gathered vector of the first
+/// exchange (direct light and sky fraction, 16 bytes) in the shares received, the gathered
+/// copy and its split, with timely's serialised buffers; the sweeps' (12 bytes) are smaller.
+const EXCHANGE_TEXEL_BYTES: f64 = 64.0;
 
 impl Sizes {
     /// Before the atlas: texels from the surface area at the density, pages twice that
@@ -69,7 +78,20 @@ impl Sizes {
             triangles: scene.triangles.len() as f64,
             texels: 0.0,
             page_texels: 0.0,
+            processes: 1.0,
         }
+    }
+
+    /// The sizes as one of `processes` processes of a distributed bake sees them.
+    pub fn per_process(self, processes: usize) -> Sizes {
+        Sizes {
+            processes: processes.max(1) as f64,
+            ..self
+        }
+    }
+
+    fn distributed(&self) -> bool {
+        self.processes > 1.0
     }
 
     /// The peak of a bake with `technique` at `rays` per texel (mean), holding `held` pilot
@@ -82,17 +104,22 @@ impl Sizes {
         held_rays: f64,
     ) -> MemoryEstimate {
         let n = self.texels;
-        plan::memory_estimate(&MemoryInputs {
+        let mut estimate = plan::memory_estimate(&MemoryInputs {
             input_bytes: self.input_bytes,
             vertices: self.vertices,
             triangles: self.triangles,
             texels: n,
             page_texels: self.page_texels,
             held_entries: held * held_rays * n,
-            built_entries: plan::entries_per_texel(technique, n, rays) * n,
+            // Each process builds the rows of its own texels only.
+            built_entries: plan::entries_per_texel(technique, n, rays) * (n / self.processes),
             held_runs: held,
             technique,
-        })
+        });
+        if self.distributed() {
+            estimate.texels += EXCHANGE_TEXEL_BYTES * n;
+        }
+        estimate
     }
 
     /// The pilot's peak: its second run built while the first is held, or with a `second`
@@ -100,9 +127,14 @@ impl Sizes {
     /// run are held.
     fn pilot_peak(&self, second: bool) -> MemoryEstimate {
         let k = PILOT_RAYS as f64;
+        // Every process of a distributed bake runs the pilots whole, before any exchange.
+        let whole = Sizes {
+            processes: 1.0,
+            ..*self
+        };
         match second {
-            false => self.estimate(Technique::DEFAULT, k, 1.0, k),
-            true => self.estimate(Technique::DEFAULT, 4.0 * k, 3.0, (2.0 * k + 4.0 * k) / 3.0),
+            false => whole.estimate(Technique::DEFAULT, k, 1.0, k),
+            true => whole.estimate(Technique::DEFAULT, 4.0 * k, 3.0, (2.0 * k + 4.0 * k) / 3.0),
         }
     }
 
@@ -191,7 +223,7 @@ fn larger(a: MemoryEstimate, b: MemoryEstimate) -> MemoryEstimate {
 /// Refuses a bake of `sizes` that cannot fit in `limit` whatever the automatic choice does.
 pub fn check(input: &Path, sizes: &Sizes, config: &BakeConfig, limit: u64) -> Result<()> {
     let least = sizes.least(config);
-    refuse_above(input, &least, limit, config)
+    refuse_above(input, sizes, &least, limit, config)
 }
 
 /// Once the rays are chosen (`pilot`: gathering rays of each reused pilot run, and whether
@@ -201,7 +233,7 @@ pub fn fit(
     input: &Path,
     sizes: &Sizes,
     config: &mut BakeConfig,
-    plan: Option<&mut Plan>,
+    mut plan: Option<&mut Plan>,
     pilot: Option<(u32, bool)>,
     limit: u64,
     progress: &dyn Progress,
@@ -221,6 +253,13 @@ pub fn fit(
     let with_pilot = |e: MemoryEstimate| pilot_peak.map_or(e, |p| larger(p, e));
     let stored = with_pilot(sizes.estimate(config.technique, rays, held, held_rays));
     let gather = with_pilot(sizes.estimate(Technique::Gather, rays, held, held_rays));
+    if let (Some(plan), true) = (plan.as_deref_mut(), sizes.distributed()) {
+        plan.reasons.push(format!(
+            "memory: per process of {}: its share of the final rows, the rest whole (scene, \
+             BVH, texels, pilot runs, radiosity vectors, exchange buffers)",
+            sizes.processes
+        ));
+    }
     if let (Some(plan), Some(auto)) = (plan, config.auto)
         && let Some(message) =
             plan::fit_memory(&stored, &gather, limit as f64, config, plan, &auto.keep)
@@ -232,11 +271,12 @@ pub fn fit(
     } else {
         stored
     };
-    refuse_above(input, &chosen, limit, config)
+    refuse_above(input, sizes, &chosen, limit, config)
 }
 
 fn refuse_above(
     input: &Path,
+    sizes: &Sizes,
     estimate: &MemoryEstimate,
     limit: u64,
     config: &BakeConfig,
@@ -244,6 +284,10 @@ fn refuse_above(
     if estimate.total() <= limit as f64 {
         return Ok(());
     }
+    let per_process = match sizes.distributed() {
+        true => format!(" per process of {}", sizes.processes),
+        false => String::new(),
+    };
     let hint = if config.technique.is_monte_carlo() && config.technique != Technique::Gather {
         "lower --texels-per-unit or --rays, use --solver gather, or raise --max-memory"
     } else {
@@ -252,7 +296,8 @@ fn refuse_above(
     Err(Error::Memory {
         path: input.to_path_buf(),
         message: format!(
-            "the bake would need about {} at its peak, above the memory limit {} ({hint})",
+            "the bake would need about {}{per_process} at its peak, above the memory limit \
+             {} ({hint})",
             estimate.describe(),
             format_bytes(limit as f64)
         ),

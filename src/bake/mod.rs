@@ -4,6 +4,7 @@
 //! [`compute`] (the automatic choice with its pilot runs in [`pilot`], light transport and its
 //! solution through the one dispatch of [`light`], denoise, pages), then [`write`].
 
+pub mod distributed;
 pub mod kept;
 pub mod light;
 pub mod memory;
@@ -159,7 +160,7 @@ pub fn bake(
     if scene.triangles.is_empty() {
         return pass_through(&source, input, out_dir, progress, t);
     }
-    let prepared = prepare_loaded(scene, source, input, config, progress, t)?;
+    let prepared = prepare_loaded(scene, source, input, config, 1, progress, t)?;
     let baked = compute_prepared(prepared, progress)?;
     write(baked, input, out_dir, config, progress)
 }
@@ -233,6 +234,8 @@ pub struct Prepared {
     /// What the junction split cut (`None` when it did not run).
     pub junctions: Option<scene::junctions::JunctionReport>,
     pub stages: Vec<StageTime>,
+    /// Processes sharing the final bake's rows (1 on one machine): memory is checked per process.
+    pub processes: usize,
 }
 
 impl Prepared {
@@ -262,7 +265,7 @@ pub fn prepare(input: &Path, config: &BakeConfig, progress: &dyn Progress) -> Re
     if scene.triangles.is_empty() {
         return Err(Error::invalid(input, "the scene has no triangles"));
     }
-    prepare_loaded(scene, source, input, config, progress, t)
+    prepare_loaded(scene, source, input, config, 1, progress, t)
 }
 
 /// Loads `input` and hands the loader's warnings to `progress`.
@@ -274,12 +277,14 @@ fn load(input: &Path, progress: &dyn Progress) -> Result<(scene::Scene, scene::S
     Ok((scene, source))
 }
 
-/// [`prepare`] from a loaded scene with triangles (loading began at `load_start`).
+/// [`prepare`] from a loaded scene with triangles (loading began at `load_start`), for one of
+/// `processes` processes sharing the final rows.
 fn prepare_loaded(
     scene: scene::Scene,
     source: scene::Source,
     input: &Path,
     config: &BakeConfig,
+    processes: usize,
     progress: &dyn Progress,
     load_start: Instant,
 ) -> Result<Prepared> {
@@ -304,7 +309,7 @@ fn prepare_loaded(
     config.max_memory = Some(memory::limit(&config));
     memory::check(
         input,
-        &memory::Sizes::predicted(&scene, &source, &config),
+        &memory::Sizes::predicted(&scene, &source, &config).per_process(processes),
         &config,
         config.max_memory.unwrap_or(u64::MAX),
     )?;
@@ -378,6 +383,7 @@ fn prepare_loaded(
         first_pilot,
         junctions,
         stages,
+        processes,
     })
 }
 
@@ -425,6 +431,25 @@ pub fn compute(input: &Path, config: &BakeConfig, progress: &dyn Progress) -> Re
 
 /// [`compute`] from the prepared stages.
 fn compute_prepared(mut prepared: Prepared, progress: &dyn Progress) -> Result<Baked> {
+    let lit = light(&mut prepared, progress, &light::by_technique)?;
+    finish(prepared, lit, progress)
+}
+
+/// The settings chosen for the final bake and its light, before denoising.
+pub(crate) struct Lighting {
+    config: BakeConfig,
+    plan: Option<Plan>,
+    stages: Vec<StageTime>,
+    last: pilot::FinalBake,
+}
+
+/// The automatic choice (pilot runs included) and the final bake, whose transport and solution
+/// `lit` makes (on this machine, [`light::by_technique`]; or [`distributed`]).
+pub(crate) fn light(
+    prepared: &mut Prepared,
+    progress: &dyn Progress,
+    lit: light::LightFn,
+) -> Result<Lighting> {
     let first = prepared.first_pilot.take();
     let surfaces = prepared.surfaces();
     let (mut config, mut plan, mut stages) = (
@@ -434,7 +459,8 @@ fn compute_prepared(mut prepared: Prepared, progress: &dyn Progress) -> Result<B
     );
 
     let input = prepared.source.path.as_path();
-    let sizes = memory::Sizes::counted(&prepared.scene, &prepared.source, &prepared.texels);
+    let sizes = memory::Sizes::counted(&prepared.scene, &prepared.source, &prepared.texels)
+        .per_process(prepared.processes);
     let limit = config.max_memory.unwrap_or(u64::MAX);
     memory::check(input, &sizes, &config, limit)?;
     let mut pilot = None;
@@ -482,9 +508,34 @@ fn compute_prepared(mut prepared: Prepared, progress: &dyn Progress) -> Result<B
 
     let t = Instant::now();
     // With a plan, the pilot bakes are part of the result (a ray-weighted mean).
-    let last = pilot::final_bake(surfaces, &config, plan.as_ref(), pilot, progress)?;
+    let last = pilot::final_bake(surfaces, &config, plan.as_ref(), pilot, progress, lit)?;
+    if !last.solution.converged {
+        progress.warn(&format!(
+            "the solver stopped on the iteration cap ({}) at residual {:.2e}, above the tolerance {:.1e}",
+            last.solution.history.len(),
+            last.solution.residual(),
+            config.solve.tolerance
+        ));
+    }
+    timed(&mut stages, "transport+solve", t);
+    Ok(Lighting {
+        config,
+        plan,
+        stages,
+        last,
+    })
+}
+
+/// Denoising, dilation and seams of a lit bake.
+pub(crate) fn finish(prepared: Prepared, lit: Lighting, progress: &dyn Progress) -> Result<Baked> {
+    let Lighting {
+        config,
+        plan,
+        mut stages,
+        last,
+    } = lit;
     // Before denoising: the error map shows the noise the denoiser was given.
-    let noise = (config.output.error_map).then(|| texel_noise(surfaces.texels, &config, &last));
+    let noise = (config.output.error_map).then(|| texel_noise(&prepared.texels, &config, &last));
     let pilot::FinalBake {
         mut transport,
         solution,
@@ -492,15 +543,6 @@ fn compute_prepared(mut prepared: Prepared, progress: &dyn Progress) -> Result<B
         light_samples,
         ..
     } = last;
-    if !solution.converged {
-        progress.warn(&format!(
-            "the solver stopped on the iteration cap ({}) at residual {:.2e}, above the tolerance {:.1e}",
-            solution.history.len(),
-            solution.residual(),
-            config.solve.tolerance
-        ));
-    }
-    timed(&mut stages, "transport+solve", t);
     let t = Instant::now();
     let directional = config
         .output
@@ -512,6 +554,7 @@ fn compute_prepared(mut prepared: Prepared, progress: &dyn Progress) -> Result<B
                 sky: config.transport.sky,
                 indirect_only: config.transport.indirect_only,
             };
+            let surfaces = prepared.surfaces();
             lightmap::directional::gather(surfaces, &solution.irradiance, &params, progress)
         })
         .transpose()?;

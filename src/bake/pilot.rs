@@ -276,21 +276,13 @@ pub fn final_bake(
     plan: Option<&Plan>,
     pilot: Option<PilotRuns>,
     progress: &dyn Progress,
+    lit: super::light::LightFn,
 ) -> Result<FinalBake> {
     let (k, l) = (config.transport.gather_rays, config.transport.light_samples);
     let texel_rays = plan
         .and_then(|p| p.texel_rays.as_ref())
         .map(|r| r.0.as_slice());
-    let bake = || {
-        transport_and_solve(
-            surfaces,
-            config.technique,
-            &config.transport,
-            texel_rays,
-            &config.solve,
-            progress,
-        )
-    };
+    let bake = || lit(surfaces, config, texel_rays, progress);
     let Some(pilot) = pilot else {
         let Lit {
             transport,

@@ -2,6 +2,7 @@
 
 mod build;
 mod compare;
+mod distributed;
 mod interrupt;
 mod progress;
 mod reference;
@@ -244,6 +245,8 @@ struct BakeArgs {
     gate: GateArgs,
     #[command(flatten)]
     run: RunArgs,
+    #[command(flatten)]
+    cluster: distributed::Args,
 }
 
 /// The error gate of `bake` and `build`: exit code [`GATE_EXIT`] when a bake is not good enough.
@@ -406,11 +409,29 @@ impl BakeArgs {
 }
 
 fn bake(args: &BakeArgs) -> Result<()> {
+    if let Some(n) = args.cluster.processes() {
+        return distributed::spawn(n);
+    }
     args.run.start()?;
     let config = args.config()?;
     let bars = Bars::new(args.run.quiet);
-    let report = lightbake::bake(&args.scene, &args.output, &config, &bars)
-        .with_context(|| format!("baking {} failed", args.scene.display()))?;
+    let failed = || format!("baking {} failed", args.scene.display());
+    let report = match args.cluster.cluster()? {
+        None => lightbake::bake(&args.scene, &args.output, &config, &bars).with_context(failed)?,
+        Some(cluster) => {
+            distributed::quiet_timely_panics();
+            let shared =
+                lightbake::distributed::bake(&args.scene, &args.output, &config, &cluster, &bars)
+                    .with_context(failed)?;
+            if !args.run.quiet {
+                println!("{}", distributed::summary(&shared, cluster.process));
+            }
+            match shared.bake {
+                Some(report) => report,
+                None => return Ok(()),
+            }
+        }
+    };
     if args.explain
         && let Some(plan) = &report.plan
     {

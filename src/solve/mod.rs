@@ -17,7 +17,7 @@
 pub mod gather;
 mod gauss_seidel;
 pub mod hierarchical;
-mod jacobi;
+pub(crate) mod jacobi;
 mod southwell;
 
 use std::time::Instant;
@@ -152,7 +152,7 @@ impl<'a> Stopping<'a> {
 }
 
 /// Emitted radiosity `π·Le` per texel when the rows carry emission, else nothing.
-fn row_emission(transport: &Transport, texels: &Texels) -> Vec<Vec3> {
+pub(crate) fn row_emission(transport: &Transport, texels: &Texels) -> Vec<Vec3> {
     if transport.rows_carry_emission {
         texels
             .emission

@@ -1,0 +1,598 @@
+//! A bake over several processes, on the `timely` dataflow crate and its own TCP communication.
+//!
+//! Every process loads the same input with the same options and runs [`super::prepare`] and the
+//! automatic choice (pilot runs included) in full: both are deterministic, so every process
+//! gets the same texels and settings. The final bake's rows are sharded: process `p` of `P`
+//! builds the Monte Carlo rows of texels `n·p/P .. n·(p+1)/P` (from the full scene) and keeps
+//! them. Each Jacobi sweep gathers its rows from the full radiosity vector and broadcasts its
+//! slice of the new `H` to every other process (an all-gather through a timely dataflow), so
+//! every process holds the whole vector after every sweep. The stopping rule is
+//! [`crate::solve`]'s, fed with the same sums in the same texel order, so every process stops
+//! after the same sweep and the solution is bit for bit the single-process one. Process 0 then
+//! denoises, dilates, stitches seams and writes; the others write nothing.
+//!
+//! Failures: a process that fails with an error sends it to the others in its next exchange;
+//! a process that dies closes its connections, which timely turns into a failure of its peers'
+//! exchange (the message names the processes whose share did not come). Every process fails
+//! then, before process 0 writes anything (output is staged, [`crate::output::Staging`]).
+//! Connecting waits at most [`Cluster::connect_timeout`]: timely itself retries for ever, so
+//! the thread that connects is left behind when it gives up (the caller is about to exit).
+//!
+//! Only the stored Monte Carlo rows with the Jacobi solver ([`Technique::DEFAULT`]) are
+//! distributed; the error map (which reads every row) is not.
+
+use std::cell::RefCell;
+use std::ops::Range;
+use std::path::Path;
+use std::rc::Rc;
+use std::sync::mpsc::{self, Receiver, RecvTimeoutError, Sender};
+use std::sync::{Arc, Mutex};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use glam::Vec3;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use timely::dataflow::channels::pact::Pipeline;
+use timely::dataflow::operators::generic::operator::Operator;
+use timely::dataflow::operators::vec::Broadcast;
+use timely::dataflow::operators::{Input, Probe};
+use timely::dataflow::{InputHandle, ProbeHandle};
+use timely::worker::Worker;
+
+use super::light::Lit;
+use super::{BakeReport, refuse_overwriting_input};
+use crate::config::{BakeConfig, Technique};
+use crate::lights::Emitters;
+use crate::solve::{self, Solution, Stopping, jacobi};
+use crate::transport::{Surfaces, Transport, montecarlo, rows};
+use crate::{Error, Progress, Result};
+
+/// Where this process sits among the processes of a distributed bake.
+#[derive(Clone, Debug)]
+pub struct Cluster {
+    /// `host:port` of every process, in process order (timely's hosts file); this process
+    /// listens on its own.
+    pub addresses: Vec<String>,
+    /// This process's index in `addresses`.
+    pub process: usize,
+    /// How long to wait for every process to connect before giving up.
+    pub connect_timeout: Duration,
+}
+
+/// What a distributed bake did: the bake itself on process 0, and the exchange's traffic.
+#[derive(Clone, Debug)]
+pub struct DistributedReport {
+    /// The bake's report on process 0 (which wrote the files); `None` on the others.
+    pub bake: Option<BakeReport>,
+    pub processes: usize,
+    /// The texels whose rows this process built.
+    pub rows: Range<usize>,
+    /// Jacobi sweeps of the final bake.
+    pub sweeps: usize,
+    /// Payload bytes this process sent to the others in one sweep (its slice of `H` to each).
+    pub bytes_per_sweep: u64,
+    /// Payload bytes this process sent in all, the first exchange (direct light) included.
+    pub bytes_sent: u64,
+    /// Wall seconds this process spent building its rows, and in the sweeps.
+    pub rows_seconds: f64,
+    pub sweeps_seconds: f64,
+    /// Of those, seconds spent in exchanges: the network, and waiting for slower processes.
+    pub exchange_seconds: f64,
+}
+
+/// Bakes `input` into `out_dir` as process `cluster.process` of a distributed bake (see the
+/// module doc): every process must be given the same input and `config`.
+pub fn bake(
+    input: &Path,
+    out_dir: &Path,
+    config: &BakeConfig,
+    cluster: &Cluster,
+    progress: &dyn Progress,
+) -> Result<DistributedReport> {
+    if cluster.process == 0 {
+        refuse_overwriting_input(input, out_dir)?;
+    }
+    let config = distributable(config)?;
+    let t = Instant::now();
+    let (scene, source) = super::load(input, progress)?;
+    if scene.triangles.is_empty() {
+        // Nothing to share: process 0 writes the scene through as one process would.
+        let bake = match cluster.process {
+            0 => Some(super::pass_through(&source, input, out_dir, progress, t)?),
+            _ => None,
+        };
+        return Ok(DistributedReport {
+            bake,
+            processes: cluster.addresses.len(),
+            rows: 0..0,
+            sweeps: 0,
+            bytes_per_sweep: 0,
+            bytes_sent: 0,
+            rows_seconds: 0.0,
+            sweeps_seconds: 0.0,
+            exchange_seconds: 0.0,
+        });
+    }
+    let mut exchange = Exchange::connect(cluster)?;
+    let processes = exchange.processes;
+    let prepared = super::prepare_loaded(scene, source, input, &config, processes, progress, t);
+    let result =
+        prepared.and_then(|p| bake_connected(p, out_dir, &config, &mut exchange, progress));
+    if let Err(e) = &result
+        && !matches!(e, Error::Cluster(_))
+    {
+        // The others learn why in their next exchange, instead of waiting for a share.
+        exchange.fail(e);
+    }
+    result
+}
+
+/// `config` for a distributed bake: the default technique, kept by the automatic choice.
+fn distributable(config: &BakeConfig) -> Result<BakeConfig> {
+    config.validate()?;
+    if config.technique != Technique::DEFAULT {
+        return Err(Error::Option(format!(
+            "a distributed bake runs {} only, not {}",
+            Technique::DEFAULT,
+            config.technique
+        )));
+    }
+    if config.output.error_map {
+        return Err(Error::Option(
+            "a distributed bake writes no error map (it reads every row, and each process holds \
+             only its own)"
+                .into(),
+        ));
+    }
+    let mut config = config.clone();
+    if let Some(auto) = &mut config.auto {
+        // Only stored rows are sharded: the memory check refuses a shard that does not fit
+        // rather than switching to the matrix-free solver.
+        auto.keep.method = true;
+        auto.keep.solver = true;
+    }
+    Ok(config)
+}
+
+fn bake_connected(
+    mut prepared: super::Prepared,
+    out_dir: &Path,
+    config: &BakeConfig,
+    exchange: &mut Exchange,
+    progress: &dyn Progress,
+) -> Result<DistributedReport> {
+    let input = prepared.source.path.clone();
+    let input = input.as_path();
+    let exchange_cell = RefCell::new(&mut *exchange);
+    let shared = |surfaces: Surfaces,
+                  config: &BakeConfig,
+                  texel_rays: Option<&[u32]>,
+                  progress: &dyn Progress| {
+        // `light` takes a shared function; the exchange is used by one bake at a time.
+        let mut exchange = exchange_cell.borrow_mut();
+        solve_shared(surfaces, config, texel_rays, progress, &mut exchange)
+    };
+    let lit = super::light(&mut prepared, progress, &shared)?;
+    let exchange = exchange_cell.into_inner();
+    let n = prepared.texels.len();
+    let mut report = DistributedReport {
+        bake: None,
+        processes: exchange.processes,
+        rows: exchange.rows(n),
+        sweeps: lit.last.solution.history.len(),
+        bytes_per_sweep: exchange.bytes_per_sweep(n),
+        bytes_sent: exchange.bytes_sent,
+        rows_seconds: exchange.rows_seconds,
+        sweeps_seconds: exchange.sweeps_seconds,
+        exchange_seconds: exchange.waited.as_secs_f64(),
+    };
+    if exchange.process == 0 {
+        let baked = super::finish(prepared, lit, progress)?;
+        report.bake = Some(super::write(baked, input, out_dir, config, progress)?);
+    }
+    Ok(report)
+}
+
+/// The final bake's rows of this process's texels, and the Jacobi solution of all of them
+/// (see the module doc): the same as [`super::light::by_technique`] on one machine.
+fn solve_shared(
+    surfaces: Surfaces,
+    config: &BakeConfig,
+    texel_rays: Option<&[u32]>,
+    progress: &dyn Progress,
+    exchange: &mut Exchange,
+) -> Result<Lit> {
+    if config.technique != Technique::DEFAULT {
+        return Err(Error::Option(format!(
+            "a distributed bake runs {} only; the plan chose {}",
+            Technique::DEFAULT,
+            config.technique
+        )));
+    }
+    if config.output.keep_transport || config.output.layers.is_some() {
+        return Err(Error::Option(
+            "a distributed bake keeps no transport and writes no layers: its rows stay spread \
+             over the processes (bake on one process for --keep-transport or --layers)"
+                .into(),
+        ));
+    }
+    let texels = surfaces.texels;
+    let n = texels.len();
+    let mine = exchange.rows(n);
+    let start = Instant::now();
+    let emitters = Emitters::new(surfaces.scene, texels);
+    let context = montecarlo::Context {
+        surfaces,
+        params: &config.transport,
+        emitters: &emitters,
+        texel_rays,
+        // Direct light split by source is for a kept transport, which a distributed bake has
+        // not (its rows stay spread over the processes).
+        sources: None,
+    };
+    let rows = rows::build(
+        mine.len(),
+        montecarlo::CHUNK,
+        "transport",
+        progress,
+        |range, out| {
+            let mut hits = Vec::with_capacity(config.transport.gather_rays as usize);
+            for i in range {
+                context.texel_row(mine.start + i, &mut hits, out);
+            }
+        },
+    )?;
+
+    exchange.rows_seconds = start.elapsed().as_secs_f64();
+    let start = Instant::now();
+
+    // First exchange: direct light and sky fraction of every texel, and the rays cast.
+    let local: Vec<f32> = (rows.direct.iter().zip(&rows.escape))
+        .flat_map(|(d, e)| [d.x, d.y, d.z, *e])
+        .collect();
+    let (all, rays) = exchange.all_gather(local, rows.rays, 4 * n)?;
+    let direct: Vec<Vec3> = all.chunks_exact(4).map(Vec3::from_slice).collect();
+    let escape: Vec<f32> = all.chunks_exact(4).map(|c| c[3]).collect();
+
+    let emitted = solve::row_emission(&rows, texels);
+    let mut h = direct.clone();
+    let mut solution = Solution::default();
+    let mut stopping = Stopping::begin(
+        ("jacobi", "sweeps"),
+        &config.solve,
+        &mut solution.history,
+        Instant::now(),
+        progress,
+    );
+    while stopping.next()? {
+        let radiosity = jacobi::radiosity(&h, &texels.albedo, &emitted);
+        let local: Vec<f32> = (0..mine.len())
+            .into_par_iter()
+            .with_min_len(1024)
+            .flat_map_iter(|i| jacobi::gathered(&rows, i, &radiosity).to_array())
+            .collect();
+        let (all, _) = exchange.all_gather(local, 0, 3 * n)?;
+        let new: Vec<Vec3> = all.chunks_exact(3).map(Vec3::from_slice).collect();
+        let sums = h.iter().zip(&new).map(|(o, n)| jacobi::row_change(*o, *n));
+        let (change, total) = jacobi::sum_changes(sums);
+        h = new;
+        if stopping.sweep(change, total)? {
+            solution.converged = true;
+            break;
+        }
+    }
+    stopping.end();
+    exchange.sweeps_seconds = start.elapsed().as_secs_f64();
+    solution.irradiance = h;
+    // The rows stay with the processes that built them; the rest is whole on every process.
+    let transport = Transport {
+        row_start: vec![0; n + 1],
+        col: Vec::new(),
+        f: Vec::new(),
+        escape,
+        direct,
+        rays,
+        rows_carry_emission: rows.rows_carry_emission,
+        direct_terms: Vec::new(),
+        sources: Default::default(),
+    };
+    Ok(Lit {
+        transport,
+        solution,
+    })
+}
+
+/// One process's part of an exchange round: its slice of a vector, or why it failed.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+struct Share {
+    from: usize,
+    /// Counted from 1.
+    round: usize,
+    values: Vec<f32>,
+    rays: u64,
+    failure: Option<String>,
+}
+
+/// The all-gather of the distributed bake: a timely worker on its own thread (timely's closures
+/// must own what they touch), fed shares over a channel and answering with each round's shares
+/// of every process.
+struct Exchange {
+    process: usize,
+    processes: usize,
+    addresses: Vec<String>,
+    outgoing: Sender<Share>,
+    incoming: Receiver<Vec<Share>>,
+    /// Per process, the rounds whose share has arrived (which process was lost, when a round
+    /// fails).
+    arrived: Arc<Mutex<Vec<usize>>>,
+    round: usize,
+    bytes_sent: u64,
+    waited: Duration,
+    rows_seconds: f64,
+    sweeps_seconds: f64,
+    /// Joined when the exchange ends (a clean shutdown sends what is in flight); left running
+    /// when connecting timed out or a process was lost.
+    timely: Option<JoinHandle<std::result::Result<(), String>>>,
+}
+
+impl Exchange {
+    /// Starts timely's communication and waits until every process is connected.
+    fn connect(cluster: &Cluster) -> Result<Exchange> {
+        let processes = cluster.addresses.len();
+        if cluster.process >= processes {
+            return Err(Error::Option(format!(
+                "process {} of a list of {processes}",
+                cluster.process
+            )));
+        }
+        let (outgoing, worker_in) = mpsc::channel();
+        let (worker_out, incoming) = mpsc::channel();
+        let (ready, connected) = mpsc::channel();
+        let arrived = Arc::new(Mutex::new(vec![0; processes]));
+        let config = timely::Config {
+            communication: timely::CommunicationConfig::Cluster {
+                threads: 1,
+                process: cluster.process,
+                addresses: cluster.addresses.clone(),
+                report: false,
+                zerocopy: false,
+            },
+            worker: timely::WorkerConfig::default(),
+        };
+        // One worker per process: timely's Fn closure takes the channels once.
+        let ends = Mutex::new(Some((worker_in, worker_out, ready, arrived.clone())));
+        let timely = std::thread::Builder::new()
+            .name("timely".into())
+            .spawn(move || {
+                let guards = timely::execute(config, move |worker| {
+                    let ends = ends.lock().unwrap().take();
+                    let (outgoing, incoming, ready, arrived) =
+                        ends.expect("one worker per process");
+                    serve(worker, outgoing, incoming, ready, arrived);
+                })?;
+                match guards.join().into_iter().find_map(|r| r.err()) {
+                    Some(e) => Err(e),
+                    None => Ok(()),
+                }
+            })
+            .map_err(|e| Error::Cluster(format!("cannot start timely: {e}")))?;
+        let mut exchange = Exchange {
+            process: cluster.process,
+            processes,
+            addresses: cluster.addresses.clone(),
+            outgoing,
+            incoming,
+            arrived,
+            round: 0,
+            bytes_sent: 0,
+            waited: Duration::ZERO,
+            rows_seconds: 0.0,
+            sweeps_seconds: 0.0,
+            timely: Some(timely),
+        };
+        match connected.recv_timeout(cluster.connect_timeout) {
+            Ok(()) => Ok(exchange),
+            Err(RecvTimeoutError::Timeout) => {
+                exchange.timely = None; // still retrying; left behind
+                Err(Error::Cluster(format!(
+                    "process {}: not every process connected within {:.0} s; is each of {} \
+                     running with the same list and reachable?",
+                    cluster.process,
+                    cluster.connect_timeout.as_secs_f64(),
+                    exchange.others()
+                )))
+            }
+            Err(RecvTimeoutError::Disconnected) => Err(Error::Cluster(format!(
+                "process {} could not start its communication: {}",
+                cluster.process,
+                exchange.join()
+            ))),
+        }
+    }
+
+    /// The other processes, as `k (host:port)`.
+    fn others(&self) -> String {
+        let others: Vec<String> = (0..self.processes)
+            .filter(|&p| p != self.process)
+            .map(|p| format!("process {p} ({})", self.addresses[p]))
+            .collect();
+        others.join(", ")
+    }
+
+    /// The texels of process `p` of `n`.
+    fn rows_of(&self, p: usize, n: usize) -> Range<usize> {
+        n * p / self.processes..n * (p + 1) / self.processes
+    }
+
+    /// This process's texels.
+    fn rows(&self, n: usize) -> Range<usize> {
+        self.rows_of(self.process, n)
+    }
+
+    fn bytes_per_sweep(&self, n: usize) -> u64 {
+        (self.processes as u64 - 1) * (self.rows(n).len() * 3 * size_of::<f32>()) as u64
+    }
+
+    /// Sends `values` (this process's slice) and `rays` to every process and returns the
+    /// concatenated slices of all processes, `len` values, and their summed rays.
+    fn all_gather(&mut self, values: Vec<f32>, rays: u64, len: usize) -> Result<(Vec<f32>, u64)> {
+        self.bytes_sent += (self.processes as u64 - 1) * (values.len() * size_of::<f32>()) as u64;
+        let share = Share {
+            from: self.process,
+            round: self.round + 1,
+            values,
+            rays,
+            failure: None,
+        };
+        let shares = self.round(share)?;
+        let mut all = Vec::with_capacity(len);
+        let mut rays = 0;
+        for share in shares {
+            if let Some(failure) = share.failure {
+                return Err(Error::Cluster(format!(
+                    "process {} failed: {failure}",
+                    share.from
+                )));
+            }
+            all.extend_from_slice(&share.values);
+            rays += share.rays;
+        }
+        if all.len() != len {
+            return Err(Error::Cluster(format!(
+                "the processes disagree on the texels ({} values gathered, {len} expected): \
+                 is every one baking the same input with the same options?",
+                all.len()
+            )));
+        }
+        Ok((all, rays))
+    }
+
+    /// Tells the other processes that this one failed with `error` (they are waiting for its
+    /// share); best effort, as the process is failing anyway.
+    fn fail(&mut self, error: &Error) {
+        let share = Share {
+            from: self.process,
+            round: self.round + 1,
+            values: Vec::new(),
+            rays: 0,
+            failure: Some(error.to_string()),
+        };
+        let _ = self.round(share);
+    }
+
+    /// One round: every process's share, in process order.
+    fn round(&mut self, share: Share) -> Result<Vec<Share>> {
+        self.round += 1;
+        let lost = |exchange: &mut Exchange| {
+            // Not joined: timely's threads end when the other processes close their
+            // connections, and a hung one might not.
+            exchange.timely = None;
+            let missing: Vec<String> = (exchange.arrived.lock().unwrap().iter().enumerate())
+                .filter(|&(p, &rounds)| rounds < exchange.round && p != exchange.process)
+                .map(|(p, _)| format!("{p} ({})", exchange.addresses[p]))
+                .collect();
+            Error::Cluster(format!(
+                "process {} lost contact with process {} in exchange {} (the first carries \
+                 direct light, then one per sweep): it died or its network failed",
+                exchange.process,
+                missing.join(", "),
+                exchange.round,
+            ))
+        };
+        if self.outgoing.send(share).is_err() {
+            return Err(lost(self));
+        }
+        let start = Instant::now();
+        let shares = self.incoming.recv();
+        self.waited += start.elapsed();
+        match shares {
+            Ok(mut shares) => {
+                shares.sort_by_key(|s| s.from);
+                Ok(shares)
+            }
+            Err(_) => Err(lost(self)),
+        }
+    }
+
+    /// Why timely's thread ended.
+    fn join(&mut self) -> String {
+        match self.timely.take().map(JoinHandle::join) {
+            Some(Ok(Err(e))) => e,
+            Some(Err(panic)) => panic
+                .downcast_ref::<String>()
+                .cloned()
+                .or_else(|| panic.downcast_ref::<&str>().map(|s| s.to_string()))
+                .unwrap_or_else(|| "timely's communication failed".into()),
+            _ => "timely's communication ended".into(),
+        }
+    }
+}
+
+impl Drop for Exchange {
+    fn drop(&mut self) {
+        // Closing the channel ends the worker, which shuts its connections down cleanly.
+        let (closed, _) = mpsc::channel();
+        self.outgoing = closed;
+        if let Some(timely) = self.timely.take() {
+            let _ = timely.join();
+        }
+    }
+}
+
+/// The timely worker: a dataflow that broadcasts each round's shares, driven round by round
+/// by the shares that come in on `outgoing`; each round's shares go back on `incoming`.
+fn serve(
+    worker: &mut Worker,
+    outgoing: Receiver<Share>,
+    incoming: Sender<Vec<Share>>,
+    ready: Sender<()>,
+    arrived: Arc<Mutex<Vec<usize>>>,
+) {
+    let mut input = InputHandle::new();
+    let probe = ProbeHandle::new();
+    let received = Rc::new(RefCell::new(Vec::new()));
+    let sink = received.clone();
+    let seen = arrived;
+    worker.dataflow::<u64, _, _>(|scope| {
+        scope
+            .input_from(&mut input)
+            .container::<Vec<Share>>()
+            .broadcast()
+            .unary::<timely::container::CapacityContainerBuilder<Vec<()>>, _, _, _>(
+                Pipeline,
+                "Gather",
+                move |_, _| {
+                    move |input, _| {
+                        input.for_each(|_, shares| {
+                            let mut seen = seen.lock().unwrap();
+                            for share in shares.drain(..) {
+                                seen[share.from] = share.round;
+                                sink.borrow_mut().push(share);
+                            }
+                        })
+                    }
+                },
+            )
+            .probe_with(&probe);
+    });
+    let _ = ready.send(());
+    while let Ok(share) = outgoing.recv() {
+        let share_round = share.round;
+        input.send(share);
+        input.advance_to(input.time() + 1);
+        while probe.less_than(input.time()) {
+            worker.step_or_park(None);
+        }
+        // A faster process's share of the next round may be here already: it waits.
+        let round = share_round;
+        let (this, later) = received
+            .take()
+            .into_iter()
+            .partition(|s: &Share| s.round == round);
+        *received.borrow_mut() = later;
+        if incoming.send(this).is_err() {
+            break;
+        }
+    }
+}

@@ -1,0 +1,372 @@
+//! Distributed bakes through the `lightbake` binary (issue 15): `--processes N` gives the same
+//! bytes as one process for any N and thread count, and a process that dies or cannot be
+//! reached fails the bake with a message naming it, leaving no output.
+
+use std::net::TcpListener;
+use std::path::Path;
+use std::process::{Child, Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+use crate::util::{fixture, list_files, scratch};
+
+fn lightbake(args: &[&str]) -> Command {
+    let mut command = Command::new(env!("CARGO_BIN_EXE_lightbake"));
+    command.args(args);
+    command
+}
+
+fn run(args: &[&str]) -> Output {
+    lightbake(args).output().expect("run lightbake")
+}
+
+fn text(bytes: &[u8]) -> String {
+    String::from_utf8_lossy(bytes).into_owned()
+}
+
+/// Every output file, by name, with its bytes.
+fn outputs(dir: &Path) -> Vec<(String, Vec<u8>)> {
+    let files = list_files(dir);
+    assert!(
+        files.iter().any(|f| f.ends_with(".gltf")),
+        "no glTF in {files:?}"
+    );
+    files
+        .into_iter()
+        .map(|f| (f.clone(), std::fs::read(dir.join(&f)).unwrap()))
+        .collect()
+}
+
+/// `child`'s output once it ends, or a panic after `limit` (the test cannot hang).
+fn finish_within(mut child: Child, limit: Duration) -> Output {
+    let start = Instant::now();
+    while child.try_wait().unwrap().is_none() {
+        if start.elapsed() > limit {
+            child.kill().unwrap();
+            panic!("still running after {limit:?}");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    child.wait_with_output().unwrap()
+}
+
+/// Loopback addresses with free ports, as a hosts file's lines.
+fn free_addresses(n: usize) -> Vec<String> {
+    let listeners: Vec<TcpListener> = (0..n)
+        .map(|_| TcpListener::bind("127.0.0.1:0").unwrap())
+        .collect();
+    listeners
+        .iter()
+        .map(|l| l.local_addr().unwrap().to_string())
+        .collect()
+}
+
+#[test]
+fn processes_give_the_bytes_of_one_process() {
+    let scene = fixture("cornell_box.gltf");
+    let scene = scene.to_str().unwrap();
+    // With the automatic choice (its pilot bakes run in every process) and without it (the
+    // whole final bake is sharded).
+    let settings: [&[&str]; 2] = [
+        &["--quality", "draft"],
+        &["--quality", "draft", "--no-auto", "--rays", "48"],
+    ];
+    for options in settings {
+        let dir = scratch();
+        let one = dir.path().join("one");
+        let args = [&["bake", scene, "-o", one.to_str().unwrap()], options].concat();
+        let o = run(&[&args[..], &["--threads", "1"]].concat());
+        assert!(o.status.success(), "{}", text(&o.stderr));
+        let expected = outputs(&one);
+        for processes in ["1", "2", "3"] {
+            for threads in ["1", "2"] {
+                let out = dir.path().join(format!("p{processes}t{threads}"));
+                let o = run(&[
+                    &["bake", scene, "-o", out.to_str().unwrap()],
+                    options,
+                    &["--processes", processes, "--threads", threads],
+                ]
+                .concat());
+                let case = format!("{options:?}, {processes} processes × {threads} threads");
+                assert!(o.status.success(), "{case}: {}", text(&o.stderr));
+                let stdout = text(&o.stdout);
+                assert!(
+                    stdout.contains(&format!("process 0 of {processes}: rows 0..")),
+                    "{case}: {stdout}"
+                );
+                assert!(
+                    outputs(&out) == expected,
+                    "{case}: the output differs from one process's"
+                );
+            }
+        }
+        // Without the pilot, the final bake was the sharded one: it swept.
+        let stdout = text(
+            &run(&[
+                &args[..],
+                &[
+                    "--processes",
+                    "2",
+                    "-o",
+                    dir.path().join("again").to_str().unwrap(),
+                ],
+            ]
+            .concat())
+            .stdout,
+        );
+        if options.contains(&"--no-auto") {
+            assert!(!stdout.contains(" 0 sweeps"), "{stdout}");
+        }
+    }
+}
+
+/// A bake of a few seconds: long enough to kill a process in the middle of it.
+const SLOW: [&str; 8] = [
+    "--quality",
+    "high",
+    "--no-auto",
+    "--rays",
+    "2048",
+    "--threads",
+    "1",
+    "--no-seams",
+];
+
+/// The pids of `parent`'s children (from /proc).
+#[cfg(target_os = "linux")]
+fn children_of(parent: u32) -> Vec<u32> {
+    let mut pids = Vec::new();
+    for entry in std::fs::read_dir("/proc").unwrap().flatten() {
+        let Ok(pid) = entry.file_name().to_string_lossy().parse::<u32>() else {
+            continue;
+        };
+        let Ok(stat) = std::fs::read_to_string(entry.path().join("stat")) else {
+            continue;
+        };
+        // pid (comm) state ppid …: the command name may hold spaces, so read after its ')'.
+        let after = &stat[stat.rfind(')').unwrap() + 2..];
+        if after.split(' ').nth(1) == Some(&parent.to_string()) {
+            pids.push(pid);
+        }
+    }
+    pids
+}
+
+fn kill(pid: u32) {
+    // SAFETY: kill(2) on a process this test started; no memory is involved.
+    assert_eq!(unsafe { libc::kill(pid as libc::pid_t, libc::SIGKILL) }, 0);
+}
+
+#[cfg(target_os = "linux")]
+#[test]
+fn a_killed_worker_fails_the_bake_and_writes_nothing() {
+    let dir = scratch();
+    let out = dir.path().join("out");
+    let scene = fixture("cornell_box.gltf");
+    let parent = lightbake(
+        &[
+            &["bake", scene.to_str().unwrap(), "-o", out.to_str().unwrap()],
+            &SLOW[..],
+            &["--processes", "2"],
+        ]
+        .concat(),
+    )
+    .stdout(Stdio::null())
+    .stderr(Stdio::piped())
+    .spawn()
+    .unwrap();
+    let start = Instant::now();
+    let workers = loop {
+        let workers = children_of(parent.id());
+        if workers.len() == 2 {
+            break workers;
+        }
+        assert!(start.elapsed() < Duration::from_secs(10), "no workers");
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    std::thread::sleep(Duration::from_millis(1500));
+    let victim = *workers
+        .iter()
+        .find(|pid| {
+            let command = std::fs::read(format!("/proc/{pid}/cmdline")).unwrap_or_default();
+            let args: Vec<&[u8]> = command.split(|&b| b == 0).collect();
+            args.windows(2).any(|w| w == [&b"--process"[..], &b"1"[..]])
+        })
+        .expect("process 1 among the workers");
+    kill(victim);
+    let o = finish_within(parent, Duration::from_secs(60));
+    let stderr = text(&o.stderr);
+    assert!(!o.status.success(), "{stderr}");
+    assert!(
+        stderr.contains(&format!(
+            "worker process 1 (pid {victim}) was killed by signal 9"
+        )),
+        "{stderr}"
+    );
+    assert!(
+        list_files(dir.path()).is_empty(),
+        "{:?}",
+        list_files(dir.path())
+    );
+}
+
+/// Two processes of a hosts file, started by hand; process 1 is killed mid-bake: process 0
+/// fails naming it, and writes nothing.
+#[test]
+fn a_lost_host_is_named() {
+    let dir = scratch();
+    let hosts = dir.path().join("hosts");
+    std::fs::write(&hosts, free_addresses(2).join("\n")).unwrap();
+    let out = dir.path().join("out");
+    let scene = fixture("cornell_box.gltf");
+    let start = |process: &str| {
+        lightbake(
+            &[
+                &["bake", scene.to_str().unwrap(), "-o", out.to_str().unwrap()],
+                &SLOW[..],
+                &["--hosts", hosts.to_str().unwrap(), "--process", process],
+            ]
+            .concat(),
+        )
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap()
+    };
+    let first = start("0");
+    let mut second = start("1");
+    std::thread::sleep(Duration::from_millis(2000));
+    assert!(second.try_wait().unwrap().is_none(), "make the bake longer");
+    second.kill().unwrap();
+    second.wait().unwrap();
+    let o = finish_within(first, Duration::from_secs(60));
+    let stderr = text(&o.stderr);
+    assert!(!o.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("process 0 lost contact with process 1 (127.0.0.1:"),
+        "{stderr}"
+    );
+    assert!(
+        !out.exists() || list_files(&out).is_empty(),
+        "{:?}",
+        list_files(&out)
+    );
+}
+
+/// A hosts file whose other process never starts: the bake gives up after --connect-timeout.
+#[test]
+fn an_unreachable_host_fails_after_the_timeout() {
+    let dir = scratch();
+    let hosts = dir.path().join("hosts");
+    let addresses = free_addresses(2);
+    std::fs::write(&hosts, addresses.join("\n")).unwrap();
+    let out = dir.path().join("out");
+    let scene = fixture("cornell_box.gltf");
+    for process in ["0", "1"] {
+        let child = lightbake(&[
+            "bake",
+            scene.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+            "--quality",
+            "draft",
+            "--hosts",
+            hosts.to_str().unwrap(),
+            "--process",
+            process,
+            "--connect-timeout",
+            "2",
+        ])
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+        let o = finish_within(child, Duration::from_secs(30));
+        let stderr = text(&o.stderr);
+        assert!(!o.status.success(), "{stderr}");
+        let other = if process == "0" { 1 } else { 0 };
+        assert!(
+            stderr.contains("not every process connected within 2 s")
+                && stderr.contains(&format!("process {other} ({})", addresses[other])),
+            "process {process}: {stderr}"
+        );
+        assert!(
+            !out.exists(),
+            "process {process} wrote {:?}",
+            list_files(&out)
+        );
+    }
+}
+
+/// `--max-memory` is checked per process: each process builds only its share of the final
+/// rows, so a limit that refuses the bake on one process admits it on two (the rows dominate
+/// at 2048 rays), and two processes still refuse a limit below their share.
+#[test]
+fn the_memory_limit_is_checked_per_process() {
+    let scene = fixture("cornell_box.gltf");
+    let scene = scene.to_str().unwrap();
+    let bake = |dir: &Path, limit: &str, processes: &str| {
+        let out = dir.join(format!("{limit}_{processes}"));
+        let options = ["--quality", "draft", "--no-auto", "--rays", "2048"];
+        let args = [
+            "bake",
+            scene,
+            "-o",
+            out.to_str().unwrap(),
+            "--max-memory",
+            limit,
+        ];
+        let o = run(&[&args[..], &options, &["--processes", processes]].concat());
+        (o, out)
+    };
+    let dir = scratch();
+    let (one, out) = bake(dir.path(), "26M", "1");
+    let err = text(&one.stderr);
+    assert!(!one.status.success(), "one process fit in 26 MiB: {err}");
+    assert!(err.contains("above the memory limit 26.0 MiB"), "{err}");
+    assert!(!err.contains("per process"), "{err}");
+    assert!(!out.exists());
+    let (two, out) = bake(dir.path(), "26M", "2");
+    assert!(two.status.success(), "{}", text(&two.stderr));
+    outputs(&out);
+    let (tight, out) = bake(dir.path(), "18M", "2");
+    let err = text(&tight.stderr);
+    assert!(
+        !tight.status.success(),
+        "two processes fit in 18 MiB: {err}"
+    );
+    assert!(err.contains("per process of 2"), "{err}");
+    assert!(!out.exists());
+}
+
+/// A scene with no triangles is written through by process 0, as one process writes it.
+#[test]
+fn a_scene_with_nothing_to_bake_is_written_through() {
+    let text_of = std::fs::read_to_string(fixture("cornell_box.gltf")).unwrap();
+    let mut json: serde_json::Value = serde_json::from_str(&text_of).unwrap();
+    for mesh in json["meshes"].as_array_mut().unwrap() {
+        for primitive in mesh["primitives"].as_array_mut().unwrap() {
+            primitive["mode"] = serde_json::json!(0);
+        }
+    }
+    let dir = scratch();
+    let input = dir.path().join("points.gltf");
+    std::fs::write(&input, json.to_string()).unwrap();
+    let input = input.to_str().unwrap();
+    let one = dir.path().join("one");
+    let o = run(&["bake", input, "-o", one.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let expected = outputs(&one);
+    let two = dir.path().join("two");
+    let o = run(&[
+        "bake",
+        input,
+        "-o",
+        two.to_str().unwrap(),
+        "--processes",
+        "2",
+    ]);
+    let err = text(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(err.contains("nothing to bake"), "{err}");
+    assert_eq!(outputs(&two), expected);
+}
