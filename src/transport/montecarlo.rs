@@ -173,14 +173,10 @@ impl Context<'_> {
         let direct = emitted + punctual + sky;
         debug_assert!(direct.is_finite(), "texel {i}: direct {direct}");
 
-        // Row: merge repeated hits on the same texel.
+        // Row: the hit counts per source texel, `F_ij = hits / K` (exact, see `Rows`).
         hits.sort_unstable();
-        let before = out.col.len();
-        for run in hits.chunk_by(|a, b| a == b) {
-            out.col.push(run[0]);
-            out.f.push(run.len() as f32 / kf);
-        }
-        out.end_row(before, escape, direct);
+        out.counts.push_row(hits, k);
+        out.end_row(out.col.len(), escape, direct);
         out.rays += k as u64 + l as u64 + shadow_rays;
     }
 }
