@@ -560,10 +560,21 @@ pub fn choose_solver(texels: usize, config: &mut BakeConfig, plan: &mut Plan, ke
     if keep.solver {
         return;
     }
-    let rows = texels as f64 * config.transport.gather_rays as f64 * 8.0;
+    let stored = match config.technique {
+        Technique::Stored { .. } => config.technique,
+        _ => Technique::DEFAULT,
+    };
+    let n = texels as f64;
+    let rows = n
+        * entries_per_texel(stored, n, config.transport.gather_rays as f64)
+        * row_entry_bytes(stored);
+    let what = match stored.is_monte_carlo() {
+        true => "stored Monte Carlo rows (exact ray counts, about 1 byte per ray)",
+        false => "stored f32 rows",
+    };
     config.technique = if config.technique.is_monte_carlo() && rows > ROW_MEMORY_LIMIT {
         plan.reasons.push(format!(
-            "solver gather: stored rows would take {:.1} GiB (> {:.0} GiB); re-casting rays each bounce needs O(texels) memory",
+            "transport matrix-free, solver gather: {what} would take {:.1} GiB (> {:.0} GiB); re-casting rays each bounce needs O(texels) memory",
             rows / (1u64 << 30) as f64,
             ROW_MEMORY_LIMIT / (1u64 << 30) as f64
         ));
@@ -571,8 +582,9 @@ pub fn choose_solver(texels: usize, config: &mut BakeConfig, plan: &mut Plan, ke
     } else {
         // Not Gauss–Seidel on one thread: the output must not depend on the thread count.
         plan.reasons.push(format!(
-            "solver jacobi: stored rows take {:.0} MiB; parallel sweeps, the same result on any number of threads",
-            rows / (1u64 << 20) as f64
+            "transport {what}: {:.0} MiB (≤ {:.0} GiB); solver jacobi: parallel sweeps, the same result on any number of threads",
+            rows / (1u64 << 20) as f64,
+            ROW_MEMORY_LIMIT / (1u64 << 30) as f64
         ));
         match config.technique {
             Technique::Stored { form_factors, .. } => {
@@ -915,16 +927,21 @@ pub fn format_bytes(bytes: f64) -> String {
     format!("{value:.digits$} {}", units[unit])
 }
 
-/// Bytes of one stored row entry: the source texel (u32) and its form factor (f32).
+/// Bytes of one stored f32 row entry: the source texel (u32) and its form factor (f32).
 pub const ROW_ENTRY_BYTES: f64 = 8.0;
+/// Bytes per gathering ray of Monte Carlo rows stored as ray counts ([`crate::transport::Rows`]),
+/// besides [`TEXEL_BYTES`]' per-row part: measured 0.66 (Cornell box, K = 1024), 0.71 and 0.80
+/// (64k-triangle furnished interior, K = 256 and 64; `examples/dev/row_storage.rs`); rounded up
+/// for scenes whose rays land farther apart.
+pub const COUNT_BYTES_PER_RAY: f64 = 1.0;
 /// Rows are built in chunks and then concatenated: both copies exist for a moment, and a
 /// chunk's vectors grow by doubling.
 const ROW_BUILD_FACTOR: f64 = 2.5;
 /// Per texel: `Texels` (96 bytes of positions, normals, area, albedo, emission, page, xy,
-/// triangle, footprint, jitter), a transport's escape, direct light and row start (20), the
-/// solver's iterates and solution (4 RGB vectors, 48), the lightmap and the denoiser's copies
-/// (36).
-const TEXEL_BYTES: f64 = 200.0;
+/// triangle, footprint, jitter), a transport's escape, direct light, row start and rays (29),
+/// the solver's iterates and solution (4 RGB vectors, 48), the lightmap and the denoiser's
+/// copies (36).
+const TEXEL_BYTES: f64 = 210.0;
 /// Per texel of a finished transport and solution that is kept (a pilot run).
 const HELD_RUN_TEXEL_BYTES: f64 = 32.0;
 /// Per page texel: the texel index (4), the page's values and validity (13), dilation's copy
@@ -954,12 +971,10 @@ pub fn memory_estimate(m: &MemoryInputs) -> MemoryEstimate {
             ..
         }
     );
+    // Southwell's transpose holds f32 entries whatever the rows are stored as.
     let built = m.built_entries
-        * if transposed {
-            ROW_BUILD_FACTOR + 1.0
-        } else {
-            ROW_BUILD_FACTOR
-        };
+        * (ROW_BUILD_FACTOR * row_entry_bytes(m.technique)
+            + if transposed { ROW_ENTRY_BYTES } else { 0.0 });
     MemoryEstimate {
         scene: PROCESS_BYTES
             + INPUT_FACTOR * m.input_bytes
@@ -968,7 +983,20 @@ pub fn memory_estimate(m: &MemoryInputs) -> MemoryEstimate {
         bvh: BVH_TRIANGLE_BYTES * m.triangles,
         texels: TEXEL_BYTES * m.texels + HELD_RUN_TEXEL_BYTES * m.held_runs * m.texels,
         pages: PAGE_TEXEL_BYTES * m.page_texels,
-        rows: ROW_ENTRY_BYTES * (m.held_entries + built),
+        // Held entries are pilot runs: Monte Carlo rows.
+        rows: COUNT_BYTES_PER_RAY * m.held_entries + built,
+    }
+}
+
+/// Bytes per entry of [`entries_per_texel`]: Monte Carlo rows are ray counts (entries counted
+/// as rays), the others f32 form factors (the hierarchy's links counted alike).
+pub fn row_entry_bytes(technique: Technique) -> f64 {
+    match technique {
+        Technique::Stored {
+            form_factors: FormFactors::MonteCarlo,
+            ..
+        } => COUNT_BYTES_PER_RAY,
+        _ => ROW_ENTRY_BYTES,
     }
 }
 

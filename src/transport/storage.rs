@@ -3,16 +3,23 @@
 //!
 //! A Monte Carlo entry is `F_ij = hits_ij / K_i` (hits of texel `j` among the `K_i` rays of
 //! texel `i`), so a row is stored losslessly as `K_i` and, per entry, the step from the previous
-//! column and the hit count: one LEB128 varint `gap << 1 | (hits > 1)`, then `hits − 2` as a
-//! second varint when the flag is set (`gap` = column − previous column − 1; columns are sorted
-//! and distinct). Most entries are hit once and lie near the previous one, so an entry takes
-//! 1–2 bytes instead of 8 (u32 column + f32 weight). Decoding rebuilds the very f32 the
-//! builder used to store (`hits as f32 / K_i as f32`), so every sum is bit-identical.
+//! column and the hit count. A non-empty row's bytes are
 //!
-//! The varint is written here rather than taken from a crate: it shares its first byte with
-//! the hit-count flag and is decoded inline in the solvers' sweeps (one branch per entry on the
-//! common one-byte case), which the slice-and-`Option` decoders of the varint crates are not
-//! shaped for.
+//! ```text
+//!   varint(m) · counts (m bytes) · steps (one varint per entry)
+//! ```
+//!
+//! where each step is the LEB128 varint `gap << 1 | (hits > 1)` (`gap` = column − previous
+//! column − 1; columns are sorted and distinct) and each entry hit more than once takes the next
+//! count byte, `hits − 2` (255 escapes to a 4-byte count). Most entries are hit once and lie
+//! near the previous one, so an entry takes 1–2 bytes instead of 8 (u32 column + f32 weight).
+//! Decoding rebuilds the very f32 the builder used to store (`hits as f32 / K_i as f32`), so
+//! every sum is bit-identical.
+//!
+//! Why two streams: the counts are read without a branch on the flag (a repeated hit is a coin
+//! toss in small scenes; a mispredicted branch per entry made sweeps 2.5–3× slower than f32
+//! rows), and the step's length branch is well predicted. The varint is written here rather
+//! than taken from a crate for that layout: it is decoded inline in the solvers' sweeps.
 
 use std::iter::{Copied, Zip};
 use std::slice::Iter;
@@ -60,6 +67,8 @@ pub struct CountRows {
     row_start: Vec<u64>,
     /// Gathering rays `K_i` of each row: the denominator of its weights.
     rays: Vec<u32>,
+    /// The rows, then one padding byte: a step's second byte is read before its first says
+    /// whether there is one.
     bytes: Vec<u8>,
     entries: u64,
 }
@@ -69,7 +78,7 @@ impl Default for CountRows {
         CountRows {
             row_start: vec![0],
             rays: Vec::new(),
-            bytes: Vec::new(),
+            bytes: vec![0],
             entries: 0,
         }
     }
@@ -79,18 +88,35 @@ impl CountRows {
     /// Appends a row from the source texels its `rays` rays hit, sorted (a texel hit `n` times
     /// appears `n` times).
     pub fn push_row(&mut self, sorted_hits: &[u32], rays: u32) {
-        let mut previous = u32::MAX; // the first gap counts from column 0
-        for run in sorted_hits.chunk_by(|a, b| a == b) {
-            let gap = run[0].wrapping_sub(previous).wrapping_sub(1) as u64;
-            let repeated = run.len() > 1;
-            write_varint(&mut self.bytes, gap << 1 | repeated as u64);
-            if repeated {
-                write_varint(&mut self.bytes, run.len() as u64 - 2);
+        let runs = || sorted_hits.chunk_by(|a, b| a == b);
+        self.bytes.pop(); // the padding
+        if !sorted_hits.is_empty() {
+            let count_bytes = |hits: usize| match hits {
+                1 => 0,
+                2..=256 => 1,
+                _ => 5,
+            };
+            write_varint(&mut self.bytes, runs().map(|r| count_bytes(r.len())).sum());
+            for run in runs().filter(|r| r.len() > 1) {
+                match u8::try_from(run.len() - 2) {
+                    Ok(b) if b < ESCAPE => self.bytes.push(b),
+                    _ => {
+                        self.bytes.push(ESCAPE);
+                        self.bytes
+                            .extend((run.len() as u32).to_le_bytes());
+                    }
+                }
             }
-            previous = run[0];
-            self.entries += 1;
+            let mut previous = u32::MAX; // the first gap counts from column 0
+            for run in runs() {
+                let gap = run[0].wrapping_sub(previous).wrapping_sub(1) as u64;
+                write_varint(&mut self.bytes, gap << 1 | (run.len() > 1) as u64);
+                previous = run[0];
+                self.entries += 1;
+            }
         }
         self.row_start.push(self.bytes.len() as u64);
+        self.bytes.push(0);
         self.rays.push(rays);
     }
 
@@ -104,6 +130,7 @@ impl CountRows {
         let removed = self.row(n - 1).count() as u64;
         self.entries -= removed;
         self.bytes.truncate(start as usize);
+        self.bytes.push(0);
         self.row_start[n] = start;
     }
 
@@ -113,6 +140,7 @@ impl CountRows {
         self.row_start
             .extend(other.row_start[1..].iter().map(|s| s + base));
         self.rays.extend(other.rays);
+        self.bytes.pop();
         self.bytes.extend(other.bytes);
         self.entries += other.entries;
     }
@@ -129,14 +157,30 @@ impl CountRows {
     #[inline]
     pub fn row(&self, i: usize) -> CountRow<'_> {
         let rays = self.rays[i] as f32;
+        let (start, end) = (self.row_start[i] as usize, self.row_start[i + 1] as usize);
+        // From the row's start to the padding byte.
+        let bytes = &self.bytes[start..];
+        let (counts, next) = match end > start {
+            true => {
+                let (m, header) = read_varint(bytes, 0);
+                (header, header + m as usize)
+            }
+            false => (0, 0),
+        };
         CountRow {
-            bytes: &self.bytes[self.row_start[i] as usize..self.row_start[i + 1] as usize],
+            bytes,
+            end: end - start,
+            counts,
+            next,
             col: u32::MAX,
             rays,
             once: 1.0 / rays,
         }
     }
 }
+
+/// The count byte that says a 4-byte count (little-endian `hits`) follows.
+const ESCAPE: u8 = 255;
 
 fn write_varint(out: &mut Vec<u8>, mut v: u64) {
     while v >= 0x80 {
@@ -146,10 +190,41 @@ fn write_varint(out: &mut Vec<u8>, mut v: u64) {
     out.push(v as u8);
 }
 
+/// The varint at `bytes[at..]` and the position after it.
+#[inline]
+fn read_varint(bytes: &[u8], at: usize) -> (u64, usize) {
+    let b = bytes[at];
+    if b < 0x80 {
+        return (b as u64, at + 1);
+    }
+    read_varint_tail(bytes, at)
+}
+
+#[cold]
+fn read_varint_tail(bytes: &[u8], mut at: usize) -> (u64, usize) {
+    let (mut v, mut shift) = (0u64, 0);
+    loop {
+        let b = bytes[at];
+        at += 1;
+        v |= ((b & 0x7f) as u64) << shift;
+        if b < 0x80 {
+            return (v, at);
+        }
+        shift += 7;
+    }
+}
+
 /// The entries of one count row, decoded as they are read.
 #[derive(Clone, Debug)]
 pub struct CountRow<'a> {
+    /// From the row's start to the end of the storage (its padding byte included).
     bytes: &'a [u8],
+    /// The row's end in `bytes`.
+    end: usize,
+    /// Position of the next count byte.
+    counts: usize,
+    /// Position of the next step.
+    next: usize,
     /// The previous entry's column (`u32::MAX` before the first).
     col: u32,
     rays: f32,
@@ -157,55 +232,49 @@ pub struct CountRow<'a> {
     once: f32,
 }
 
-impl CountRow<'_> {
-    /// The rest of a varint whose first byte (`first`, with its continuation bit) was read.
-    #[cold]
-    fn varint_tail(&mut self, first: u8) -> u64 {
-        let mut v = (first & 0x7f) as u64;
-        let mut shift = 7;
-        while let Some((&b, rest)) = self.bytes.split_first() {
-            self.bytes = rest;
-            v |= ((b & 0x7f) as u64) << shift;
-            if b < 0x80 {
-                break;
-            }
-            shift += 7;
-        }
-        v
-    }
-
-    #[inline]
-    fn varint(&mut self) -> u64 {
-        match self.bytes.split_first() {
-            Some((&b, rest)) => {
-                self.bytes = rest;
-                if b < 0x80 {
-                    b as u64
-                } else {
-                    self.varint_tail(b)
-                }
-            }
-            None => 0,
-        }
-    }
-}
-
 impl Iterator for CountRow<'_> {
     type Item = (u32, f32);
 
     #[inline]
     fn next(&mut self) -> Option<(u32, f32)> {
-        if self.bytes.is_empty() {
+        if self.next >= self.end {
             return None;
         }
-        let v = self.varint();
-        self.col = self.col.wrapping_add((v >> 1) as u32).wrapping_add(1);
-        let f = if v & 1 == 0 {
-            self.once
+        // A one- or two-byte step without a branch on its length (in small scenes most steps
+        // take one byte, in large ones most take two); longer ones are rare.
+        let (b0, b1) = (self.bytes[self.next], self.bytes[self.next + 1]);
+        let v = if (b0 & b1) >= 0x80 {
+            let (v, next) = read_varint_tail(self.bytes, self.next);
+            self.next = next;
+            v
         } else {
-            (self.varint() + 2) as f32 / self.rays
+            let long = (b0 >> 7) as u64;
+            self.next += 1 + long as usize;
+            (b0 & 0x7f) as u64 | ((b1 as u64) << 7) * long
         };
-        Some((self.col, f))
+        self.col = self.col.wrapping_add((v >> 1) as u32).wrapping_add(1);
+        // Read whether or not the entry is repeated (`counts` < `next` ≤ len: in bounds), so
+        // that no branch depends on the flag.
+        let repeated = (v & 1) as usize;
+        let byte = self.bytes[self.counts];
+        let hits = if (repeated == 1) & (byte == ESCAPE) {
+            self.escaped_count()
+        } else {
+            byte as u32 + 2
+        };
+        self.counts += repeated;
+        let weight = hits as f32 / self.rays;
+        Some((self.col, if repeated == 1 { weight } else { self.once }))
+    }
+}
+
+impl CountRow<'_> {
+    /// The 4-byte count after an escape byte at `counts`; moves past it.
+    #[cold]
+    fn escaped_count(&mut self) -> u32 {
+        let at = self.counts + 1;
+        self.counts += 4;
+        u32::from_le_bytes(self.bytes[at..at + 4].try_into().unwrap())
     }
 }
 
