@@ -7,11 +7,11 @@ use std::time::Instant;
 use glam::Vec3;
 use lightbake::config::{FormFactors, RowSolver, Technique};
 use lightbake::testing::{self, Geometry, GltfBuilder, Material};
+use lightbake::transport::Rows;
 use lightbake::transport::kernel::{
     parallel_rectangles, perpendicular_rectangles, point_to_coaxial_disk, point_to_disk_bound,
     point_to_point,
 };
-use lightbake::transport::Rows;
 use lightbake::{BakeConfig, Baked, NoProgress, compute};
 
 use crate::util::{fixture, quick, scratch};

@@ -43,7 +43,11 @@ fn main() {
         };
         let n = counts.len() as f64;
         let per_texel = |t: &Transport| t.rows.bytes() as f64 / n;
-        for solver in [RowSolver::Jacobi, RowSolver::GaussSeidel, RowSolver::Southwell] {
+        for solver in [
+            RowSolver::Jacobi,
+            RowSolver::GaussSeidel,
+            RowSolver::Southwell,
+        ] {
             let (mut best, mut iterations) = ([f64::MAX; 2], 0);
             for _ in 0..repeats {
                 let mut results = Vec::new();

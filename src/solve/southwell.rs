@@ -345,8 +345,8 @@ mod tests {
     use super::*;
     use crate::config::{BakeConfig, FormFactors, RowSolver, Technique};
     use crate::solve::tests::fixture;
-    use crate::{NoProgress, compute};
     use crate::transport::{Rows, WeightRows};
+    use crate::{NoProgress, compute};
 
     fn config() -> BakeConfig {
         let mut c = BakeConfig::draft();

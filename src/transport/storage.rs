@@ -102,8 +102,7 @@ impl CountRows {
                     Ok(b) if b < ESCAPE => self.bytes.push(b),
                     _ => {
                         self.bytes.push(ESCAPE);
-                        self.bytes
-                            .extend((run.len() as u32).to_le_bytes());
+                        self.bytes.extend((run.len() as u32).to_le_bytes());
                     }
                 }
             }
@@ -250,7 +249,7 @@ impl Iterator for CountRow<'_> {
         } else {
             let long = (b0 >> 7) as u64;
             self.next += 1 + long as usize;
-            (b0 & 0x7f) as u64 | ((b1 as u64) << 7) * long
+            (b0 & 0x7f) as u64 | (((b1 as u64) << 7) * long)
         };
         self.col = self.col.wrapping_add((v >> 1) as u32).wrapping_add(1);
         // Read whether or not the entry is repeated (`counts` < `next` ≤ len: in bounds), so
@@ -423,7 +422,8 @@ mod tests {
         assert_eq!(rows.entries(), entries as u64);
         for (i, want) in expected.iter().enumerate() {
             let got: Vec<(u32, f32)> = rows.row(i).collect();
-            let bits = |r: &[(u32, f32)]| r.iter().map(|&(j, f)| (j, f.to_bits())).collect::<Vec<_>>();
+            let bits =
+                |r: &[(u32, f32)]| r.iter().map(|&(j, f)| (j, f.to_bits())).collect::<Vec<_>>();
             assert_eq!(bits(&got), bits(want), "row {i}");
             // fold (the solvers' path) sees the same entries in the same order
             let folded = rows.row(i).fold(Vec::new(), |mut v, e| {
