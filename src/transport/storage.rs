@@ -436,6 +436,40 @@ mod tests {
         assert!((0..rows.len()).all(|i| rows.row(i).eq(w.row(i))));
     }
 
+    /// A bake's Monte Carlo rows stored as counts and the same rows as f32 weights (the storage
+    /// before counts) give bit-identical solutions with every row solver.
+    #[test]
+    fn solutions_are_identical_with_counts_and_weights() {
+        use crate::config::{BakeConfig, RowSolver};
+        use crate::transport::Transport;
+        use crate::{NoProgress, compute, solve};
+        let mut c = BakeConfig::draft();
+        c.auto = None;
+        c.transport.gather_rays = 128;
+        let fixture = crate::solve::tests::fixture("cornell_box.gltf");
+        let baked = compute(&fixture, &c, &NoProgress).unwrap();
+        let counts = &baked.transport;
+        assert!(matches!(counts.rows, Rows::Counts(_)) && counts.rows.entries() > 0);
+        let weights = Transport {
+            rows: Rows::Weights(counts.rows.to_weights()),
+            ..counts.clone()
+        };
+        assert!(counts.rows.bytes() * 4 < weights.rows.bytes());
+        for solver in [
+            RowSolver::Jacobi,
+            RowSolver::GaussSeidel,
+            RowSolver::Southwell,
+        ] {
+            let solve = |t| solve::solve(t, &baked.texels, solver, &c.solve, &NoProgress).unwrap();
+            let (a, b) = (solve(counts), solve(&weights));
+            assert!(a.irradiance == b.irradiance, "{solver:?}");
+            assert_eq!(a.history.len(), b.history.len());
+            if solver == RowSolver::Jacobi {
+                assert!(a.irradiance == baked.solution.irradiance);
+            }
+        }
+    }
+
     /// Concatenating chunks and clearing a row keep the other rows intact.
     #[test]
     fn append_and_clear_keep_rows() {
