@@ -385,7 +385,8 @@ fn automatic_choice_switches_to_gather_when_rows_do_not_fit() {
     assert!(out.contains("montecarlo/jacobi"), "{out}");
     let peak = explained_peak(&out);
 
-    let limit = format!("{}K", ((peak - 1.0) * 1024.0) as u64);
+    // Rows stored as ray counts take a few hundred KiB here: just below the peak.
+    let limit = format!("{}K", ((peak - 0.1) * 1024.0) as u64);
     let dir = scratch();
     let o = bake_fixture(
         "cornell_box.gltf",

@@ -334,8 +334,11 @@ fn memory_estimate_and_the_gather_switch() {
     let stored = plan::memory_estimate(&inputs);
     let parts = stored.scene + stored.bvh + stored.texels + stored.pages + stored.rows;
     assert_eq!(stored.total(), parts);
-    // 25.6 M entries of 8 bytes, built in chunks then concatenated.
-    assert!(stored.rows >= 8.0 * 25.6e6 * 2.0, "{stored:?}");
+    // 25.6 M Monte Carlo rays stored as counts, built in chunks then concatenated.
+    assert!(
+        stored.rows >= plan::COUNT_BYTES_PER_RAY * 25.6e6 * 2.0,
+        "{stored:?}"
+    );
     let gather = plan::memory_estimate(&MemoryInputs {
         built_entries: 0.0,
         technique: Technique::Gather,
