@@ -234,7 +234,17 @@ pub struct CountRow<'a> {
 impl Iterator for CountRow<'_> {
     type Item = (u32, f32);
 
+    /// The solvers' path: the decoder's state in locals for the whole row.
     #[inline]
+    fn fold<B, F: FnMut(B, (u32, f32)) -> B>(mut self, init: B, mut f: F) -> B {
+        let mut acc = init;
+        while let Some(entry) = self.next() {
+            acc = f(acc, entry);
+        }
+        acc
+    }
+
+    #[inline(always)]
     fn next(&mut self) -> Option<(u32, f32)> {
         if self.next >= self.end {
             return None;
