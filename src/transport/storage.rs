@@ -236,9 +236,9 @@ impl Iterator for CountRow<'_> {
 
     /// The solvers' path: the decoder's state in locals for the whole row.
     #[inline]
-    fn fold<B, F: FnMut(B, (u32, f32)) -> B>(mut self, init: B, mut f: F) -> B {
+    fn fold<B, F: FnMut(B, (u32, f32)) -> B>(self, init: B, mut f: F) -> B {
         let mut acc = init;
-        while let Some(entry) = self.next() {
+        for entry in self {
             acc = f(acc, entry);
         }
         acc
