@@ -35,6 +35,10 @@ pub struct AtlasParams {
     /// a wall and lightmap charts end at every junction. Has no effect when the input's
     /// `TEXCOORD_1` is reused (its charts cannot change).
     pub split_junctions: bool,
+    /// Cut receivers along the hard shadow outlines of punctual lights too
+    /// (`scene::shadow_cuts`), so a renderer's filtering does not blur them over a texel. Part
+    /// of the junction split: no effect without `split_junctions`.
+    pub shadow_cuts: bool,
 }
 
 /// How the form factors of stored rows are computed (see the `transport` module of each).
@@ -296,6 +300,7 @@ impl BakeConfig {
                 max_page_size: 1024,
                 padding: 2,
                 split_junctions: true,
+                shadow_cuts: true,
             },
             technique: Technique::DEFAULT,
             transport: TransportParams {

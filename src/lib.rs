@@ -14,7 +14,11 @@
 //!                                                     cameras (all a renderer needs)
 //!   ─ plan::choose_density ──▶ BakeConfig            texel density for the scene's area (auto)
 //!  ─ scene::junctions::split ▶ Scene                 receivers cut where other surfaces meet
-//!                                                     them (new vertices are blends: provenance)
+//!                                                     them (new vertices are blends: provenance),
+//!                                                     and along the hard shadow outlines of
+//!                                                     punctual lights (scene::shadow_cuts; its
+//!                                                     shadow rays come from a Tracer of the
+//!                                                     uncut scene, passed in by `bake`)
 //!             Tracer::new   ──▶ Tracer                obvhs CWBVH: closest hit, occlusion
 //!            ─ atlas::build ──▶ Atlas                 xatlas charts + pages, or input TEXCOORD_1
 //!           ─ texels::build ──▶ Texels                one radiosity patch per covered texel

@@ -759,10 +759,7 @@ pub fn resolution_error(texels: &Texels, pilot: [&[Vec3]; 2]) -> f32 {
 /// have no second difference (ascending).
 fn resolution_squares(texels: &Texels, pilot: [&[Vec3]; 2]) -> (Vec<Vec3>, Vec<u32>) {
     let n = texels.len();
-    let mut valid = vec![true; n];
-    for &i in &texels.invalid {
-        valid[i as usize] = false;
-    }
+    let valid = texels.valid_mask();
     let neighbour = |i: usize, dx: i64, dy: i64| -> Option<usize> {
         let page = texels.page[i] as usize;
         let size = texels.pages[page];

@@ -198,3 +198,43 @@ fn point_error_is_within_the_target_at_draft_and_medium() {
         );
     }
 }
+
+/// On a smooth (faceted) sphere the reference integrates about the shading normal, as the bake's
+/// texels, the camera reference and renderers do: lit points at the top of `sphere_on_floor`
+/// (tilt under 37°: no floor and no other surface in view, so `H/π` is the point light's
+/// direct light alone) match `I max(0, n_s·l) / (π d²)` with the interpolated normal `n_s`,
+/// and not the same with the face's normal (up to half a facet, 7.5°, away).
+#[test]
+fn points_on_a_smooth_sphere_see_the_light_about_the_shading_normal() {
+    let (intensity, light) = (8.0f32, Vec3::new(0.8, 2.0, 0.6));
+    let direct = |p: Vec3, n: Vec3| {
+        let d = light - p;
+        intensity * n.dot(d.normalize()).max(0.0) / (PI * d.length_squared())
+    };
+    let input = fixture("sphere_on_floor.gltf");
+    let (r, _) =
+        points::compute(&input, &BakeConfig::draft(), &params(16), 2048, &NoProgress).unwrap();
+    let top: Vec<usize> = (0..r.points.len())
+        .filter(|&k| r.points[k].position.y > 0.9)
+        .collect();
+    assert!(top.len() > 20, "{} points on the sphere's top", top.len());
+    let rms = |n: &dyn Fn(&points::Point) -> Vec3| {
+        let sq: f32 = (top.iter())
+            .map(|&k| {
+                let e = direct(r.points[k].position, n(&r.points[k]));
+                ((r.mean[k].x - e) / e).powi(2)
+            })
+            .sum();
+        (sq / top.len() as f32).sqrt()
+    };
+    let (shading, face) = (rms(&|p| p.shading_normal), rms(&|p| p.normal));
+    eprintln!(
+        "{} points: relative RMS difference {shading:.4} from the shading-normal closed form, \
+         {face:.4} from the face-normal one",
+        top.len()
+    );
+    assert!(
+        shading < 0.005 && face > 5.0 * shading,
+        "{shading} vs {face}"
+    );
+}

@@ -233,6 +233,7 @@ fn t_junction_mismatch(seams: bool) -> (f32, f32, lightbake::lightmap::seams::Se
             .map(|k| Point {
                 position: glam::Vec3::new((k as f32 + 0.5) / 100.0, 0.0, z),
                 normal: glam::Vec3::Y,
+                shading_normal: glam::Vec3::Y,
             })
             .collect::<Vec<_>>()
     };

@@ -17,5 +17,6 @@ mod quality;
 mod reference;
 mod render;
 mod seams;
+mod shadow_cuts;
 mod solvers;
 mod view;

@@ -1296,6 +1296,7 @@ pub(super) mod tests {
             max_page_size,
             padding: 2,
             split_junctions: true,
+            shadow_cuts: true,
         }
     }
 

@@ -293,7 +293,21 @@ fn prepare_loaded(
         && !atlas::reuses_input_uvs(&scene, &source, &config.atlas)
     {
         let t = Instant::now();
-        let (scene, report) = scene::junctions::split(scene, 1.0 / config.atlas.texels_per_unit);
+        let texel = 1.0 / config.atlas.texels_per_unit;
+        let (scene, report) = if config.atlas.shadow_cuts && !scene.lights.is_empty() {
+            // Shadow rays see the geometry as loaded: the split moves no surface.
+            let tracer = Tracer::new(&scene);
+            let lights = scene.lights.clone();
+            let light_at = |l: usize, p: Vec3, n: Vec3| {
+                crate::lights::punctual_irradiance(&lights[l], p + n * tracer.epsilon, n, &tracer)
+                    .element_sum()
+                    / 3.0
+            };
+            let cutter = scene::shadow_cuts::ShadowCutter::new(&scene, &light_at);
+            scene::junctions::split_with(scene, texel, Some(&cutter))
+        } else {
+            scene::junctions::split(scene, texel)
+        };
         junctions = Some(report);
         timed(&mut stages, "junctions", t);
         scene

@@ -37,6 +37,7 @@ pub struct Options {
     pub rgbm: Option<bool>,
     pub error_map: Option<bool>,
     pub no_split_junctions: Option<bool>,
+    pub no_shadow_cuts: Option<bool>,
     pub no_validity: Option<bool>,
     pub no_denoise: Option<bool>,
     pub no_seams: Option<bool>,
@@ -120,6 +121,7 @@ impl Options {
         c.output.rgbm = self.rgbm.unwrap_or(false);
         c.output.error_map = self.error_map.unwrap_or(false);
         c.atlas.split_junctions = !self.no_split_junctions.unwrap_or(false);
+        c.atlas.shadow_cuts = !self.no_shadow_cuts.unwrap_or(false);
         c.transport.validity = !self.no_validity.unwrap_or(false);
         c.transport.denoise = !self.no_denoise.unwrap_or(false);
         if !no_auto {

@@ -117,6 +117,10 @@ struct AtlasArgs {
     /// it; the divided-texel cell map keeps their values right, a renderer's filtering does not).
     #[arg(long)]
     no_split_junctions: bool,
+    /// Do not cut receivers along the hard shadow outlines of sun, point and spot lights (a
+    /// renderer's filtering then blurs each such shadow edge over a texel on each side).
+    #[arg(long)]
+    no_shadow_cuts: bool,
 }
 
 impl AtlasArgs {
@@ -130,6 +134,7 @@ impl AtlasArgs {
         c.atlas.padding = self.padding;
         c.atlas.uv = self.uv.mode();
         c.atlas.split_junctions = !self.no_split_junctions;
+        c.atlas.shadow_cuts = !self.no_shadow_cuts;
         c
     }
 }
@@ -353,6 +358,7 @@ impl BakeArgs {
             padding: Some(self.atlas.padding),
             uv: Some(value_name(self.atlas.uv)),
             no_split_junctions: Some(self.atlas.no_split_junctions),
+            no_shadow_cuts: Some(self.atlas.no_shadow_cuts),
             rays: self.rays,
             light_samples: self.light_samples,
             sky: Some(Rgb::Rgb(self.sky.to_array())),

@@ -103,8 +103,9 @@ error. Rays that leave the scene see --sky (give render the same --background).
 
 With --points N, -o is a CSV file: N points drawn area-weighted on the input scene's surfaces
 (points whose face looks into geometry are left out and counted), each with the path-traced
-H/π there and its standard error: `#` comment lines, the header x,y,z,nx,ny,nz,r,g,b,se_r,se_g,se_b,
-one row per point (world position, unit normal, H/π, standard error). Compare bakes with it:
+H/π there (about the shading normal) and its standard error: `#` comment lines, the header
+x,y,z,nx,ny,nz,r,g,b,se_r,se_g,se_b,snx,sny,snz, one row per point (world position, unit face
+normal, H/π, standard error, unit shading normal). Compare bakes with it:
   lightbake reference scene.gltf --points 4096 --spp 4096 --target-error 0.01 -o points.csv
   lightbake compare baked/scene.gltf --points points.csv";
 

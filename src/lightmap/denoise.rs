@@ -151,10 +151,7 @@ pub fn denoise(
 ) -> Result<()> {
     assert_eq!(values.len(), texels.len());
     assert_eq!(noise.len(), texels.len());
-    let mut valid = vec![true; texels.len()];
-    for &i in &texels.invalid {
-        valid[i as usize] = false;
-    }
+    let valid = texels.valid_mask();
     let input: &[Vec3] = values;
     let aborted = AtomicBool::new(false);
     let filtered: Vec<Vec3> = (0..texels.len())

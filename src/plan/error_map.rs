@@ -107,10 +107,7 @@ pub fn error_map(
     noise_level: Option<f32>,
 ) -> Vec<Vec3> {
     let n = texels.len();
-    let mut valid = vec![true; n];
-    for &i in &texels.invalid {
-        valid[i as usize] = false;
-    }
+    let valid = texels.valid_mask();
     let level = |v: Vec3| v.max(Vec3::ZERO).element_sum() / 3.0;
     let kept = (0..n).filter(|&i| valid[i]);
     let (sum, count) = kept.fold((0.0f64, 0usize), |(s, c), i| {

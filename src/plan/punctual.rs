@@ -88,10 +88,7 @@ impl PunctualSample {
                 sum / (GRID * GRID) as f32
             })
             .collect();
-        let mut valid = vec![true; texels.len()];
-        for &i in &texels.invalid {
-            valid[i as usize] = false;
-        }
+        let valid = texels.valid_mask();
         let mut cdf = Vec::with_capacity(scene.triangles.len());
         let mut area = 0.0f64;
         for t in 0..scene.triangles.len() {

@@ -17,8 +17,11 @@
 //! **Estimator.** At each kept point `x` with geometric normal `n`, one sample is one path of the
 //! texel reference's estimator (`Paths::reflected`: next-event estimation for punctual lights
 //! and small emitters, MIS with the cosine-sampled bounce, Russian roulette) started at
-//! `x + ε·n`, so the mean estimates `H(x)/π` at the point itself (not a footprint average), with
-//! the standard error of the mean of independent paths. Paths after the first vertex read the
+//! `x + ε·n` about the surface's shading normal there (interpolated vertex normals, as texels,
+//! the camera reference and renderers shade a smooth surface; on a faceted sphere the face's
+//! own normal differs by up to half a facet, and irradiance about it differed from what the
+//! bake stores by 7% RMS on `sphere_on_floor`), so the mean estimates `H(x)/π` at the point
+//! itself (not a footprint average), with the standard error of the mean of independent paths. Paths after the first vertex read the
 //! texels' `ρ` and `Le` like the texel reference, so the texel density of `config` only matters
 //! for textured materials. The stopping rules (`max_samples`, `target_rel_error` over points,
 //! `time_limit`) are the texel reference's; streams are seeded by (seed, point, sample), so the
@@ -44,8 +47,10 @@
 //! reference's noise ([`metrics::noise_over_mean`]).
 //!
 //! **File** ([`PointReference::to_csv`]): UTF-8 CSV, `#` comment lines first, then a header and
-//! one row per point: `x,y,z,nx,ny,nz,r,g,b,se_r,se_g,se_b` — world position, unit geometric
-//! normal, `H/π` (linear RGB) and its standard error per channel.
+//! one row per point: `x,y,z,nx,ny,nz,r,g,b,se_r,se_g,se_b,snx,sny,snz` — world position, unit
+//! geometric normal, `H/π` (linear RGB), its standard error per channel and the unit shading
+//! normal. Files without the last three columns (written before they existed) read with the
+//! shading normal equal to the geometric one.
 //!
 //! Limits: the lookup needs the bake to keep the input's geometry (it does); a point with no
 //! baked surface within a few ray offsets is counted as unmatched and left out. Emissive
@@ -62,7 +67,7 @@ use crate::lightmap::Page;
 use crate::lights::triangle_area;
 use crate::render::RenderScene;
 use crate::sampling::{Rng, sample_cdf, triangle_point};
-use crate::scene::Scene;
+use crate::scene::{Scene, SurfacePoint};
 use crate::texels::Texels;
 use crate::texels::validity::{self, MAX_BACK};
 use crate::trace::Tracer;
@@ -80,11 +85,13 @@ const MAX_DRAWS_PER_POINT: usize = 20;
 /// The baked surface under a point is searched this many ray offsets above and below it.
 const LOCATE_OFFSETS: f32 = 4.0;
 
-/// A point on a surface: world position and the unit geometric normal of its (front) face.
+/// A point on a surface: world position, the unit geometric normal of its (front) face and the
+/// surface's unit interpolated (shading) normal there, turned to the face's side.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Point {
     pub position: Vec3,
     pub normal: Vec3,
+    pub shading_normal: Vec3,
 }
 
 /// Visible points drawn on a scene's surfaces.
@@ -124,6 +131,7 @@ pub fn draw(scene: &Scene, tracer: &Tracer, n: usize, seed: u64) -> Result<Point
         (back <= limit).then_some(Point {
             position: sp.p,
             normal: sp.n_geo,
+            shading_normal: sp.n,
         })
     };
     let mut set = PointSet::default();
@@ -167,8 +175,13 @@ pub fn trace(
             i as u64,
             sample as u64,
         );
-        let Point { position, normal } = points[i];
-        paths.reflected(position + normal * eps, normal, &mut rng, rays)
+        let p = points[i];
+        paths.reflected(
+            p.position + p.normal * eps,
+            p.shading_normal,
+            &mut rng,
+            rays,
+        )
     };
     trace_items(
         (scene, texels, tracer),
@@ -254,13 +267,13 @@ impl PointReference {
         let mut s = format!(
             "# lightbake point reference: path-traced H/pi at points on visible surfaces\n\
              # points={} hidden={} samples={}\n\
-             x,y,z,nx,ny,nz,r,g,b,se_r,se_g,se_b\n",
+             x,y,z,nx,ny,nz,r,g,b,se_r,se_g,se_b,snx,sny,snz\n",
             self.points.len(),
             self.hidden,
             self.samples
         );
         for ((p, m), se) in self.points.iter().zip(&self.mean).zip(&self.std_error) {
-            let row = [p.position, p.normal, *m, *se]
+            let row = [p.position, p.normal, *m, *se, p.shading_normal]
                 .map(|v| v.to_array().map(|c| c.to_string()).join(","));
             s.push_str(&row.join(","));
             s.push('\n');
@@ -303,12 +316,21 @@ impl PointReference {
                 .map(|c| c.trim().parse::<f32>())
                 .collect::<std::result::Result<_, _>>()
                 .map_err(|e| bad(k + 1, &e.to_string()))?;
-            let [x, y, z, nx, ny, nz, r_, g, b, sr, sg, sb] = v[..] else {
-                return Err(bad(k + 1, &format!("expected 12 numbers, got {}", v.len())));
+            let (shading, v) = match v[..] {
+                [.., snx, sny, snz] if v.len() == 15 => (Some(Vec3::new(snx, sny, snz)), &v[..12]),
+                _ => (None, &v[..]),
             };
+            let [x, y, z, nx, ny, nz, r_, g, b, sr, sg, sb] = v[..] else {
+                return Err(bad(
+                    k + 1,
+                    &format!("expected 12 or 15 numbers, got {}", v.len()),
+                ));
+            };
+            let normal = Vec3::new(nx, ny, nz);
             r.points.push(Point {
                 position: Vec3::new(x, y, z),
-                normal: Vec3::new(nx, ny, nz),
+                normal,
+                shading_normal: shading.unwrap_or(normal),
             });
             r.mean.push(Vec3::new(r_, g, b));
             r.std_error.push(Vec3::new(sr, sg, sb));
@@ -327,6 +349,11 @@ pub struct Lookup {
     pub value: Vec3,
     /// A texel of the bilinear footprint with a positive weight is black in every channel.
     pub touches_black: bool,
+    /// Where it was read: the index into [`RenderScene::pages`] and the `TEXCOORD_1` there.
+    pub page: u32,
+    pub uv: Vec2,
+    /// The baked surface's interpolated vertex normal at the point.
+    pub shading_normal: Vec3,
 }
 
 /// Reads the baked lightmap at every point as a renderer does (see the module docs); `None`
@@ -335,30 +362,33 @@ pub fn look_up(baked: &RenderScene, points: &[Point]) -> Vec<Option<Lookup>> {
     points
         .par_iter()
         .map(|p| {
-            let (instance, uv) = locate(&baked.scene, &baked.tracer, p)?;
-            let page = baked.page(instance)?;
-            Some(lookup_page(page, uv))
+            let sp = locate(&baked.scene, &baked.tracer, p)?;
+            let k = baked.instance_page[sp.instance as usize]?;
+            Some(lookup_page(&baked.pages[k as usize], k, &sp))
         })
         .collect()
 }
 
-fn lookup_page(page: &Page, uv: Vec2) -> Lookup {
+fn lookup_page(page: &Page, k: u32, sp: &SurfacePoint) -> Lookup {
     let touches_black = page
-        .footprint(uv)
+        .footprint(sp.uv1)
         .iter()
         .any(|&(k, w)| w > 0.0 && page.rgb[k].max_element() <= 0.0);
     Lookup {
-        value: page.bilinear(uv),
+        value: page.bilinear(sp.uv1),
         touches_black,
+        page: k,
+        uv: sp.uv1,
+        shading_normal: sp.n,
     }
 }
 
-/// The instance and interpolated `TEXCOORD_1` of the front-facing baked surface under `p`.
-fn locate(scene: &Scene, tracer: &Tracer, p: &Point) -> Option<(u32, Vec2)> {
+/// The front-facing baked surface under `p` (instance, interpolated `TEXCOORD_1` and normal).
+fn locate(scene: &Scene, tracer: &Tracer, p: &Point) -> Option<SurfacePoint> {
     let reach = LOCATE_OFFSETS * tracer.epsilon;
     let facing = |t: u32, b: Vec2| {
         let sp = scene.surface_point(t, b);
-        (sp.n_geo.dot(p.normal) > 0.9).then_some((sp.instance, sp.uv1))
+        (sp.n_geo.dot(p.normal) > 0.9).then_some(sp)
     };
     let hit = tracer.closest(p.position + p.normal * reach, -p.normal, 2.0 * reach);
     if let Some(hit) = hit
@@ -490,6 +520,7 @@ mod tests {
             points: vec![Point {
                 position: Vec3::new(0.1, -2.5, 3.0e-7),
                 normal: Vec3::Y,
+                shading_normal: Vec3::new(0.6, 0.8, 0.0),
             }],
             mean: vec![Vec3::new(0.3, 0.25, 1.0 / 3.0)],
             std_error: vec![Vec3::splat(0.001)],
@@ -501,6 +532,10 @@ mod tests {
         assert_eq!((back.mean, back.std_error), (r.mean, r.std_error));
         assert_eq!((back.hidden, back.samples), (4, 256));
         assert!(PointReference::from_csv("x,y,z\n1,2\n", "p.csv".as_ref()).is_err());
+        // A file from before the shading normal: it reads as the geometric normal.
+        let old = "x,y,z,nx,ny,nz,r,g,b,se_r,se_g,se_b\n0,0,0,0,1,0,0.5,0.5,0.5,0,0,0\n";
+        let old = PointReference::from_csv(old, "p.csv".as_ref()).unwrap();
+        assert_eq!(old.points[0].shading_normal, Vec3::Y);
     }
 
     #[test]

@@ -27,6 +27,10 @@
 //! 4. **Sides**: the instance's triangles are grouped into sides, connected across edges that are
 //!    not cuts; the atlas never puts two sides into one chart.
 //!
+//! [`split_with`] cuts along the hard shadow outlines of punctual lights too
+//! ([`super::shadow_cuts`]): they join step 2 as segments that are never stitched, and a patch
+//! with such cuts is bounded by its border in step 4 as well.
+//!
 //! New vertices are blends of at most three source vertices of the same primitive
 //! ([`Blend`]); the output writer blends every attribute the same way, so the split exists only
 //! in the baked copy.
@@ -36,6 +40,8 @@ use std::collections::BTreeMap;
 use glam::{DVec2, DVec3, Vec2, Vec3};
 use spade::{ConstrainedDelaunayTriangulation, Point2, Triangulation};
 
+use super::geometry::{BoxGrid, Plane, clip_interval, inside_intervals, weld};
+use super::shadow_cuts::ShadowCutter;
 use super::{Blend, Scene, Split};
 
 /// Cut end points closer than this merge, and move onto a patch vertex or edge this close
@@ -69,18 +75,37 @@ pub struct JunctionReport {
     /// Junction edges whose two sides stayed connected around the junction (the cell map of
     /// divided texels covers them).
     pub unseparated_edges: usize,
+    /// Shadow outline cuts inserted ([`super::shadow_cuts`]; counted among `segments` too),
+    /// the boundary samples that chose them, and outline stretches left out (work bounds).
+    pub shadow_segments: usize,
+    pub shadow_samples: usize,
+    pub shadow_skipped: usize,
 }
 
 impl JunctionReport {
     /// One phrase for the bake's summary line.
     pub fn brief(&self) -> String {
         format!(
-            "junctions: {} receiver(s) split ({} segments, {} extensions, {} triangles → +{}){}",
+            "junctions: {} receiver(s) split ({} segments, {} extensions, {} triangles → +{}){}{}",
             self.receivers,
             self.segments,
             self.extensions,
             self.triangles_split,
             self.triangles_added,
+            if self.shadow_samples > 0 {
+                format!(
+                    ", {} of the segments along shadow outlines ({} samples{})",
+                    self.shadow_segments,
+                    self.shadow_samples,
+                    if self.shadow_skipped > 0 {
+                        format!(", {} stretches left out", self.shadow_skipped)
+                    } else {
+                        String::new()
+                    }
+                )
+            } else {
+                String::new()
+            },
             if self.fallback_triangles + self.unseparated_edges > 0 {
                 format!(
                     ", {} triangles left whole, {} edges unseparated",
@@ -96,16 +121,30 @@ impl JunctionReport {
 /// Cuts every instance of `scene` where other surfaces meet it (see the module docs); `texel`
 /// is the lightmap texel size in world units (snapping tolerances are fractions of it).
 pub fn split(scene: Scene, texel: f32) -> (Scene, JunctionReport) {
+    split_with(scene, texel, None)
+}
+
+/// [`split`], cutting along the shadow outlines `shadows` finds too (see
+/// [`super::shadow_cuts`]).
+pub fn split_with(
+    scene: Scene,
+    texel: f32,
+    shadows: Option<&ShadowCutter>,
+) -> (Scene, JunctionReport) {
     let texel = f64::from(texel);
     let tol = Tolerances {
+        texel,
         snap: SNAP_TEXELS * texel,
         touch: TOUCH_TEXELS * texel,
     };
-    let grid = Grid::new(&scene, tol.touch, texel);
+    let grid = triangle_grid(&scene, tol.touch, texel);
     let mut report = JunctionReport::default();
     let splits: Vec<Option<InstanceSplit>> = (0..scene.instances.len())
-        .map(|i| split_instance(&scene, i as u32, &grid, tol, &mut report))
+        .map(|i| split_instance(&scene, i as u32, &grid, tol, shadows, &mut report))
         .collect();
+    if let Some(shadows) = shadows {
+        (report.shadow_samples, report.shadow_skipped) = shadows.work();
+    }
     if splits.iter().all(Option::is_none) {
         return (scene, report);
     }
@@ -114,6 +153,7 @@ pub fn split(scene: Scene, texel: f32) -> (Scene, JunctionReport) {
 
 #[derive(Clone, Copy)]
 struct Tolerances {
+    texel: f64,
     snap: f64,
     touch: f64,
 }
@@ -188,85 +228,28 @@ fn assemble(
     scene
 }
 
-/// Uniform grid of triangle bounding boxes: the broad phase that finds the triangles near a
-/// patch.
-struct Grid {
-    lo: DVec3,
-    cell: DVec3,
-    dims: [usize; 3],
-    cells: Vec<Vec<u32>>,
-}
-
-impl Grid {
-    fn new(scene: &Scene, margin: f64, texel: f64) -> Grid {
-        let (lo, hi) = scene.bounds();
-        let (lo, hi) = (lo.as_dvec3() - margin, hi.as_dvec3() + margin);
-        let extent = (hi - lo).max(DVec3::splat(texel));
-        let dims = (extent / (4.0 * texel))
-            .ceil()
-            .clamp(DVec3::ONE, DVec3::splat(MAX_GRID_CELLS));
-        let dims = [dims.x as usize, dims.y as usize, dims.z as usize];
-        let cell = extent / DVec3::new(dims[0] as f64, dims[1] as f64, dims[2] as f64);
-        let mut grid = Grid {
-            lo,
-            cell,
-            dims,
-            cells: vec![Vec::new(); dims[0] * dims[1] * dims[2]],
-        };
-        for (t, tri) in scene.triangles.iter().enumerate() {
-            let p = tri.map(|v| scene.positions[v as usize].as_dvec3());
-            let (a, b) = (p[0].min(p[1]).min(p[2]), p[0].max(p[1]).max(p[2]));
-            for c in grid.cells_of(a - margin, b + margin) {
-                grid.cells[c].push(t as u32);
-            }
-        }
-        grid
+/// The broad phase that finds the triangles near a patch: their bounding boxes in a grid.
+fn triangle_grid(scene: &Scene, margin: f64, texel: f64) -> BoxGrid {
+    let (lo, hi) = scene.bounds();
+    let (lo, hi) = (lo.as_dvec3() - margin, hi.as_dvec3() + margin);
+    let extent = (hi - lo).max(DVec3::splat(texel));
+    let dims = (extent / (4.0 * texel))
+        .ceil()
+        .clamp(DVec3::ONE, DVec3::splat(MAX_GRID_CELLS));
+    let mut grid = BoxGrid::new(lo, extent, dims);
+    for (t, tri) in scene.triangles.iter().enumerate() {
+        let p = tri.map(|v| scene.positions[v as usize].as_dvec3());
+        let (a, b) = (p[0].min(p[1]).min(p[2]), p[0].max(p[1]).max(p[2]));
+        grid.insert(t as u32, a - margin, b + margin);
     }
-
-    fn cells_of(&self, a: DVec3, b: DVec3) -> impl Iterator<Item = usize> + use<> {
-        let index = |p: DVec3| {
-            let q = ((p - self.lo) / self.cell).floor();
-            [q.x, q.y, q.z]
-                .iter()
-                .zip(self.dims)
-                .map(|(&q, d)| (q.max(0.0) as usize).min(d - 1))
-                .collect::<Vec<_>>()
-        };
-        let (i, j) = (index(a), index(b));
-        let dims = self.dims;
-        (i[2]..=j[2]).flat_map(move |z| {
-            let (i, j) = (i.clone(), j.clone());
-            (i[1]..=j[1])
-                .flat_map(move |y| (i[0]..=j[0]).map(move |x| (z * dims[1] + y) * dims[0] + x))
-        })
-    }
-
-    /// Triangles whose boxes may overlap the box `a..b`, ascending.
-    fn query(&self, a: DVec3, b: DVec3) -> Vec<u32> {
-        let mut found: Vec<u32> = self
-            .cells_of(a, b)
-            .flat_map(|c| self.cells[c].iter().copied())
-            .collect();
-        found.sort_unstable();
-        found.dedup();
-        found
-    }
+    grid
 }
 
 /// A flat patch of an instance in its own plane coordinates.
 struct Patch {
     /// Instance-local triangles.
     triangles: Vec<u32>,
-    origin: DVec3,
-    axes: [DVec3; 2],
-    normal: DVec3,
-}
-
-impl Patch {
-    fn to_2d(&self, p: DVec3) -> DVec2 {
-        let d = p - self.origin;
-        DVec2::new(d.dot(self.axes[0]), d.dot(self.axes[1]))
-    }
+    plane: Plane,
 }
 
 /// Where a cut piece ends inside one triangle.
@@ -284,6 +267,9 @@ struct Cuts {
     on_border: Vec<bool>,
     /// Point pairs; `true` for an extension of a free segment end.
     segments: Vec<([u32; 2], bool)>,
+    /// Some cuts follow shadow outlines: the patch's border bounds its sides too, as a shadow
+    /// that ends at a crease (a wall's shadow climbing a box) is no closed cut of the instance.
+    shadow: bool,
 }
 
 /// The patch's edges in plane coordinates, with their border flag (one patch face on them).
@@ -456,8 +442,9 @@ impl Cuts {
 fn split_instance(
     scene: &Scene,
     index: u32,
-    grid: &Grid,
+    grid: &BoxGrid,
     tol: Tolerances,
+    shadows: Option<&ShadowCutter>,
     report: &mut JunctionReport,
 ) -> Option<InstanceSplit> {
     let inst = &scene.instances[index as usize];
@@ -518,9 +505,11 @@ fn split_instance(
         let u = n.any_orthonormal_vector();
         patches.push(Patch {
             triangles: members,
-            origin,
-            axes: [u, n.cross(u)],
-            normal: n,
+            plane: Plane {
+                origin,
+                axes: [u, n.cross(u)],
+                normal: n,
+            },
         });
     }
     let receiver = |p: &Patch, id: u32| {
@@ -528,7 +517,8 @@ fn split_instance(
             let w = welded(t as usize);
             (0..3).all(|e| {
                 faces_at(w[e], w[(e + 1) % 3]).iter().all(|&(_, u, _)| {
-                    patch_of[u as usize] == id || normal[u as usize].dot(p.normal) < SMOOTH_DOT
+                    patch_of[u as usize] == id
+                        || normal[u as usize].dot(p.plane.normal) < SMOOTH_DOT
                 })
             })
         })
@@ -541,13 +531,17 @@ fn split_instance(
     let mut patch_cuts: Vec<Option<Cuts>> = Vec::with_capacity(patches.len());
     for (id, patch) in patches.iter().enumerate() {
         let cuts = receiver(patch, id as u32)
-            .then(|| patch_cuts_of(scene, index, patch, &tris, &weld, pos, grid, tol))
+            .then(|| {
+                patch_cuts_of(
+                    scene, index, patch, &tris, &weld, pos, grid, tol, shadows, report,
+                )
+            })
             .flatten();
         if let Some(cuts) = &cuts {
             report.segments += cuts.segments.iter().filter(|s| !s.1).count();
             report.extensions += cuts.segments.iter().filter(|s| s.1).count();
             for &t in &patch.triangles {
-                let corners = tris[t as usize].map(|v| patch.to_2d(pos(v)));
+                let corners = tris[t as usize].map(|v| patch.plane.to_2d(pos(v)));
                 let w = welded(t as usize);
                 for &([a, b], _) in &cuts.segments {
                     let Some(ends) = clip(
@@ -603,6 +597,7 @@ fn split_instance(
         split: Split::default(),
     };
     let mut cut_bits: Vec<[u8; 2]> = Vec::with_capacity(tris.len()); // junction, any cut
+    let mut out_patch: Vec<u32> = Vec::with_capacity(tris.len());
     let mut blends: BTreeMap<Vec<(u32, u32)>, u32> = BTreeMap::new();
     let source_vertices = inst.vertices.end - first;
     let mut any_split = false;
@@ -628,24 +623,26 @@ fn split_instance(
             let corners = tris[t].map(|v| {
                 patches
                     .get(id as usize)
-                    .map_or(DVec2::ZERO, |p| p.to_2d(pos(v)))
+                    .map_or(DVec2::ZERO, |p| p.plane.to_2d(pos(v)))
             });
             out.triangles.push(tris[t]);
             out.source_triangle.push(inst.source_triangle[t]);
             cut_bits.push(cuts.map_or([0, 0], |c| cut_bits_of(corners, c, tol.snap)));
+            out_patch.push(id);
             continue;
         }
         let frame = match cuts {
             Some(_) => &patches[id as usize],
             None => &own_frame(tris[t].map(pos)),
         };
-        let corners = tris[t].map(|v| frame.to_2d(pos(v)));
+        let corners = tris[t].map(|v| frame.plane.to_2d(pos(v)));
         let Some(faces) = retriangulate(corners, &on_edges, own.map_or(&[][..], Vec::as_slice))
         else {
             report.fallback_triangles += 1;
             out.triangles.push(tris[t]);
             out.source_triangle.push(inst.source_triangle[t]);
             cut_bits.push([0, 0]);
+            out_patch.push(id);
             continue;
         };
         any_split = true;
@@ -665,6 +662,7 @@ fn split_instance(
             out.triangles.push(tri);
             out.source_triangle.push(inst.source_triangle[t]);
             cut_bits.push(bits);
+            out_patch.push(id);
         }
     }
     if !any_split {
@@ -672,7 +670,13 @@ fn split_instance(
     }
     report.receivers += 1;
 
-    // Sides: connected across edges that are not cuts.
+    // Sides: connected across edges that are not cuts, nor borders of a patch with shadow cuts.
+    let shadowed = |id: u32| {
+        patch_cuts
+            .get(id as usize)
+            .and_then(Option::as_ref)
+            .is_some_and(|c| c.shadow)
+    };
     let blend_pos = |v: u32| -> [u64; 3] {
         let p = if v < source_vertices {
             pos(v)
@@ -724,7 +728,9 @@ fn split_instance(
                 }
                 for &(_, u, _) in faces_on(&new_edges, w[k], w[(k + 1) % 3]) {
                     let u = u as usize;
-                    let blocked = cut_bits[u][1] & (1 << edge_index(u, w[k], w[(k + 1) % 3])) != 0;
+                    let blocked = cut_bits[u][1] & (1 << edge_index(u, w[k], w[(k + 1) % 3])) != 0
+                        || (out_patch[u] != out_patch[t]
+                            && (shadowed(out_patch[u]) || shadowed(out_patch[t])));
                     if sides[u] == u32::MAX && !blocked {
                         sides[u] = next_side;
                         stack.push(u);
@@ -776,23 +782,6 @@ fn cut_bits_of(face: [DVec2; 3], cuts: &Cuts, snap: f64) -> [u8; 2] {
     bits
 }
 
-/// Welded id per vertex: vertices at the same position share one (+0.0 folds −0.0 into 0.0).
-fn weld(positions: &[Vec3]) -> Vec<u32> {
-    let key = |v: usize| (positions[v] + Vec3::ZERO).to_array().map(f32::to_bits);
-    let mut order: Vec<u32> = (0..positions.len() as u32).collect();
-    order.sort_unstable_by_key(|&v| (key(v as usize), v));
-    let mut weld = vec![0u32; positions.len()];
-    for (id, same) in order
-        .chunk_by(|&a, &b| key(a as usize) == key(b as usize))
-        .enumerate()
-    {
-        for &v in same {
-            weld[v as usize] = id as u32;
-        }
-    }
-    weld
-}
-
 /// Every edge as (welded end points ascending, triangle, corner it starts at), sorted.
 fn edge_list(triangles: usize, welded: impl Fn(usize) -> [u32; 3]) -> Vec<([u32; 2], u32, u8)> {
     let mut edges = Vec::with_capacity(3 * triangles);
@@ -822,9 +811,11 @@ fn own_frame(p: [DVec3; 3]) -> Patch {
     let u = n.any_orthonormal_vector();
     Patch {
         triangles: Vec::new(),
-        origin: p[0],
-        axes: [u, n.cross(u)],
-        normal: n,
+        plane: Plane {
+            origin: p[0],
+            axes: [u, n.cross(u)],
+            normal: n,
+        },
     }
 }
 
@@ -837,8 +828,10 @@ fn patch_cuts_of(
     tris: &[[u32; 3]],
     weld: &[u32],
     pos: impl Fn(u32) -> DVec3 + Copy,
-    grid: &Grid,
+    grid: &BoxGrid,
     tol: Tolerances,
+    shadows: Option<&ShadowCutter>,
+    report: &mut JunctionReport,
 ) -> Option<Cuts> {
     // The patch's edges and vertices in plane coordinates.
     let mut counted: BTreeMap<[u32; 2], (usize, [DVec2; 2])> = BTreeMap::new();
@@ -846,7 +839,7 @@ fn patch_cuts_of(
     let mut corners2d = Vec::with_capacity(patch.triangles.len());
     for &t in &patch.triangles {
         let tri = tris[t as usize];
-        let c = tri.map(|v| patch.to_2d(pos(v)));
+        let c = tri.map(|v| patch.plane.to_2d(pos(v)));
         corners2d.push(c);
         for k in 0..3 {
             let p = pos(tri[k]);
@@ -875,6 +868,7 @@ fn patch_cuts_of(
         points: Vec::new(),
         on_border: Vec::new(),
         segments: Vec::new(),
+        shadow: false,
     };
     let inst = &scene.instances[index as usize];
     let own = |g: u32| {
@@ -892,30 +886,28 @@ fn patch_cuts_of(
         let Some([a, b]) = plane_segment(p, patch, tol.touch) else {
             continue;
         };
-        let (a, b) = (patch.to_2d(a), patch.to_2d(b));
+        let (a, b) = (patch.plane.to_2d(a), patch.plane.to_2d(b));
         let length = a.distance(b);
         if length <= tol.snap {
             continue;
         }
-        // Parameter intervals of the segment inside the patch's triangles, merged.
-        let mut inside: Vec<[f64; 2]> = corners2d
-            .iter()
-            .filter_map(|&c| clip_interval(a, b, c, 1e-9 * tol.snap))
-            .collect();
-        inside.sort_by(|x, y| x[0].total_cmp(&y[0]));
-        let mut merged: Vec<[f64; 2]> = Vec::new();
-        for iv in inside {
-            match merged.last_mut() {
-                Some(m) if iv[0] <= m[1] + tol.snap / length => m[1] = m[1].max(iv[1]),
-                _ => merged.push(iv),
-            }
-        }
-        for [s0, s1] in merged {
+        for [s0, s1] in inside_intervals(a, b, &corners2d, tol.snap) {
             if (s1 - s0) * length > tol.snap {
                 let i = cuts.point(a.lerp(b, s0), &patch_edges, tol.snap);
                 let j = cuts.point(a.lerp(b, s1), &patch_edges, tol.snap);
                 cuts.add(i, j, false);
             }
+        }
+    }
+    // Shadow outlines of punctual lights: cuts never stitched, as junctions are.
+    if let Some(shadows) = shadows {
+        for [a, b] in shadows.patch_cuts(&patch.plane, &corners2d, (lo, hi), tol.texel, tol.touch) {
+            let i = cuts.point(a, &patch_edges, tol.snap);
+            let j = cuts.point(b, &patch_edges, tol.snap);
+            let before = cuts.segments.len();
+            cuts.add(i, j, false);
+            report.shadow_segments += cuts.segments.len() - before;
+            cuts.shadow = true;
         }
     }
     // Segments lying along the patch border change nothing: leave them out.
@@ -942,7 +934,7 @@ fn patch_cuts_of(
 /// edge in it (corners within `touch` count as in it); nothing when coplanar or touching at a
 /// point.
 fn plane_segment(p: [DVec3; 3], patch: &Patch, touch: f64) -> Option<[DVec3; 2]> {
-    let d = p.map(|q| (q - patch.origin).dot(patch.normal));
+    let d = p.map(|q| (q - patch.plane.origin).dot(patch.plane.normal));
     let side = d.map(|x| {
         if x.abs() <= touch {
             0
@@ -957,7 +949,7 @@ fn plane_segment(p: [DVec3; 3], patch: &Patch, touch: f64) -> Option<[DVec3; 2]>
     for k in 0..3 {
         let j = (k + 1) % 3;
         if side[k] == 0 {
-            points.push(p[k] - patch.normal * d[k]);
+            points.push(p[k] - patch.plane.normal * d[k]);
         }
         if side[k] * side[j] < 0 {
             let s = d[k] / (d[k] - d[j]);
@@ -968,32 +960,6 @@ fn plane_segment(p: [DVec3; 3], patch: &Patch, touch: f64) -> Option<[DVec3; 2]>
         [a, b] => Some([a, b]),
         _ => None,
     }
-}
-
-/// The parameter interval of segment `a → b` inside the counter-clockwise triangle `c`
-/// (boundary included within `eps`).
-fn clip_interval(a: DVec2, b: DVec2, c: [DVec2; 3], eps: f64) -> Option<[f64; 2]> {
-    let d = b - a;
-    let (mut s0, mut s1) = (0.0f64, 1.0f64);
-    for k in 0..3 {
-        let e = c[(k + 1) % 3] - c[k];
-        let n = DVec2::new(-e.y, e.x).normalize_or_zero(); // inward for counter-clockwise
-        let num = n.dot(a - c[k]) + eps;
-        let den = n.dot(d);
-        if den.abs() < 1e-300 {
-            if num < 0.0 {
-                return None;
-            }
-        } else {
-            let s = -num / den;
-            if den > 0.0 {
-                s0 = s0.max(s);
-            } else {
-                s1 = s1.min(s);
-            }
-        }
-    }
-    (s1 > s0).then_some([s0, s1])
 }
 
 /// The piece of cut `a → b` inside triangle `c`, its ends classified; `None` when it misses or
@@ -1157,7 +1123,7 @@ fn vertex_of(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::scene::{Instance, Material};
+    use crate::scene::{Instance, LightKind, Material};
 
     /// Points near a segment's ends or near each other split it into no sliver (the fuzzer's
     /// out-of-memory case was pieces splitting each other without end).
@@ -1174,6 +1140,7 @@ mod tests {
             ],
             on_border: vec![false; 5],
             segments: vec![([0, 1], false)],
+            shadow: false,
         };
         cuts.split_at_points(snap);
         assert_eq!(cuts.segments.len(), 2, "{:?}", cuts.segments);
@@ -1424,6 +1391,145 @@ mod tests {
         for t in split.instances[floor].triangles.clone() {
             let xs = split.triangles[t as usize].map(|v| split.positions[v as usize].x);
             assert!(xs.iter().all(|&x| x <= 1e-6) || xs.iter().all(|&x| x >= -1e-6));
+        }
+    }
+
+    /// A closed box from `lo` to `hi`, faces counter-clockwise seen from outside.
+    fn cuboid(lo: Vec3, hi: Vec3) -> (Vec<Vec3>, Vec<[u32; 3]>) {
+        let mut p = Vec::new();
+        let mut t = Vec::new();
+        for axis in 0..3 {
+            for high in [false, true] {
+                let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
+                let corner = |a: bool, b: bool| {
+                    let mut c = lo;
+                    c[axis] = if high { hi[axis] } else { lo[axis] };
+                    c[u] = if a { hi[u] } else { lo[u] };
+                    c[v] = if b { hi[v] } else { lo[v] };
+                    c
+                };
+                let first = p.len() as u32;
+                p.extend([
+                    corner(false, false),
+                    corner(true, false),
+                    corner(true, true),
+                ]);
+                p.push(corner(false, true));
+                // (u, v, axis) is right-handed: counter-clockwise in (u, v) faces +axis.
+                let quad = [[0, 1, 2], [0, 2, 3]].map(|q: [u32; 3]| q.map(|k| k + first));
+                t.extend(if high {
+                    quad
+                } else {
+                    quad.map(|q| [q[0], q[2], q[1]])
+                });
+            }
+        }
+        (p, t)
+    }
+
+    /// Whether the segment from `o` along `d` (unit) hits a triangle of `scene`.
+    fn blocked(scene: &Scene, o: Vec3, d: Vec3) -> bool {
+        scene.triangles.iter().any(|t| {
+            let [a, b, c] = t.map(|v| scene.positions[v as usize]);
+            let (e1, e2) = (b - a, c - a);
+            let q = d.cross(e2);
+            let det = e1.dot(q);
+            if det.abs() < 1e-9 {
+                return false;
+            }
+            let s = (o - a) / det;
+            let (u, r) = (s.dot(q), d.dot(s.cross(e1)));
+            u >= 0.0 && r >= 0.0 && u + r <= 1.0 && e2.dot(s.cross(e1)) > 1e-5
+        })
+    }
+
+    /// Total length of the floor's (instance 0) never-stitched cut edges on the line x = `x`.
+    fn cut_length_at(scene: &Scene, x: f32) -> f32 {
+        let inst = &scene.instances[0];
+        let mut length = 0.0;
+        for t in inst.triangles.clone() {
+            let tri = scene.triangles[t as usize].map(|v| scene.positions[v as usize]);
+            for k in 0..3 {
+                let (a, b) = (tri[k], tri[(k + 1) % 3]);
+                if scene.is_junction_edge(t, k) && (a.x - x).abs() < 1e-4 && (b.x - x).abs() < 1e-4
+                {
+                    length += a.distance(b);
+                }
+            }
+        }
+        length / 2.0 // each edge from both of its triangles
+    }
+
+    /// A 1 m box on the floor under a sun travelling along (1, −2, 0) casts a shadow reaching
+    /// 0.5 m past its side x = 2: the floor is cut along that outline (x = 2.5, 1 m long). With
+    /// a roof at 3 m whose shadow covers x = 2..3.5, the box's outline lies in shadow and is
+    /// not cut; the roof's own outline (x = 3.5, across the floor) is.
+    #[test]
+    fn a_box_on_a_floor_under_a_sun_is_cut_along_its_shadow_outline() {
+        let sun = crate::scene::Light {
+            name: None,
+            kind: LightKind::Directional,
+            position: Vec3::ZERO,
+            direction: Vec3::new(1.0, -2.0, 0.0).normalize(),
+            intensity: Vec3::ONE,
+            range: None,
+        };
+        let roof = (
+            vec![
+                Vec3::new(0.5, 3.0, 0.0),
+                Vec3::new(2.0, 3.0, 0.0),
+                Vec3::new(2.0, 3.0, 4.0),
+                Vec3::new(0.5, 3.0, 4.0),
+            ],
+            vec![[0, 1, 2], [0, 2, 3]],
+        );
+        let cube = cuboid(Vec3::new(1.0, 0.0, 1.0), Vec3::new(2.0, 1.0, 2.0));
+        for with_roof in [false, true] {
+            let mut meshes = vec![floor(), cube.clone()];
+            if with_roof {
+                meshes.push(roof.clone());
+            }
+            let mut scene = scene_of(&meshes);
+            scene.lights.push(sun.clone());
+            let shadows_of = scene.clone();
+            let light_at = |_: usize, p: Vec3, n: Vec3| {
+                let l = -sun.direction;
+                let lit = n.dot(l) > 0.0 && !blocked(&shadows_of, p + n * 1e-4, l);
+                if lit { n.dot(l) } else { 0.0 }
+            };
+            let cutter = ShadowCutter::new(&scene, &light_at);
+            let (split, report) = split_with(scene, 0.1, Some(&cutter));
+            assert_eq!(report.fallback_triangles, 0, "{report:?}");
+            let (outline, roof_outline) = (cut_length_at(&split, 2.5), cut_length_at(&split, 3.5));
+            if with_roof {
+                assert!(
+                    outline < 1e-3,
+                    "{outline} m cut in the roof's shadow: {report:?}"
+                );
+                assert!(
+                    (roof_outline - 4.0).abs() < 1e-3,
+                    "{roof_outline}: {report:?}"
+                );
+            } else {
+                assert!((outline - 1.0).abs() < 1e-3, "{outline}: {report:?}");
+                assert_eq!(roof_outline, 0.0);
+                // The sides of the cut do not meet: the shadow is a side of its own.
+                let inst = &split.instances[0];
+                let side_at = |x: f32| {
+                    let p = Vec2::new(x, 1.5);
+                    inst.triangles.clone().find_map(|t| {
+                        let c = split.triangles[t as usize].map(|v| {
+                            Vec2::new(split.positions[v as usize].x, split.positions[v as usize].z)
+                        });
+                        let inside = (0..3)
+                            .all(|k| (c[(k + 1) % 3] - c[k]).perp_dot(p - c[k]) <= 0.0)
+                            || (0..3).all(|k| (c[(k + 1) % 3] - c[k]).perp_dot(p - c[k]) >= 0.0);
+                        inside.then(|| inst.split.sides[(t - inst.triangles.start) as usize])
+                    })
+                };
+                assert!(side_at(2.45).is_some());
+                assert_ne!(side_at(2.45), side_at(2.55));
+            }
         }
     }
 }

@@ -14,8 +14,10 @@
 //! output glTF as an extra single-sided primitive.
 
 mod camera;
+mod geometry;
 mod gltf_in;
 pub mod junctions;
+pub mod shadow_cuts;
 
 use std::ops::Range;
 use std::path::PathBuf;

@@ -77,6 +77,15 @@ impl Texels {
     pub fn len(&self) -> usize {
         self.position.len()
     }
+
+    /// Per texel: not in [`Texels::invalid`].
+    pub fn valid_mask(&self) -> Vec<bool> {
+        let mut valid = vec![true; self.len()];
+        for &i in &self.invalid {
+            valid[i as usize] = false;
+        }
+        valid
+    }
     pub fn is_empty(&self) -> bool {
         self.position.is_empty()
     }

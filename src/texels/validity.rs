@@ -211,10 +211,7 @@ pub fn fill_invalid(texels: &Texels, values: &mut [Vec3]) {
     if texels.invalid.is_empty() {
         return;
     }
-    let mut known = vec![true; texels.len()];
-    for &i in &texels.invalid {
-        known[i as usize] = false;
-    }
+    let mut known = texels.valid_mask();
     let mut pending: Vec<u32> = texels.invalid.clone();
     let mut ring: Vec<(u32, Vec3)> = Vec::with_capacity(pending.len());
     loop {
