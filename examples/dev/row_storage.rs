@@ -3,13 +3,14 @@
 //! bit-identical.
 //!
 //! ```sh
-//! nice -n 10 cargo run --release --example row_storage [-- REPEATS]
+//! nice -n 10 cargo run --release --example row_storage [-- REPEATS [FILTER]]
 //! ```
 //!
-//! Bakes `cornell_box.gltf` at high and `furnished_interior.glb` at draft and medium with the
+//! Bakes `cornell_box.gltf` and `two_rooms.gltf` at high and `furnished_interior.glb` at draft and medium with the
 //! preset's settings (no automatic choice: Monte Carlo rows, K of the preset), then solves each
 //! transport with Jacobi, Gauss–Seidel and Southwell, alternating the two storages `REPEATS`
-//! times (default 3) and keeping each one's fastest run.
+//! times (default 3) and keeping each one's fastest run. `FILTER` keeps the cases whose
+//! "scene preset" contains it.
 
 use std::path::Path;
 use std::time::Instant;
@@ -22,9 +23,11 @@ fn main() {
     let repeats: usize = std::env::args()
         .nth(1)
         .map_or(3, |a| a.parse().expect("REPEATS"));
+    let only = std::env::args().nth(2).unwrap_or_default();
     let fixtures = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures");
     let cases = [
         ("cornell_box.gltf", "high", BakeConfig::high()),
+        ("two_rooms.gltf", "high", BakeConfig::high()),
         ("furnished_interior.glb", "draft", BakeConfig::draft()),
         ("furnished_interior.glb", "medium", BakeConfig::medium()),
     ];
@@ -33,6 +36,9 @@ fn main() {
     );
     println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|");
     for (scene, preset, mut config) in cases {
+        if !format!("{scene} {preset}").contains(&only) {
+            continue;
+        }
         config.auto = None;
         let baked = compute(&fixtures.join(scene), &config, &NoProgress).expect("bake");
         let counts = &baked.transport;
