@@ -3,29 +3,23 @@
 //!
 //! A Monte Carlo entry is `F_ij = hits_ij / K_i` (hits of texel `j` among the `K_i` rays of
 //! texel `i`), so a row is stored losslessly as `K_i` and, per entry, the step from the previous
-//! column and the hit count. A non-empty row of `m` entries is
+//! column and the hit count. A non-empty row's bytes are
 //!
 //! ```text
-//!   varint(m << 1 | wide) · varint(first column) · varint(count bytes)
-//!   · steps (m bytes, or 2m when wide) · counts · far steps (u16 each, or u32 when wide)
+//!   varint(m) · counts (m bytes) · steps (one varint per entry)
 //! ```
 //!
-//! Each step is `gap << 1 | (hits > 1)` (`gap` = column − previous column − 1, the first
-//! column counting as gap 0; columns are sorted and distinct) in one byte for gaps up to 126,
-//! or two bytes for gaps up to 32766 in a `wide` row. A larger gap is written as the step
-//! `ESCAPE | (hits > 1)` (`0xFE`, or `0xFFFE` wide) with the gap itself in the far stream
-//! (u16, or u32 wide). Each entry hit more than once takes the next count byte, `hits − 2`
-//! (255 escapes to a 4-byte count). The builder picks per row the width that takes fewer
-//! bytes (most steps are short in small scenes, most need two bytes in large ones).
+//! where each step is the LEB128 varint `gap << 1 | (hits > 1)` (`gap` = column − previous
+//! column − 1; columns are sorted and distinct) and each entry hit more than once takes the next
+//! count byte, `hits − 2` (255 escapes to a 4-byte count). Most entries are hit once and lie
+//! near the previous one, so an entry takes 1–2 bytes instead of 8 (u32 column + f32 weight).
 //! Decoding rebuilds the very f32 the builder used to store (`hits as f32 / K_i as f32`), so
 //! every sum is bit-identical.
 //!
-//! Why fixed-width steps with side streams: the solvers' inner loop must keep up with a loop
-//! over f32 weights. A varint's length decides where the next step starts, a chain through a
-//! memory load per entry (sweeps were 2–3× slower than over f32 weights); here the step of
-//! entry `n` is at `n` (or `2n`), and the count and far streams advance by a flag, so the loop
-//! has no branch and no load-to-address chain (the side streams are read whether or not the
-//! entry uses them: the storage ends in padding).
+//! Why two streams: the counts are read without a branch on the flag (a repeated hit is a coin
+//! toss in small scenes; a mispredicted branch per entry made sweeps 2.5–3× slower than f32
+//! rows), and the step's length branch is well predicted. The varint is written here rather
+//! than taken from a crate for that layout: it is decoded inline in the solvers' sweeps.
 
 use std::iter::{Copied, Zip};
 use std::slice::Iter;
@@ -66,57 +60,17 @@ impl Default for WeightRows {
     }
 }
 
-/// Monte Carlo rows as ray counts (see the module docs).
+/// Monte Carlo rows as ray counts, varint-coded (see the module docs).
 #[derive(Clone, Debug, PartialEq)]
 pub struct CountRows {
     /// Row `i` is `bytes[row_start[i]..row_start[i+1]]` (u64: rows of large bakes pass 4 GiB).
     row_start: Vec<u64>,
     /// Gathering rays `K_i` of each row: the denominator of its weights.
     rays: Vec<u32>,
-    /// The rows, then [`PADDING`] bytes: the side streams are read before a step says whether
-    /// it uses them.
+    /// The rows, then one padding byte: a step's second byte is read before its first says
+    /// whether there is one.
     bytes: Vec<u8>,
     entries: u64,
-}
-
-/// The most rays a row may have for its weights to be exact ([`weight`]); the configuration
-/// allows at most this many.
-pub const MAX_RAYS: u32 = 1 << 20;
-/// Bytes after the last row: the widest read past a row's end (a far step).
-const PADDING: usize = 4;
-/// The count byte that says a 4-byte count (little-endian `hits`) follows.
-const COUNT_ESCAPE: u8 = 255;
-
-/// One step width: one byte with u16 far steps, or two bytes with u32 far steps.
-trait Width {
-    const STEP_BYTES: usize;
-    const FAR_BYTES: usize;
-    /// The least step that says "the gap is in the far stream" (its low bit is the flag).
-    const ESCAPE: u32;
-    /// The largest gap a far step holds.
-    const FAR_MAX: u32;
-}
-struct Narrow;
-struct Wide;
-impl Width for Narrow {
-    const STEP_BYTES: usize = 1;
-    const FAR_BYTES: usize = 2;
-    const ESCAPE: u32 = 0xFE;
-    const FAR_MAX: u32 = u16::MAX as u32;
-}
-impl Width for Wide {
-    const STEP_BYTES: usize = 2;
-    const FAR_BYTES: usize = 4;
-    const ESCAPE: u32 = 0xFFFE;
-    const FAR_MAX: u32 = u32::MAX;
-}
-
-/// The little-endian unsigned integer of `W` bytes at `bytes[at..]`.
-#[inline(always)]
-fn read_le<const W: usize>(bytes: &[u8], at: usize) -> u32 {
-    let mut word = [0u8; 4];
-    word[..W].copy_from_slice(&bytes[at..at + W]);
-    u32::from_le_bytes(word)
 }
 
 impl Default for CountRows {
@@ -124,7 +78,7 @@ impl Default for CountRows {
         CountRows {
             row_start: vec![0],
             rays: Vec::new(),
-            bytes: vec![0; PADDING],
+            bytes: vec![0],
             entries: 0,
         }
     }
@@ -134,67 +88,35 @@ impl CountRows {
     /// Appends a row from the source texels its `rays` rays hit, sorted (a texel hit `n` times
     /// appears `n` times).
     pub fn push_row(&mut self, sorted_hits: &[u32], rays: u32) {
-        debug_assert!(rays <= MAX_RAYS, "{rays} rays: weights would not be exact");
-        self.bytes.truncate(self.bytes.len() - PADDING);
-        if let Some(&first) = sorted_hits.first() {
-            let runs = || sorted_hits.chunk_by(|a, b| a == b);
-            // Each entry as (gap, hits); the first column counts as gap 0.
-            let entries = || {
-                let mut previous = first.wrapping_sub(1);
-                runs().map(move |run| {
-                    let gap = run[0].wrapping_sub(previous).wrapping_sub(1);
-                    previous = run[0];
-                    (gap, run.len())
-                })
-            };
-            let m = runs().count();
-            let far_bytes = |near_max: u32, far: usize| {
-                far * entries().filter(|&(gap, _)| gap > near_max).count()
-            };
-            let narrow = (entries().all(|(gap, _)| gap <= Narrow::FAR_MAX))
-                .then(|| m + far_bytes(Narrow::ESCAPE / 2 - 1, Narrow::FAR_BYTES));
-            let wide =
-                narrow.is_none_or(|n| 2 * m + far_bytes(Wide::ESCAPE / 2 - 1, Wide::FAR_BYTES) < n);
+        let runs = || sorted_hits.chunk_by(|a, b| a == b);
+        self.bytes.pop(); // the padding
+        if !sorted_hits.is_empty() {
             let count_bytes = |hits: usize| match hits {
                 1 => 0,
                 2..=256 => 1,
                 _ => 5,
             };
-            write_varint(&mut self.bytes, (m as u64) << 1 | wide as u64);
-            write_varint(&mut self.bytes, first as u64);
             write_varint(&mut self.bytes, runs().map(|r| count_bytes(r.len())).sum());
-            match wide {
-                true => self.push_steps::<Wide>(entries()),
-                false => self.push_steps::<Narrow>(entries()),
-            }
-            self.entries += m as u64;
-        }
-        self.row_start.push(self.bytes.len() as u64);
-        self.bytes.extend([0; PADDING]);
-        self.rays.push(rays);
-    }
-
-    /// The steps, counts and far steps of a row's `(gap, hits)` entries, with width `W`.
-    fn push_steps<W: Width>(&mut self, entries: impl Iterator<Item = (u32, usize)> + Clone) {
-        let near = |gap: u32| gap < W::ESCAPE / 2;
-        for (gap, hits) in entries.clone() {
-            let step = if near(gap) { gap << 1 } else { W::ESCAPE } | (hits > 1) as u32;
-            self.bytes
-                .extend_from_slice(&step.to_le_bytes()[..W::STEP_BYTES]);
-        }
-        for (_, hits) in entries.clone().filter(|&(_, hits)| hits > 1) {
-            match u8::try_from(hits - 2) {
-                Ok(b) if b < COUNT_ESCAPE => self.bytes.push(b),
-                _ => {
-                    self.bytes.push(COUNT_ESCAPE);
-                    self.bytes.extend((hits as u32).to_le_bytes());
+            for run in runs().filter(|r| r.len() > 1) {
+                match u8::try_from(run.len() - 2) {
+                    Ok(b) if b < ESCAPE => self.bytes.push(b),
+                    _ => {
+                        self.bytes.push(ESCAPE);
+                        self.bytes.extend((run.len() as u32).to_le_bytes());
+                    }
                 }
             }
+            let mut previous = u32::MAX; // the first gap counts from column 0
+            for run in runs() {
+                let gap = run[0].wrapping_sub(previous).wrapping_sub(1) as u64;
+                write_varint(&mut self.bytes, gap << 1 | (run.len() > 1) as u64);
+                previous = run[0];
+                self.entries += 1;
+            }
         }
-        for (gap, _) in entries.filter(|&(gap, _)| !near(gap)) {
-            self.bytes
-                .extend_from_slice(&gap.to_le_bytes()[..W::FAR_BYTES]);
-        }
+        self.row_start.push(self.bytes.len() as u64);
+        self.bytes.push(0);
+        self.rays.push(rays);
     }
 
     /// Empties the last row (its ray count stays).
@@ -204,9 +126,10 @@ impl CountRows {
             return;
         }
         let start = self.row_start[n - 1];
-        self.entries -= self.row(n - 1).len() as u64;
+        let removed = self.row(n - 1).count() as u64;
+        self.entries -= removed;
         self.bytes.truncate(start as usize);
-        self.bytes.extend([0; PADDING]);
+        self.bytes.push(0);
         self.row_start[n] = start;
     }
 
@@ -216,7 +139,7 @@ impl CountRows {
         self.row_start
             .extend(other.row_start[1..].iter().map(|s| s + base));
         self.rays.extend(other.rays);
-        self.bytes.truncate(self.bytes.len() - PADDING);
+        self.bytes.pop();
         self.bytes.extend(other.bytes);
         self.entries += other.entries;
     }
@@ -232,35 +155,31 @@ impl CountRows {
     /// The entries of row `i` as (source texel, `hits / K_i`).
     #[inline]
     pub fn row(&self, i: usize) -> CountRow<'_> {
+        let rays = self.rays[i] as f32;
         let (start, end) = (self.row_start[i] as usize, self.row_start[i + 1] as usize);
-        let mut row = CountRow {
-            bytes: &[],
-            left: 0,
-            wide: false,
-            step: 0,
-            counts: 0,
-            far: 0,
-            col: 0,
-            inv_rays: 1.0 / self.rays[i] as f64,
+        // From the row's start to the padding byte.
+        let bytes = &self.bytes[start..];
+        let (counts, next) = match end > start {
+            true => {
+                let (m, header) = read_varint(bytes, 0);
+                (header, header + m as usize)
+            }
+            false => (0, 0),
         };
-        if end > start {
-            // From the row's start to the storage's end (its padding included).
-            let bytes = &self.bytes[start..];
-            let (header, at) = read_varint(bytes, 0);
-            let (first, at) = read_varint(bytes, at);
-            let (count_bytes, at) = read_varint(bytes, at);
-            let m = (header >> 1) as usize;
-            row.wide = header & 1 == 1;
-            row.bytes = bytes;
-            row.left = m;
-            row.step = at;
-            row.counts = at + m * if row.wide { Wide::STEP_BYTES } else { 1 };
-            row.far = row.counts + count_bytes as usize;
-            row.col = (first as u32).wrapping_sub(1);
+        CountRow {
+            bytes,
+            end: end - start,
+            counts,
+            next,
+            col: u32::MAX,
+            rays,
+            once: 1.0 / rays,
         }
-        row
     }
 }
+
+/// The count byte that says a 4-byte count (little-endian `hits`) follows.
+const ESCAPE: u8 = 255;
 
 fn write_varint(out: &mut Vec<u8>, mut v: u64) {
     while v >= 0x80 {
@@ -271,7 +190,17 @@ fn write_varint(out: &mut Vec<u8>, mut v: u64) {
 }
 
 /// The varint at `bytes[at..]` and the position after it.
-fn read_varint(bytes: &[u8], mut at: usize) -> (u64, usize) {
+#[inline]
+fn read_varint(bytes: &[u8], at: usize) -> (u64, usize) {
+    let b = bytes[at];
+    if b < 0x80 {
+        return (b as u64, at + 1);
+    }
+    read_varint_tail(bytes, at)
+}
+
+#[cold]
+fn read_varint_tail(bytes: &[u8], mut at: usize) -> (u64, usize) {
     let (mut v, mut shift) = (0u64, 0);
     loop {
         let b = bytes[at];
@@ -287,119 +216,76 @@ fn read_varint(bytes: &[u8], mut at: usize) -> (u64, usize) {
 /// The entries of one count row, decoded as they are read.
 #[derive(Clone, Debug)]
 pub struct CountRow<'a> {
-    /// From the row's start to the end of the storage (its padding included).
+    /// From the row's start to the end of the storage (its padding byte included).
     bytes: &'a [u8],
-    /// Entries not yet read.
-    left: usize,
-    /// Two-byte steps with u32 far steps (else one byte, u16).
-    wide: bool,
-    /// Positions of the next step, count byte and far step.
-    step: usize,
+    /// The row's end in `bytes`.
+    end: usize,
+    /// Position of the next count byte.
     counts: usize,
-    far: usize,
-    /// The previous entry's column (the first column − 1 before the first).
+    /// Position of the next step.
+    next: usize,
+    /// The previous entry's column (`u32::MAX` before the first).
     col: u32,
-    /// `1 / K_i` in f64: `hits · (1 / K_i)` rounded to f32 is exactly `hits as f32 / K_i as f32`
-    /// (see [`weight`]), without a division per entry.
-    inv_rays: f64,
-}
-
-impl CountRow<'_> {
-    /// The next entry, in a row of width `W` with entries left.
-    #[inline(always)]
-    fn decode<W: Width>(&mut self) -> (u32, f32) {
-        let step = match W::STEP_BYTES {
-            1 => read_le::<1>(self.bytes, self.step),
-            _ => read_le::<2>(self.bytes, self.step),
-        };
-        let far = match W::FAR_BYTES {
-            2 => read_le::<2>(self.bytes, self.far),
-            _ => read_le::<4>(self.bytes, self.far),
-        };
-        self.step += W::STEP_BYTES;
-        let escaped = step >= W::ESCAPE;
-        self.far += escaped as usize * W::FAR_BYTES;
-        let gap = if escaped { far } else { step >> 1 };
-        self.col = self.col.wrapping_add(gap).wrapping_add(1);
-        // The count byte is read whether or not the entry is repeated (in bounds: the far
-        // steps or the padding follow), and a single hit divided like a repeated one, so that
-        // no branch depends on the flag (a repeated hit is a coin toss in small scenes).
-        let repeated = step & 1;
-        let count = self.bytes[self.counts] as u32 * repeated;
-        let escaped_count = count == COUNT_ESCAPE as u32;
-        let hits = match escaped_count {
-            true => escaped_count_at(self.bytes, self.counts),
-            false => 1 + repeated + count,
-        };
-        self.counts += repeated as usize + 4 * escaped_count as usize;
-        (self.col, scaled(hits, self.inv_rays))
-    }
-
-    /// The rest of the row folded with `f`: the solvers' path, one loop per width.
-    #[inline(always)]
-    fn fold_width<W: Width, B, F: FnMut(B, (u32, f32)) -> B>(mut self, init: B, mut f: F) -> B {
-        let mut acc = init;
-        for _ in 0..self.left {
-            acc = f(acc, self.decode::<W>());
-        }
-        acc
-    }
-}
-
-/// The weight of `hits` of `rays` rays as the solvers' rows hold it, `hits as f32 / rays as f32`
-/// (the f32 the builder stored before counts), computed as [`CountRow`] does: `hits · (1 / K)`
-/// in f64, rounded to f32. That is the same f32: the f64 product is within 2⁻⁵² (relative) of
-/// `hits / K`, while a quotient of integers below 2²⁴ (`hits ≤ K ≤ 2²⁰`, the configuration's
-/// limit) that is not an f32 is at least `1 / (K · 2²⁵) ≥ 2⁻⁴⁵` from every f32 rounding boundary
-/// (a boundary has 25 significant bits, the quotient's distance to it is a multiple of
-/// `1 / (K · 2²⁴⁻ᵉ)`), and one that is an f32 rounds back to itself.
-#[cfg(test)]
-fn weight(hits: u32, rays: u32) -> f32 {
-    scaled(hits, 1.0 / rays as f64)
-}
-
-/// `hits · inv_rays` as f32 ([`weight`]).
-#[inline(always)]
-fn scaled(hits: u32, inv_rays: f64) -> f32 {
-    (hits as f64 * inv_rays) as f32
-}
-
-/// The 4-byte count after the escape byte at `at`.
-#[cold]
-#[inline(never)]
-fn escaped_count_at(bytes: &[u8], at: usize) -> u32 {
-    read_le::<4>(bytes, at + 1)
+    rays: f32,
+    /// `1 / K_i`: the weight of a single hit, equal to `1 as f32 / K_i`.
+    once: f32,
 }
 
 impl Iterator for CountRow<'_> {
     type Item = (u32, f32);
 
+    /// The solvers' path: the decoder's state in locals for the whole row.
     #[inline]
+    fn fold<B, F: FnMut(B, (u32, f32)) -> B>(self, init: B, mut f: F) -> B {
+        let mut acc = init;
+        for entry in self {
+            acc = f(acc, entry);
+        }
+        acc
+    }
+
+    #[inline(always)]
     fn next(&mut self) -> Option<(u32, f32)> {
-        if self.left == 0 {
+        if self.next >= self.end {
             return None;
         }
-        self.left -= 1;
-        Some(match self.wide {
-            true => self.decode::<Wide>(),
-            false => self.decode::<Narrow>(),
-        })
-    }
-
-    fn size_hint(&self) -> (usize, Option<usize>) {
-        (self.left, Some(self.left))
-    }
-
-    #[inline]
-    fn fold<B, F: FnMut(B, (u32, f32)) -> B>(self, init: B, f: F) -> B {
-        match self.wide {
-            true => self.fold_width::<Wide, B, F>(init, f),
-            false => self.fold_width::<Narrow, B, F>(init, f),
-        }
+        // A one- or two-byte step without a branch on its length (in small scenes most steps
+        // take one byte, in large ones most take two); longer ones are rare.
+        let (b0, b1) = (self.bytes[self.next], self.bytes[self.next + 1]);
+        let v = if (b0 & b1) >= 0x80 {
+            let (v, next) = read_varint_tail(self.bytes, self.next);
+            self.next = next;
+            v
+        } else {
+            let long = (b0 >> 7) as u64;
+            self.next += 1 + long as usize;
+            (b0 & 0x7f) as u64 | (((b1 as u64) << 7) * long)
+        };
+        self.col = self.col.wrapping_add((v >> 1) as u32).wrapping_add(1);
+        // Read whether or not the entry is repeated (`counts` < `next` ≤ len: in bounds), so
+        // that no branch depends on the flag.
+        let repeated = (v & 1) as usize;
+        let byte = self.bytes[self.counts];
+        let hits = if (repeated == 1) & (byte == ESCAPE) {
+            self.escaped_count()
+        } else {
+            byte as u32 + 2
+        };
+        self.counts += repeated;
+        let weight = hits as f32 / self.rays;
+        Some((self.col, if repeated == 1 { weight } else { self.once }))
     }
 }
 
-impl ExactSizeIterator for CountRow<'_> {}
+impl CountRow<'_> {
+    /// The 4-byte count after an escape byte at `counts`; moves past it.
+    #[cold]
+    fn escaped_count(&mut self) -> u32 {
+        let at = self.counts + 1;
+        self.counts += 4;
+        u32::from_le_bytes(self.bytes[at..at + 4].try_into().unwrap())
+    }
+}
 
 impl Rows {
     /// Rows held.
@@ -592,36 +478,6 @@ mod tests {
                 assert!(a.irradiance == baked.solution.irradiance);
             }
         }
-    }
-
-    /// `weight` (a multiplication in f64) is the f32 quotient for every row the configuration
-    /// allows: all counts of every K up to 4096, random ones up to the limit.
-    #[test]
-    fn weights_are_the_f32_quotients() {
-        for rays in 1..=4096 {
-            for hits in 1..=rays {
-                assert_eq!(
-                    weight(hits, rays),
-                    hits as f32 / rays as f32,
-                    "{hits}/{rays}"
-                );
-            }
-        }
-        let mut rng = Rng::new(3, 0, 0);
-        for _ in 0..4_000_000 {
-            let rays = 1 + rng.next_u32() % MAX_RAYS;
-            let hits = 1 + rng.next_u32() % rays;
-            assert_eq!(
-                weight(hits, rays),
-                hits as f32 / rays as f32,
-                "{hits}/{rays}"
-            );
-        }
-        let mut c = crate::config::BakeConfig::draft();
-        c.transport.gather_rays = MAX_RAYS;
-        assert!(c.validate().is_ok());
-        c.transport.gather_rays = MAX_RAYS + 1;
-        assert!(c.validate().is_err());
     }
 
     /// Concatenating chunks and clearing a row keep the other rows intact.
