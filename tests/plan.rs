@@ -339,7 +339,8 @@ fn memory_estimate_and_the_gather_switch() {
         technique: Technique::DEFAULT,
     };
     let stored = plan::memory_estimate(&inputs);
-    let parts = stored.scene + stored.bvh + stored.texels + stored.pages + stored.rows;
+    let parts =
+        stored.scene + stored.bvh + stored.atlas + stored.texels + stored.pages + stored.rows;
     assert_eq!(stored.total(), parts);
     // 25.6 M Monte Carlo rays stored as counts, built in chunks then concatenated.
     assert!(
