@@ -206,6 +206,10 @@ pub struct TransportParams {
     /// method only (stored rows or matrix-free); point, polygon and hierarchical form factors
     /// are deterministic, so their errors are not the white noise it removes and it is skipped.
     pub denoise: bool,
+    /// Keep direct light split by light source as well (`Transport::direct_terms`; Monte Carlo
+    /// rows only): what relighting and per-light layers scale. Costs 12 bytes per texel and
+    /// source; set by the bake when `output.keep_transport` or `output.layers` asks.
+    pub split_direct: bool,
 }
 
 /// How the radiosity system is iterated.
@@ -233,6 +237,40 @@ pub struct OutputParams {
     /// Also write each page's per-texel error estimate (`plan::error_map`) as
     /// `<page>_error.exr`.
     pub error_map: bool,
+    /// Also write `<stem>.transport`: the rows, direct light per source and the settings, from
+    /// which `lightbake relight` re-solves with other light and material values without casting
+    /// a ray (see the crate's `relight`). Monte Carlo rows only.
+    pub keep_transport: bool,
+    /// Write one set of pages per layer (`None`: no layers): each punctual light, the emissive
+    /// materials together and the sky are a layer of their own unless a [`LayerGroup`] names
+    /// them. The layers sum to the lightmap.
+    pub layers: Option<Vec<LayerGroup>>,
+}
+
+/// Light sources baked into one layer: light names, emissive material names or `sky`.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct LayerGroup {
+    pub name: String,
+    pub members: Vec<String>,
+}
+
+impl LayerGroup {
+    /// A group as the command line and manifests give it: `NAME=MEMBER,MEMBER…`.
+    pub fn parse(spec: &str) -> crate::Result<LayerGroup> {
+        let bad = || crate::Error::Option(format!("layer {spec:?}: expected GROUP=NAME,NAME…"));
+        let (name, members) = spec.split_once('=').ok_or_else(bad)?;
+        let members: Vec<String> = (members.split(','))
+            .map(|m| m.trim().to_string())
+            .filter(|m| !m.is_empty())
+            .collect();
+        if name.trim().is_empty() || members.is_empty() {
+            return Err(bad());
+        }
+        Ok(LayerGroup {
+            name: name.trim().to_string(),
+            members,
+        })
+    }
 }
 
 /// Which settings the user fixed; the automatic choice ([`crate::plan`]) leaves those alone.
@@ -311,6 +349,7 @@ impl BakeConfig {
                 seed: 0,
                 validity: true,
                 denoise: true,
+                split_direct: false,
             },
             solve: SolveParams {
                 tolerance,
@@ -322,6 +361,8 @@ impl BakeConfig {
                 rgbm: false,
                 seams: true,
                 error_map: false,
+                keep_transport: false,
+                layers: None,
             },
             auto: None,
             max_memory: None,
@@ -391,6 +432,20 @@ impl BakeConfig {
             return Err(Option(format!(
                 "sky radiance must be finite and non-negative, got {}",
                 t.sky
+            )));
+        }
+        let o = &self.output;
+        let stored_monte_carlo = matches!(
+            self.technique,
+            Technique::Stored {
+                form_factors: FormFactors::MonteCarlo,
+                ..
+            }
+        );
+        if (o.keep_transport || o.layers.is_some()) && !stored_monte_carlo {
+            return Err(Option(format!(
+                "keeping the transport and per-light layers need stored Monte Carlo rows (direct light split by light), but this bake uses {}: use --method montecarlo and a stored-row solver (jacobi, gauss-seidel, southwell)",
+                self.technique
             )));
         }
         let s = &self.solve;

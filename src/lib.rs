@@ -59,7 +59,10 @@
 //!   bake                             prepare/compute/write; `light`: the one dispatch of a
 //!                                    Technique to transport and solver; `pilot`: the pilot runs
 //!                                    and the final bake that reuses them; `memory`: the
-//!                                    estimate against `--max-memory` (refuse, or gather)
+//!                                    estimate against `--max-memory` (refuse, or gather);
+//!                                    `kept`: the kept transport's file (`--keep-transport`);
+//!                                    `relight`: a kept bake solved again with other light and
+//!                                    material values, and per-light layers
 //!   build                            many scenes from a manifest: `bake` options by name, a
 //!                                    content-addressed cache, a JSON report, the error gate
 //!   reference, render                beside the pipeline (reference uses bake's prepare)
@@ -114,7 +117,9 @@ pub mod testing;
 
 mod bake;
 
-pub use bake::{BakeReport, Baked, Prepared, StageTime, bake, compute, prepare, write};
+pub use bake::{
+    BakeReport, Baked, Prepared, StageTime, bake, compute, kept, prepare, relight, write,
+};
 pub use build::{BuildReport, Manifest, build};
 pub use config::BakeConfig;
 pub use error::{Error, Result};

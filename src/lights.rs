@@ -197,6 +197,7 @@ impl Emitters {
         }
         Some(LightSample {
             point,
+            texel: j,
             le: texels.emission[j as usize],
             cos_i,
             cos_l,
@@ -224,6 +225,8 @@ impl Emitters {
 pub struct LightSample {
     /// The point on the emitter.
     pub point: Vec3,
+    /// The texel sampled.
+    pub texel: u32,
     /// Emitted radiance of the texel sampled.
     pub le: Vec3,
     /// Cosines at the receiver and at the emitter.

@@ -366,3 +366,44 @@ fn signal_stops_a_bake_and_leaves_nothing() {
         assert!(left.is_empty(), "signal {signal} left {left:?}");
     }
 }
+
+#[test]
+fn relight_from_a_kept_transport_with_layers() {
+    let dir = scratch();
+    let (a, b) = (dir.path().join("a"), dir.path().join("b"));
+    let o = bake(
+        &fixture("lamp_room.gltf"),
+        &a,
+        &["--keep-transport", "--layers"],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(a.join("lamp_room.transport").exists());
+    assert!(a.join("lamp_room_bulb_lightmap0.exr").exists());
+    let gltf = a.join("lamp_room.gltf");
+    let relight = |extra: &[&str]| {
+        let mut args = vec!["relight", gltf.to_str().unwrap(), "-o", b.to_str().unwrap()];
+        args.extend_from_slice(extra);
+        lightbake(&args)
+    };
+    let o = relight(&[
+        "--light",
+        "bulb=2",
+        "--light",
+        "spot=1,0.5,0.2",
+        "--layers",
+        "lamps=bulb,spot",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(String::from_utf8_lossy(&o.stdout).contains("no rays"));
+    let files = list_files(&b);
+    for f in [
+        "lamp_room.gltf",
+        "lamp_room_lightmap0.exr",
+        "lamp_room_lamps_lightmap0.exr",
+    ] {
+        assert!(files.contains(&f.to_string()), "{f} missing: {files:?}");
+    }
+    let o = relight(&["--light", "sun=2"]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("\"bulb\", \"spot\""), "{}", stderr(&o));
+}

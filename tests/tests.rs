@@ -15,6 +15,7 @@ mod plan;
 mod points;
 mod quality;
 mod reference;
+mod relight;
 mod render;
 mod seams;
 mod shadow_cuts;

@@ -6,6 +6,7 @@
 //! cargo run --release --example benchmark -- --quick    # fewer settings, smaller reference
 //! cargo run --release --example benchmark -- --scene cornell_box --scene furnace
 //! cargo run --release --example benchmark -- --scene furnace --method hierarchical
+//! cargo run --release --example benchmark -- --relight  # only the relight table (large hall)
 //! ```
 //!
 //! Writes `examples/gallery/bench.csv`, `bench.md` and the charts `error_vs_time_<scene>.png`
@@ -42,6 +43,7 @@ use lightbake::{BakeConfig, NoProgress, metrics};
 use plotters::prelude::*;
 
 mod font;
+mod relight;
 mod stability;
 
 /// One bake configuration of the sweep.
@@ -777,6 +779,11 @@ fn main() {
     let work = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("target/chart");
     std::fs::create_dir_all(&work).unwrap();
     std::fs::create_dir_all(&gallery).unwrap();
+    if args.iter().any(|a| a == "--relight") {
+        let md = relight_table(&work, &gallery);
+        println!("{md}");
+        return;
+    }
     font::register();
 
     let mut rows: Vec<Row> = Vec::new();
@@ -1030,10 +1037,26 @@ fn main() {
     report.push_str(&stability_md);
     let _ = writeln!(report, "\nLightmap quality, measured in the same run:\n");
     report.push_str(&quality_md);
+    report.push_str(&relight_table(&work, &gallery));
     let _ = writeln!(report, "\nEvery run:\n");
     report.push_str(&md);
     std::fs::write(gallery.join("bench.csv"), csv).unwrap();
     std::fs::write(gallery.join("bench.md"), &report).unwrap();
     println!("{report}");
     println!("wrote {}/bench.csv, bench.md and charts", gallery.display());
+}
+
+/// The relight figures of the large hall: `bench_relight.csv` in `gallery`, and the Markdown
+/// table returned.
+fn relight_table(work: &Path, gallery: &Path) -> String {
+    let hall = work.join("large_hall.gltf");
+    lightbake::testing::large_hall()
+        .write_gltf(&hall)
+        .expect("write large_hall.gltf");
+    eprintln!("== large_hall: relight against a fresh bake");
+    let row = relight::measure("large_hall", &hall, work);
+    eprintln!("   {}", row.csv());
+    let csv = format!("{}\n{}\n", relight::RelightRow::CSV_HEADER, row.csv());
+    std::fs::write(gallery.join("bench_relight.csv"), csv).unwrap();
+    relight::RelightRow::markdown(&[row])
 }

@@ -29,6 +29,14 @@
 //!   unit, relative to the instance's bounding box) with `texelsPerUnit = 1`, so those epsilons
 //!   are a ten-thousandth of a texel whatever the scene scale. Faces xatlas leaves out are then
 //!   too small to reach a texel centre; they get a zero-area UV at the corner of page 0.
+//! - Needles: xatlas merges vertices within 1e-4 of each other (per coordinate) only after its
+//!   own zero-length test, so a triangle with a shorter, non-zero edge reaches the conformal map
+//!   with two corners in one place: its angles are 0/0, the whole chart's UVs become NaN, and
+//!   packing then rasterises that chart at 2³¹ texels, where `x += 1` in f32 stops moving — it
+//!   never returns (a junction-split furnished interior at `--quality high` hung so). Triangles
+//!   with an edge below [`NEEDLE_EDGE_TEXELS`] are therefore never given to xatlas; they are at
+//!   most that wide, cover no texel centre a renderer could see, and are placed like the faces
+//!   xatlas leaves out.
 //! - Density: planar charts get exactly `texels_per_unit`. Curved (LSCM) charts come out denser,
 //!   about 1.4× the texel area on a sphere: this xatlas scales a chart by the ratio of surface to
 //!   parametric *area* where the square root would be right, and rounds chart extents up to whole
@@ -73,6 +81,10 @@ const MAX_TEXELS: f64 = 64.0 * 1024.0 * 1024.0;
 
 /// Faces xatlas leaves out of every chart are accepted below this size (texels²).
 const NEGLIGIBLE_TEXEL_AREA: f64 = 1e-3;
+
+/// A triangle with an edge shorter than this (texels) is a needle xatlas must not see: ten times
+/// xatlas' vertex-merging distance, far above f32 rounding of positions in texels.
+const NEEDLE_EDGE_TEXELS: f64 = 1e-3;
 
 /// Unwraps every instance with xatlas at `params.texels_per_unit` and packs the charts.
 pub fn unwrap(scene: &Scene, source: &Source, params: &AtlasParams) -> Result<Atlas> {
@@ -166,6 +178,13 @@ fn instance_densities(scene: &Scene, params: &AtlasParams) -> Vec<f32> {
 fn world_area(scene: &Scene, t: usize) -> f64 {
     let [a, b, c] = scene.triangles[t].map(|v| scene.positions[v as usize].as_dvec3());
     0.5 * (b - a).cross(c - a).length()
+}
+
+/// Whether scene triangle `t` has an edge below [`NEEDLE_EDGE_TEXELS`] at `tpu` texels per unit.
+fn is_needle(scene: &Scene, t: usize, tpu: f32) -> bool {
+    let [a, b, c] = scene.triangles[t].map(|v| scene.positions[v as usize].as_dvec3());
+    let shortest = a.distance(b).min(b.distance(c)).min(c.distance(a));
+    shortest * f64::from(tpu) < NEEDLE_EDGE_TEXELS
 }
 
 /// What xatlas returned, copied out before the atlas is destroyed.
@@ -612,7 +631,12 @@ fn run_xatlas(
         let inst_blocks = blocks_by_side(scene, inst, rest);
         for block in &inst_blocks {
             let (positions, normals, indices) = mesh_input(scene, inst, block, tpu);
-            add_mesh(&atlas, &positions, &normals, &indices);
+            let needles: Vec<bool> = block
+                .triangles
+                .iter()
+                .map(|&t| is_needle(scene, (inst.triangles.start + t) as usize, tpu))
+                .collect();
+            add_mesh(&atlas, &positions, &normals, &indices, Some(&needles));
         }
         given.push(inst_blocks);
     }
@@ -633,6 +657,7 @@ fn run_xatlas(
             &positions,
             &vec![[0.0, 0.0, 1.0]; positions.len()],
             &indices,
+            None,
         );
     }
     atlas.generate(chart_options, pack_options);
@@ -719,8 +744,16 @@ fn run_xatlas(
     })
 }
 
-/// Adds one mesh (positions in texels, unit normals, triangles) to `atlas`.
-fn add_mesh(atlas: &ffi::Handle, positions: &[[f32; 3]], normals: &[[f32; 3]], indices: &[u32]) {
+/// Adds one mesh (positions in texels, unit normals, triangles, triangles to leave out) to
+/// `atlas`.
+fn add_mesh(
+    atlas: &ffi::Handle,
+    positions: &[[f32; 3]],
+    normals: &[[f32; 3]],
+    indices: &[u32],
+    ignore: Option<&[bool]>,
+) {
+    debug_assert!(ignore.is_none_or(|i| 3 * i.len() == indices.len()));
     let decl = ffi::MeshDecl {
         vertex_count: positions.len() as u32,
         vertex_position_data: positions.as_ptr().cast(),
@@ -733,7 +766,7 @@ fn add_mesh(atlas: &ffi::Handle, positions: &[[f32; 3]], normals: &[[f32; 3]], i
         index_data: indices.as_ptr().cast(),
         index_offset: 0,
         index_format: ffi::INDEX_FORMAT_U32,
-        face_ignore_data: std::ptr::null(),
+        face_ignore_data: ignore.map_or(std::ptr::null(), <[bool]>::as_ptr),
     };
     // The indices are local and in range, and a multiple of three: AddMesh cannot fail.
     let status = atlas.add_mesh(&decl);
@@ -824,9 +857,10 @@ fn instance_uv(
             return Err(fail(format!("split triangle {local_t} across pages")));
         }
         let charted = page >= 0;
+        let global_t = inst.triangles.start as usize + local_t;
         if !charted
-            && world_area(scene, (inst.triangles.start as usize) + local_t) * f64::from(tpu).powi(2)
-                > NEGLIGIBLE_TEXEL_AREA
+            && world_area(scene, global_t) * f64::from(tpu).powi(2) > NEGLIGIBLE_TEXEL_AREA
+            && !is_needle(scene, global_t, tpu)
         {
             return Err(fail(format!("left triangle {local_t} out of every chart")));
         }
@@ -1652,6 +1686,40 @@ pub(super) mod tests {
                 }
             }
         }
+    }
+
+    /// A triangle whose shortest edge (5e-5 texels) lies below xatlas' vertex merging is never
+    /// given to xatlas: two of its corners would be one vertex there, and a chart with such
+    /// triangles got NaN UVs, which xatlas' packer rasterises for ever (a junction-split furnished
+    /// interior at `--quality high` hung so). It is placed like the faces xatlas leaves out.
+    #[test]
+    fn a_needle_is_left_out_of_xatlas() {
+        let tpu = 24.0;
+        let needle = Part::new(
+            vec![
+                Vec3::ZERO,
+                Vec3::new(5e-5 / tpu, 0.0, 0.0),
+                Vec3::new(0.0, 10.0 / tpu, 0.0),
+            ],
+            vec![[0, 1, 2]],
+        );
+        let scene = scene_of(&[sphere(Vec3::new(2.0, 0.0, 0.0), 0.5, 8, 8), needle], &[]);
+        let atlas = unwrap_ok(&scene, &params(tpu, 256));
+        let uv_area = |t: u32| {
+            let ([a, b, c], _) = atlas.triangle_uv(&scene, t);
+            (b - a).perp_dot(c - a).abs()
+        };
+        let last = scene.triangles.len() as u32 - 1;
+        assert!(is_needle(&scene, last as usize, tpu));
+        assert_eq!(uv_area(last), 0.0, "the needle was charted");
+        assert!((0..last).all(|t| uv_area(t) > 0.0 && !is_needle(&scene, t as usize, tpu)));
+        assert!(
+            atlas
+                .instances
+                .iter()
+                .flat_map(|i| &i.uv)
+                .all(|uv| uv.is_finite())
+        );
     }
 
     #[test]

@@ -4,9 +4,11 @@
 //! [`compute`] (the automatic choice with its pilot runs in [`pilot`], light transport and its
 //! solution through the one dispatch of [`light`], denoise, pages), then [`write`].
 
+pub mod kept;
 pub mod light;
 pub mod memory;
 pub mod pilot;
+pub mod relight;
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -120,6 +122,8 @@ pub struct Baked {
     pub plan: Option<Plan>,
     pub seams: Option<lightmap::seams::SeamReport>,
     pub junctions: Option<scene::junctions::JunctionReport>,
+    /// Per-light layers (`config.output.layers`; [`relight`]).
+    pub layers: Vec<relight::LayerPages>,
     pub stages: Vec<StageTime>,
 }
 
@@ -423,6 +427,29 @@ fn compute_prepared(mut prepared: Prepared, progress: &dyn Progress) -> Result<B
         config.validate()?;
         timed(&mut stages, "plan", t);
     }
+    // A kept transport (and layers) must describe the lightmap written: one run's rows, so the
+    // pilot runs are not mixed in (their rays are spent on the choice only), and every texel
+    // casts the chosen rays, so the kept settings say all a fresh bake needs to cast the same
+    // (`--no-auto` with them).
+    let kept = config.output.keep_transport || config.output.layers.is_some();
+    if kept {
+        config.transport.split_direct = true;
+        if let Some(plan) = plan.as_mut() {
+            if let Some(runs) = pilot.take() {
+                plan.discarded_rays += runs.runs.iter().map(|r| r.transport.rays).sum::<u64>();
+                // The one run casts what the pilot pair and the final bake would have together.
+                let t = &mut config.transport;
+                let own = !runs.enough as u32;
+                t.gather_rays = own * t.gather_rays + 2 * runs.gather_rays;
+                t.light_samples = own * t.light_samples + 2 * runs.light_samples;
+                plan.reasons.push(format!(
+                    "kept transport: one bake at K={} and L={} (the pilot bakes' rays and the final bake's together), the pilot bakes not mixed in",
+                    t.gather_rays, t.light_samples
+                ));
+            }
+            plan.texel_rays = None;
+        }
+    }
     memory::fit(
         input,
         &sizes,
@@ -432,6 +459,9 @@ fn compute_prepared(mut prepared: Prepared, progress: &dyn Progress) -> Result<B
         limit,
         progress,
     )?;
+    if kept {
+        config.validate()?; // the memory limit may have asked for the gather solver
+    }
 
     let t = Instant::now();
     // With a plan, the pilot bakes are part of the result (a ray-weighted mean).
@@ -439,7 +469,7 @@ fn compute_prepared(mut prepared: Prepared, progress: &dyn Progress) -> Result<B
     // Before denoising: the error map shows the noise the denoiser was given.
     let noise = (config.output.error_map).then(|| texel_noise(surfaces.texels, &config, &last));
     let pilot::FinalBake {
-        transport,
+        mut transport,
         solution,
         gather_rays,
         light_samples,
@@ -465,20 +495,21 @@ fn compute_prepared(mut prepared: Prepared, progress: &dyn Progress) -> Result<B
     } = prepared;
 
     let t = Instant::now();
-    // A texel stores H/π; indirect-only leaves out light that arrived without a bounce.
-    let mut lightmap: Vec<Vec3> = solution
-        .irradiance
-        .iter()
-        .zip(&transport.direct)
-        .map(|(h, d)| if config.transport.indirect_only { (*h - *d).max(Vec3::ZERO) } else { *h } / std::f32::consts::PI)
-        .collect();
+    let indirect_only = config.transport.indirect_only;
+    let mut lightmap = stored_values(&solution.irradiance, &transport.direct, indirect_only);
     let denoised = config.transport.denoise && config.technique.is_monte_carlo();
+    let noise_model = TransportParams {
+        gather_rays,
+        light_samples,
+        ..config.transport.clone()
+    };
+    // Layers are denoised with the lightmap's own weights (see `relight`).
+    let layer_guide = (denoised && config.output.layers.is_some()).then(|| {
+        let noise =
+            lightmap::denoise::bake_noise(&texels, &transport.direct, &lightmap, &noise_model);
+        (lightmap.clone(), noise)
+    });
     if denoised {
-        let noise_model = TransportParams {
-            gather_rays,
-            light_samples,
-            ..config.transport.clone()
-        };
         lightmap::denoise::denoise_bake(
             &texels,
             &transport,
@@ -489,15 +520,35 @@ fn compute_prepared(mut prepared: Prepared, progress: &dyn Progress) -> Result<B
     }
     timed(&mut stages, "denoise", t);
     let t = Instant::now();
-    texels::validity::fill_invalid(&texels, &mut lightmap);
+    let mut pages = pages_of(&texels, &mut lightmap, config.atlas.padding);
     let error_map = noise.map(|sigma| {
         let noise_level = plan.as_ref().and_then(|p| p.predicted_noise);
         let map = plan::error_map::error_map(&texels, &lightmap, &sigma, denoised, noise_level);
         LightmapPages::from_texels(&texels, &map)
     });
-    let mut pages = LightmapPages::from_texels(&texels, &lightmap);
-    lightmap::dilate(&mut pages, config.atlas.padding.max(2) * 2);
     timed(&mut stages, "dilate", t);
+    let mut layers = Vec::new();
+    if let Some(groups) = &config.output.layers {
+        let t = Instant::now();
+        let settings = kept::Settings::new(&scene, &config, "");
+        let planned = relight::plan_layers(&settings, groups)?;
+        let seams = (config.output.seams)
+            .then(|| lightmap::seams::find(&scene, &atlas, &Default::default()));
+        let guide = layer_guide
+            .as_ref()
+            .map(|(g, n)| (g.as_slice(), n.as_slice()));
+        let scale = vec![Vec3::ONE; transport.sources.len()];
+        layers = relight::layer_pages(
+            (&texels, &mut transport),
+            &config,
+            &solution,
+            (&scale, &planned),
+            guide,
+            seams.as_ref(),
+            progress,
+        )?;
+        timed(&mut stages, "layers", t);
+    }
     check_aborted(progress)?;
     let t = Instant::now();
     let seams = config
@@ -522,8 +573,33 @@ fn compute_prepared(mut prepared: Prepared, progress: &dyn Progress) -> Result<B
         plan,
         seams,
         junctions,
+        layers,
         stages,
     })
+}
+
+/// What a texel stores, `H/π`, from the solved irradiance `h` and the direct light `direct`;
+/// indirect-only leaves out light that arrived without a bounce.
+pub(crate) fn stored_values(h: &[Vec3], direct: &[Vec3], indirect_only: bool) -> Vec<Vec3> {
+    (h.iter().zip(direct))
+        .map(|(h, d)| match indirect_only {
+            true => (*h - *d).max(Vec3::ZERO),
+            false => *h,
+        } / std::f32::consts::PI)
+        .collect()
+}
+
+/// Pages of `lightmap` (indexed like `texels`): invalid texels filled from their neighbours
+/// (in `lightmap` too), then dilated into the gutters (`padding` sets the reach).
+pub(crate) fn pages_of(
+    texels: &texels::Texels,
+    lightmap: &mut [Vec3],
+    padding: u32,
+) -> LightmapPages {
+    texels::validity::fill_invalid(texels, lightmap);
+    let mut pages = LightmapPages::from_texels(texels, lightmap);
+    lightmap::dilate(&mut pages, padding.max(2) * 2);
+    pages
 }
 
 /// Standard deviation per texel and channel of the stored values (`H/π`) of `bake` before
@@ -577,26 +653,8 @@ pub fn write(
     let t = Instant::now();
     let stem = output_stem(input);
     let mut staging = Staging::new(out_dir, &protected_files(input, &baked.source))?;
-    let mut page_files = Vec::with_capacity(baked.pages.pages.len());
-    for (k, page) in baked.pages.pages.iter().enumerate() {
-        let files = PageFiles {
-            exr: format!("{stem}_lightmap{k}.exr"),
-            png: format!("{stem}_lightmap{k}.png"),
-        };
-        staging.write(
-            &files.exr,
-            &output::write_exr(page, config.output.float, input)?,
-        )?;
-        staging.write(
-            &files.png,
-            &output::write_png_preview(page, config.output.preview_exposure)?,
-        )?;
-        if config.output.rgbm {
-            let png = output::write_rgbm_png(page, output::rgbm::DEFAULT_RANGE)?;
-            staging.write(&format!("{stem}_lightmap{k}_rgbm.png"), &png)?;
-        }
-        page_files.push(files);
-    }
+    let page_files = relight::stage_pages(&mut staging, &stem, &baked.pages, config, input)?;
+    let layer_files = relight::stage_layers(&mut staging, &stem, &baked.layers, config, input)?;
     // Beside the pages, referenced by nothing in the glTF.
     for (k, page) in baked
         .error_map
@@ -616,6 +674,9 @@ pub fn write(
         &mut staging,
         &stem,
     )?;
+    if !layer_files.is_empty() || config.output.keep_transport {
+        keep_with_gltf(&baked, &mut staging, input, &stem, &layer_files)?;
+    }
     check_aborted(progress)?;
     let files = commit(staging)?;
     timed(&mut baked.stages, "write", t);
@@ -636,6 +697,54 @@ pub fn write(
         stages: baked.stages,
         files,
     })
+}
+
+/// Names the layers' pages in the staged glTF's extras, and with `keep_transport` stages
+/// `<stem>.transport` for that glTF as finally staged ([`kept`]).
+fn keep_with_gltf(
+    baked: &Baked,
+    staging: &mut Staging,
+    input: &Path,
+    stem: &str,
+    layer_files: &[(relight::Layer, Vec<PageFiles>)],
+) -> Result<()> {
+    let name = match baked.source.is_glb {
+        true => format!("{stem}.glb"),
+        false => format!("{stem}.gltf"),
+    };
+    let config = &baked.config;
+    let settings = kept::Settings::new(&baked.scene, config, &name);
+    if !layer_files.is_empty() {
+        let gltf = staging.read(&name)?;
+        let edited = relight::edit_gltf(&gltf, input, |json| {
+            relight::add_layer_extras(json, &settings, layer_files)
+        })?;
+        staging.replace(&name, &edited)?;
+    }
+    if !config.output.keep_transport {
+        return Ok(());
+    }
+    let mut files = vec![staging.read(&name)?];
+    if !baked.source.is_glb
+        && let Ok(bin) = staging.read(&format!("{stem}.bin"))
+    {
+        files.push(bin);
+    }
+    let files: Vec<&[u8]> = files.iter().map(Vec::as_slice).collect();
+    let seams = match config.output.seams {
+        true => lightmap::seams::find(&baked.scene, &baked.atlas, &Default::default()),
+        false => Default::default(),
+    };
+    let material = kept::texel_materials(&baked.scene, &baked.texels);
+    let bytes = kept::encode(
+        &settings,
+        &files,
+        &baked.texels,
+        &material,
+        &baked.transport,
+        &seams,
+    )?;
+    staging.write(&format!("{stem}.transport"), &bytes)
 }
 
 /// The output files' stem: the input's.

@@ -5,7 +5,7 @@
 use glam::Vec3;
 use serde::Deserialize;
 
-use crate::config::{AutoParams, Keep, Technique, UvMode};
+use crate::config::{AutoParams, Keep, LayerGroup, Technique, UvMode};
 use crate::{BakeConfig, Error, Result};
 
 /// Every option of `lightbake bake` that changes what is baked; `None` (left out) is the
@@ -45,6 +45,10 @@ pub struct Options {
     pub seed: Option<u64>,
     /// Memory the bake may use, e.g. `"512M"`, `"8G"` (binary units) or bytes.
     pub max_memory: Option<String>,
+    /// Also write `<stem>.transport` for `lightbake relight`.
+    pub keep_transport: Option<bool>,
+    /// Per-light layers: `[]` for a layer per light, or groups `"GROUP=NAME,NAME"`.
+    pub layers: Option<Vec<String>>,
 }
 
 /// A colour given as one value or three.
@@ -139,6 +143,11 @@ impl Options {
             });
         }
         c.output.seams = !self.no_seams.unwrap_or(false);
+        c.output.keep_transport = self.keep_transport.unwrap_or(false);
+        c.output.layers = (self.layers.iter())
+            .map(|specs| specs.iter().map(|s| LayerGroup::parse(s)).collect())
+            .next()
+            .transpose()?;
         if let Some(size) = &self.max_memory {
             c.max_memory =
                 Some(parse_memory(size).map_err(|e| Error::Option(format!("max-memory {e}")))?);

@@ -5,6 +5,7 @@ mod compare;
 mod interrupt;
 mod progress;
 mod reference;
+mod relight;
 mod render;
 mod view;
 
@@ -35,6 +36,9 @@ struct Cli {
 enum Command {
     /// Bake lightmaps: writes <stem>.gltf + .bin (or .glb), and per page an EXR and a PNG preview.
     Bake(BakeArgs),
+    /// Solve a bake kept with --keep-transport again with other light and material values, no
+    /// ray cast: writes pages and the glTF as a bake does.
+    Relight(relight::Args),
     /// Render a camera view of a baked scene (lightmap × albedo, optional specular layer).
     Render(render::Args),
     /// Path-trace reference lightmaps at the same texels as a bake (the accuracy yardstick), or
@@ -223,6 +227,12 @@ struct BakeArgs {
     /// gather solver when that fits (automatic choice only), or is refused before any heavy work.
     #[arg(long, value_name = "SIZE", value_parser = lightbake::build::options::parse_memory)]
     max_memory: Option<u64>,
+    /// Also write <stem>.transport beside the output: what `lightbake relight` needs to solve
+    /// this bake again with other light and material values without casting a ray.
+    #[arg(long)]
+    keep_transport: bool,
+    #[command(flatten)]
+    layers: relight::LayerArgs,
     #[command(flatten)]
     gate: GateArgs,
     #[command(flatten)]
@@ -376,6 +386,8 @@ impl BakeArgs {
             exposure: Some(self.exposure),
             seed: Some(self.seed),
             max_memory: self.max_memory.map(|bytes| bytes.to_string()),
+            keep_transport: Some(self.keep_transport),
+            layers: self.layers.specs(),
         }
     }
 
@@ -422,6 +434,7 @@ fn main() -> ExitCode {
         Command::Render(args) => render::run(args),
         Command::Reference(args) => reference::run(args),
         Command::Bake(args) => bake(args),
+        Command::Relight(args) => relight::run(args),
         Command::Compare(args) => compare::run(args),
         Command::View(args) => view::run(args),
         Command::Build(args) => build::run(args),

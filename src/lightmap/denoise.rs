@@ -110,6 +110,24 @@ pub fn denoise_bake(
     params: &TransportParams,
     progress: &dyn Progress,
 ) -> Result<()> {
+    let noise = bake_noise(texels, &transport.direct, lightmap, params);
+    denoise(
+        texels,
+        lightmap,
+        &noise,
+        &DenoiseParams::default(),
+        progress,
+    )
+}
+
+/// [`expected_noise`] of every texel of a bake's `lightmap` (`H/π`, indirect only when
+/// `params.indirect_only`), with direct light `direct` (W/m²) and the ray counts of `params`.
+pub fn bake_noise(
+    texels: &Texels,
+    direct: &[Vec3],
+    lightmap: &[Vec3],
+    params: &TransportParams,
+) -> Vec<f32> {
     // Without emitters or sky, direct light is punctual only, and that is exact.
     let sampled_direct =
         params.sky.max_element() > 0.0 || texels.emission.iter().any(|e| e.max_element() > 0.0);
@@ -118,9 +136,9 @@ pub fn denoise_bake(
     } else {
         0
     };
-    let noise: Vec<f32> = lightmap
+    lightmap
         .iter()
-        .zip(&transport.direct)
+        .zip(direct)
         .map(|(&v, &h_direct)| {
             let direct = if params.indirect_only {
                 Vec3::ZERO
@@ -129,14 +147,7 @@ pub fn denoise_bake(
             };
             expected_noise(v - direct, direct, params.gather_rays, light_samples)
         })
-        .collect();
-    denoise(
-        texels,
-        lightmap,
-        &noise,
-        &DenoiseParams::default(),
-        progress,
-    )
+        .collect()
 }
 
 /// Filters `values` (indexed like `texels`) in place; `noise[i]` is [`expected_noise`] of texel
@@ -149,10 +160,41 @@ pub fn denoise(
     params: &DenoiseParams,
     progress: &dyn Progress,
 ) -> Result<()> {
+    let filtered = filter(texels, values, values, noise, params, progress)?;
+    values.copy_from_slice(&filtered);
+    Ok(())
+}
+
+/// [`denoise`] with the weights of `guide` (range kernel, noise and all) applied to `values`:
+/// for a fixed guide the filter is linear in `values` (up to the clamp of a negative plane fit
+/// at zero), so parts of a lightmap filtered with the whole as guide sum to the filtered
+/// whole. Per-light layers are denoised this way.
+pub fn denoise_guided(
+    texels: &Texels,
+    guide: &[Vec3],
+    values: &mut [Vec3],
+    noise: &[f32],
+    params: &DenoiseParams,
+    progress: &dyn Progress,
+) -> Result<()> {
+    assert_eq!(guide.len(), values.len());
+    let filtered = filter(texels, guide, values, noise, params, progress)?;
+    values.copy_from_slice(&filtered);
+    Ok(())
+}
+
+/// Every texel of `values` filtered with the weights of `guide`.
+fn filter(
+    texels: &Texels,
+    guide: &[Vec3],
+    values: &[Vec3],
+    noise: &[f32],
+    params: &DenoiseParams,
+    progress: &dyn Progress,
+) -> Result<Vec<Vec3>> {
     assert_eq!(values.len(), texels.len());
     assert_eq!(noise.len(), texels.len());
     let valid = texels.valid_mask();
-    let input: &[Vec3] = values;
     let aborted = AtomicBool::new(false);
     let filtered: Vec<Vec3> = (0..texels.len())
         .into_par_iter()
@@ -160,25 +202,25 @@ pub fn denoise(
             // Once per texel: a filter window of tens of texels each, so the check costs nothing.
             if aborted.load(Ordering::Relaxed) || progress.aborted() {
                 aborted.store(true, Ordering::Relaxed);
-                return input[i];
+                return values[i];
             }
             if valid[i] {
-                filter_texel(texels, input, noise, &valid, params, i)
+                filter_texel(texels, (guide, values), noise, &valid, params, i)
             } else {
-                input[i]
+                values[i]
             }
         })
         .collect();
     if aborted.into_inner() {
         return Err(Error::Aborted);
     }
-    values.copy_from_slice(&filtered);
-    Ok(())
+    Ok(filtered)
 }
 
+/// Texel `i` of `x` filtered with the weights `guide` gives.
 fn filter_texel(
     texels: &Texels,
-    x: &[Vec3],
+    (guide, x): (&[Vec3], &[Vec3]),
     noise: &[f32],
     valid: &[bool],
     params: &DenoiseParams,
@@ -198,7 +240,7 @@ fn filter_texel(
     let gate2 = (params.gate * (du + dv).length())
         .powi(2)
         .max(f32::MIN_POSITIVE);
-    let y_i = x[i].element_sum() / 3.0;
+    let y_i = guide[i].element_sum() / 3.0;
     let inv_2ss = 1.0 / (2.0 * params.sigma_s * params.sigma_s);
     let c2 = params.range_scale * params.range_scale;
     let r = params.radius as i64;
@@ -227,7 +269,7 @@ fn filter_texel(
                 continue;
             }
             let spatial = -((dx * dx + dy * dy) as f32) * inv_2ss;
-            let diff = x[j].element_sum() / 3.0 - y_i;
+            let diff = guide[j].element_sum() / 3.0 - y_i;
             let var = c2 * (noise[i] * noise[i] + noise[j] * noise[j]);
             let range = if diff == 0.0 {
                 0.0
@@ -237,7 +279,7 @@ fn filter_texel(
                 f32::NEG_INFINITY
             };
             let w = (spatial + range).exp();
-            if w.is_finite() && x[j].is_finite() {
+            if w.is_finite() && guide[j].is_finite() && x[j].is_finite() {
                 let phi = DVec3::new(1.0, dx as f64, dy as f64);
                 let w = w as f64;
                 a += DMat3::from_cols(phi * (w * phi.x), phi * (w * phi.y), phi * (w * phi.z));

@@ -836,7 +836,7 @@ fn encode_uri(path: &str) -> String {
 }
 
 /// Decodes `%XX` escapes; `None` when an escape is malformed or the result is not UTF-8.
-fn decode_uri(uri: &str) -> Option<String> {
+pub(crate) fn decode_uri(uri: &str) -> Option<String> {
     let bytes = uri.as_bytes();
     let mut out = Vec::with_capacity(bytes.len());
     let mut i = 0;

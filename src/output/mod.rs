@@ -13,6 +13,7 @@ pub mod rgbm;
 mod staging;
 
 pub use exr::{read_exr, write_exr, write_exr_image};
+pub(crate) use gltf_out::decode_uri;
 pub use gltf_out::{PageFiles, write_gltf};
 pub use png::{write_png_image, write_png_preview, write_rgbm_png};
 pub use staging::Staging;

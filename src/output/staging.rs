@@ -69,6 +69,32 @@ impl Staging {
         Ok(())
     }
 
+    /// The bytes staged as `name`.
+    pub fn read(&self, name: &str) -> Result<Vec<u8>> {
+        self.staged(name)?;
+        let path = self.tmp.join(name);
+        fs::read(&path).map_err(|e| Error::io(&path, e))
+    }
+
+    /// Stages `bytes` as `name` in place of what [`Staging::write`] staged under that name.
+    pub fn replace(&mut self, name: &str, bytes: &[u8]) -> Result<()> {
+        self.staged(name)?;
+        let path = self.tmp.join(name);
+        fs::write(&path, bytes).map_err(|e| Error::io(&path, e))
+    }
+
+    /// Whether `name` is staged.
+    pub fn contains(&self, name: &str) -> bool {
+        self.names.iter().any(|n| n == name)
+    }
+
+    fn staged(&self, name: &str) -> Result<()> {
+        match self.contains(name) {
+            true => Ok(()),
+            false => Err(Error::Option(format!("output file {name} was not staged"))),
+        }
+    }
+
     fn final_path(&self, name: &str) -> Result<PathBuf> {
         let rel = Path::new(name);
         if rel.is_absolute()

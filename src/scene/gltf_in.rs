@@ -728,6 +728,7 @@ impl Loader<'_> {
             .normalize_or(Vec3::NEG_Z);
         self.scene.lights.push(Light {
             name: light.name().map(str::to_string),
+            source: Some(light.index() as u32),
             kind,
             position: placement.world.transform_point3(Vec3::ZERO),
             direction,

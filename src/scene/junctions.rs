@@ -1468,6 +1468,7 @@ mod tests {
     fn a_box_on_a_floor_under_a_sun_is_cut_along_its_shadow_outline() {
         let sun = crate::scene::Light {
             name: None,
+            source: None,
             kind: LightKind::Directional,
             position: Vec3::ZERO,
             direction: Vec3::new(1.0, -2.0, 0.0).normalize(),

@@ -237,6 +237,8 @@ fn wrap(i: i64, n: i64, mode: Wrap) -> i64 {
 #[derive(Clone, Debug)]
 pub struct Light {
     pub name: Option<String>,
+    /// Index in the glTF's `KHR_lights_punctual.lights` (`None` for a light made in code).
+    pub source: Option<u32>,
     pub kind: LightKind,
     /// World position (unused for directional lights).
     pub position: Vec3,

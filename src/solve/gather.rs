@@ -65,6 +65,7 @@ pub fn solve(
         params: transport_params,
         emitters: &emitters,
         texel_rays: None,
+        sources: None,
     };
     // Direct light, sky fraction and rays with the Monte Carlo method's own code and seeds.
     let mut transport = ctx.rows(progress, true)?;

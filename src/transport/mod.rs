@@ -65,6 +65,62 @@ pub struct Transport {
     /// radiosity (`B_j = π·Le_j + ρ_j H_j`); false when `direct` already holds them (Monte Carlo
     /// with explicit light sampling), so rows carry only reflected radiosity `ρ_j H_j`.
     pub rows_carry_emission: bool,
+    /// `direct` split by light source, `sources.len()` values per texel (texel-major), when
+    /// [`TransportParams::split_direct`] asks for it (relighting and per-light layers), else
+    /// empty. The sky is not a source: its part of `direct` is `π · sky · escape`.
+    pub direct_terms: Vec<Vec3>,
+    /// The sources of `direct_terms`.
+    pub sources: Sources,
+}
+
+/// The light sources direct light is split into ([`Transport::direct_terms`]): every punctual
+/// light of the scene in scene order, then every emissive material in material order. Direct
+/// light is linear in each source's intensity or emission, so scaling a source scales its term.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Sources {
+    /// Sources `0..lights` are the scene's punctual lights.
+    pub lights: usize,
+    /// Source `lights + k` is the emission of material `emissive[k]`.
+    pub emissive: Vec<u32>,
+    /// Per material: its source, or `u32::MAX` when it does not emit.
+    pub material_source: Vec<u32>,
+}
+
+impl Sources {
+    pub fn new(scene: &Scene) -> Sources {
+        let mut emissive = Vec::new();
+        let material_source = (scene.materials.iter().enumerate())
+            .map(
+                |(m, material)| match material.emission.max_element() > 0.0 {
+                    true => {
+                        emissive.push(m as u32);
+                        (scene.lights.len() + emissive.len() - 1) as u32
+                    }
+                    false => u32::MAX,
+                },
+            )
+            .collect();
+        Sources {
+            lights: scene.lights.len(),
+            emissive,
+            material_source,
+        }
+    }
+
+    pub fn len(&self) -> usize {
+        self.lights + self.emissive.len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// The source of emitting texel `j`: its main triangle's material.
+    #[inline]
+    pub fn of_texel(&self, scene: &Scene, texels: &Texels, j: u32) -> usize {
+        let t = texels.triangle[j as usize] as usize;
+        let m = scene.instances[scene.triangle_instance[t] as usize].material;
+        self.material_source[m as usize] as usize
+    }
 }
 
 impl Transport {
@@ -72,6 +128,28 @@ impl Transport {
     #[inline]
     pub fn row(&self, i: usize) -> Row<'_> {
         self.rows.row(i)
+    }
+
+    /// Rows given as (source texel, `F_ij`) per receiver, with each receiver's escape
+    /// fraction; no direct light, no rays. How rows come back from outside the builders (a
+    /// kept transport, `bake::kept`), so readers never touch the row storage.
+    pub fn from_rows<R>(rows: impl Iterator<Item = R>, escape: Vec<f32>) -> Transport
+    where
+        R: Iterator<Item = (u32, f32)>,
+    {
+        let mut w = WeightRows::default();
+        for row in rows {
+            for (j, f) in row {
+                w.col.push(j);
+                w.f.push(f);
+            }
+            w.row_start.push(w.col.len() as u32);
+        }
+        Transport {
+            rows: Rows::Weights(w),
+            escape,
+            ..Default::default()
+        }
     }
 
     pub fn len(&self) -> usize {

@@ -23,7 +23,7 @@ use std::f32::consts::PI;
 use glam::{Vec2, Vec3};
 
 use super::rows::{self, ChunkRows};
-use super::{Surfaces, Transport};
+use super::{Sources, Surfaces, Transport};
 use crate::config::TransportParams;
 use crate::lights::{Emitters, punctual_irradiance, triangle_point};
 use crate::sampling::{Rng, cosine_hemisphere, frame, hammersley, power_weight};
@@ -43,13 +43,17 @@ pub fn build(
     progress: &dyn Progress,
 ) -> Result<Transport> {
     let emitters = Emitters::new(surfaces.scene, surfaces.texels);
+    let sources = params.split_direct.then(|| Sources::new(surfaces.scene));
     let ctx = Context {
         surfaces,
         params,
         emitters: &emitters,
         texel_rays,
+        sources: sources.as_ref(),
     };
-    ctx.rows(progress, false)
+    let mut transport = ctx.rows(progress, false)?;
+    transport.sources = sources.unwrap_or_default();
+    Ok(transport)
 }
 
 /// What gathering reads: the surfaces, the options, the emitters to sample and the per-texel
@@ -59,6 +63,8 @@ pub(crate) struct Context<'a> {
     pub(crate) params: &'a TransportParams,
     pub(crate) emitters: &'a Emitters,
     pub(crate) texel_rays: Option<&'a [u32]>,
+    /// Split direct light by source into the rows' `terms` ([`Transport::direct_terms`]).
+    pub(crate) sources: Option<&'a Sources>,
 }
 
 impl Context<'_> {
@@ -111,6 +117,18 @@ impl Context<'_> {
         let mut escaped = 0u32;
         let mut emitted = Vec3::ZERO;
         hits.clear();
+        // This texel's direct light by source, when split: each contribution is added to its
+        // source's term as it is added to the total.
+        let terms = out.terms.len();
+        if let Some(sources) = self.sources {
+            out.terms.resize(terms + sources.len(), Vec3::ZERO);
+        }
+        let add_term = |out: &mut ChunkRows, source: usize, e: Vec3| {
+            if self.sources.is_some() {
+                out.terms[terms + source] += e;
+            }
+        };
+        let emitter_source = |j: u32| self.sources.map_or(0, |s| s.of_texel(scene, texels, j));
 
         // Gathering rays: form factors, sky, and the gathering half of emitter MIS.
         for s in 0..k {
@@ -131,7 +149,9 @@ impl Context<'_> {
                 let p_gather = local.z / PI;
                 let (_, n_l) = triangle_point(scene, hit.triangle, hit.bary);
                 let p_light = self.emitters.pdf_toward(hit.triangle, n_l, dir, hit.t);
-                emitted += le * (local.z * power_weight(kf * p_gather, lf * p_light));
+                let e = le * (local.z * power_weight(kf * p_gather, lf * p_light));
+                emitted += e;
+                add_term(out, emitter_source(j), e);
             }
         }
 
@@ -149,7 +169,9 @@ impl Context<'_> {
                 continue;
             };
             let p_gather = x.cos_i / PI;
-            emitted += x.le * (x.cos_i * power_weight(lf * x.pdf_solid_angle(), kf * p_gather));
+            let e = x.le * (x.cos_i * power_weight(lf * x.pdf_solid_angle(), kf * p_gather));
+            emitted += e;
+            add_term(out, emitter_source(x.texel), e);
         }
 
         // Punctual lights at stratified footprint points.
@@ -160,11 +182,18 @@ impl Context<'_> {
             for s in 0..g * g {
                 let u = (Vec2::new((s % g) as f32, (s / g) as f32) + rng.next_vec2()) / g as f32;
                 let p = self.footprint_point(i, u);
-                for light in &scene.lights {
-                    punctual += punctual_irradiance(light, p, n, tracer);
+                for (l, light) in scene.lights.iter().enumerate() {
+                    let e = punctual_irradiance(light, p, n, tracer);
+                    punctual += e;
+                    add_term(out, l, e);
                 }
             }
             punctual /= (g * g) as f32;
+            if self.sources.is_some() {
+                for term in &mut out.terms[terms..terms + scene.lights.len()] {
+                    *term /= (g * g) as f32;
+                }
+            }
             shadow_rays = (g * g) as u64 * scene.lights.len() as u64;
         }
 
@@ -172,6 +201,12 @@ impl Context<'_> {
         let sky = self.params.sky * (PI * escape);
         let direct = emitted + punctual + sky;
         debug_assert!(direct.is_finite(), "texel {i}: direct {direct}");
+        // As `end_row` treats the total: a non-finite term counts as no light.
+        for term in &mut out.terms[terms..] {
+            if !term.is_finite() {
+                *term = Vec3::ZERO;
+            }
+        }
 
         // Row: the hit counts per source texel, `F_ij = hits / K` (exact, see `Rows`).
         hits.sort_unstable();

@@ -23,6 +23,8 @@ pub(crate) struct ChunkRows {
     pub(crate) counts: CountRows,
     pub(crate) escape: Vec<f32>,
     pub(crate) direct: Vec<Vec3>,
+    /// `direct` by source, when split ([`Transport::direct_terms`]).
+    pub(crate) terms: Vec<Vec3>,
     pub(crate) rays: u64,
 }
 
@@ -108,6 +110,7 @@ pub(crate) fn build(
         }
         t.escape.extend(c.escape);
         t.direct.extend(c.direct);
+        t.direct_terms.extend(c.terms);
         t.rays += c.rays;
     }
     t.rows = match counted {

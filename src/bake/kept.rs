@@ -1,0 +1,563 @@
+//! The kept transport, `<stem>.transport`: what `lightbake relight` needs to solve a bake again
+//! with other light and material values, without casting a ray ([`super::relight`]).
+//!
+//! ## Format (version 1)
+//!
+//! Little-endian throughout; `vec3` is three `f32`.
+//!
+//! | bytes             | what                                                                 |
+//! |-------------------|----------------------------------------------------------------------|
+//! | 20                | magic `LIGHTBAKE-TRANSPORT\n`                                         |
+//! | u32               | format version (1)                                                   |
+//! | 32                | scene hash: blake3 of the baked glTF (`.gltf` JSON then its `.bin`, or the `.glb`) and of the settings block |
+//! | u64               | body length in bytes                                                 |
+//! | body              | the sections below, in order                                         |
+//! | 32                | blake3 of the body (a damaged or truncated copy is refused)          |
+//!
+//! Body sections:
+//!
+//! 1. settings: u64 length + UTF-8 JSON ([`Settings`]): the settings the bake ran with (the
+//!    automatic choices applied: method, solver, rays, light samples, tolerance, density; a
+//!    kept bake casts the chosen rays at every texel), the glTF it belongs to, and the lights and materials by name with their
+//!    baked values (the relit values are relative to them).
+//! 2. texels: u32 texel count `n`, u32 source count `S`, u32 page count, then per page
+//!    u32 width and height; then arrays of `n`: page (u32), x and y (2 × u32), position,
+//!    normal, du, dv, albedo, emission (vec3 each), material (u32, an index into the settings'
+//!    materials); then u32 count and the ids of the invalid texels. These are the texels after
+//!    validity moved their sample points (that pass casts rays): the denoiser, the invalid-texel
+//!    fill and the pages read them.
+//! 3. rows: `n` escape fractions (f32), `n` row lengths (u32), then every row's entries in
+//!    texel order as (u32 source texel, f32 form factor). Written through
+//!    [`Transport::row`] and read back through [`Transport::from_rows`], so the file does not
+//!    depend on how rows are held in memory. Form factors are stored as f32, the precision the
+//!    solver uses: a Monte Carlo entry is a hit count over the texel's ray count, which f32
+//!    holds exactly enough for the count to be recovered (`round(f · K)`, K ≤ 2²⁰).
+//! 4. direct light by source: `n × S` vec3, texel-major ([`Transport::direct_terms`]): sources
+//!    are the scene's punctual lights, then its emissive materials
+//!    ([`crate::transport::Sources`]). The sky's part is `π · sky · escape`.
+//! 5. seams: u32 count, then per sample u32 page × 2 and f32 uv × 4 (the seam samples the
+//!    stitching reads, found from the scene and atlas at bake time).
+//!
+//! Reading refuses, naming the file: another kind of file (magic), another format version, a
+//! truncated or damaged file (lengths and body hash), and a stale or foreign one (the scene
+//! hash does not match the glTF beside it: baked again, edited, or another scene's).
+
+use std::path::{Path, PathBuf};
+
+use glam::{Vec2, Vec3};
+use serde::{Deserialize, Serialize};
+
+use crate::atlas::PageSize;
+use crate::config::{BakeConfig, Technique, UvMode};
+use crate::lightmap::seams::{SeamSample, Seams};
+use crate::scene::Scene;
+use crate::texels::{NO_TEXEL, Texels};
+use crate::transport::{Sources, Transport};
+use crate::{Error, Result};
+
+const MAGIC: &[u8; 20] = b"LIGHTBAKE-TRANSPORT\n";
+/// The format version this lightbake writes and reads.
+pub const VERSION: u32 = 1;
+
+/// The settings block: how the bake ran, and the lights and materials it was baked with.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct Settings {
+    /// The lightbake that wrote the file.
+    pub lightbake: String,
+    /// The baked glTF (`.gltf` or `.glb`) beside the file, by name.
+    pub gltf: String,
+    pub method: String,
+    pub solver: String,
+    pub texels_per_unit: f32,
+    pub instance_density: Vec<f32>,
+    pub max_page_size: u32,
+    pub padding: u32,
+    pub uv: String,
+    pub split_junctions: bool,
+    pub shadow_cuts: bool,
+    pub gather_rays: u32,
+    pub light_samples: u32,
+    pub sky: [f32; 3],
+    pub indirect_only: bool,
+    pub seed: u64,
+    pub validity: bool,
+    pub denoise: bool,
+    pub tolerance: f32,
+    pub max_iterations: u32,
+    pub float: bool,
+    pub preview_exposure: f32,
+    pub rgbm: bool,
+    pub seams: bool,
+    /// The scene's punctual lights, in scene order (sources `0..lights.len()`).
+    pub lights: Vec<LightEntry>,
+    /// The scene's materials, in scene order.
+    pub materials: Vec<MaterialEntry>,
+    /// The emissive materials (indices into `materials`): sources `lights.len()..`.
+    pub emissive: Vec<u32>,
+}
+
+/// A punctual light as baked.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct LightEntry {
+    /// Its glTF name, or `light <k>` (k its index in `KHR_lights_punctual.lights`).
+    pub label: String,
+    /// Its index in `KHR_lights_punctual.lights`.
+    pub source: Option<u32>,
+    /// `color × intensity`.
+    pub intensity: [f32; 3],
+}
+
+/// A material as baked.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct MaterialEntry {
+    /// Its glTF name, or `material <k>` (k its glTF index), or `default`.
+    pub label: String,
+    /// Its glTF material index.
+    pub source: Option<u32>,
+    pub base_color: [f32; 3],
+    /// Whether a texture multiplies `base_color`.
+    pub textured: bool,
+    /// `emissiveFactor × emissiveStrength`.
+    pub emission: [f32; 3],
+}
+
+impl Settings {
+    /// The settings of a bake of `scene` with `config` (the automatic choices applied).
+    pub fn new(scene: &Scene, config: &BakeConfig, gltf: &str) -> Self {
+        let (t, a, o) = (&config.transport, &config.atlas, &config.output);
+        let lights = (scene.lights.iter().enumerate())
+            .map(|(k, l)| LightEntry {
+                label: l.name.clone().unwrap_or_else(|| match l.source {
+                    Some(s) => format!("light {s}"),
+                    None => format!("light #{k}"),
+                }),
+                source: l.source,
+                intensity: l.intensity.to_array(),
+            })
+            .collect();
+        let materials = (scene.materials.iter())
+            .map(|m| MaterialEntry {
+                label: m.name.clone().unwrap_or_else(|| match m.source {
+                    Some(s) => format!("material {s}"),
+                    None => "default".to_string(),
+                }),
+                source: m.source,
+                base_color: m.base_color.to_array(),
+                textured: m.base_color_texture.is_some(),
+                emission: m.emission.to_array(),
+            })
+            .collect();
+        Settings {
+            lightbake: env!("CARGO_PKG_VERSION").to_string(),
+            gltf: gltf.to_string(),
+            method: config.technique.method().to_string(),
+            solver: config.technique.solver().to_string(),
+            texels_per_unit: a.texels_per_unit,
+            instance_density: a.instance_density.clone(),
+            max_page_size: a.max_page_size,
+            padding: a.padding,
+            uv: match a.uv {
+                UvMode::Unwrap => "unwrap",
+                UvMode::Existing => "existing",
+                UvMode::Auto => "auto",
+            }
+            .to_string(),
+            split_junctions: a.split_junctions,
+            shadow_cuts: a.shadow_cuts,
+            gather_rays: t.gather_rays,
+            light_samples: t.light_samples,
+            sky: t.sky.to_array(),
+            indirect_only: t.indirect_only,
+            seed: t.seed,
+            validity: t.validity,
+            denoise: t.denoise,
+            tolerance: config.solve.tolerance,
+            max_iterations: config.solve.max_iterations,
+            float: o.float,
+            preview_exposure: o.preview_exposure,
+            rgbm: o.rgbm,
+            seams: o.seams,
+            lights,
+            materials,
+            emissive: Sources::new(scene).emissive,
+        }
+    }
+
+    /// The bake's configuration, with no automatic choice left to make (`auto: None`): what a
+    /// fresh bake with the same fixed settings runs with.
+    pub fn config(&self) -> Result<BakeConfig> {
+        let mut c = BakeConfig::medium();
+        c.technique = Technique::from_names(&self.method, &self.solver)?;
+        let a = &mut c.atlas;
+        a.texels_per_unit = self.texels_per_unit;
+        a.instance_density = self.instance_density.clone();
+        a.max_page_size = self.max_page_size;
+        a.padding = self.padding;
+        a.uv = match self.uv.as_str() {
+            "unwrap" => UvMode::Unwrap,
+            "existing" => UvMode::Existing,
+            _ => UvMode::Auto,
+        };
+        a.split_junctions = self.split_junctions;
+        a.shadow_cuts = self.shadow_cuts;
+        let t = &mut c.transport;
+        t.gather_rays = self.gather_rays;
+        t.light_samples = self.light_samples;
+        t.sky = Vec3::from(self.sky);
+        t.indirect_only = self.indirect_only;
+        t.seed = self.seed;
+        t.validity = self.validity;
+        t.denoise = self.denoise;
+        c.solve.tolerance = self.tolerance;
+        c.solve.max_iterations = self.max_iterations;
+        let o = &mut c.output;
+        o.float = self.float;
+        o.preview_exposure = self.preview_exposure;
+        o.rgbm = self.rgbm;
+        o.seams = self.seams;
+        c.auto = None;
+        Ok(c)
+    }
+}
+
+/// A kept transport, read back.
+#[derive(Clone, Debug)]
+pub struct Kept {
+    pub settings: Settings,
+    /// The fields the solver, denoiser, fill and pages read (see the module docs); the others
+    /// are empty.
+    pub texels: Texels,
+    /// Per texel: its material (an index into `settings.materials`).
+    pub material: Vec<u32>,
+    /// Rows, escape fractions, direct light by source (`direct` is empty: relight makes it).
+    pub transport: Transport,
+    /// Seam samples only (`edges` is empty).
+    pub seams: Seams,
+}
+
+/// Per texel: the material of its main triangle.
+pub fn texel_materials(scene: &Scene, texels: &Texels) -> Vec<u32> {
+    (texels.triangle.iter())
+        .map(|&t| scene.instances[scene.triangle_instance[t as usize] as usize].material)
+        .collect()
+}
+
+/// The scene hash: the baked glTF's files and the settings block.
+fn scene_hash(gltf_files: &[&[u8]], settings: &[u8]) -> [u8; 32] {
+    let mut h = blake3::Hasher::new();
+    for bytes in gltf_files {
+        h.update(&(bytes.len() as u64).to_le_bytes());
+        h.update(bytes);
+    }
+    h.update(settings);
+    *h.finalize().as_bytes()
+}
+
+/// The file's bytes. `gltf_files` are the baked glTF's files as written (`.gltf` then `.bin`,
+/// or the `.glb`); `transport` holds direct light by source.
+pub fn encode(
+    settings: &Settings,
+    gltf_files: &[&[u8]],
+    texels: &Texels,
+    material: &[u32],
+    transport: &Transport,
+    seams: &Seams,
+) -> Result<Vec<u8>> {
+    let n = texels.len();
+    let sources = transport.sources.len();
+    if transport.direct_terms.len() != n * sources || transport.len() != n {
+        return Err(Error::Option(
+            "the transport holds no direct light by source: it cannot be kept".to_string(),
+        ));
+    }
+    let json = serde_json::to_vec(settings)
+        .map_err(|e| Error::Option(format!("cannot serialise the bake's settings: {e}")))?;
+    let mut w = Writer::default();
+    w.u64(json.len() as u64);
+    w.0.extend_from_slice(&json);
+    w.u32(n as u32);
+    w.u32(sources as u32);
+    w.u32(texels.pages.len() as u32);
+    for p in &texels.pages {
+        w.u32(p.width);
+        w.u32(p.height);
+    }
+    texels.page.iter().for_each(|&p| w.u32(p));
+    texels.xy.iter().flatten().for_each(|&v| w.u32(v));
+    for field in [
+        &texels.position,
+        &texels.normal,
+        &texels.du,
+        &texels.dv,
+        &texels.albedo,
+        &texels.emission,
+    ] {
+        field.iter().for_each(|&v| w.vec3(v));
+    }
+    material.iter().for_each(|&m| w.u32(m));
+    w.u32(texels.invalid.len() as u32);
+    texels.invalid.iter().for_each(|&i| w.u32(i));
+    transport.escape.iter().for_each(|&e| w.f32(e));
+    (0..n).for_each(|i| w.u32(transport.row(i).count() as u32));
+    for i in 0..n {
+        for (j, f) in transport.row(i) {
+            w.u32(j);
+            w.f32(f);
+        }
+    }
+    transport.direct_terms.iter().for_each(|&v| w.vec3(v));
+    w.u32(seams.samples.len() as u32);
+    for s in &seams.samples {
+        s.page.iter().for_each(|&p| w.u32(p));
+        s.uv.iter().for_each(|&uv| {
+            w.f32(uv.x);
+            w.f32(uv.y);
+        });
+    }
+    let body = w.0;
+    let mut out = Vec::with_capacity(body.len() + 100);
+    out.extend_from_slice(MAGIC);
+    out.extend_from_slice(&VERSION.to_le_bytes());
+    out.extend_from_slice(&scene_hash(gltf_files, &json));
+    out.extend_from_slice(&(body.len() as u64).to_le_bytes());
+    out.extend_from_slice(&body);
+    out.extend_from_slice(blake3::hash(&body).as_bytes());
+    Ok(out)
+}
+
+/// The files of the baked glTF `gltf` (`.gltf` then its `.bin`, or the `.glb`), as the scene
+/// hash reads them.
+pub fn gltf_files(gltf: &Path) -> Result<Vec<Vec<u8>>> {
+    let main = std::fs::read(gltf).map_err(|e| Error::io(gltf, e))?;
+    let mut files = vec![main];
+    if gltf.extension().and_then(|e| e.to_str()) == Some("gltf") {
+        let bin = gltf.with_extension("bin");
+        if bin.exists() {
+            files.push(std::fs::read(&bin).map_err(|e| Error::io(&bin, e))?);
+        }
+    }
+    Ok(files)
+}
+
+/// `<stem>.transport` beside the baked glTF `gltf`.
+pub fn path_beside(gltf: &Path) -> PathBuf {
+    gltf.with_extension("transport")
+}
+
+/// Reads the transport kept beside the baked glTF `gltf` (see the module docs for what is
+/// refused).
+pub fn read(gltf: &Path) -> Result<Kept> {
+    let path = path_beside(gltf);
+    let bytes = std::fs::read(&path).map_err(|e| {
+        Error::invalid(
+            &path,
+            format!("cannot read it ({e}): bake with --keep-transport to write it"),
+        )
+    })?;
+    let bad = |what: String| Error::invalid(&path, what);
+    if bytes.len() < MAGIC.len() || &bytes[..MAGIC.len()] != MAGIC {
+        return Err(bad("not a lightbake transport file".to_string()));
+    }
+    let mut r = Reader {
+        bytes: &bytes,
+        at: MAGIC.len(),
+    };
+    let truncated = |_| bad(format!("truncated ({} bytes)", bytes.len()));
+    let version = r.u32().map_err(truncated)?;
+    if version != VERSION {
+        return Err(bad(format!(
+            "transport format version {version}; this lightbake reads version {VERSION}: bake again with --keep-transport"
+        )));
+    }
+    let hash: [u8; 32] = r.take(32).map_err(truncated)?.try_into().unwrap();
+    let body_len = r.u64().map_err(truncated)? as usize;
+    let expected = r.at + body_len + 32;
+    if bytes.len() != expected {
+        return Err(bad(format!(
+            "truncated or damaged: {} bytes, the header says {expected}",
+            bytes.len()
+        )));
+    }
+    let body = &bytes[r.at..r.at + body_len];
+    if blake3::hash(body).as_bytes() != &bytes[expected - 32..] {
+        return Err(bad(
+            "damaged: the body's checksum does not match".to_string()
+        ));
+    }
+    let mut r = Reader { bytes: body, at: 0 };
+    let (kept, json) = decode(&mut r).map_err(|what| bad(format!("malformed: {what}")))?;
+    let files = gltf_files(gltf)?;
+    let files: Vec<&[u8]> = files.iter().map(Vec::as_slice).collect();
+    if scene_hash(&files, json) != hash {
+        return Err(bad(format!(
+            "stale or foreign: it was not made with {} as it is now (baked again, edited, or another scene's); bake again with --keep-transport",
+            gltf.display()
+        )));
+    }
+    if kept.settings.gltf != gltf.file_name().and_then(|n| n.to_str()).unwrap_or("") {
+        return Err(bad(format!(
+            "foreign: it belongs to {}, not {}",
+            kept.settings.gltf,
+            gltf.display()
+        )));
+    }
+    Ok(kept)
+}
+
+/// The body, parsed, and its settings block as written; an error says what is inconsistent.
+fn decode<'a>(r: &mut Reader<'a>) -> std::result::Result<(Kept, &'a [u8]), String> {
+    let json_len = r.u64()? as usize;
+    let json = r.take(json_len)?;
+    let settings: Settings = serde_json::from_slice(json).map_err(|e| format!("settings: {e}"))?;
+    let n = r.u32()? as usize;
+    let sources = r.u32()? as usize;
+    let pages = r.u32()? as usize;
+    if sources != settings.lights.len() + settings.emissive.len() {
+        return Err(format!(
+            "{sources} sources, the settings name {}",
+            settings.lights.len() + settings.emissive.len()
+        ));
+    }
+    let mut texels = Texels::default();
+    for _ in 0..pages {
+        let (width, height) = (r.u32()?, r.u32()?);
+        texels.pages.push(PageSize { width, height });
+        texels
+            .index
+            .push(vec![NO_TEXEL; width as usize * height as usize]);
+    }
+    texels.page = r.u32s(n)?;
+    texels.xy = r.u32s(2 * n)?.chunks(2).map(|c| [c[0], c[1]]).collect();
+    for i in 0..n {
+        let (p, [x, y]) = (texels.page[i] as usize, texels.xy[i]);
+        let size = texels
+            .pages
+            .get(p)
+            .ok_or(format!("texel {i}: no page {p}"))?;
+        if x >= size.width || y >= size.height {
+            return Err(format!("texel {i} lies outside its page"));
+        }
+        texels.index[p][(y * size.width + x) as usize] = i as u32;
+    }
+    texels.position = r.vec3s(n)?;
+    texels.normal = r.vec3s(n)?;
+    texels.du = r.vec3s(n)?;
+    texels.dv = r.vec3s(n)?;
+    texels.albedo = r.vec3s(n)?;
+    texels.emission = r.vec3s(n)?;
+    let material = r.u32s(n)?;
+    if material
+        .iter()
+        .any(|&m| m as usize >= settings.materials.len())
+    {
+        return Err("a texel's material is out of range".to_string());
+    }
+    let invalid = r.u32()? as usize;
+    texels.invalid = r.u32s(invalid)?;
+    if texels.invalid.iter().any(|&i| i as usize >= n) {
+        return Err("an invalid texel id is out of range".to_string());
+    }
+    let escape = r.f32s(n)?;
+    let lengths = r.u32s(n)?;
+    let entries: usize = lengths.iter().map(|&l| l as usize).sum();
+    let pairs = r.take(entries * 8)?;
+    let mut at = 0;
+    let rows = lengths.iter().map(|&len| {
+        let row = &pairs[at..at + len as usize * 8];
+        at += len as usize * 8;
+        row.chunks_exact(8).map(|e| {
+            let word = |k: usize| u32::from_le_bytes(e[k..k + 4].try_into().unwrap());
+            (word(0), f32::from_bits(word(4)))
+        })
+    });
+    let mut transport = Transport::from_rows(rows, escape);
+    if (0..n).any(|i| transport.row(i).any(|(j, _)| j as usize >= n)) {
+        return Err("a row names a texel out of range".to_string());
+    }
+    transport.direct_terms = r.vec3s(n * sources)?;
+    transport.sources = Sources {
+        lights: settings.lights.len(),
+        emissive: settings.emissive.clone(),
+        ..Default::default()
+    };
+    let samples = r.u32()? as usize;
+    let mut seams = Seams::default();
+    for _ in 0..samples {
+        let page = [r.u32()?, r.u32()?];
+        let v = r.f32s(4)?;
+        if page.iter().any(|&p| p as usize >= pages) {
+            return Err("a seam sample's page is out of range".to_string());
+        }
+        seams.samples.push(SeamSample {
+            page,
+            uv: [Vec2::new(v[0], v[1]), Vec2::new(v[2], v[3])],
+        });
+    }
+    if r.at != r.bytes.len() {
+        return Err(format!(
+            "{} bytes after the last section",
+            r.bytes.len() - r.at
+        ));
+    }
+    let kept = Kept {
+        settings,
+        texels,
+        material,
+        transport,
+        seams,
+    };
+    Ok((kept, json))
+}
+
+#[derive(Default)]
+struct Writer(Vec<u8>);
+
+impl Writer {
+    fn u32(&mut self, v: u32) {
+        self.0.extend_from_slice(&v.to_le_bytes());
+    }
+    fn u64(&mut self, v: u64) {
+        self.0.extend_from_slice(&v.to_le_bytes());
+    }
+    fn f32(&mut self, v: f32) {
+        self.0.extend_from_slice(&v.to_le_bytes());
+    }
+    fn vec3(&mut self, v: Vec3) {
+        v.to_array().iter().for_each(|&c| self.f32(c));
+    }
+}
+
+struct Reader<'a> {
+    bytes: &'a [u8],
+    at: usize,
+}
+
+impl<'a> Reader<'a> {
+    fn take(&mut self, len: usize) -> std::result::Result<&'a [u8], String> {
+        let end = self.at.checked_add(len).filter(|&e| e <= self.bytes.len());
+        let end = end.ok_or_else(|| format!("a section runs past the end at byte {}", self.at))?;
+        let out = &self.bytes[self.at..end];
+        self.at = end;
+        Ok(out)
+    }
+    fn u32(&mut self) -> std::result::Result<u32, String> {
+        Ok(u32::from_le_bytes(self.take(4)?.try_into().unwrap()))
+    }
+    fn u64(&mut self) -> std::result::Result<u64, String> {
+        Ok(u64::from_le_bytes(self.take(8)?.try_into().unwrap()))
+    }
+    fn u32s(&mut self, n: usize) -> std::result::Result<Vec<u32>, String> {
+        let bytes = self.take(n.checked_mul(4).ok_or("length overflows")?)?;
+        Ok(bytes
+            .chunks_exact(4)
+            .map(|c| u32::from_le_bytes(c.try_into().unwrap()))
+            .collect())
+    }
+    fn f32s(&mut self, n: usize) -> std::result::Result<Vec<f32>, String> {
+        Ok(self.u32s(n)?.into_iter().map(f32::from_bits).collect())
+    }
+    fn vec3s(&mut self, n: usize) -> std::result::Result<Vec<Vec3>, String> {
+        let v = self.f32s(n.checked_mul(3).ok_or("length overflows")?)?;
+        Ok(v.chunks_exact(3).map(Vec3::from_slice).collect())
+    }
+}
