@@ -15,7 +15,7 @@ use std::time::Instant;
 
 use base64::Engine;
 use glam::Vec3;
-use lightbake::render::{Image, RenderOptions, RenderScene};
+use lightbake::render::{RenderOptions, RenderScene};
 use lightbake::testing::{Camera, Face, Geometry, GltfBuilder, Light, Material};
 use lightbake::{BakeConfig, NoProgress};
 use serde_json::{Value, json};
@@ -62,7 +62,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         images.push(image);
     }
     let png = out.join("mirror_and_glass.png");
-    side_by_side(&images[0], &images[1]).save(&png, -0.7)?;
+    images[0].beside(&images[1]).save(&png, -0.7)?;
     println!(
         "wrote {} (left: lightmap only, right: --specular)",
         png.display()
@@ -195,22 +195,5 @@ fn set_material(json: &mut Value, name: &str, metallic: f32, roughness: f32, ext
     m["pbrMetallicRoughness"]["roughnessFactor"] = json!(roughness);
     if extensions.is_object() {
         m["extensions"] = extensions;
-    }
-}
-
-fn side_by_side(a: &Image, b: &Image) -> Image {
-    let mut rgb = Vec::with_capacity(a.rgb.len() + b.rgb.len());
-    for y in 0..a.height as usize {
-        for i in [a, b] {
-            let w = i.width as usize;
-            rgb.extend_from_slice(&i.rgb[y * w..(y + 1) * w]);
-        }
-    }
-    Image {
-        width: a.width + b.width,
-        height: a.height,
-        rgb,
-        nonfinite: a.nonfinite + b.nonfinite,
-        rays: a.rays + b.rays,
     }
 }

@@ -237,6 +237,9 @@ pub struct OutputParams {
     /// Also write each page's per-texel error estimate (`plan::error_map`) as
     /// `<page>_error.exr`.
     pub error_map: bool,
+    /// Also write directional pages (L1 spherical harmonics of the incident radiance,
+    /// `lightmap::directional`) from a final gather with this many rays per texel.
+    pub directional: Option<u32>,
     /// Also write `<stem>.transport`: the rows, direct light per source and the settings, from
     /// which `lightbake relight` re-solves with other light and material values without casting
     /// a ray (see the crate's `relight`). Monte Carlo rows only.
@@ -363,6 +366,7 @@ impl BakeConfig {
                 error_map: false,
                 keep_transport: false,
                 layers: None,
+                directional: None,
             },
             auto: None,
             max_memory: None,
@@ -420,6 +424,13 @@ impl BakeConfig {
             return Err(Option(format!(
                 "gather rays must be within 1..=1048576, got {}",
                 t.gather_rays
+            )));
+        }
+        if let Some(rays) = self.output.directional
+            && (rays == 0 || rays > 1 << 20)
+        {
+            return Err(Option(format!(
+                "directional rays must be within 1..=1048576, got {rays}"
             )));
         }
         if t.light_samples > 1 << 20 {

@@ -33,6 +33,8 @@
 //!            ─ solve::solve ──▶ Solution              H = H_direct + F·(ρH), iterated
 //!     or solve::gather, solve::hierarchical ──▶ Transport (no rows) + Solution
 //!     ─ lightmap::denoise  ──▶ H/π per texel         edge-aware, Monte Carlo only
+//!  ─ lightmap::directional ──▶ L1 SH per texel       with --directional: a final gather over
+//!                                                     the solution (pages like the lightmap's)
 //! ─ LightmapPages::from_texels ▶ LightmapPages         H/π per texel, dilated into the gutters
 //!         ─ lightmap::seams ──▶ LightmapPages         UV seams stitched (least squares)
 //!                  ─ output ──▶ .exr + .png pages, .gltf/.bin or .glb (every file format

@@ -440,13 +440,23 @@ impl Paths<'_> {
         let mut rng = Rng::new(self.params.seed ^ SEED_SALT, i as u64, sample as u64);
         let n = t.normal[i];
         let x = footprint_point(t, i, rng.next_vec2()) + n * self.tracer.epsilon;
-        self.reflected(x, n, &mut rng, rays)
+        self.reflected(x, n, None, &mut rng, rays)
     }
 
     /// One path estimate of `H(x)/π` at the surface point `x` (already lifted off the surface
     /// by the ray offset) with unit normal `n`: the radiance a white Lambertian surface there
     /// reflects. Shared by the texel and the camera modes. Non-finite estimates count as 0.
-    pub(crate) fn reflected(&self, x: Vec3, n: Vec3, rng: &mut Rng, rays: &mut u64) -> Vec3 {
+    /// With a `horizon` (the surface's geometric normal, when `n` is a perturbed normal) light
+    /// arriving at `x` from below it counts as zero: the surface itself blocks it (a ray into
+    /// the surface would otherwise hit its own front from just above it).
+    pub(crate) fn reflected(
+        &self,
+        x: Vec3,
+        n: Vec3,
+        horizon: Option<Vec3>,
+        rng: &mut Rng,
+        rays: &mut u64,
+    ) -> Vec3 {
         let (t, eps) = (self.texels, self.tracer.epsilon);
         let (mut x, mut n) = (x, n);
         // The receiver is a white Lambertian surface: H/π is the radiance it reflects.
@@ -456,12 +466,16 @@ impl Paths<'_> {
         for depth in 0..self.params.max_depth {
             // Light that reaches x₀ without a bounce is direct light.
             let counts = depth > 0 || !self.params.indirect_only;
+            let horizon = horizon.filter(|_| depth == 0);
             if counts {
-                l += beta * rho * self.next_event(x, n, rng, rays) / PI;
+                l += beta * rho * self.next_event(x, n, horizon, rng, rays) / PI;
             }
             let (tx, ty) = frame(n);
             let local = cosine_hemisphere(rng.next_vec2());
             let dir = tx * local.x + ty * local.y + n * local.z;
+            if horizon.is_some_and(|h| h.dot(dir) <= 0.0) {
+                break;
+            }
             beta *= rho;
             *rays += 1;
             let (hit, j) = match t.ray_end(self.tracer, x, dir) {
@@ -505,12 +519,26 @@ impl Paths<'_> {
     }
 
     /// Irradiance estimate at `x` (offset, normal `n`) from punctual lights and one
-    /// MIS-weighted sample of the small emitters.
+    /// MIS-weighted sample of the small emitters; none from below `horizon`.
     #[inline]
-    fn next_event(&self, x: Vec3, n: Vec3, rng: &mut Rng, rays: &mut u64) -> Vec3 {
+    fn next_event(
+        &self,
+        x: Vec3,
+        n: Vec3,
+        horizon: Option<Vec3>,
+        rng: &mut Rng,
+        rays: &mut u64,
+    ) -> Vec3 {
+        let above = |dir: Vec3| horizon.is_none_or(|h| h.dot(dir) > 0.0);
         let mut e = Vec3::ZERO;
         for light in &self.scene.lights {
-            e += punctual_irradiance(light, x, n, self.tracer);
+            let toward = match light.kind {
+                scene::LightKind::Directional => -light.direction,
+                _ => light.position - x,
+            };
+            if above(toward) {
+                e += punctual_irradiance(light, x, n, self.tracer);
+            }
         }
         *rays += self.scene.lights.len() as u64;
         if self.emitters.is_empty() {
@@ -525,7 +553,7 @@ impl Paths<'_> {
             return e;
         };
         *rays += 1;
-        if self.tracer.occluded(x, y.point) {
+        if !above(y.point - x) || self.tracer.occluded(x, y.point) {
             return e;
         }
         let p_bsdf = y.cos_i / PI;

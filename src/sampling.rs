@@ -77,6 +77,15 @@ pub fn cosine_hemisphere(u: Vec2) -> Vec3 {
     Vec3::new(d.x, d.y, z)
 }
 
+/// Uniformly distributed direction over the hemisphere around +Z (pdf `1/2π`) from a point in
+/// the unit square: `z = u.x`, azimuth `2π·u.y`.
+#[inline]
+pub fn uniform_hemisphere(u: Vec2) -> Vec3 {
+    let r = (1.0 - u.x * u.x).max(0.0).sqrt();
+    let phi = 2.0 * PI * u.y;
+    Vec3::new(r * phi.cos(), r * phi.sin(), u.x)
+}
+
 #[inline]
 fn concentric_disk(u: Vec2) -> Vec2 {
     let o = 2.0 * u - Vec2::ONE;

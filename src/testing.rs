@@ -288,6 +288,8 @@ pub struct Material {
     pub double_sided: bool,
     /// Image index (each image is its own texture).
     pub base_color_texture: Option<usize>,
+    /// Image index of the `normalTexture` (tangent space, linear).
+    pub normal_texture: Option<usize>,
 }
 
 impl Material {
@@ -299,6 +301,7 @@ impl Material {
             emissive_strength: 1.0,
             double_sided: false,
             base_color_texture: None,
+            normal_texture: None,
         }
     }
 
@@ -320,6 +323,11 @@ impl Material {
 
     pub fn with_texture(mut self, image: usize) -> Self {
         self.base_color_texture = Some(image);
+        self
+    }
+
+    pub fn with_normal_texture(mut self, image: usize) -> Self {
+        self.normal_texture = Some(image);
         self
     }
 }
@@ -852,6 +860,9 @@ fn material_json(material: &Material) -> Value {
     if material.emissive != [0.0; 3] {
         out.insert("emissiveFactor".into(), nums(&material.emissive));
     }
+    if let Some(image) = material.normal_texture {
+        out.insert("normalTexture".into(), json!({ "index": image }));
+    }
     if material.double_sided {
         out.insert("doubleSided".into(), json!(true));
     }
@@ -1276,6 +1287,68 @@ pub fn textured() -> GltfBuilder {
     let camera = Camera::perspective("camera", 0.8, None);
     gltf.add_camera_node(camera, Vec3::new(0.0, 2.0, 2.5), Vec3::ZERO);
     gltf
+}
+
+/// A 3 × 2 m wall (z = −1, facing +z) whose `normalTexture` ([`dome_normal_map`]) gives it
+/// 6 × 4 hemispherical bumps, on a grey floor, lit at a grazing angle by a point light close
+/// to its upper left and a dimmer one to its right: the bumps only show when a renderer shades
+/// the perturbed normal, which a plain lightmap (one value per texel) cannot. For directional
+/// lightmaps (`lightmap::directional`) and the renderer's normal maps.
+pub fn normal_mapped_wall() -> GltfBuilder {
+    let mut gltf = GltfBuilder::new("normal_mapped_wall");
+    let image = gltf.add_image(
+        "domes",
+        &dome_normal_map(384, 256, 6, 4).into(),
+        ImageStorage::BufferView,
+    );
+    let wall_material =
+        gltf.add_material(Material::grey("bumpy wall", 0.8).with_normal_texture(image));
+    let floor_material = gltf.add_material(Material::grey("floor", 0.5));
+    let wall = Geometry::grid(
+        Vec3::new(-1.5, 0.0, -1.0),
+        Vec3::X * 3.0,
+        Vec3::Y * 2.0,
+        6,
+        4,
+    );
+    let wall_mesh = gltf.add_mesh("wall", wall, wall_material);
+    gltf.add_mesh_node("wall", wall_mesh);
+    let floor_mesh = gltf.add_mesh("floor", floor(3.0, 6), floor_material);
+    gltf.add_mesh_node("floor", floor_mesh);
+    gltf.add_light_node(
+        Light::point("grazing", [1.0, 0.95, 0.85], 3.0),
+        Vec3::new(-1.3, 1.9, -0.75),
+        Vec3::NEG_Y,
+    );
+    gltf.add_light_node(
+        Light::point("fill", [0.7, 0.8, 1.0], 1.5),
+        Vec3::new(1.4, 0.6, 0.2),
+        Vec3::NEG_Y,
+    );
+    let camera = Camera::perspective("camera", 0.9, None);
+    gltf.add_camera_node(camera, Vec3::new(0.0, 1.0, 2.2), Vec3::new(0.0, 0.9, -1.0));
+    gltf
+}
+
+/// A `width × height` tangent-space normal map (glTF convention: +x right, +y up the image,
+/// `rgb = (n + 1)/2`) of `across × down` hemispherical domes filling 90% of their cells, flat
+/// between them.
+pub fn dome_normal_map(width: u32, height: u32, across: u32, down: u32) -> image::RgbImage {
+    let (cw, ch) = (width as f32 / across as f32, height as f32 / down as f32);
+    let radius = 0.45 * cw.min(ch);
+    image::RgbImage::from_fn(width, height, |x, y| {
+        let (px, py) = (x as f32 + 0.5, y as f32 + 0.5);
+        let dx = (px - ((px / cw).floor() + 0.5) * cw) / radius;
+        let dy = (py - ((py / ch).floor() + 0.5) * ch) / radius;
+        let r2 = dx * dx + dy * dy;
+        let n = if r2 < 1.0 {
+            Vec3::new(dx, -dy, (1.0 - r2).sqrt()).normalize()
+        } else {
+            Vec3::Z
+        };
+        let byte = |c: f32| ((c * 0.5 + 0.5) * 255.0).round() as u8;
+        image::Rgb([byte(n.x), byte(n.y), byte(n.z)])
+    })
 }
 
 /// A `size`-pixel square image of `squares × squares` alternating [`CHECKER_COLORS`].

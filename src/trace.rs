@@ -499,6 +499,7 @@ mod tests {
                 back: None,
                 has_uv1: false,
                 lightmap: None,
+                directional: None,
                 split: Default::default(),
             });
         };
@@ -617,6 +618,7 @@ mod tests {
             back: None,
             has_uv1: false,
             lightmap: None,
+            directional: None,
             split: Default::default(),
         });
         s.materials.push(Material::default());

@@ -6,6 +6,7 @@ mod analytic;
 mod build;
 mod cli;
 mod denoise;
+mod directional;
 mod form_factors;
 mod hardening;
 mod hierarchical;

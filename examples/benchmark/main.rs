@@ -7,10 +7,12 @@
 //! cargo run --release --example benchmark -- --scene cornell_box --scene furnace
 //! cargo run --release --example benchmark -- --scene furnace --method hierarchical
 //! cargo run --release --example benchmark -- --relight  # only the relight table (large hall)
+//! cargo run --release --example benchmark -- --directional-only --scene cornell_box
 //! ```
 //!
 //! Writes `examples/gallery/bench.csv`, `bench.md` and the charts `error_vs_time_<scene>.png`
-//! and `residual_vs_iteration.png`. Each bake runs in a child process (this program run with
+//! and `residual_vs_iteration.png` (and `bench_directional.csv`: the directional overhead,
+//! `directional.rs`). Each bake runs in a child process (this program run with
 //! `--child`), so its peak memory (VmHWM) is its own.
 //!
 //! Error metrics over all valid texels and channels, against the reference `r` (`x` = bake), from
@@ -42,6 +44,7 @@ use lightbake::render::RenderScene;
 use lightbake::{BakeConfig, NoProgress, metrics};
 use plotters::prelude::*;
 
+mod directional;
 mod font;
 mod relight;
 mod stability;
@@ -764,6 +767,12 @@ fn main() {
         child(&args[1..]);
         return;
     }
+    if args.first().map(String::as_str) == Some(directional::CHILD) {
+        directional::child(&args[1..], peak_mib);
+        return;
+    }
+    let directional_only = args.iter().any(|a| a == "--directional-only");
+    let (mut directional_md, mut directional_csv) = directional::headers();
     let quick = args.iter().any(|a| a == "--quick");
     let only: Vec<&str> = args
         .windows(2)
@@ -794,6 +803,15 @@ fn main() {
     let mut kept: Vec<(&'static str, PathBuf, f32, Ref)> = Vec::new();
     for scene in scenes(&work, quick) {
         if !only.is_empty() && !only.contains(&scene.name) {
+            continue;
+        }
+        eprintln!("== {}: directional overhead", scene.name);
+        let (row, csv) =
+            directional::overhead(scene.name, &scene.path, scene.texels_per_unit, &work);
+        eprint!("   {row}");
+        directional_md.push_str(&row);
+        directional_csv.push_str(&csv);
+        if directional_only {
             continue;
         }
         eprintln!("== {}: reference", scene.name);
@@ -898,6 +916,10 @@ fn main() {
         }
     }
 
+    if directional_only {
+        println!("{directional_md}");
+        return;
+    }
     eprintln!("== stability cases");
     let known = |name: &str| {
         kept.iter()
@@ -1038,8 +1060,15 @@ fn main() {
     let _ = writeln!(report, "\nLightmap quality, measured in the same run:\n");
     report.push_str(&quality_md);
     report.push_str(&relight_table(&work, &gallery));
+    let _ = writeln!(
+        report,
+        "\nDirectional overhead (`--directional`, {} rays per texel; the automatic choice at 4%, plain and directional bakes back to back):\n",
+        lightbake::lightmap::directional::DEFAULT_RAYS
+    );
+    report.push_str(&directional_md);
     let _ = writeln!(report, "\nEvery run:\n");
     report.push_str(&md);
+    std::fs::write(gallery.join("bench_directional.csv"), &directional_csv).unwrap();
     std::fs::write(gallery.join("bench.csv"), csv).unwrap();
     std::fs::write(gallery.join("bench.md"), &report).unwrap();
     println!("{report}");

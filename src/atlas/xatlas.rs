@@ -1297,6 +1297,7 @@ pub(super) mod tests {
                 back: None,
                 has_uv1: part.uv1.is_some(),
                 lightmap: None,
+                directional: None,
                 split: Default::default(),
             });
         };

@@ -49,6 +49,9 @@ pub struct BakeReport {
     pub seams: Option<lightmap::seams::SeamReport>,
     /// What the junction split cut (`None` when it did not run).
     pub junctions: Option<scene::junctions::JunctionReport>,
+    /// How the directional pages' reconstruction at the texel normals agrees with the lightmap
+    /// (`None` without `config.output.directional`).
+    pub directional: Option<lightmap::directional::Agreement>,
     pub stages: Vec<StageTime>,
     /// The files written, the glTF first.
     pub files: Vec<PathBuf>,
@@ -78,8 +81,17 @@ impl BakeReport {
             .junctions
             .as_ref()
             .map_or(String::new(), |j| format!("; {}", j.brief()));
+        let directional = self.directional.map_or(String::new(), |a| {
+            format!(
+                "; directional gather at the texel normals vs the lightmap: {:.1}% RMS, bias {:+.1}% (L1 reconstruction {:.1}%, {:+.1}%)",
+                a.gathered_rmse * 100.0,
+                a.gathered_bias * 100.0,
+                a.l1_rmse * 100.0,
+                a.l1_bias * 100.0
+            )
+        });
         format!(
-            "{} texels ({} moved out of geometry, {} invalid, {} divided by a wall) on {} page(s), {} triangles, {:.2} M rays, {} iterations, residual {:.1e}{}{}{junctions}{plan}; {} (total {:.2}s)",
+            "{} texels ({} moved out of geometry, {} invalid, {} divided by a wall) on {} page(s), {} triangles, {:.2} M rays, {} iterations, residual {:.1e}{}{}{junctions}{directional}{plan}; {} (total {:.2}s)",
             self.texels,
             self.validity.moved,
             self.validity.invalid,
@@ -116,6 +128,10 @@ pub struct Baked {
     /// Per page, each texel's estimated relative error: resolution, noise and total in R, G, B
     /// (`config.output.error_map`; [`plan::error_map`]).
     pub error_map: Option<LightmapPages>,
+    /// The directional pages ([`lightmap::directional::NAMES`]), dilated and stitched like
+    /// `pages`, their agreement with the lightmap and the gather's rays
+    /// (`config.output.directional`).
+    pub directional: Option<([LightmapPages; 4], lightmap::directional::Agreement, u64)>,
     pub validity: texels::validity::ValidityReport,
     /// The settings the bake ran with: `config` with the automatic choices applied.
     pub config: BakeConfig,
@@ -191,6 +207,7 @@ fn pass_through(
         plan: None,
         seams: None,
         junctions: None,
+        directional: None,
         stages,
         files,
     })
@@ -484,6 +501,23 @@ fn compute_prepared(mut prepared: Prepared, progress: &dyn Progress) -> Result<B
         ));
     }
     timed(&mut stages, "transport+solve", t);
+    let t = Instant::now();
+    let directional = config
+        .output
+        .directional
+        .map(|rays| {
+            let params = lightmap::directional::DirectionalParams {
+                rays,
+                seed: config.transport.seed,
+                sky: config.transport.sky,
+                indirect_only: config.transport.indirect_only,
+            };
+            lightmap::directional::gather(surfaces, &solution.irradiance, &params, progress)
+        })
+        .transpose()?;
+    if directional.is_some() {
+        timed(&mut stages, "directional", t);
+    }
     let Prepared {
         scene,
         source,
@@ -557,6 +591,23 @@ fn compute_prepared(mut prepared: Prepared, progress: &dyn Progress) -> Result<B
         .then(|| lightmap::seams::stitch_bake(&scene, &atlas, &mut pages, &Default::default()));
     timed(&mut stages, "seams", t);
     check_aborted(progress)?;
+    let directional = directional.map(|gathered| {
+        let t = Instant::now();
+        let agreement = lightmap::directional::agreement(&texels, &gathered, &lightmap);
+        let mut pages = lightmap::directional::pages(&texels, &gathered.sh);
+        for (c, p) in pages.iter_mut().enumerate() {
+            lightmap::dilate(p, config.atlas.padding.max(2) * 2);
+            if config.output.seams {
+                let params = lightmap::seams::SeamParams {
+                    non_negative: c == 0,
+                    ..Default::default()
+                };
+                lightmap::seams::stitch_bake(&scene, &atlas, p, &params);
+            }
+        }
+        timed(&mut stages, "directional pages", t);
+        (pages, agreement, gathered.rays)
+    });
 
     Ok(Baked {
         scene,
@@ -568,6 +619,7 @@ fn compute_prepared(mut prepared: Prepared, progress: &dyn Progress) -> Result<B
         lightmap,
         pages,
         error_map,
+        directional,
         validity,
         config,
         plan,
@@ -653,8 +705,20 @@ pub fn write(
     let t = Instant::now();
     let stem = output_stem(input);
     let mut staging = Staging::new(out_dir, &protected_files(input, &baked.source))?;
-    let page_files = relight::stage_pages(&mut staging, &stem, &baked.pages, config, input)?;
+    let mut page_files = relight::stage_pages(&mut staging, &stem, &baked.pages, config, input)?;
     let layer_files = relight::stage_layers(&mut staging, &stem, &baked.layers, config, input)?;
+    if let Some((pages, ..)) = &baked.directional {
+        for (k, files) in page_files.iter_mut().enumerate() {
+            let names = lightmap::directional::NAMES.map(|c| format!("{stem}_lightmap{k}_{c}.exr"));
+            for (name, pages) in names.iter().zip(pages) {
+                staging.write(
+                    name,
+                    &output::write_exr(&pages.pages[k], config.output.float, input)?,
+                )?;
+            }
+            files.directional = Some(names);
+        }
+    }
     // Beside the pages, referenced by nothing in the glTF.
     for (k, page) in baked
         .error_map
@@ -685,8 +749,11 @@ pub fn write(
         triangles: baked.scene.triangles.len(),
         texels: baked.texels.len(),
         pages: baked.pages.pages.len(),
-        // Every ray cast, the pilot bakes that are not part of the result included.
-        rays: baked.transport.rays + baked.plan.as_ref().map_or(0, |p| p.discarded_rays),
+        // Every ray cast, the pilot bakes that are not part of the result and the directional
+        // gather included.
+        rays: baked.transport.rays
+            + baked.plan.as_ref().map_or(0, |p| p.discarded_rays)
+            + baked.directional.as_ref().map_or(0, |d| d.2),
         iterations: baked.solution.history.len(),
         residual: baked.solution.residual(),
         converged: baked.solution.converged,
@@ -694,6 +761,7 @@ pub fn write(
         plan: baked.plan,
         seams: baked.seams,
         junctions: baked.junctions,
+        directional: baked.directional.map(|(_, a, _)| a),
         stages: baked.stages,
         files,
     })

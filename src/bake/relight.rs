@@ -584,6 +584,7 @@ pub(crate) fn stage_pages(
         let names = output::PageFiles {
             exr: format!("{prefix}_lightmap{k}.exr"),
             png: format!("{prefix}_lightmap{k}.png"),
+            directional: None,
         };
         staging.write(
             &names.exr,

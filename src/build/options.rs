@@ -36,6 +36,10 @@ pub struct Options {
     pub float: Option<bool>,
     pub rgbm: Option<bool>,
     pub error_map: Option<bool>,
+    /// Also write directional (L1 SH) pages.
+    pub directional: Option<bool>,
+    /// Hemisphere rays per texel of the directional gather.
+    pub directional_rays: Option<u32>,
     pub no_split_junctions: Option<bool>,
     pub no_shadow_cuts: Option<bool>,
     pub no_validity: Option<bool>,
@@ -124,6 +128,10 @@ impl Options {
         c.output.preview_exposure = self.exposure.unwrap_or(0.0);
         c.output.rgbm = self.rgbm.unwrap_or(false);
         c.output.error_map = self.error_map.unwrap_or(false);
+        c.output.directional = self.directional.unwrap_or(false).then(|| {
+            self.directional_rays
+                .unwrap_or(crate::lightmap::directional::DEFAULT_RAYS)
+        });
         c.atlas.split_junctions = !self.no_split_junctions.unwrap_or(false);
         c.atlas.shadow_cuts = !self.no_shadow_cuts.unwrap_or(false);
         c.transport.validity = !self.no_validity.unwrap_or(false);

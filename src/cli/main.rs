@@ -207,6 +207,13 @@ struct BakeArgs {
     /// relative resolution error, noise and total in R, G, B (see the README's "Error map").
     #[arg(long)]
     error_map: bool,
+    /// Also write directional lightmaps: per page <stem>_lightmap<k>_{L0,L1x,L1y,L1z}.exr, L1
+    /// spherical harmonics of the incident radiance (see the README's "Directional lightmaps").
+    #[arg(long)]
+    directional: bool,
+    /// Hemisphere rays per texel of the directional gather.
+    #[arg(long, value_name = "N", requires = "directional")]
+    directional_rays: Option<u32>,
     /// Keep texel sample points where they are even inside geometry (to measure leaks).
     #[arg(long)]
     no_validity: bool,
@@ -380,6 +387,8 @@ impl BakeArgs {
             float: Some(self.float),
             rgbm: Some(self.rgbm),
             error_map: Some(self.error_map),
+            directional: Some(self.directional),
+            directional_rays: self.directional_rays,
             no_validity: Some(self.no_validity),
             no_denoise: Some(self.no_denoise),
             no_seams: Some(self.no_seams),

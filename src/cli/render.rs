@@ -30,6 +30,10 @@ pub struct Args {
     /// Add the ray-traced specular layer (mirrors, glossy metals, glass).
     #[arg(long)]
     specular: bool,
+    /// Shade from the lightmap alone even where the bake has directional pages (normal maps
+    /// then change nothing in the diffuse light).
+    #[arg(long)]
+    no_directional: bool,
     /// Depth of the specular ray tree.
     #[arg(long, default_value_t = 6)]
     max_depth: u32,
@@ -145,8 +149,11 @@ fn parse_size(s: &str) -> Result<(u32, u32), String> {
 pub fn run(args: &Args) -> Result<()> {
     check_image_path(&args.output)?;
     let start = Instant::now();
-    let scene = RenderScene::load(&args.scene)
+    let mut scene = RenderScene::load(&args.scene)
         .with_context(|| format!("loading {} failed", args.scene.display()))?;
+    if args.no_directional {
+        scene.ignore_directional();
+    }
     let load_seconds = start.elapsed().as_secs_f64();
     if scene.unlit_instances() > 0 {
         eprintln!(

@@ -1,10 +1,12 @@
 //! Stage 7 — `LightmapPages`: the solution laid back into page images, dilated, seams stitched.
 //!
 //! A texel stores `H/π` (irradiance over π): the radiance a white Lambertian surface would
-//! reflect, so a renderer shades with `baseColor × lightmap + emission`.
+//! reflect, so a renderer shades with `baseColor × lightmap + emission`. With `--directional`,
+//! [`directional`] adds pages of L1 spherical harmonics of the incident radiance.
 
 pub mod denoise;
 mod dilate;
+pub mod directional;
 pub mod seams;
 
 use glam::{Vec2, Vec3};
@@ -80,6 +82,16 @@ impl LightmapPages {
     /// never reach a page: they are written as zero (and the solver's own checks make that
     /// unreachable in practice).
     pub fn from_texels(texels: &Texels, values: &[Vec3]) -> LightmapPages {
+        Self::lay_out(texels, values, |v| v.max(Vec3::ZERO))
+    }
+
+    /// [`LightmapPages::from_texels`] keeping negative values (signed coefficients such as
+    /// [`directional`]'s L1).
+    pub fn from_texels_signed(texels: &Texels, values: &[Vec3]) -> LightmapPages {
+        Self::lay_out(texels, values, |v| v)
+    }
+
+    fn lay_out(texels: &Texels, values: &[Vec3], keep: impl Fn(Vec3) -> Vec3) -> LightmapPages {
         let mut pages: Vec<Page> = texels
             .pages
             .iter()
@@ -94,11 +106,7 @@ impl LightmapPages {
             let page = &mut pages[texels.page[i] as usize];
             let [x, y] = texels.xy[i];
             let k = (y * page.width + x) as usize;
-            page.rgb[k] = if v.is_finite() {
-                v.max(Vec3::ZERO)
-            } else {
-                Vec3::ZERO
-            };
+            page.rgb[k] = if v.is_finite() { keep(*v) } else { Vec3::ZERO };
             page.valid[k] = true;
         }
         LightmapPages { pages }

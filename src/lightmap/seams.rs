@@ -95,6 +95,7 @@
 //! | `min_face_dot`      | 0.5     | faces folding by more than 60° are a crease                |
 //! | `weld`              | 1e-5    | position tolerance, relative to the scene's diagonal       |
 //! | `t_junctions`       | true    | also find edges meeting along part of their length         |
+//! | `non_negative`      | true    | clamp stitched values at 0 (off for signed directional L1) |
 //!
 //! Limits: a seam can only be closed as far as the bilinear footprints allow: where a chart
 //! border is shorter than a texel, or one texel serves two seams pulling different ways, some
@@ -120,6 +121,8 @@ pub struct SeamParams {
     pub weld: f32,
     /// Also find edges that meet only along part of their length (T-junctions).
     pub t_junctions: bool,
+    /// Clamp stitched values at zero (off for signed data: directional L1 pages).
+    pub non_negative: bool,
 }
 
 impl Default for SeamParams {
@@ -132,6 +135,7 @@ impl Default for SeamParams {
             min_face_dot: 0.5,
             weld: 1e-5,
             t_junctions: true,
+            non_negative: true,
         }
     }
 }
@@ -672,7 +676,11 @@ pub fn stitch(seams: &Seams, pages: &mut LightmapPages, params: &SeamParams) -> 
     }
 
     for ((&(page, k), x), x0) in texel_of.iter().zip(&x).zip(&x0) {
-        let v = x.max(Vec3::ZERO);
+        let v = if params.non_negative {
+            x.max(Vec3::ZERO)
+        } else {
+            *x
+        };
         pages.pages[page as usize].rgb[k as usize] = if v.is_finite() { v } else { *x0 };
     }
     (n, iterations)
@@ -844,6 +852,7 @@ mod tests {
                 back: None,
                 has_uv1: false,
                 lightmap: None,
+                directional: None,
                 split: Default::default(),
             }],
             materials: vec![Material::default()],

@@ -34,6 +34,15 @@ use crate::atlas::{Atlas, InstanceUv};
 use crate::scene::{Scene, Source};
 use crate::{Error, Result};
 
+/// `extras.lightmap.directional`: the L1 SH pages by coefficient name, and how to read them.
+fn directional_extras(names: &[String; 4]) -> Value {
+    let mut v = json!({"convention": crate::lightmap::directional::CONVENTION});
+    for (name, file) in crate::lightmap::directional::NAMES.iter().zip(names) {
+        v[*name] = json!(encode_uri(file));
+    }
+    v
+}
+
 /// The material extension that carries the lightmap texture.
 const LIGHTMAP_EXTENSION: &str = "FB_materials_lightmap";
 const ARRAY_BUFFER: u64 = 34962;
@@ -46,6 +55,8 @@ const CLAMP_TO_EDGE: u64 = 33071;
 pub struct PageFiles {
     pub exr: String,
     pub png: String,
+    /// The directional pages (`lightmap::directional::NAMES` order), when baked.
+    pub directional: Option<[String; 4]>,
 }
 
 /// Writes `<stem>.gltf` + `<stem>.bin` (or `<stem>.glb` for .glb input) into `staging`, plus
@@ -68,6 +79,11 @@ pub fn write_gltf(
     let mut reserved: Vec<String> = pages
         .iter()
         .flat_map(|p| [p.exr.clone(), p.png.clone()])
+        .chain(
+            pages
+                .iter()
+                .flat_map(|p| p.directional.iter().flatten().cloned()),
+        )
         .collect();
     reserved.extend(["gltf", "bin", "glb"].map(|ext| format!("{stem}.{ext}")));
     doc.copy_images(source, &reserved, staging)?;
@@ -427,8 +443,11 @@ impl<'a> Document<'a> {
             );
             for part in &parts[i..end] {
                 let material = materials[&material_key(part)];
-                let lightmap =
-                    json!({"exr": encode_uri(&pages[part.page as usize].exr), "page": part.page});
+                let files = &pages[part.page as usize];
+                let mut lightmap = json!({"exr": encode_uri(&files.exr), "page": part.page});
+                if let Some(names) = &files.directional {
+                    lightmap["directional"] = directional_extras(names);
+                }
                 let primitive = self.write_primitive(
                     original,
                     &attributes,
@@ -1088,6 +1107,7 @@ mod tests {
             back: None,
             has_uv1: false,
             lightmap: None,
+            directional: None,
             split: Default::default(),
         }
     }
@@ -1138,6 +1158,7 @@ mod tests {
             .map(|k| PageFiles {
                 exr: format!("quad_lightmap{k}.exr"),
                 png: format!("quad lightmap{k}.png"),
+                directional: None,
             })
             .collect()
     }

@@ -130,7 +130,7 @@ fn radiance(paths: &Paths, origin: Vec3, dir: Vec3, rng: &mut Rng, rays: &mut u6
         return emission;
     }
     let x = sp.p + sp.n_geo * paths.tracer.epsilon;
-    base * paths.reflected(x, sp.n, rng, rays) + emission
+    base * paths.reflected(x, sp.n, None, rng, rays) + emission
 }
 
 /// Closest front-face hit along the ray, skipping back faces of single-sided surfaces.

@@ -27,6 +27,12 @@
 //! `time_limit`) are the texel reference's; streams are seeded by (seed, point, sample), so the
 //! result does not depend on the thread count.
 //!
+//! **Perturbed normals** ([`trace_about`] with [`Normals::Perturbed`]): the same estimator about
+//! a normal that is not the surface's (a normal map's, or a tilted one), with light from below
+//! the surface counted as zero — the first bounce's rays and light samples below the geometric
+//! normal are dropped instead of hitting the surface's own front from just above it. The
+//! yardstick of directional lightmaps (`tests/directional.rs`).
+//!
 //! **As a renderer reads it.** [`look_up`] takes a baked output loaded as `lightbake render`
 //! loads it ([`RenderScene`]: the output glTF through the scene loader, each primitive's
 //! `TEXCOORD_1` and the EXR page its `extras.lightmap` names) and, for each point, finds the
@@ -168,6 +174,34 @@ pub fn trace(
     params: &ReferenceParams,
     progress: &dyn Progress,
 ) -> Result<Reference> {
+    trace_about(
+        (scene, texels, tracer),
+        points,
+        Normals::Shading,
+        params,
+        progress,
+    )
+}
+
+/// How [`trace_about`] reads each point's `shading_normal`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Normals {
+    /// The surface's smooth normal ([`trace`]).
+    Shading,
+    /// A perturbed normal (a normal map's): light from below the surface (the point's
+    /// geometric `normal`) counts as zero. The irradiance a renderer should reconstruct there
+    /// from directional pages (`lightmap::directional`).
+    Perturbed,
+}
+
+/// [`trace`], with the points' `shading_normal` read as `normals` says.
+pub fn trace_about(
+    (scene, texels, tracer): (&Scene, &Texels, &Tracer),
+    points: &[Point],
+    normals: Normals,
+    params: &ReferenceParams,
+    progress: &dyn Progress,
+) -> Result<Reference> {
     let eps = tracer.epsilon;
     let sample: &ItemSample = &|paths, i, sample, rays| {
         let mut rng = Rng::new(
@@ -179,6 +213,7 @@ pub fn trace(
         paths.reflected(
             p.position + p.normal * eps,
             p.shading_normal,
+            (normals == Normals::Perturbed).then_some(p.normal),
             &mut rng,
             rays,
         )

@@ -8,6 +8,12 @@
 //!   L_d(x) = baseColor(uv0) · lightmap(uv1) + Le(uv0)         lightmap = H/π (bilinear)
 //! ```
 //!
+//! When the bake has directional pages (`bake --directional`), `lightmap(uv1)` is replaced by
+//! the L1 reconstruction `max(0, L0 + L1·n)` (each page bilinear at `uv1`;
+//! `lightmap::directional`) at the shading normal `n`: the material's `normalTexture` applied to
+//! the interpolated normal ([`Scene::shading_normal`]). Without directional pages a normal map
+//! changes nothing in the diffuse term (the lightmap holds one value per texel).
+//!
 //! With `specular` on, surfaces with `roughness ≤ GLOSSY_MAX_ROUGHNESS` become nodes of a
 //! Whitted ray tree (the `shade` module documents the model: Schlick Fresnel, GGX glossy lobe,
 //! refraction with absorption, energy-conserving composite). Leaves of the tree (depth limit,
@@ -94,6 +100,10 @@ pub struct RenderScene {
     /// Page of each scene instance (`None`: the primitive has no lightmap and shades black
     /// apart from its emission).
     pub instance_page: Vec<Option<u32>>,
+    /// Directional pages (L0, L1x, L1y, L1z, indices into `pages`) of each instance whose bake
+    /// has them: diffuse light is then reconstructed for the shading normal (the material's
+    /// `normalTexture` applied), see `lightmap::directional`.
+    pub instance_directional: Vec<Option<[u32; 4]>>,
     /// Per scene triangle: its back face is culled (glTF's `"doubleSided": false`; a baked
     /// double-sided wall is two such primitives, back to back, which would z-fight otherwise).
     /// Transmissive surfaces are kept: a single-sided one bounds a volume, and its back face
@@ -118,22 +128,34 @@ impl RenderScene {
     pub fn load(path: &Path) -> Result<RenderScene> {
         let (scene, _) = scene::load(path)?;
         let mut pages = Vec::new();
-        let mut page_of_file: HashMap<&Path, u32> = HashMap::new();
+        let mut page_of_file: HashMap<PathBuf, u32> = HashMap::new();
         let mut instance_page = Vec::with_capacity(scene.instances.len());
+        let mut instance_directional = Vec::with_capacity(scene.instances.len());
+        let mut read = |file: &'_ Path| -> Result<u32> {
+            Ok(match page_of_file.get(file) {
+                Some(&k) => k,
+                None => {
+                    pages.push(output::read_exr(file)?);
+                    let k = pages.len() as u32 - 1;
+                    page_of_file.insert(file.to_owned(), k);
+                    k
+                }
+            })
+        };
         for inst in &scene.instances {
             let page = match &inst.lightmap {
-                Some(file) if inst.has_uv1 => Some(match page_of_file.get(file.as_path()) {
-                    Some(&k) => k,
-                    None => {
-                        pages.push(output::read_exr(file)?);
-                        let k = pages.len() as u32 - 1;
-                        page_of_file.insert(file, k);
-                        k
-                    }
-                }),
+                Some(file) if inst.has_uv1 => Some(read(file)?),
                 _ => None,
             };
             instance_page.push(page);
+            let directional = match &inst.directional {
+                Some(files) if page.is_some() => {
+                    let [a, b, c, d] = files;
+                    Some([read(a)?, read(b)?, read(c)?, read(d)?])
+                }
+                _ => None,
+            };
+            instance_directional.push(directional);
         }
         if instance_page.iter().all(Option::is_none) {
             return Err(Error::invalid(
@@ -157,8 +179,20 @@ impl RenderScene {
             tracer,
             pages,
             instance_page,
+            instance_directional,
             cull_back,
         })
+    }
+
+    /// Shade from the lightmap pages alone, as if the bake had no directional pages (to
+    /// compare).
+    pub fn ignore_directional(&mut self) {
+        self.instance_directional.iter_mut().for_each(|d| *d = None);
+    }
+
+    /// The directional pages (L0, L1x, L1y, L1z) of scene instance `instance`, if it has them.
+    pub fn directional(&self, instance: u32) -> Option<[&Page; 4]> {
+        self.instance_directional[instance as usize].map(|ks| ks.map(|k| &self.pages[k as usize]))
     }
 
     /// The lightmap page of scene instance `instance`, if it has one.
@@ -346,6 +380,24 @@ const PIXEL_STREAM: u64 = 0x7265_6e64; // "rend"
 const REFINE_STREAM: u64 = 0x7265_666e; // "refn"
 
 impl Image {
+    /// `self` and `other` (of the same height) side by side, `self` on the left.
+    pub fn beside(&self, other: &Image) -> Image {
+        let mut rgb = Vec::with_capacity(self.rgb.len() + other.rgb.len());
+        for y in 0..self.height as usize {
+            for i in [self, other] {
+                let w = i.width as usize;
+                rgb.extend_from_slice(&i.rgb[y * w..(y + 1) * w]);
+            }
+        }
+        Image {
+            width: self.width + other.width,
+            height: self.height,
+            rgb,
+            nonfinite: self.nonfinite + other.nonfinite,
+            rays: self.rays + other.rays,
+        }
+    }
+
     /// 8-bit sRGB PNG, tone-mapped as [`output::png`] describes (scale by `2^exposure`, then a
     /// soft shoulder that keeps mid-tones true and highlights some detail).
     pub fn to_png(&self, exposure: f32) -> Result<Vec<u8>> {

@@ -35,11 +35,12 @@
 //! behind means leaving the glass); diffuse light through glass comes from the bake, which
 //! treated glass as an opaque Lambertian surface.
 
-use glam::{Vec2, Vec3};
+use glam::Vec3;
 
 use super::{RenderOptions, RenderScene};
+use crate::lightmap::directional;
 use crate::sampling::{Rng, frame, hammersley};
-use crate::scene::Surface;
+use crate::scene::{Surface, SurfacePoint};
 use crate::trace::Hit;
 
 /// Roughness at or below which reflection is one perfect mirror ray.
@@ -88,7 +89,7 @@ impl<'a> Shader<'a> {
         } else {
             Vec3::ZERO
         };
-        let l_d = base * self.lightmap(sp.instance, sp.uv1);
+        let l_d = base * self.diffuse_light(hit.triangle, &sp);
         let tree = self.options.specular && depth < self.options.max_depth;
         if !tree || !is_specular(surface) {
             return l_d + emission;
@@ -217,11 +218,18 @@ impl<'a> Shader<'a> {
             .closest_culling(origin, dir, f32::INFINITY, &scene.cull_back)
     }
 
-    /// Bilinear lookup of `H/π` at `uv1` (see [`crate::lightmap::Page::bilinear`]).
-    fn lightmap(&self, instance: u32, uv: Vec2) -> Vec3 {
+    /// `H/π` at `sp` (a point of triangle `t`): the L1 reconstruction at the shading normal
+    /// from the directional pages when the bake has them, else the bilinear lookup of the
+    /// lightmap at `uv1` (see [`crate::lightmap::Page::bilinear`]).
+    fn diffuse_light(&self, t: u32, sp: &SurfacePoint) -> Vec3 {
+        if let Some(pages) = self.scene.directional(sp.instance) {
+            let c = pages.map(|p| p.bilinear(sp.uv1));
+            let n = self.scene.scene.shading_normal(t, sp);
+            return directional::irradiance_over_pi(&c, n);
+        }
         self.scene
-            .page(instance)
-            .map_or(Vec3::ZERO, |p| p.bilinear(uv))
+            .page(sp.instance)
+            .map_or(Vec3::ZERO, |p| p.bilinear(sp.uv1))
     }
 }
 

@@ -616,6 +616,14 @@ impl Loader<'_> {
         let lightmap = extras["lightmap"]["exr"]
             .as_str()
             .map(|uri| self.files.dir.join(percent_decode(uri)));
+        let pages = super::DIRECTIONAL_PAGES.map(|name| {
+            let uri = extras["lightmap"]["directional"][name].as_str()?;
+            Some(self.files.dir.join(percent_decode(uri)))
+        });
+        let directional = pages
+            .iter()
+            .all(Option::is_some)
+            .then(|| pages.map(Option::unwrap));
         scene.instances.push(Instance {
             node: node.index() as u32,
             mesh: mesh.index() as u32,
@@ -628,6 +636,7 @@ impl Loader<'_> {
             back: None,
             has_uv1,
             lightmap,
+            directional,
             split: Default::default(),
         });
         Ok(instance)

@@ -1189,6 +1189,7 @@ mod tests {
                 back: None,
                 has_uv1: false,
                 lightmap: None,
+                directional: None,
                 split: Split::default(),
             });
         }

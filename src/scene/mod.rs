@@ -35,6 +35,10 @@ pub const MAX_ALBEDO: f32 = 0.99;
 /// it; beyond it lies damaged data (a flipped exponent bit), which the BVH cannot take.
 pub const MAX_COORDINATE: f32 = 1e7;
 
+/// The keys of a baked primitive's `extras.lightmap.directional`: its directional pages'
+/// coefficients (`lightmap::directional`), in storage order.
+pub const DIRECTIONAL_PAGES: [&str; 4] = ["L0", "L1x", "L1y", "L1z"];
+
 /// World-space geometry, materials and lights of the default scene.
 #[derive(Clone, Debug, Default)]
 pub struct Scene {
@@ -87,6 +91,9 @@ pub struct Instance {
     /// The EXR page named by the primitive's `extras.lightmap.exr` (a baked scene; resolved
     /// against the glTF file's folder), for the renderer.
     pub lightmap: Option<PathBuf>,
+    /// The directional pages named by `extras.lightmap.directional` (L0, L1x, L1y, L1z:
+    /// `lightmap::directional`), resolved like `lightmap`.
+    pub directional: Option<[PathBuf; 4]>,
     /// What [`junctions::split`] changed (empty for the input as loaded).
     pub split: Split,
 }
@@ -129,6 +136,11 @@ pub struct Material {
     pub emission: Vec3,
     /// Index into [`Scene::textures`], sampled through `TEXCOORD_0`.
     pub emissive_texture: Option<u32>,
+    /// `normalTexture`: index into [`Scene::textures`] (decoded linear, not sRGB), sampled
+    /// through `TEXCOORD_0`; only the renderer reads it.
+    pub normal_texture: Option<u32>,
+    /// `normalTexture.scale`: scales the tangent-space x and y.
+    pub normal_scale: f32,
     pub double_sided: bool,
     /// What the renderer's specular layer needs; the bake treats every surface as Lambertian.
     pub surface: Surface,
@@ -144,6 +156,8 @@ impl Default for Material {
             base_color_texture: None,
             emission: Vec3::ZERO,
             emissive_texture: None,
+            normal_texture: None,
+            normal_scale: 1.0,
             double_sided: false,
             surface: Surface::default(),
         }
@@ -318,6 +332,43 @@ impl Scene {
             instance,
             material: self.instances[instance as usize].material,
         }
+    }
+
+    /// The shading normal at `sp` (a point of triangle `t`): the material's `normalTexture`
+    /// applied to the interpolated normal, or that normal when there is none. The tangent
+    /// frame is the triangle's own, from its `TEXCOORD_0` derivatives (`∂p/∂u`, `∂p/∂v`,
+    /// Gram–Schmidt against the normal, handedness from the UV winding): MikkTSpace's result on
+    /// planar, uniformly mapped triangles (the TANGENT attribute is not read). Turned to the
+    /// side of the face like [`SurfacePoint::n`].
+    pub fn shading_normal(&self, t: u32, sp: &SurfacePoint) -> Vec3 {
+        let m = &self.materials[sp.material as usize];
+        let Some(texture) = m.normal_texture else {
+            return sp.n;
+        };
+        let [i0, i1, i2] = self.triangles[t as usize].map(|v| v as usize);
+        let (e1, e2) = (
+            self.positions[i1] - self.positions[i0],
+            self.positions[i2] - self.positions[i0],
+        );
+        let (d1, d2) = (self.uv0[i1] - self.uv0[i0], self.uv0[i2] - self.uv0[i0]);
+        let det = d1.x * d2.y - d2.x * d1.y;
+        if det == 0.0 || !det.is_finite() {
+            return sp.n;
+        }
+        let dp_du = (e1 * d2.y - e2 * d1.y) / det;
+        let dp_dv = (e2 * d1.x - e1 * d2.x) / det;
+        let tangent = (dp_du - sp.n * sp.n.dot(dp_du)).normalize_or_zero();
+        // The map's +y (green) points up the image, towards decreasing v (glTF's v grows
+        // downward): n × t there, unless the UVs are mirrored.
+        let mirrored = sp.n.cross(dp_du).dot(-dp_dv) < 0.0;
+        let bitangent = sp.n.cross(tangent) * if mirrored { -1.0 } else { 1.0 };
+        if tangent == Vec3::ZERO {
+            return sp.n;
+        }
+        let c = self.textures[texture as usize].sample(sp.uv0) * 2.0 - Vec3::ONE;
+        let local = Vec3::new(c.x * m.normal_scale, c.y * m.normal_scale, c.z);
+        let n = (tangent * local.x + bitangent * local.y + sp.n * local.z).normalize_or_zero();
+        if n.dot(sp.n_geo) > 0.0 { n } else { sp.n }
     }
 
     /// Reflectance `baseColorFactor × baseColorTexture(uv0)` of material `m`.

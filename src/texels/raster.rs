@@ -729,6 +729,7 @@ mod tests {
                 back: None,
                 has_uv1: false,
                 lightmap: None,
+                directional: None,
                 split: Default::default(),
             }],
             materials: vec![material],

@@ -66,6 +66,8 @@ pub(super) fn add_materials(
             base_color_texture: None,
             emission: emissive.clamp(Vec3::ZERO, Vec3::ONE) * strength.max(0.0),
             emissive_texture: None,
+            normal_texture: None,
+            normal_scale: 1.0,
             double_sided: material.double_sided(),
             surface: surface(&json["materials"][index]),
         };
@@ -78,6 +80,15 @@ pub(super) fn add_materials(
                 &label("emissiveTexture"),
                 scene,
             )?;
+            if let Some(normal) = material.normal_texture() {
+                converted.normal_scale = normal.scale();
+                converted.normal_texture = textures.get_linear(
+                    normal.texture(),
+                    normal.tex_coord(),
+                    &label("normalTexture"),
+                    scene,
+                )?;
+            }
         }
         scene.materials.push(converted);
     }
@@ -120,14 +131,18 @@ fn surface(m: &Value) -> Surface {
     s
 }
 
+/// A decoded image: width, height, linear texels (row 0 at the top).
+type Decoded = (u32, u32, Vec<Vec3>);
+
 /// Decodes each image once and stores each (image, sampler) pair once in `scene.textures`.
 struct TextureCache<'a> {
     files: &'a Files<'a>,
     buffers: &'a [Vec<u8>],
-    /// Decoded linear texels by image index; `None` when the image could not be decoded.
-    images: BTreeMap<usize, Option<(u32, u32, Vec<Vec3>)>>,
-    /// Scene texture index by (image, sampler).
-    textures: BTreeMap<(usize, Option<usize>), Option<u32>>,
+    /// Decoded linear texels by (image index, sRGB-encoded); `None` when the image could not
+    /// be decoded.
+    images: BTreeMap<(usize, bool), Option<Decoded>>,
+    /// Scene texture index by (image, sampler, sRGB-encoded).
+    textures: BTreeMap<(usize, Option<usize>, bool), Option<u32>>,
 }
 
 impl TextureCache<'_> {
@@ -140,25 +155,46 @@ impl TextureCache<'_> {
         scene: &mut Scene,
     ) -> Result<Option<u32>> {
         let Some(info) = info else { return Ok(None) };
-        if info.tex_coord() != 0 {
+        self.texture(info.texture(), info.tex_coord(), true, label, scene)
+    }
+
+    /// [`TextureCache::get`] for data that is not a colour (a normal map): decoded without
+    /// the sRGB transfer function.
+    fn get_linear(
+        &mut self,
+        texture: gltf::Texture,
+        tex_coord: u32,
+        label: &str,
+        scene: &mut Scene,
+    ) -> Result<Option<u32>> {
+        self.texture(texture, tex_coord, false, label, scene)
+    }
+
+    fn texture(
+        &mut self,
+        texture: gltf::Texture,
+        tex_coord: u32,
+        srgb: bool,
+        label: &str,
+        scene: &mut Scene,
+    ) -> Result<Option<u32>> {
+        if tex_coord != 0 {
             let message = format!(
-                "{label} uses TEXCOORD_{}; lightbake samples it through TEXCOORD_0",
-                info.tex_coord()
+                "{label} uses TEXCOORD_{tex_coord}; lightbake samples it through TEXCOORD_0"
             );
             warn(scene, message);
         }
-        let texture = info.texture();
         let image = texture.source();
         let sampler = texture.sampler();
-        let key = (image.index(), sampler.index());
+        let key = (image.index(), sampler.index(), srgb);
         if let Some(&cached) = self.textures.get(&key) {
             return Ok(cached);
         }
-        let decoded = match self.images.get(&image.index()) {
+        let decoded = match self.images.get(&(image.index(), srgb)) {
             Some(decoded) => decoded.clone(),
             None => {
-                let decoded = self.decode_image(&image, scene)?;
-                self.images.insert(image.index(), decoded.clone());
+                let decoded = self.decode_image(&image, srgb, scene)?;
+                self.images.insert((image.index(), srgb), decoded.clone());
                 decoded
             }
         };
@@ -180,8 +216,9 @@ impl TextureCache<'_> {
     fn decode_image(
         &self,
         image: &gltf::Image,
+        srgb: bool,
         scene: &mut Scene,
-    ) -> Result<Option<(u32, u32, Vec<Vec3>)>> {
+    ) -> Result<Option<Decoded>> {
         let i = image.index();
         let (bytes, what) = match image.source() {
             gltf::image::Source::Uri { uri, .. } => {
@@ -206,7 +243,7 @@ impl TextureCache<'_> {
                 (bytes.to_vec(), format!("image {i}"))
             }
         };
-        match decode_srgb(&bytes) {
+        match decode(&bytes, srgb) {
             Ok(decoded) => Ok(Some(decoded)),
             Err(e) => {
                 warn(
@@ -227,9 +264,11 @@ fn wrap(mode: gltf::texture::WrappingMode) -> Wrap {
     }
 }
 
-/// Decodes a PNG or JPEG to linear RGB (alpha dropped), row 0 at the top.
-fn decode_srgb(bytes: &[u8]) -> image::ImageResult<(u32, u32, Vec<Vec3>)> {
+/// Decodes a PNG or JPEG to linear RGB (alpha dropped), row 0 at the top: through the sRGB
+/// transfer function when `srgb` (colours), as stored otherwise (normal maps).
+fn decode(bytes: &[u8], srgb: bool) -> image::ImageResult<Decoded> {
     use image::DynamicImage as D;
+    let srgb_to_linear = |c: f32| if srgb { srgb_to_linear(c) } else { c };
     let image = image::load_from_memory(bytes)?;
     let (width, height) = (image.width(), image.height());
     let texels = match image {
