@@ -554,8 +554,9 @@ pub fn choose_light_samples(config: &mut BakeConfig, plan: &mut Plan, keep: &Kee
     }
 }
 
-/// Step 5: the solver, from the memory the stored rows of `texels` would take — Jacobi, or
-/// the matrix-free gatherer for Monte Carlo rows beyond [`ROW_MEMORY_LIMIT`].
+/// Step 5: the solver, from the memory the stored rows of `texels` would take — Jacobi over
+/// f32 rows, over Monte Carlo rows stored as ray counts when only those stay within
+/// [`ROW_MEMORY_LIMIT`] (slower sweeps), or the matrix-free gatherer beyond it.
 pub fn choose_solver(texels: usize, config: &mut BakeConfig, plan: &mut Plan, keep: &Keep) {
     if keep.solver {
         return;
@@ -565,14 +566,21 @@ pub fn choose_solver(texels: usize, config: &mut BakeConfig, plan: &mut Plan, ke
         _ => Technique::DEFAULT,
     };
     let n = texels as f64;
-    let rows = n
-        * entries_per_texel(stored, n, config.transport.gather_rays as f64)
-        * row_entry_bytes(stored);
-    let what = match stored.is_monte_carlo() {
-        true => "stored Monte Carlo rows (exact ray counts, about 1 byte per ray)",
+    let bytes = |counts| {
+        n * entries_per_texel(stored, n, config.transport.gather_rays as f64)
+            * row_entry_bytes(stored, counts)
+    };
+    let counts = stored.is_monte_carlo() && bytes(false) > ROW_MEMORY_LIMIT;
+    config.transport.count_rows = counts;
+    let rows = bytes(counts);
+    let what = match counts {
+        true => {
+            "stored Monte Carlo rows as exact ray counts (about 1 byte per ray; f32 rows would exceed the limit)"
+        }
         false => "stored f32 rows",
     };
     config.technique = if config.technique.is_monte_carlo() && rows > ROW_MEMORY_LIMIT {
+        config.transport.count_rows = false;
         plan.reasons.push(format!(
             "transport matrix-free, solver gather: {what} would take {:.1} GiB (> {:.0} GiB); re-casting rays each bounce needs O(texels) memory",
             rows / (1u64 << 30) as f64,
@@ -869,6 +877,8 @@ pub struct MemoryInputs {
     pub held_runs: f64,
     /// Which solver iterates the rows: Southwell keeps a transposed copy of them.
     pub technique: Technique,
+    /// Monte Carlo rows built as ray counts ([`crate::config::TransportParams::count_rows`]).
+    pub count_rows: bool,
 }
 
 /// Estimated peak memory of a bake by part, in bytes ([`memory_estimate`]).
@@ -981,7 +991,7 @@ pub fn memory_estimate(m: &MemoryInputs) -> MemoryEstimate {
     );
     // Southwell's transpose holds f32 entries whatever the rows are stored as.
     let built = m.built_entries
-        * (ROW_BUILD_FACTOR * row_entry_bytes(m.technique)
+        * (ROW_BUILD_FACTOR * row_entry_bytes(m.technique, m.count_rows)
             + if transposed { ROW_ENTRY_BYTES } else { 0.0 });
     MemoryEstimate {
         scene: PROCESS_BYTES
@@ -992,19 +1002,20 @@ pub fn memory_estimate(m: &MemoryInputs) -> MemoryEstimate {
         atlas: ATLAS_TRIANGLE_BYTES * m.triangles,
         texels: TEXEL_BYTES * m.texels + HELD_RUN_TEXEL_BYTES * m.held_runs * m.texels,
         pages: PAGE_TEXEL_BYTES * m.page_texels,
-        // Held entries are pilot runs: Monte Carlo rows.
-        rows: COUNT_BYTES_PER_RAY * m.held_entries + built,
+        // Held entries are pilot runs: Monte Carlo rows, built before the storage is chosen (f32).
+        rows: ROW_ENTRY_BYTES * m.held_entries + built,
     }
 }
 
-/// Bytes per entry of [`entries_per_texel`]: Monte Carlo rows are ray counts (entries counted
-/// as rays), the others f32 form factors (the hierarchy's links counted alike).
-pub fn row_entry_bytes(technique: Technique) -> f64 {
+/// Bytes per entry of [`entries_per_texel`]: Monte Carlo rows stored as ray counts
+/// (`count_rows`; entries counted as rays), otherwise f32 form factors (the hierarchy's links
+/// counted alike).
+pub fn row_entry_bytes(technique: Technique, count_rows: bool) -> f64 {
     match technique {
         Technique::Stored {
             form_factors: FormFactors::MonteCarlo,
             ..
-        } => COUNT_BYTES_PER_RAY,
+        } if count_rows => COUNT_BYTES_PER_RAY,
         _ => ROW_ENTRY_BYTES,
     }
 }
@@ -1023,7 +1034,49 @@ pub fn entries_per_texel(technique: Technique, texels: f64, gather_rays: f64) ->
     }
 }
 
-/// Step 5b, once the rays are chosen: when the bake's estimated peak (`stored`) exceeds
+/// Step 5b, once the rays are chosen: how stored Monte Carlo rows are held — f32 weights
+/// (fastest sweeps) when their estimated peak `f32_rows` fits `limit`, else exact ray counts
+/// (`count_rows`: the same output, sweeps 2–3× slower) when theirs does; left as is when
+/// neither fits ([`fit_memory`] may then switch to the gather solver). Sets
+/// `config.transport.count_rows`; returns the reason, with both estimates.
+pub fn choose_row_storage(
+    f32_rows: &MemoryEstimate,
+    count_rows: &MemoryEstimate,
+    limit: f64,
+    config: &mut BakeConfig,
+) -> Option<String> {
+    let Technique::Stored {
+        form_factors: FormFactors::MonteCarlo,
+        ..
+    } = config.technique
+    else {
+        return None;
+    };
+    let (f32_peak, counts_peak) = (
+        format_bytes(f32_rows.total()),
+        format_bytes(count_rows.total()),
+    );
+    let limit_text = format_bytes(limit);
+    if config.transport.count_rows {
+        return Some(format!(
+            "rows as ray counts (chosen before; estimated peak {counts_peak}, with f32 rows {f32_peak}; limit {limit_text})"
+        ));
+    }
+    if f32_rows.total() <= limit {
+        return Some(format!(
+            "rows f32: estimated peak {f32_peak} within the memory limit {limit_text} (as ray counts {counts_peak}: smaller, sweeps 2–3× slower)"
+        ));
+    }
+    if count_rows.total() > limit {
+        return None;
+    }
+    config.transport.count_rows = true;
+    Some(format!(
+        "rows as exact ray counts: the estimated peak with f32 rows {f32_peak} exceeds the memory limit {limit_text}, with counts {counts_peak} fits (the same output; sweeps 2–3× slower)"
+    ))
+}
+
+/// Step 5c, once the rays are chosen: when the bake's estimated peak (`stored`) exceeds
 /// `limit` and the matrix-free gather solver's (`gather`) does not, switch to it (unless the
 /// user fixed the solver or the method is not Monte Carlo). Returns the switch's message, for a
 /// warning; the caller refuses what still does not fit.

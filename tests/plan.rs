@@ -338,8 +338,29 @@ fn memory_estimate_and_the_gather_switch() {
         built_entries: 1e5 * 256.0,
         held_runs: 0.0,
         technique: Technique::DEFAULT,
+        count_rows: true,
     };
     let stored = plan::memory_estimate(&inputs);
+    let f32_rows = plan::memory_estimate(&MemoryInputs {
+        count_rows: false,
+        ..inputs
+    });
+    assert!(
+        f32_rows.rows > 4.0 * stored.rows,
+        "{f32_rows:?} against {stored:?}"
+    );
+
+    // Storage: f32 rows with room for them, counts below their estimate, nothing below both.
+    for (limit, counts, chosen) in [
+        (f32_rows.total() + 1.0, false, true),
+        ((f32_rows.total() + stored.total()) / 2.0, true, true),
+        (stored.total() - 1.0, false, false),
+    ] {
+        let mut config = lightbake::BakeConfig::medium();
+        let reason = plan::choose_row_storage(&f32_rows, &stored, limit, &mut config);
+        assert_eq!(config.transport.count_rows, counts, "limit {limit}");
+        assert_eq!(reason.is_some(), chosen, "{reason:?}");
+    }
     let parts =
         stored.scene + stored.bvh + stored.atlas + stored.texels + stored.pages + stored.rows;
     assert_eq!(stored.total(), parts);

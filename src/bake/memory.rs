@@ -81,6 +81,18 @@ impl Sizes {
         held: f64,
         held_rays: f64,
     ) -> MemoryEstimate {
+        self.estimate_rows(technique, false, rays, held, held_rays)
+    }
+
+    /// [`Sizes::estimate`] with Monte Carlo rows stored as ray counts when `count_rows`.
+    fn estimate_rows(
+        &self,
+        technique: Technique,
+        count_rows: bool,
+        rays: f64,
+        held: f64,
+        held_rays: f64,
+    ) -> MemoryEstimate {
         let n = self.texels;
         plan::memory_estimate(&MemoryInputs {
             input_bytes: self.input_bytes,
@@ -92,6 +104,7 @@ impl Sizes {
             built_entries: plan::entries_per_texel(technique, n, rays) * n,
             held_runs: held,
             technique,
+            count_rows,
         })
     }
 
@@ -219,8 +232,17 @@ pub fn fit(
     // The pilot's own peak is past, but it counts: the estimate is the bake's.
     let pilot_peak = pilot.map(|(k, _)| sizes.pilot_peak(k > PILOT_RAYS));
     let with_pilot = |e: MemoryEstimate| pilot_peak.map_or(e, |p| larger(p, e));
-    let stored = with_pilot(sizes.estimate(config.technique, rays, held, held_rays));
+    let technique = config.technique;
+    let stored_as =
+        |counts| with_pilot(sizes.estimate_rows(technique, counts, rays, held, held_rays));
+    let (f32_rows, count_rows) = (stored_as(false), stored_as(true));
     let gather = with_pilot(sizes.estimate(Technique::Gather, rays, held, held_rays));
+    let mut plan = plan;
+    let storage = plan::choose_row_storage(&f32_rows, &count_rows, limit as f64, config);
+    if let Some(plan) = plan.as_deref_mut() {
+        plan.reasons.extend(storage);
+    }
+    let stored = stored_as(config.transport.count_rows);
     if let (Some(plan), Some(auto)) = (plan, config.auto)
         && let Some(message) =
             plan::fit_memory(&stored, &gather, limit as f64, config, plan, &auto.keep)

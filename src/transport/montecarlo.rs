@@ -208,10 +208,19 @@ impl Context<'_> {
             }
         }
 
-        // Row: the hit counts per source texel, `F_ij = hits / K` (exact, see `Rows`).
+        // Row: the hit counts per source texel, `F_ij = hits / K`, stored as counts (exact,
+        // see `Rows`) or as f32 weights with repeated hits merged.
         hits.sort_unstable();
-        out.counts.push_row(hits, k);
-        out.end_row(out.col.len(), escape, direct);
+        let before = out.col.len();
+        if self.params.count_rows {
+            out.counts.push_row(hits, k);
+        } else {
+            for run in hits.chunk_by(|a, b| a == b) {
+                out.col.push(run[0]);
+                out.f.push(run.len() as f32 / kf);
+            }
+        }
+        out.end_row(before, escape, direct);
         out.rays += k as u64 + l as u64 + shadow_rays;
     }
 }
