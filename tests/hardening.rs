@@ -393,18 +393,20 @@ fn automatic_choice_stores_counts_then_gathers_when_rows_do_not_fit() {
     assert!(counts_peak < peak - 0.5, "{out}");
 
     // Between the two estimates: ray counts, the same files byte for byte.
-    let limit = format!("{}K", (((peak + counts_peak) / 2.0) * 1024.0) as u64);
+    // A bake within `limit` MiB, in `dir`: its --explain and warnings.
+    let limited = |limit: f64, dir: &Path| {
+        let limit = format!("{}K", (limit * 1024.0) as u64);
+        let o = bake_fixture(
+            "cornell_box.gltf",
+            dir,
+            &[&options[..], &["--max-memory", &limit]].concat(),
+        );
+        let err = String::from_utf8_lossy(&o.stderr).into_owned();
+        assert!(o.status.success(), "{err}");
+        (String::from_utf8_lossy(&o.stdout).into_owned(), err)
+    };
     let dir = scratch();
-    let o = bake_fixture(
-        "cornell_box.gltf",
-        dir.path(),
-        &[&options[..], &["--max-memory", &limit]].concat(),
-    );
-    let (out, err) = (
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr),
-    );
-    assert!(o.status.success(), "{err}");
+    let (out, _) = limited((peak + counts_peak) / 2.0, dir.path());
     assert!(
         out.contains("  - rows as exact ray counts: the estimated peak with f32 rows"),
         "{out}"
@@ -418,18 +420,8 @@ fn automatic_choice_stores_counts_then_gathers_when_rows_do_not_fit() {
     }
 
     // Just below the counts' peak (above the pilot's).
-    let limit = format!("{}K", ((counts_peak - 0.1) * 1024.0) as u64);
     let dir = scratch();
-    let o = bake_fixture(
-        "cornell_box.gltf",
-        dir.path(),
-        &[&options[..], &["--max-memory", &limit]].concat(),
-    );
-    let (out, err) = (
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr),
-    );
-    assert!(o.status.success(), "{err}");
+    let (out, err) = limited(counts_peak - 0.1, dir.path());
     assert!(
         err.contains("warning") && err.contains("solver gather: the estimated peak"),
         "{err}"
