@@ -1,7 +1,7 @@
 //! The one row builder every transport method uses: receivers in fixed-size chunks built in
 //! parallel (one progress tick and abort check per chunk), then concatenated in order into
-//! [`Rows`]: f32 weights, or ray counts for the Monte Carlo rows (which a chunk builds in its
-//! `counts`). Chunk boundaries never depend on the thread count, so neither do
+//! [`Rows`]: f32 weights, or ray counts for Monte Carlo rows built with
+//! `TransportParams::count_rows` (which a chunk builds in its `counts`). Chunk boundaries never depend on the thread count, so neither do
 //! the rows.
 
 use std::ops::Range;
