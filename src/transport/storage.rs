@@ -446,8 +446,8 @@ mod tests {
         assert!((0..rows.len()).all(|i| rows.row(i).eq(w.row(i))));
     }
 
-    /// A bake's Monte Carlo rows stored as counts and the same rows as f32 weights (the storage
-    /// before counts) give bit-identical solutions with every row solver.
+    /// A bake's Monte Carlo rows stored as counts and the same bake's f32 rows (the default)
+    /// hold the same weights and give bit-identical solutions with every row solver.
     #[test]
     fn solutions_are_identical_with_counts_and_weights() {
         use crate::config::{BakeConfig, RowSolver};
@@ -457,11 +457,17 @@ mod tests {
         c.auto = None;
         c.transport.gather_rays = 128;
         let fixture = crate::solve::tests::fixture("cornell_box.gltf");
+        let f32_baked = compute(&fixture, &c, &NoProgress).unwrap();
+        c.transport.count_rows = true;
         let baked = compute(&fixture, &c, &NoProgress).unwrap();
         let counts = &baked.transport;
         assert!(matches!(counts.rows, Rows::Counts(_)) && counts.rows.entries() > 0);
+        assert_eq!(
+            f32_baked.transport.rows,
+            Rows::Weights(counts.rows.to_weights())
+        );
         let weights = Transport {
-            rows: Rows::Weights(counts.rows.to_weights()),
+            rows: f32_baked.transport.rows.clone(),
             ..counts.clone()
         };
         assert!(counts.rows.bytes() * 4 < weights.rows.bytes());
@@ -476,6 +482,7 @@ mod tests {
             assert_eq!(a.history.len(), b.history.len());
             if solver == RowSolver::Jacobi {
                 assert!(a.irradiance == baked.solution.irradiance);
+                assert!(b.irradiance == f32_baked.solution.irradiance);
             }
         }
     }
