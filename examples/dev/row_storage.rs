@@ -40,6 +40,7 @@ fn main() {
             continue;
         }
         config.auto = None;
+        config.transport.count_rows = true;
         let baked = compute(&fixtures.join(scene), &config, &NoProgress).expect("bake");
         let counts = &baked.transport;
         assert!(matches!(counts.rows, Rows::Counts(_)));
