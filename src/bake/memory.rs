@@ -121,11 +121,13 @@ impl Sizes {
 
     /// The least a bake of `config` can need: with the automatic choice of rays, its pilot
     /// (the first pair held while the second is built, the worst case) and a final bake with
-    /// the gather solver when the solver may switch; otherwise the configured bake.
+    /// the gather solver when the solver may switch; otherwise the configured bake (Monte Carlo
+    /// rows as ray counts, the smaller storage `fit` may choose).
     fn least(&self, config: &BakeConfig) -> MemoryEstimate {
         let k = PILOT_RAYS as f64;
-        let configured = self.estimate(
+        let configured = self.estimate_rows(
             config.technique,
+            true,
             config.transport.gather_rays as f64,
             0.0,
             0.0,
@@ -144,8 +146,11 @@ impl Sizes {
         };
         let rays = config.transport.gather_rays as f64;
         match pilot {
-            true => larger(worst_pilot, self.estimate(last, rays, 2.0, 4.0 * k)),
-            false => self.estimate(last, rays, 0.0, 0.0),
+            true => larger(
+                worst_pilot,
+                self.estimate_rows(last, true, rays, 2.0, 4.0 * k),
+            ),
+            false => self.estimate_rows(last, true, rays, 0.0, 0.0),
         }
     }
 }
