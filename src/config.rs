@@ -210,6 +210,10 @@ pub struct TransportParams {
     /// rows only): what relighting and per-light layers scale. Costs 12 bytes per texel and
     /// source; set by the bake when `output.keep_transport` or `output.layers` asks.
     pub split_direct: bool,
+    /// Store Monte Carlo rows as their exact ray counts (`transport::Rows::Counts`): the same
+    /// output from 3.6–6.5× fewer row bytes, but sweeps 2–3× slower. Set by the memory check
+    /// (`bake::memory::fit`) when f32 rows would not fit the memory limit and counts would.
+    pub count_rows: bool,
 }
 
 /// How the radiosity system is iterated.
@@ -353,6 +357,7 @@ impl BakeConfig {
                 validity: true,
                 denoise: true,
                 split_direct: false,
+                count_rows: false,
             },
             solve: SolveParams {
                 tolerance,

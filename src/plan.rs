@@ -554,16 +554,35 @@ pub fn choose_light_samples(config: &mut BakeConfig, plan: &mut Plan, keep: &Kee
     }
 }
 
-/// Step 5: the solver, from the memory the stored rows of `texels` would take — Jacobi, or
-/// the matrix-free gatherer for Monte Carlo rows beyond [`ROW_MEMORY_LIMIT`].
+/// Step 5: the solver, from the memory the stored rows of `texels` would take — Jacobi over
+/// f32 rows, over Monte Carlo rows stored as ray counts when only those stay within
+/// [`ROW_MEMORY_LIMIT`] (slower sweeps), or the matrix-free gatherer beyond it.
 pub fn choose_solver(texels: usize, config: &mut BakeConfig, plan: &mut Plan, keep: &Keep) {
     if keep.solver {
         return;
     }
-    let rows = texels as f64 * config.transport.gather_rays as f64 * 8.0;
+    let stored = match config.technique {
+        Technique::Stored { .. } => config.technique,
+        _ => Technique::DEFAULT,
+    };
+    let n = texels as f64;
+    let bytes = |counts| {
+        n * entries_per_texel(stored, n, config.transport.gather_rays as f64)
+            * row_entry_bytes(stored, counts)
+    };
+    let counts = stored.is_monte_carlo() && bytes(false) > ROW_MEMORY_LIMIT;
+    config.transport.count_rows = counts;
+    let rows = bytes(counts);
+    let what = match counts {
+        true => {
+            "stored Monte Carlo rows as exact ray counts (about 1 byte per ray; f32 rows would exceed the limit)"
+        }
+        false => "stored f32 rows",
+    };
     config.technique = if config.technique.is_monte_carlo() && rows > ROW_MEMORY_LIMIT {
+        config.transport.count_rows = false;
         plan.reasons.push(format!(
-            "solver gather: stored rows would take {:.1} GiB (> {:.0} GiB); re-casting rays each bounce needs O(texels) memory",
+            "transport matrix-free, solver gather: {what} would take {:.1} GiB (> {:.0} GiB); re-casting rays each bounce needs O(texels) memory",
             rows / (1u64 << 30) as f64,
             ROW_MEMORY_LIMIT / (1u64 << 30) as f64
         ));
@@ -571,8 +590,9 @@ pub fn choose_solver(texels: usize, config: &mut BakeConfig, plan: &mut Plan, ke
     } else {
         // Not Gauss–Seidel on one thread: the output must not depend on the thread count.
         plan.reasons.push(format!(
-            "solver jacobi: stored rows take {:.0} MiB; parallel sweeps, the same result on any number of threads",
-            rows / (1u64 << 20) as f64
+            "transport {what}: {:.0} MiB (≤ {:.0} GiB); solver jacobi: parallel sweeps, the same result on any number of threads",
+            rows / (1u64 << 20) as f64,
+            ROW_MEMORY_LIMIT / (1u64 << 30) as f64
         ));
         match config.technique {
             Technique::Stored { form_factors, .. } => {
@@ -857,6 +877,8 @@ pub struct MemoryInputs {
     pub held_runs: f64,
     /// Which solver iterates the rows: Southwell keeps a transposed copy of them.
     pub technique: Technique,
+    /// Monte Carlo rows built as ray counts ([`crate::config::TransportParams::count_rows`]).
+    pub count_rows: bool,
 }
 
 /// Estimated peak memory of a bake by part, in bytes ([`memory_estimate`]).
@@ -866,6 +888,8 @@ pub struct MemoryEstimate {
     pub scene: f64,
     /// The tracer's BVH and triangles.
     pub bvh: f64,
+    /// The atlas stage's working set (xatlas' charting and packing), kept by the allocator.
+    pub atlas: f64,
     /// Texels, their lightmap values and per-texel vectors of transport and solver.
     pub texels: f64,
     /// Lightmap pages (index, values, encoded files).
@@ -876,18 +900,19 @@ pub struct MemoryEstimate {
 
 impl MemoryEstimate {
     pub fn total(&self) -> f64 {
-        self.scene + self.bvh + self.texels + self.pages + self.rows
+        self.scene + self.bvh + self.atlas + self.texels + self.pages + self.rows
     }
 
     /// "1.2 GiB (rows 1.0 GiB, texels …)", for messages.
     pub fn describe(&self) -> String {
         format!(
-            "{} (rows {}, texels {}, pages {}, BVH {}, scene {})",
+            "{} (rows {}, texels {}, pages {}, BVH {}, atlas {}, scene {})",
             format_bytes(self.total()),
             format_bytes(self.rows),
             format_bytes(self.texels),
             format_bytes(self.pages),
             format_bytes(self.bvh),
+            format_bytes(self.atlas),
             format_bytes(self.scene)
         )
     }
@@ -912,16 +937,21 @@ pub fn format_bytes(bytes: f64) -> String {
     format!("{value:.digits$} {}", units[unit])
 }
 
-/// Bytes of one stored row entry: the source texel (u32) and its form factor (f32).
+/// Bytes of one stored f32 row entry: the source texel (u32) and its form factor (f32).
 pub const ROW_ENTRY_BYTES: f64 = 8.0;
+/// Bytes per gathering ray of Monte Carlo rows stored as ray counts ([`crate::transport::Rows`]),
+/// besides [`TEXEL_BYTES`]' per-row part: measured 0.66 (Cornell box, K = 1024), 0.71 and 0.80
+/// (64k-triangle furnished interior, K = 256 and 64; `examples/dev/row_storage.rs`); rounded up
+/// for scenes whose rays land farther apart.
+pub const COUNT_BYTES_PER_RAY: f64 = 1.0;
 /// Rows are built in chunks and then concatenated: both copies exist for a moment, and a
 /// chunk's vectors grow by doubling.
 const ROW_BUILD_FACTOR: f64 = 2.5;
 /// Per texel: `Texels` (96 bytes of positions, normals, area, albedo, emission, page, xy,
-/// triangle, footprint, jitter), a transport's escape, direct light and row start (20), the
-/// solver's iterates and solution (4 RGB vectors, 48), the lightmap and the denoiser's copies
-/// (36).
-const TEXEL_BYTES: f64 = 200.0;
+/// triangle, footprint, jitter), a transport's escape, direct light, row start and rays (29),
+/// the solver's iterates and solution (4 RGB vectors, 48), the lightmap and the denoiser's
+/// copies (36).
+const TEXEL_BYTES: f64 = 210.0;
 /// Per texel of a finished transport and solution that is kept (a pilot run).
 const HELD_RUN_TEXEL_BYTES: f64 = 32.0;
 /// Per page texel: the texel index (4), the page's values and validity (13), dilation's copy
@@ -934,6 +964,14 @@ const VERTEX_BYTES: f64 = 64.0;
 const TRIANGLE_BYTES: f64 = 96.0;
 /// Per triangle of the tracer: the CWBVH nodes and the precomputed triangles in BVH order.
 const BVH_TRIANGLE_BYTES: f64 = 128.0;
+/// Per triangle of the atlas stage: xatlas' charting and packing working set. Measured (RSS
+/// sampled every 50 ms, `furnished_interior.glb`, 71 624 triangles): +104 MiB at draft (48k
+/// texels) and +112 MiB at medium (155k texels) in the stage's last seconds, whatever the
+/// texels, from ~90 MiB; the resident memory stays up afterwards (glibc keeps the freed heap,
+/// one arena or many alike) and later stages reuse only part of it. With this figure the
+/// estimate ÷ measured peak is 0.94 and 0.99 there, 0.81 and 0.77 on the Cornell box and two
+/// rooms at high (README, "Memory").
+const ATLAS_TRIANGLE_BYTES: f64 = 2560.0;
 /// The input as read and as decoded (JSON tree, buffers).
 const INPUT_FACTOR: f64 = 2.0;
 /// The process itself: code, thread stacks, allocator.
@@ -951,21 +989,34 @@ pub fn memory_estimate(m: &MemoryInputs) -> MemoryEstimate {
             ..
         }
     );
+    // Southwell's transpose holds f32 entries whatever the rows are stored as.
     let built = m.built_entries
-        * if transposed {
-            ROW_BUILD_FACTOR + 1.0
-        } else {
-            ROW_BUILD_FACTOR
-        };
+        * (ROW_BUILD_FACTOR * row_entry_bytes(m.technique, m.count_rows)
+            + if transposed { ROW_ENTRY_BYTES } else { 0.0 });
     MemoryEstimate {
         scene: PROCESS_BYTES
             + INPUT_FACTOR * m.input_bytes
             + VERTEX_BYTES * m.vertices
             + TRIANGLE_BYTES * m.triangles,
         bvh: BVH_TRIANGLE_BYTES * m.triangles,
+        atlas: ATLAS_TRIANGLE_BYTES * m.triangles,
         texels: TEXEL_BYTES * m.texels + HELD_RUN_TEXEL_BYTES * m.held_runs * m.texels,
         pages: PAGE_TEXEL_BYTES * m.page_texels,
-        rows: ROW_ENTRY_BYTES * (m.held_entries + built),
+        // Held entries are pilot runs: Monte Carlo rows, built before the storage is chosen (f32).
+        rows: ROW_ENTRY_BYTES * m.held_entries + built,
+    }
+}
+
+/// Bytes per entry of [`entries_per_texel`]: Monte Carlo rows stored as ray counts
+/// (`count_rows`; entries counted as rays), otherwise f32 form factors (the hierarchy's links
+/// counted alike).
+pub fn row_entry_bytes(technique: Technique, count_rows: bool) -> f64 {
+    match technique {
+        Technique::Stored {
+            form_factors: FormFactors::MonteCarlo,
+            ..
+        } if count_rows => COUNT_BYTES_PER_RAY,
+        _ => ROW_ENTRY_BYTES,
     }
 }
 
@@ -983,7 +1034,49 @@ pub fn entries_per_texel(technique: Technique, texels: f64, gather_rays: f64) ->
     }
 }
 
-/// Step 5b, once the rays are chosen: when the bake's estimated peak (`stored`) exceeds
+/// Step 5b, once the rays are chosen: how stored Monte Carlo rows are held — f32 weights
+/// (fastest sweeps) when their estimated peak `f32_rows` fits `limit`, else exact ray counts
+/// (`count_rows`: the same output, sweeps 2–3× slower) when theirs does; left as is when
+/// neither fits ([`fit_memory`] may then switch to the gather solver). Sets
+/// `config.transport.count_rows`; returns the reason, with both estimates.
+pub fn choose_row_storage(
+    f32_rows: &MemoryEstimate,
+    count_rows: &MemoryEstimate,
+    limit: f64,
+    config: &mut BakeConfig,
+) -> Option<String> {
+    let Technique::Stored {
+        form_factors: FormFactors::MonteCarlo,
+        ..
+    } = config.technique
+    else {
+        return None;
+    };
+    let (f32_peak, counts_peak) = (
+        format_bytes(f32_rows.total()),
+        format_bytes(count_rows.total()),
+    );
+    let limit_text = format_bytes(limit);
+    if config.transport.count_rows {
+        return Some(format!(
+            "rows as ray counts (chosen before; estimated peak {counts_peak}, with f32 rows {f32_peak}; limit {limit_text})"
+        ));
+    }
+    if f32_rows.total() <= limit {
+        return Some(format!(
+            "rows f32: estimated peak {f32_peak} within the memory limit {limit_text} (as ray counts {counts_peak}: smaller, sweeps 2–3× slower)"
+        ));
+    }
+    if count_rows.total() > limit {
+        return None;
+    }
+    config.transport.count_rows = true;
+    Some(format!(
+        "rows as exact ray counts: the estimated peak with f32 rows {f32_peak} exceeds the memory limit {limit_text}, with counts {counts_peak} fits (the same output; sweeps 2–3× slower)"
+    ))
+}
+
+/// Step 5c, once the rays are chosen: when the bake's estimated peak (`stored`) exceeds
 /// `limit` and the matrix-free gather solver's (`gather`) does not, switch to it (unless the
 /// user fixed the solver or the method is not Monte Carlo). Returns the switch's message, for a
 /// warning; the caller refuses what still does not fit.

@@ -7,6 +7,7 @@ use std::time::Instant;
 use glam::Vec3;
 use lightbake::config::{FormFactors, RowSolver, Technique};
 use lightbake::testing::{self, Geometry, GltfBuilder, Material};
+use lightbake::transport::Rows;
 use lightbake::transport::kernel::{
     parallel_rectangles, perpendicular_rectangles, point_to_coaxial_disk, point_to_disk_bound,
     point_to_point,
@@ -420,11 +421,14 @@ fn reciprocity(name: &str) -> (f64, f64) {
     )
     .unwrap();
     let (t, tr) = (&baked.texels, &baked.transport);
+    let Rows::Weights(w) = &tr.rows else {
+        panic!("polygon rows hold f32 weights")
+    };
     let f = |i: usize, j: usize| {
-        let r = tr.row_start[i] as usize..tr.row_start[i + 1] as usize;
-        tr.col[r.clone()]
+        let r = w.row_start[i] as usize..w.row_start[i + 1] as usize;
+        w.col[r.clone()]
             .binary_search(&(j as u32))
-            .map_or(0.0, |k| tr.f[r.start + k])
+            .map_or(0.0, |k| w.f[r.start + k])
     };
     let side = |i: usize| t.area[i].sqrt();
     let (mut pairs, mut close, mut asymmetry, mut total) = (0, 0, 0.0f64, 0.0f64);

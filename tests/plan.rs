@@ -329,20 +329,46 @@ fn memory_estimate_and_the_gather_switch() {
     use lightbake::plan::{self, MemoryInputs, Plan};
     let inputs = MemoryInputs {
         input_bytes: 1e6,
-        vertices: 1e4,
-        triangles: 2e4,
+        // Few triangles for the texels: the rows dominate (the atlas takes 2.5 KiB a triangle).
+        vertices: 1e3,
+        triangles: 2e3,
         texels: 1e5,
         page_texels: 2e5,
         held_entries: 0.0,
         built_entries: 1e5 * 256.0,
         held_runs: 0.0,
         technique: Technique::DEFAULT,
+        count_rows: true,
     };
     let stored = plan::memory_estimate(&inputs);
-    let parts = stored.scene + stored.bvh + stored.texels + stored.pages + stored.rows;
+    let f32_rows = plan::memory_estimate(&MemoryInputs {
+        count_rows: false,
+        ..inputs
+    });
+    assert!(
+        f32_rows.rows > 4.0 * stored.rows,
+        "{f32_rows:?} against {stored:?}"
+    );
+
+    // Storage: f32 rows with room for them, counts below their estimate, nothing below both.
+    for (limit, counts, chosen) in [
+        (f32_rows.total() + 1.0, false, true),
+        ((f32_rows.total() + stored.total()) / 2.0, true, true),
+        (stored.total() - 1.0, false, false),
+    ] {
+        let mut config = lightbake::BakeConfig::medium();
+        let reason = plan::choose_row_storage(&f32_rows, &stored, limit, &mut config);
+        assert_eq!(config.transport.count_rows, counts, "limit {limit}");
+        assert_eq!(reason.is_some(), chosen, "{reason:?}");
+    }
+    let parts =
+        stored.scene + stored.bvh + stored.atlas + stored.texels + stored.pages + stored.rows;
     assert_eq!(stored.total(), parts);
-    // 25.6 M entries of 8 bytes, built in chunks then concatenated.
-    assert!(stored.rows >= 8.0 * 25.6e6 * 2.0, "{stored:?}");
+    // 25.6 M Monte Carlo rays stored as counts, built in chunks then concatenated.
+    assert!(
+        stored.rows >= plan::COUNT_BYTES_PER_RAY * 25.6e6 * 2.0,
+        "{stored:?}"
+    );
     let gather = plan::memory_estimate(&MemoryInputs {
         built_entries: 0.0,
         technique: Technique::Gather,

@@ -287,9 +287,11 @@ fn solve_shared(
     solution.irradiance = h;
     // The rows stay with the processes that built them; the rest is whole on every process.
     let transport = Transport {
-        row_start: vec![0; n + 1],
-        col: Vec::new(),
-        f: Vec::new(),
+        rows: crate::transport::Rows::Weights(crate::transport::WeightRows {
+            row_start: vec![0; n + 1],
+            col: Vec::new(),
+            f: Vec::new(),
+        }),
         escape,
         direct,
         rays,

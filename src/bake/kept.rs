@@ -471,7 +471,7 @@ fn decode<'a>(r: &mut Reader<'a>) -> std::result::Result<(Kept, &'a [u8]), Strin
         })
     });
     let mut transport = Transport::from_rows(rows, escape);
-    if transport.col.iter().any(|&j| j as usize >= n) {
+    if (0..n).any(|i| transport.row(i).any(|(j, _)| j as usize >= n)) {
         return Err("a row names a texel out of range".to_string());
     }
     transport.direct_terms = r.vec3s(n * sources)?;

@@ -103,6 +103,18 @@ impl Sizes {
         held: f64,
         held_rays: f64,
     ) -> MemoryEstimate {
+        self.estimate_rows(technique, false, rays, held, held_rays)
+    }
+
+    /// [`Sizes::estimate`] with Monte Carlo rows stored as ray counts when `count_rows`.
+    fn estimate_rows(
+        &self,
+        technique: Technique,
+        count_rows: bool,
+        rays: f64,
+        held: f64,
+        held_rays: f64,
+    ) -> MemoryEstimate {
         let n = self.texels;
         let mut estimate = plan::memory_estimate(&MemoryInputs {
             input_bytes: self.input_bytes,
@@ -115,6 +127,7 @@ impl Sizes {
             built_entries: plan::entries_per_texel(technique, n, rays) * (n / self.processes),
             held_runs: held,
             technique,
+            count_rows,
         });
         if self.distributed() {
             estimate.texels += EXCHANGE_TEXEL_BYTES * n;
@@ -140,11 +153,13 @@ impl Sizes {
 
     /// The least a bake of `config` can need: with the automatic choice of rays, its pilot
     /// (the first pair held while the second is built, the worst case) and a final bake with
-    /// the gather solver when the solver may switch; otherwise the configured bake.
+    /// the gather solver when the solver may switch; otherwise the configured bake (Monte Carlo
+    /// rows as ray counts, the smaller storage `fit` may choose).
     fn least(&self, config: &BakeConfig) -> MemoryEstimate {
         let k = PILOT_RAYS as f64;
-        let configured = self.estimate(
+        let configured = self.estimate_rows(
             config.technique,
+            true,
             config.transport.gather_rays as f64,
             0.0,
             0.0,
@@ -163,8 +178,11 @@ impl Sizes {
         };
         let rays = config.transport.gather_rays as f64;
         match pilot {
-            true => larger(worst_pilot, self.estimate(last, rays, 2.0, 4.0 * k)),
-            false => self.estimate(last, rays, 0.0, 0.0),
+            true => larger(
+                worst_pilot,
+                self.estimate_rows(last, true, rays, 2.0, 4.0 * k),
+            ),
+            false => self.estimate_rows(last, true, rays, 0.0, 0.0),
         }
     }
 }
@@ -233,7 +251,7 @@ pub fn fit(
     input: &Path,
     sizes: &Sizes,
     config: &mut BakeConfig,
-    mut plan: Option<&mut Plan>,
+    plan: Option<&mut Plan>,
     pilot: Option<(u32, bool)>,
     limit: u64,
     progress: &dyn Progress,
@@ -251,8 +269,12 @@ pub fn fit(
     // The pilot's own peak is past, but it counts: the estimate is the bake's.
     let pilot_peak = pilot.map(|(k, _)| sizes.pilot_peak(k > PILOT_RAYS));
     let with_pilot = |e: MemoryEstimate| pilot_peak.map_or(e, |p| larger(p, e));
-    let stored = with_pilot(sizes.estimate(config.technique, rays, held, held_rays));
+    let technique = config.technique;
+    let stored_as =
+        |counts| with_pilot(sizes.estimate_rows(technique, counts, rays, held, held_rays));
+    let (f32_rows, count_rows) = (stored_as(false), stored_as(true));
     let gather = with_pilot(sizes.estimate(Technique::Gather, rays, held, held_rays));
+    let mut plan = plan;
     if let (Some(plan), true) = (plan.as_deref_mut(), sizes.distributed()) {
         plan.reasons.push(format!(
             "memory: per process of {}: its share of the final rows, the rest whole (scene, \
@@ -260,6 +282,11 @@ pub fn fit(
             sizes.processes
         ));
     }
+    let storage = plan::choose_row_storage(&f32_rows, &count_rows, limit as f64, config);
+    if let Some(plan) = plan.as_deref_mut() {
+        plan.reasons.extend(storage);
+    }
+    let stored = stored_as(config.transport.count_rows);
     if let (Some(plan), Some(auto)) = (plan, config.auto)
         && let Some(message) =
             plan::fit_memory(&stored, &gather, limit as f64, config, plan, &auto.keep)

@@ -76,15 +76,18 @@ impl Columns {
     fn new(t: &Transport) -> Columns {
         let n = t.len();
         let mut col_start = vec![0u32; n + 1];
-        for &j in &t.col {
-            col_start[j as usize + 1] += 1;
+        for i in 0..n {
+            for (j, _) in t.row(i) {
+                col_start[j as usize + 1] += 1;
+            }
         }
         for j in 0..n {
             col_start[j + 1] += col_start[j];
         }
         let mut next: Vec<u32> = col_start[..n].to_vec();
-        let mut row = vec![0u32; t.col.len()];
-        let mut f = vec![0.0f32; t.col.len()];
+        let entries = col_start[n] as usize;
+        let mut row = vec![0u32; entries];
+        let mut f = vec![0.0f32; entries];
         for i in 0..n {
             for (j, f_ij) in t.row(i) {
                 let k = next[j as usize] as usize;
@@ -342,6 +345,7 @@ mod tests {
     use super::*;
     use crate::config::{BakeConfig, FormFactors, RowSolver, Technique};
     use crate::solve::tests::fixture;
+    use crate::transport::{Rows, WeightRows};
     use crate::{NoProgress, compute};
 
     fn config() -> BakeConfig {
@@ -355,9 +359,11 @@ mod tests {
     #[test]
     fn transpose_lists_every_entry_once_by_column() {
         let t = Transport {
-            row_start: vec![0, 2, 3, 5],
-            col: vec![1, 2, 0, 0, 1],
-            f: vec![0.1, 0.2, 0.3, 0.4, 0.5],
+            rows: Rows::Weights(WeightRows {
+                row_start: vec![0, 2, 3, 5],
+                col: vec![1, 2, 0, 0, 1],
+                f: vec![0.1, 0.2, 0.3, 0.4, 0.5],
+            }),
             escape: vec![0.0; 3],
             direct: vec![Vec3::ZERO; 3],
             ..Default::default()

@@ -1,7 +1,7 @@
 //! Stage 5 — `Transport`: how light moves between texels.
 //!
-//! For each receiving texel `i` this holds a sparse row of form factors `F_ij` (compressed sparse
-//! rows: `row_start`, `col`, `f`), the fraction of its hemisphere that escapes to the sky, and the
+//! For each receiving texel `i` this holds a sparse row of form factors `F_ij` ([`Rows`]: f32
+//! weights, or for Monte Carlo the exact ray counts they come from), the fraction of its hemisphere that escapes to the sky, and the
 //! direct irradiance `H_direct,i` from punctual lights, emissive surfaces and the sky.
 //!
 //! The system solved downstream is, per colour channel,
@@ -30,6 +30,7 @@ pub(crate) mod montecarlo;
 mod point;
 mod polygon;
 pub(crate) mod rows;
+mod storage;
 
 use glam::Vec3;
 
@@ -38,6 +39,7 @@ use crate::scene::Scene;
 use crate::texels::Texels;
 use crate::trace::Tracer;
 use crate::{Progress, Result};
+pub use storage::{CountRow, CountRows, Row, Rows, WeightRows};
 
 /// What every transport method reads: the scene, its texels and the tracer over the scene.
 #[derive(Clone, Copy)]
@@ -50,12 +52,9 @@ pub struct Surfaces<'a> {
 /// Form factors and direct light of every texel.
 #[derive(Clone, Debug, Default)]
 pub struct Transport {
-    /// Row `i` is `col[row_start[i]..row_start[i+1]]`, `f[…]` (length = texels + 1).
-    pub row_start: Vec<u32>,
-    /// Source texel of each entry.
-    pub col: Vec<u32>,
-    /// `F_ij`: fraction of the energy arriving at `i` that leaves `j` (rows sum to ≤ 1).
-    pub f: Vec<f32>,
+    /// Row `i` holds `F_ij`, the fraction of the energy arriving at `i` that leaves `j` (rows
+    /// sum to ≤ 1), for the source texels `j` it sees.
+    pub rows: Rows,
     /// Fraction of texel `i`'s hemisphere that sees the sky.
     pub escape: Vec<f32>,
     /// Direct irradiance `H_direct` (W/m²): punctual lights, emitters, sky.
@@ -127,12 +126,8 @@ impl Sources {
 impl Transport {
     /// The entries of row `i` as (source texel, F_ij).
     #[inline]
-    pub fn row(&self, i: usize) -> impl Iterator<Item = (u32, f32)> + '_ {
-        let r = self.row_start[i] as usize..self.row_start[i + 1] as usize;
-        self.col[r.clone()]
-            .iter()
-            .copied()
-            .zip(self.f[r].iter().copied())
+    pub fn row(&self, i: usize) -> Row<'_> {
+        self.rows.row(i)
     }
 
     /// Rows given as (source texel, `F_ij`) per receiver, with each receiver's escape
@@ -142,19 +137,19 @@ impl Transport {
     where
         R: Iterator<Item = (u32, f32)>,
     {
-        let mut t = Transport {
-            row_start: vec![0],
-            escape,
-            ..Default::default()
-        };
+        let mut w = WeightRows::default();
         for row in rows {
             for (j, f) in row {
-                t.col.push(j);
-                t.f.push(f);
+                w.col.push(j);
+                w.f.push(f);
             }
-            t.row_start.push(t.col.len() as u32);
+            w.row_start.push(w.col.len() as u32);
         }
-        t
+        Transport {
+            rows: Rows::Weights(w),
+            escape,
+            ..Default::default()
+        }
     }
 
     pub fn len(&self) -> usize {
@@ -166,8 +161,10 @@ impl Transport {
 
     /// Debug-build check: finite, non-negative, rows bounded.
     pub fn validate(&self) {
-        assert_eq!(self.row_start.len(), self.direct.len() + 1);
-        assert_eq!(self.col.len(), self.f.len());
+        assert_eq!(self.rows.len(), self.direct.len());
+        if let Rows::Weights(w) = &self.rows {
+            assert_eq!(w.col.len(), w.f.len());
+        }
         assert!(
             self.direct
                 .iter()

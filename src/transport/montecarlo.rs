@@ -208,12 +208,17 @@ impl Context<'_> {
             }
         }
 
-        // Row: merge repeated hits on the same texel.
+        // Row: the hit counts per source texel, `F_ij = hits / K`, stored as counts (exact,
+        // see `Rows`) or as f32 weights with repeated hits merged.
         hits.sort_unstable();
         let before = out.col.len();
-        for run in hits.chunk_by(|a, b| a == b) {
-            out.col.push(run[0]);
-            out.f.push(run.len() as f32 / kf);
+        if self.params.count_rows {
+            out.counts.push_row(hits, k);
+        } else {
+            for run in hits.chunk_by(|a, b| a == b) {
+                out.col.push(run[0]);
+                out.f.push(run.len() as f32 / kf);
+            }
         }
         out.end_row(before, escape, direct);
         out.rays += k as u64 + l as u64 + shadow_rays;

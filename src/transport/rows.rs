@@ -1,6 +1,7 @@
 //! The one row builder every transport method uses: receivers in fixed-size chunks built in
 //! parallel (one progress tick and abort check per chunk), then concatenated in order into
-//! compressed sparse rows. Chunk boundaries never depend on the thread count, so neither do
+//! [`Rows`]: f32 weights, or ray counts for Monte Carlo rows built with
+//! `TransportParams::count_rows` (which a chunk builds in its `counts`). Chunk boundaries never depend on the thread count, so neither do
 //! the rows.
 
 use std::ops::Range;
@@ -9,15 +10,17 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use glam::Vec3;
 use rayon::prelude::*;
 
-use super::Transport;
+use super::{CountRows, Rows, Transport, WeightRows};
 use crate::{Error, Progress, Result};
 
-/// Rows of one chunk of receivers, concatenated in order afterwards.
+/// Rows of one chunk of receivers, concatenated in order afterwards: weighted entries in
+/// `col`, `f` (row lengths in `row_len`), or Monte Carlo rows in `counts`.
 #[derive(Default)]
 pub(crate) struct ChunkRows {
     pub(crate) row_len: Vec<u32>,
     pub(crate) col: Vec<u32>,
     pub(crate) f: Vec<f32>,
+    pub(crate) counts: CountRows,
     pub(crate) escape: Vec<f32>,
     pub(crate) direct: Vec<Vec3>,
     /// `direct` by source, when split ([`Transport::direct_terms`]).
@@ -45,6 +48,7 @@ impl ChunkRows {
         if let Some(len) = self.row_len.last_mut() {
             *len = 0;
         }
+        self.counts.clear_last_row();
     }
 }
 
@@ -78,30 +82,40 @@ pub(crate) fn build(
         return Err(Error::Aborted);
     }
 
+    let counted = chunks.iter().any(|c| !c.counts.is_empty());
     let entries: usize = chunks.iter().map(|c| c.col.len()).sum();
-    let mut t = Transport {
+    let mut weights = WeightRows {
         row_start: Vec::with_capacity(n + 1),
         col: Vec::with_capacity(entries),
         f: Vec::with_capacity(entries),
+    };
+    weights.row_start.push(0);
+    let mut counts = CountRows::default();
+    let mut t = Transport {
         escape: Vec::with_capacity(n),
         direct: Vec::with_capacity(n),
-        rays: 0,
-        rows_carry_emission: false,
-        ..Default::default()
+        ..Transport::default()
     };
-    t.row_start.push(0);
     for c in chunks {
-        let mut start = *t.row_start.last().unwrap();
-        for len in c.row_len {
-            start += len;
-            t.row_start.push(start);
+        if counted {
+            counts.append(c.counts);
+        } else {
+            let mut start = *weights.row_start.last().unwrap();
+            for len in c.row_len {
+                start += len;
+                weights.row_start.push(start);
+            }
+            weights.col.extend(c.col);
+            weights.f.extend(c.f);
         }
-        t.col.extend(c.col);
-        t.f.extend(c.f);
         t.escape.extend(c.escape);
         t.direct.extend(c.direct);
         t.direct_terms.extend(c.terms);
         t.rays += c.rays;
     }
+    t.rows = match counted {
+        true => Rows::Counts(counts),
+        false => Rows::Weights(weights),
+    };
     Ok(t)
 }
