@@ -120,7 +120,11 @@ pub fn spawn(n: usize) -> Result<()> {
             .arg("--process")
             .arg(process.to_string());
         if process > 0 {
-            command.arg("--quiet").stdout(Stdio::null());
+            // Quiet once: clap refuses a repeated `--quiet`.
+            if !args.iter().any(|a| a == "--quiet" || a == "-q") {
+                command.arg("--quiet");
+            }
+            command.stdout(Stdio::null());
         }
         match command.spawn() {
             Ok(child) => children.push(child),
