@@ -50,8 +50,10 @@
 //!   config                           all options: Technique (only valid transport × solver
 //!                                    pairs), AutoParams/Keep of the automatic choice
 //!   scene → trace → atlas → texels → lights
-//!   transport                        rows (one chunked row builder), montecarlo, point, polygon,
-//!                                    hierarchical link building and direct light
+//!   transport                        rows (one chunked row builder; `storage`: f32 weights, or
+//!                                    Monte Carlo rows as exact ray counts when the planner finds
+//!                                    f32 rows do not fit the memory budget), montecarlo, point,
+//!                                    polygon, hierarchical link building and direct light
 //!   solve                            one stopping rule; jacobi, gauss_seidel, southwell on stored
 //!                                    rows; gather (matrix-free) and hierarchical make their own
 //!                                    transport as they iterate
