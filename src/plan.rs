@@ -940,7 +940,7 @@ pub fn format_bytes(bytes: f64) -> String {
 /// Bytes of one stored f32 row entry: the source texel (u32) and its form factor (f32).
 pub const ROW_ENTRY_BYTES: f64 = 8.0;
 /// Bytes per gathering ray of Monte Carlo rows stored as ray counts ([`crate::transport::Rows`]),
-/// besides [`TEXEL_BYTES`]' per-row part: measured 0.66 (Cornell box, K = 1024), 0.71 and 0.80
+/// besides `TEXEL_BYTES`' per-row part: measured 0.66 (Cornell box, K = 1024), 0.71 and 0.80
 /// (64k-triangle furnished interior, K = 256 and 64; `examples/dev/row_storage.rs`); rounded up
 /// for scenes whose rays land farther apart.
 pub const COUNT_BYTES_PER_RAY: f64 = 1.0;

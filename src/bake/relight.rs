@@ -29,7 +29,7 @@
 //!   float rounding (Southwell's shooting order depends on the values: its layers stop at the
 //!   tolerance each and sum to it within the tolerance). Denoising is not linear (its range
 //!   kernel reads the values), so each layer is filtered with the weights of the full lightmap
-//!   ([`denoise_guided`]): the same linear filter for every layer, and the filtered layers sum
+//!   ([`denoise_guided`](crate::lightmap::denoise::denoise_guided)): the same linear filter for every layer, and the filtered layers sum
 //!   to the filtered lightmap (up to the clamp of a plane fit below zero). The invalid-texel
 //!   fill and dilation are linear; seam stitching is a least-squares solve stopped at a
 //!   tolerance, so after it the pages sum within that tolerance.
