@@ -377,3 +377,33 @@ fn a_scene_with_nothing_to_bake_is_written_through() {
     assert!(err.contains("nothing to bake"), "{err}");
     assert_eq!(outputs(&two), expected);
 }
+
+/// A kept transport or layers need every row in one process: refused before any work, with the
+/// reason, and nothing written.
+#[test]
+fn a_distributed_bake_refuses_to_keep_its_transport() {
+    let scene = fixture("cornell_box.gltf");
+    let dir = scratch();
+    for option in ["--keep-transport", "--layers"] {
+        let out = dir.path().join(option.trim_start_matches('-'));
+        let o = run(&[
+            "bake",
+            scene.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+            "--quality",
+            "draft",
+            "--processes",
+            "2",
+            "--quiet",
+            option,
+        ]);
+        let err = text(&o.stderr);
+        assert!(!o.status.success(), "{option} was accepted: {err}");
+        assert!(
+            err.contains("keeps no transport and writes no layers"),
+            "{err}"
+        );
+        assert!(!out.exists(), "{option}: {:?}", list_files(&out));
+    }
+}

@@ -145,6 +145,13 @@ fn distributable(config: &BakeConfig) -> Result<BakeConfig> {
                 .into(),
         ));
     }
+    if config.output.keep_transport || config.output.layers.is_some() {
+        return Err(Error::Option(
+            "a distributed bake keeps no transport and writes no layers: its rows stay spread \
+             over the processes (bake on one process for --keep-transport or --layers)"
+                .into(),
+        ));
+    }
     let mut config = config.clone();
     if let Some(auto) = &mut config.auto {
         // Only stored rows are sharded: the memory check refuses a shard that does not fit
@@ -209,13 +216,6 @@ fn solve_shared(
             Technique::DEFAULT,
             config.technique
         )));
-    }
-    if config.output.keep_transport || config.output.layers.is_some() {
-        return Err(Error::Option(
-            "a distributed bake keeps no transport and writes no layers: its rows stay spread \
-             over the processes (bake on one process for --keep-transport or --layers)"
-                .into(),
-        ));
     }
     let texels = surfaces.texels;
     let n = texels.len();
