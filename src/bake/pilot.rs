@@ -201,6 +201,9 @@ fn gathered_sample(
             &runs.runs[1].solution.irradiance,
         ],
         sky: transport.sky,
+        target,
+        budget_rays,
+        seed: transport.seed,
     };
     GatheredSample::measure(
         surfaces.scene,
@@ -208,9 +211,6 @@ fn gathered_sample(
         surfaces.tracer,
         &runs,
         punctual,
-        target,
-        budget_rays,
-        transport.seed,
     )
 }
 

@@ -93,16 +93,22 @@ pub struct GatheredSample {
 
 /// What the two runs give the sample: per texel, the irradiance `H` each run solved (what the
 /// lightmap stores; not for `--indirect-only` bakes).
+#[derive(Clone, Copy)]
 pub struct Runs<'a> {
     pub irradiance: [&'a [Vec3]; 2],
     /// Uniform sky radiance the bake uses.
     pub sky: Vec3,
+    /// The relative error the bake aims at, the rays the sample may cast past its first batch,
+    /// and the seed of its streams.
+    pub target: f32,
+    pub budget_rays: u64,
+    pub seed: u64,
 }
 
 impl GatheredSample {
     /// Samples surface points of `scene` with the pilot's two `runs` in batches of [`BATCH`]
-    /// until the estimate is within [`PRECISION`], clearly below the relative error `target`
-    /// ([`SMALL`]), past `budget_rays`, or [`MAX_POINTS`]; `punctual` (the punctual lights' texel values) splits off
+    /// until the estimate is within [`PRECISION`], clearly below the relative error
+    /// `runs.target` ([`SMALL`]), past `runs.budget_rays`, or [`MAX_POINTS`]; `punctual` (the punctual lights' texel values) splits off
     /// the rest. `None` without texels.
     pub fn measure(
         scene: &Scene,
@@ -110,10 +116,13 @@ impl GatheredSample {
         tracer: &Tracer,
         runs: &Runs,
         punctual: Option<&PunctualSample>,
-        target: f32,
-        budget_rays: u64,
-        seed: u64,
     ) -> Option<GatheredSample> {
+        let Runs {
+            target,
+            budget_rays,
+            seed,
+            ..
+        } = *runs;
         if texels.is_empty() || scene.triangles.is_empty() {
             return None;
         }
@@ -131,7 +140,7 @@ impl GatheredSample {
             area += 0.5 * (b - a).cross(c - a).length();
             cdf.push(area as f32);
         }
-        if !(area > 0.0) {
+        if area <= 0.0 || !area.is_finite() {
             return None;
         }
         let (kf, lf) = (GATHER_RAYS as f32, light_samples as f32);
