@@ -8,18 +8,17 @@
 //! rays that return the reflected radiosity `ρ_j·H_j` of the texel they hit (the pilot's solved
 //! `H`), emitter light samples combined with the rays' emitter hits by the power heuristic, the
 //! sky through the rays that escape — only at the point itself rather than over a texel's
-//! footprint, about the surface's shading normal (as the point yardstick and renderers shade),
-//! with the punctual lights' exact irradiance added. The lookup of the pilot's texel values
-//! minus that estimate is the error a renderer shows there, apart from the light's second
-//! bounce at texel resolution (a second-order effect).
+//! footprint, about the surface's shading normal (as the point yardstick and renderers shade).
+//! The lookup of the pilot's texel values minus that estimate is the error a renderer shows
+//! there, apart from the light's second bounce at texel resolution (a second-order effect).
 //!
 //! **Punctual lights apart.** Their direct light is exact at a point (one shadow ray per
 //! light), so its part is the [`PunctualSample`]'s texel values read back against the exact
 //! light there, about the shading normal: noise-free. The gather covers the rest, and the two
 //! mean squares add (independent errors, as noise and resolution error are).
 //!
-//! **Noise out.** Both sides of the rest are noisy: the pilot's texels (K = 16) and the point's own
-//! gather. Each of the pilot's two independent runs gives its own difference `d_a`, `d_b` (its
+//! **Noise out.** Both sides of the rest are noisy: the pilot's texels (K = 16) and the
+//! point's own gather. Each of the pilot's two independent runs gives its own difference `d_a`, `d_b` (its
 //! texels against a gather through its own solution, with independent rays), so
 //! `E[d_a·d_b] = (E d)²`: the mean of the products estimates the mean square lookup error
 //! without either noise (it can be negative at a point; only the mean is read). Its standard
@@ -29,9 +28,11 @@
 //! looking into geometry, the point yardstick's probe test) or whose texel is buried are left
 //! out.
 //!
-//! **Cost.** Points (4 096 to 65 536, as the precision needs) × (16 probe rays + 2 runs × ([`GATHER_RAYS`] +
-//! [`LIGHT_SAMPLES`]) + one shadow ray per punctual light) rays: about `POINTS / texels` of a pilot pair, a fraction of the
-//! bake on anything but the smallest scenes (measured in README, "What a renderer shows").
+//! **Cost.** Per point, 16 probe rays, 2 runs × ([`GATHER_RAYS`] + [`LIGHT_SAMPLES`]) and one
+//! shadow ray per punctual light; [`BATCH`] points at least, more while the estimate is not
+//! precise and the sample has cast less than its budget (the bake gives it half the pilot's
+//! rays). Measured (README, "What a renderer shows"): 0.1–0.3 s for the first batch, as much as
+//! a sub-second bake; 9% of the furnished interior's draft bake and 4% of its medium one.
 
 use std::f32::consts::PI;
 
@@ -52,8 +53,8 @@ pub const BATCH: usize = 4096;
 /// ... until the mean square's two standard errors are within this share of it ...
 pub const PRECISION: f64 = 0.4;
 /// ... or the error is clearly small next to the target (its upper bound below this share of
-/// it), or the sample's rays exceed `budget_rays` (the bake passes half the pilot's: its cost stays below that but for the
-/// first batch), or this many points have been drawn.
+/// it), or the sample's rays exceed its budget (the bake passes half the pilot's; the first
+/// batch is cast whatever the budget), or this many points have been drawn.
 pub const SMALL: f32 = 0.25;
 pub const MAX_POINTS: usize = 65_536;
 /// Gathering rays per point and run (the pilot's own [`super::PILOT_RAYS`] twice over: the
@@ -108,8 +109,8 @@ pub struct Runs<'a> {
 impl GatheredSample {
     /// Samples surface points of `scene` with the pilot's two `runs` in batches of [`BATCH`]
     /// until the estimate is within [`PRECISION`], clearly below the relative error
-    /// `runs.target` ([`SMALL`]), past `runs.budget_rays`, or [`MAX_POINTS`]; `punctual` (the punctual lights' texel values) splits off
-    /// the rest. `None` without texels.
+    /// `runs.target` ([`SMALL`]), past `runs.budget_rays`, or [`MAX_POINTS`]; `punctual` (the
+    /// punctual lights' texel values) splits off the rest. `None` without texels.
     pub fn measure(
         scene: &Scene,
         texels: &Texels,
