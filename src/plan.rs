@@ -41,8 +41,9 @@
 //!   runs on them. Only where the sampled punctual error is the larger part (the second
 //!   differences alone are a lower bound); when the atlas stays, its pilot pair is the first
 //!   pilot below. Per instance, not per chart: a floor with one shadow is raised whole.
-//! - **Resolution error** is predicted ([`predict_resolution`]): what a renderer shows between texel centres, where it blends four texels
-//!   bilinearly, differs from the light at that point where the light changes within a texel.
+//! - **Resolution error** is predicted ([`predict_resolution`]): what a renderer shows
+//!   between texel centres, where it blends four texels bilinearly, differs from the light at
+//!   that point where the light changes within a texel.
 //!   It is *measured* at random surface points ([`GatheredSample`]): the last pilot pair's texel
 //!   values read back by bilinear lookup against the light there — punctual lights exactly (one
 //!   shadow ray each, about the shading normal), emitters, sky and interreflection gathered at
