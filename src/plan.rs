@@ -41,19 +41,31 @@
 //!   runs on them. Only where the sampled punctual error is the larger part (the second
 //!   differences alone are a lower bound); when the atlas stays, its pilot pair is the first
 //!   pilot below. Per instance, not per chart: a floor with one shadow is raised whole.
-//! - **Resolution error** is predicted ([`predict_resolution`]), not yet controlled by the
-//!   global density: what a renderer shows between texel centres, where it blends four texels
-//!   bilinearly, differs from the light at that point where the light changes within a texel.
-//!   For punctual direct light (hard shadows of sun, point and spot lights, spot-cone edges)
-//!   it is *sampled* ([`PunctualSample`]): texel values read back by bilinear lookup at random
-//!   surface points against the exact light there, gutters and buried texels included. For
-//!   the rest (interreflection, emitters) it is estimated from the pilot's second differences
-//!   ([`resolution_error`]; a lower bound: emitter shadow edges narrower than a texel are not
-//!   in it). `--explain` reports noise and both parts, and says plainly when the prediction is
-//!   above the target and why (resolution error that more rays cannot lower, or noise at the
-//!   ray cap). Against the point yardstick at `--quality medium` the sampled part
-//!   over-predicted the courtyard (8.6% predicted, 6.2% measured) and spot_and_directional
-//!   (3.0% predicted resolution, 2.4% measured in all).
+//! - **Resolution error** is predicted ([`predict_resolution`]): what a renderer shows
+//!   between texel centres, where it blends four texels bilinearly, differs from the light at
+//!   that point where the light changes within a texel.
+//!   It is *measured* at random surface points ([`GatheredSample`]): the last pilot pair's texel
+//!   values read back by bilinear lookup against the light there — punctual lights exactly (one
+//!   shadow ray each, about the shading normal), emitters, sky and interreflection gathered at
+//!   the point as transport gathers at a texel (32 rays and 8 emitter light samples through
+//!   each run's solution). Each run's difference is independent of the other's, so the mean of
+//!   their products has neither's noise; points are drawn in batches of 4096 until the mean
+//!   square is known to ±40% (two standard errors), is clearly small, or the sample has cast
+//!   half the pilot's rays (it always casts one batch: 0.1–0.3 s, as much as a sub-second bake;
+//!   2.0 s of 22 s on the furnished interior at draft, 2.9 s of 65 s at medium). The pilot's
+//!   second differences ([`resolution_error`]) it replaced are a lower bound (emitter shadows and
+//!   contacts narrower than a texel are not in them) and stay in `--explain` beside it; the
+//!   punctual sample ([`PunctualSample`], about the face normal) still steers the adaptive
+//!   density. Predicted (noise before denoising and resolution error in quadrature) against
+//!   measured point error (reference noise out), draft / medium: furnished interior 8.9% / 4.9%
+//!   for 8.1% / 5.6% (the second differences predicted 6.5% / 3.5%), Cornell box 6.6% / 3.0% for
+//!   6.2% / 2.8%, lamp_room 8.0% / 4.2% for 7.1% / 2.6%, two_rooms 6.3% / 3.4% for 4.3% / 1.4%;
+//!   the table is in README ("What a renderer shows"). `--explain` says plainly when the
+//!   prediction is above the target, which part dominates, and about how much more texels (a
+//!   range: the error falls as `h²` where light curves smoothly, as `√h` at edges) or rays
+//!   would take. Not yet a control, though measured to pay: on the interior at medium, 20 /m
+//!   instead of 16 gave 4.32% for 5.57% (predicted 4.26%) where the rays of the same time gave
+//!   5.44%.
 //!
 //! - **Error map** ([`error_map`], `--error-map`): the same two parts texel by texel, written
 //!   beside each page so an artist sees where a bake is weak and whether texels or rays would help.
@@ -65,10 +77,12 @@
 //! at low K and leaves it at high K), so the choice errs towards more rays.
 
 pub mod error_map;
+pub mod gathered;
 pub mod punctual;
 
 use glam::Vec3;
 
+pub use gathered::GatheredSample;
 pub use punctual::PunctualSample;
 
 use crate::config::{BakeConfig, FormFactors, Keep, RowSolver, Technique};
@@ -116,6 +130,8 @@ pub struct Plan {
     /// Gathering rays per texel in all, the reused pilot bakes included.
     pub total_rays: Option<u32>,
     pub pilot_seconds: f64,
+    /// Seconds of the gathered point sample ([`GatheredSample`]) behind the resolution error.
+    pub resolution_seconds: f64,
     pub pilot_rays: u64,
     /// Rays of pilot bakes not reused in the result (the first pair, when a second ran).
     pub discarded_rays: u64,
@@ -132,6 +148,14 @@ pub struct Plan {
 /// The parts of the predicted resolution error.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct ResolutionParts {
+    /// Relative RMS lookup error of all the light at random surface points against a gather
+    /// there ([`GatheredSample`]), with its spread from the sample's own noise (the relative
+    /// errors at the mean square ∓ two standard errors); the prediction when measured.
+    pub gathered: Option<(f32, f32, f32)>,
+    /// Its parts: the light other than punctual direct light (emitters, sky,
+    /// interreflection), and punctual direct light at the same points about the shading normal.
+    pub rest: Option<f32>,
+    pub point_punctual: Option<f32>,
     /// Relative RMS lookup error of the light other than punctual direct light, from the
     /// pilot's second differences ([`resolution_error`]'s model; a lower bound).
     pub curved: f32,
@@ -634,12 +658,16 @@ pub fn choose_texel_rays(texels: &Texels, pilot: &[&[Vec3]], k: u32, plan: &mut 
     }
 }
 
-/// Step 3b, after the rays: the resolution error of the density ([`resolution_error`]) from
-/// the last pilot pair's lightmap values, and the prediction that combines it with the noise.
+/// Step 3b, after the rays: the resolution error of the density and the prediction that
+/// combines it with the noise. Measured at random surface points against a gather there
+/// (`gathered`, [`GatheredSample`]) when there is one; otherwise the sampled punctual part
+/// ([`PunctualSample`]) and the rest from the pilot's second differences ([`resolution_error`],
+/// a lower bound) in quadrature. `pilot` is the last pilot pair's lightmap values.
 pub fn predict_resolution(
     texels: &Texels,
     pilot: [&[Vec3]; 2],
     punctual: Option<&PunctualSample>,
+    gathered: Option<&GatheredSample>,
     plan: &mut Plan,
 ) {
     let n = texels.len();
@@ -648,15 +676,29 @@ pub fn predict_resolution(
     let (square, skip) = resolution_squares(texels, [&without[0], &without[1]]);
     let curved = metrics::weighted_rms_over_mean(&square, &mean, &texels.area, &skip);
     let sampled = punctual.map_or(0.0, |p| p.relative_error());
-    let r = curved.hypot(sampled);
+    let gathered_bounds = gathered
+        .map(|g| g.relative_error_bounds())
+        .filter(|b| b.0.is_finite());
+    let rest = gathered.map(|g| g.rest_error()).filter(|r| r.is_finite());
+    let point_punctual = gathered
+        .map(|g| g.punctual_error())
+        .filter(|r| r.is_finite());
+    let r = match gathered_bounds {
+        Some((r, _, _)) => r,
+        None => curved.hypot(sampled),
+    };
     if !r.is_finite() {
         return;
     }
-    plan.resolution_parts = Some(ResolutionParts {
+    let parts = ResolutionParts {
+        gathered: gathered_bounds,
+        rest,
+        point_punctual,
         curved,
         sampled,
         border_share: punctual.map_or(0.0, |p| p.border_share()),
-    });
+    };
+    plan.resolution_parts = Some(parts);
     plan.predicted_resolution = Some(r);
     let e = plan.target_error;
     let noise = plan.predicted_noise.unwrap_or(0.0);
@@ -667,44 +709,117 @@ pub fn predict_resolution(
             "within the {:.1}% target as far as this estimate sees",
             e * 100.0
         )
-    } else if r > e {
-        format!(
-            "ABOVE the {:.1}% target: resolution error {} exceeds it — shadow edges, spot-cone \
-             edges and small objects need more texels than the density allows, and more rays \
-             cannot help (raise --texels-per-unit: at an edge the lookup error falls only as \
-             the square root of the texel size, so halving it takes 4× the density)",
-            e * 100.0,
-            pct(r)
-        )
-    } else if noise > e {
-        format!(
-            "ABOVE the {:.1}% target: the noise {} exceeds it at the ray cap",
-            e * 100.0,
-            pct(noise)
-        )
     } else {
         format!(
-            "ABOVE the {:.1}% target: noise and resolution error together exceed it \
-             (more texels would lower the resolution error)",
-            e * 100.0
+            "ABOVE the {:.1}% target: {}",
+            e * 100.0,
+            over_target(e, noise, r)
         )
     };
-    let parts = plan.resolution_parts.unwrap_or_default();
+    let measured = match (gathered_bounds, gathered) {
+        (Some((_, lo, hi)), Some(g)) => format!(
+            "measured at {} random surface points: the pilot's texel values read back by \
+             bilinear lookup against the light gathered at each point ({} rays and light \
+             samples per point and run; the two runs' independent differences multiplied, so \
+             neither's noise counts; {}…{} within two standard errors; {:.2}s, {:.1}% of the \
+             pilot's rays): emitters, sky and interreflection {} (the pilot's second \
+             differences alone saw {}), punctual direct light {} (the exact light at the same \
+             points; {} at {} points about the face normals, {:.1}% of those lookups reading a \
+             gutter or buried neighbour)",
+            g.points.len(),
+            gathered::GATHER_RAYS + gathered::LIGHT_SAMPLES,
+            pct(lo),
+            pct(hi),
+            plan.resolution_seconds,
+            100.0 * g.rays as f64 / plan.pilot_rays.max(1) as f64,
+            rest.map_or("—".into(), pct),
+            pct(curved),
+            point_punctual.map_or("—".into(), pct),
+            pct(sampled),
+            punctual::POINTS,
+            parts.border_share * 100.0,
+        ),
+        _ => format!(
+            "punctual direct light {} (sampled: texel values read back by bilinear lookup at {} \
+             random surface points against the exact light there; {:.1}% of those lookups read \
+             a gutter or buried neighbour), the rest {} (the pilot's second differences between \
+             texel centres; a lower bound: emitter shadow edges narrower than a texel are not in \
+             it)",
+            pct(sampled),
+            punctual::POINTS,
+            parts.border_share * 100.0,
+            pct(curved),
+        ),
+    };
     plan.reasons.push(format!(
         "prediction {} at random points of the surfaces, as a renderer shows the bake: noise {} \
-         and resolution error {} in quadrature — {verdict}. Resolution error: punctual direct \
-         light {} (sampled: texel values read back by bilinear lookup at {} random surface \
-         points against the exact light there; {:.1}% of those lookups read a gutter or buried \
-         neighbour), the rest {} (the pilot's second differences between texel centres; a \
-         lower bound: emitter shadow edges narrower than a texel are not in it)",
+         and resolution error {} in quadrature — {verdict}. Resolution error {measured}",
         pct(combined),
         pct(noise),
         pct(r),
-        pct(parts.sampled),
-        punctual::POINTS,
-        parts.border_share * 100.0,
-        pct(parts.curved),
     ));
+}
+
+/// Why a prediction of noise `noise` and resolution error `r` in quadrature is above the
+/// target `e`, which part dominates, and about how much more of texels or rays would reach it.
+/// Texels: the lookup error falls as `h²` (texel size `h`) where the light curves smoothly and
+/// only as `√h` at edges narrower than a texel, so the density a given fall needs lies between
+/// those two powers of it. Rays: the noise falls as `1/√K` (the slowest the fit allows).
+fn over_target(e: f32, noise: f32, r: f32) -> String {
+    let pct = |x: f32| format!("{:.2}%", x * 100.0);
+    // Each part's share of the budget once the other is as it is.
+    let room = |other: f32| (e * e - other * other).max(0.0).sqrt();
+    let density = |need: f32| {
+        let fall = r / need;
+        format!(
+            "×{:.1}…×{:.1} the texel density (×{:.1}…×{:.0} the texels: the first where the \
+             light curves smoothly, the second at shadow edges narrower than a texel)",
+            fall.sqrt(),
+            fall * fall,
+            fall,
+            fall.powi(4)
+        )
+    };
+    let rays = |need: f32| format!("×{:.1} the rays", (noise / need).powi(2));
+    if r >= noise {
+        let need_r = room(noise);
+        if need_r <= 0.0 {
+            return format!(
+                "resolution error {} is the larger part, and the noise {} alone exceeds the \
+                 target; more rays first ({}), then more texels",
+                pct(r),
+                pct(noise),
+                rays(0.75 * e)
+            );
+        }
+        format!(
+            "resolution error {} is the larger part, and more rays cannot lower it; bringing \
+             it to {} (beside the noise {}) takes about {}",
+            pct(r),
+            pct(need_r),
+            pct(noise),
+            density(need_r)
+        )
+    } else {
+        let need_n = room(r);
+        if need_n <= 0.0 {
+            return format!(
+                "noise {} is the larger part, and the resolution error {} alone exceeds the \
+                 target; more texels ({}) and rays",
+                pct(noise),
+                pct(r),
+                density(0.75 * e)
+            );
+        }
+        format!(
+            "noise {} is the larger part (the rays are at their cap or the fall was slower \
+             than measured); bringing it to {} (beside the resolution error {}) takes about {}",
+            pct(noise),
+            pct(need_n),
+            pct(r),
+            rays(need_n)
+        )
+    }
 }
 
 /// The pilot's values without the direct light of punctual lights (measured apart by

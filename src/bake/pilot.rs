@@ -11,7 +11,7 @@ use glam::Vec3;
 
 use super::light::{Lit, transport_and_solve};
 use crate::config::{BakeConfig, FormFactors, Keep, SolveParams, Technique, TransportParams};
-use crate::plan::{self, PILOT_RAYS, Plan, PunctualSample};
+use crate::plan::{self, GatheredSample, PILOT_RAYS, Plan, PunctualSample};
 use crate::progress::CancelOnly;
 use crate::solve::Solution;
 use crate::texels::Texels;
@@ -64,7 +64,17 @@ pub fn choose_transport(
         runs.enough = plan::choose_rays(config, plan, first, second);
         let [a, b] = runs.stored(config.transport.indirect_only);
         let punctual = punctual_sample(surfaces, &config.transport, [&a, &b]);
-        plan::predict_resolution(texels, [&a, &b], punctual.as_ref(), plan);
+        let sampled = Instant::now();
+        let gathered = gathered_sample(
+            surfaces,
+            &config.transport,
+            &runs,
+            punctual.as_ref(),
+            e,
+            plan.pilot_rays / 2,
+        );
+        plan.resolution_seconds = sampled.elapsed().as_secs_f64();
+        plan::predict_resolution(texels, [&a, &b], punctual.as_ref(), gathered.as_ref(), plan);
         pilot = Some(runs);
     } else if monte_carlo && !keep.rays {
         plan::keep_rays_unmeasured(config, plan);
@@ -168,6 +178,39 @@ fn punctual_sample(
         surfaces.tracer,
         &mean,
         transport.seed,
+    )
+}
+
+/// All the light's lookup error at random surface points against a gather there through each
+/// pilot run's solution ([`GatheredSample`]); none when the lightmap leaves direct light out
+/// (the gather would have to leave it out too).
+fn gathered_sample(
+    surfaces: Surfaces,
+    transport: &TransportParams,
+    runs: &PilotRuns,
+    punctual: Option<&PunctualSample>,
+    target: f32,
+    budget_rays: u64,
+) -> Option<GatheredSample> {
+    if transport.indirect_only {
+        return None;
+    }
+    let runs = plan::gathered::Runs {
+        irradiance: [
+            &runs.runs[0].solution.irradiance,
+            &runs.runs[1].solution.irradiance,
+        ],
+        sky: transport.sky,
+        target,
+        budget_rays,
+        seed: transport.seed,
+    };
+    GatheredSample::measure(
+        surfaces.scene,
+        surfaces.texels,
+        surfaces.tracer,
+        &runs,
+        punctual,
     )
 }
 

@@ -143,7 +143,7 @@ impl PunctualSample {
 /// The texels (and weights) a renderer's bilinear lookup at page position `uv` (texel units)
 /// blends, without gutters and buried texels, and whether any was left out. `None` when the
 /// texel under `uv` is itself missing or buried (a point nobody sees through the lightmap).
-fn bilinear(
+pub(super) fn bilinear(
     texels: &Texels,
     valid: &[bool],
     page: usize,

@@ -1,0 +1,324 @@
+//! The resolution error of all the light, sampled at random surface points against a gather
+//! there: what the second differences ([`super::resolution_error`]) cannot see on scenes lit by
+//! emitters and interreflection.
+//!
+//! [`super::PunctualSample`] compares bilinear lookups with the exact punctual light at random
+//! points. Emitters are area lights and interreflection has no closed form, but at a point both
+//! can be *estimated* the way transport estimates them at a texel — cosine-distributed gathering
+//! rays that return the reflected radiosity `ρ_j·H_j` of the texel they hit (the pilot's solved
+//! `H`), emitter light samples combined with the rays' emitter hits by the power heuristic, the
+//! sky through the rays that escape — only at the point itself rather than over a texel's
+//! footprint, about the surface's shading normal (as the point yardstick and renderers shade).
+//! The lookup of the pilot's texel values minus that estimate is the error a renderer shows
+//! there, apart from the light's second bounce at texel resolution (a second-order effect).
+//!
+//! **Punctual lights apart.** Their direct light is exact at a point (one shadow ray per
+//! light), so its part is the [`PunctualSample`]'s texel values read back against the exact
+//! light there, about the shading normal: noise-free. The gather covers the rest, and the two
+//! mean squares add (independent errors, as noise and resolution error are).
+//!
+//! **Noise out.** Both sides of the rest are noisy: the pilot's texels (K = 16) and the
+//! point's own gather. Each of the pilot's two independent runs gives its own difference `d_a`, `d_b` (its
+//! texels against a gather through its own solution, with independent rays), so
+//! `E[d_a·d_b] = (E d)²`: the mean of the products estimates the mean square lookup error
+//! without either noise (it can be negative at a point; only the mean is read). Its standard
+//! error is kept ([`GatheredSample::relative_error_bounds`]).
+//!
+//! **Points** are drawn area-weighted over the scene's triangles; those nobody sees (a face
+//! looking into geometry, the point yardstick's probe test) or whose texel is buried are left
+//! out.
+//!
+//! **Cost.** Per point, 16 probe rays, 2 runs × ([`GATHER_RAYS`] + [`LIGHT_SAMPLES`]) and one
+//! shadow ray per punctual light; [`BATCH`] points at least, more while the estimate is not
+//! precise and the sample has cast less than its budget (the bake gives it half the pilot's
+//! rays). Measured (README, "What a renderer shows"): 0.1–0.3 s for the first batch, as much as
+//! a sub-second bake; 9% of the furnished interior's draft bake and 4% of its medium one.
+
+use std::f32::consts::PI;
+
+use glam::Vec3;
+use rayon::prelude::*;
+
+use super::punctual::{PunctualSample, bilinear};
+use crate::lights::{Emitters, punctual_irradiance};
+use crate::reference::points::PROBE_RAYS;
+use crate::sampling::{self, Rng, cosine_hemisphere, frame, hammersley, power_weight};
+use crate::scene::Scene;
+use crate::texels::validity::{self, MAX_BACK};
+use crate::texels::{RayEnd, Texels};
+use crate::trace::Tracer;
+
+/// Random surface points are drawn in batches of this many ...
+pub const BATCH: usize = 4096;
+/// ... until the mean square's two standard errors are within this share of it ...
+pub const PRECISION: f64 = 0.4;
+/// ... or the error is clearly small next to the target (its upper bound below this share of
+/// it), or the sample's rays exceed its budget (the bake passes half the pilot's; the first
+/// batch is cast whatever the budget), or this many points have been drawn.
+pub const SMALL: f32 = 0.25;
+pub const MAX_POINTS: usize = 65_536;
+/// Gathering rays per point and run (the pilot's own [`super::PILOT_RAYS`] twice over: the
+/// point's noise then weighs less than the pilot texels' in the products' variance).
+pub const GATHER_RAYS: u32 = 32;
+/// Emitter light samples per point and run (a quarter of the rays, as the bake).
+pub const LIGHT_SAMPLES: u32 = 8;
+/// Mixed into the seed: these streams differ from transport's, the punctual sample's and the
+/// point yardstick's.
+const SALT: u64 = 0x6A7E_5EED_0F90_1275;
+
+/// One sampled point's squared lookup errors (means over channels).
+#[derive(Clone, Copy, Debug)]
+pub struct GatheredPoint {
+    pub instance: u32,
+    /// `d_a·d_b` of the light other than punctual direct light (emitters, sky,
+    /// interreflection): the lookup of each run's values less the punctual sample's texels,
+    /// against the gather through that run. An unbiased estimate of its squared lookup error.
+    pub rest_square: f32,
+    /// The squared lookup error of the punctual direct light: the punctual sample's texels
+    /// against the exact light about the shading normal (no noise on either side).
+    pub punctual_square: f32,
+    /// The bilinear lookup of the two runs' mean (what a relative error divides by).
+    pub total: f32,
+}
+
+/// The lookup error of the pilot's lightmap at random surface points against a gather there.
+#[derive(Clone, Debug, Default)]
+pub struct GatheredSample {
+    /// One per visible sampled point (points on buried or unrasterised texels are left out).
+    pub points: Vec<GatheredPoint>,
+    /// Rays cast at the kept points (probes, gathering, light samples and punctual shadow rays).
+    pub rays: u64,
+    /// Points drawn, the left-out ones included.
+    pub drawn: usize,
+}
+
+/// What the two runs give the sample: per texel, the irradiance `H` each run solved (what the
+/// lightmap stores; not for `--indirect-only` bakes).
+#[derive(Clone, Copy)]
+pub struct Runs<'a> {
+    pub irradiance: [&'a [Vec3]; 2],
+    /// Uniform sky radiance the bake uses.
+    pub sky: Vec3,
+    /// The relative error the bake aims at, the rays the sample may cast past its first batch,
+    /// and the seed of its streams.
+    pub target: f32,
+    pub budget_rays: u64,
+    pub seed: u64,
+}
+
+impl GatheredSample {
+    /// Samples surface points of `scene` with the pilot's two `runs` in batches of [`BATCH`]
+    /// until the estimate is within [`PRECISION`], clearly below the relative error
+    /// `runs.target` ([`SMALL`]), past `runs.budget_rays`, or [`MAX_POINTS`]; `punctual` (the
+    /// punctual lights' texel values) splits off the rest. `None` without texels.
+    pub fn measure(
+        scene: &Scene,
+        texels: &Texels,
+        tracer: &Tracer,
+        runs: &Runs,
+        punctual: Option<&PunctualSample>,
+    ) -> Option<GatheredSample> {
+        let Runs {
+            target,
+            budget_rays,
+            seed,
+            ..
+        } = *runs;
+        if texels.is_empty() || scene.triangles.is_empty() {
+            return None;
+        }
+        let emitters = Emitters::new(scene, texels);
+        let light_samples = if emitters.is_empty() {
+            0
+        } else {
+            LIGHT_SAMPLES
+        };
+        let valid = texels.valid_mask();
+        let mut cdf = Vec::with_capacity(scene.triangles.len());
+        let mut area = 0.0f64;
+        for t in &scene.triangles {
+            let [a, b, c] = t.map(|v| scene.positions[v as usize].as_dvec3());
+            area += 0.5 * (b - a).cross(c - a).length();
+            cdf.push(area as f32);
+        }
+        if area <= 0.0 || !area.is_finite() {
+            return None;
+        }
+        let (kf, lf) = (GATHER_RAYS as f32, light_samples as f32);
+        // The non-punctual light at a point, as transport estimates it at a texel, through
+        // run `h`'s solved irradiance.
+        let gather = |origin: Vec3, n: Vec3, h: &[Vec3], rng: &mut Rng| -> Vec3 {
+            let (tx, ty) = frame(n);
+            let shift = rng.next_vec2();
+            let (mut emitted, mut reflected, mut escaped) = (Vec3::ZERO, Vec3::ZERO, 0u32);
+            for s in 0..GATHER_RAYS {
+                let local = cosine_hemisphere(hammersley(s, GATHER_RAYS, shift));
+                let dir = tx * local.x + ty * local.y + n * local.z;
+                match texels.ray_end(tracer, origin, dir) {
+                    RayEnd::Escaped => escaped += 1,
+                    RayEnd::Absorbed => {}
+                    RayEnd::Texel(hit, j) => {
+                        let j = j as usize;
+                        reflected += texels.albedo[j] * h[j];
+                        let le = texels.emission[j];
+                        if le.max_element() > 0.0 {
+                            let (_, n_l) =
+                                crate::lights::triangle_point(scene, hit.triangle, hit.bary);
+                            let p_light = emitters.pdf_toward(hit.triangle, n_l, dir, hit.t);
+                            emitted +=
+                                le * (local.z * power_weight(kf * local.z / PI, lf * p_light));
+                        }
+                    }
+                }
+            }
+            let light_shift = rng.next_vec2();
+            for s in 0..light_samples {
+                let u = hammersley(s, light_samples, light_shift);
+                let Some(x) = emitters.sample_from((scene, texels, tracer), origin, n, u) else {
+                    continue;
+                };
+                let p_gather = x.cos_i / PI;
+                emitted += x.le * (x.cos_i * power_weight(lf * x.pdf_solid_angle(), kf * p_gather));
+            }
+            emitted + reflected / kf + runs.sky * (PI * escaped as f32 / kf)
+        };
+        let point = |k: usize| -> Option<GatheredPoint> {
+            let mut rng = Rng::new(seed ^ SALT, k as u64, 0);
+            let t = sampling::sample_cdf(&cdf, rng.next_f32()) as u32;
+            let b = sampling::triangle_point(rng.next_vec2());
+            let sp = scene.surface_point(t, b);
+            if sp.n_geo == Vec3::ZERO {
+                return None;
+            }
+            // Points nobody sees (faces looking into geometry: a floor under a cabinet, the
+            // bottom of a box on the floor) are left out, as the point yardstick leaves them.
+            let shift = rng.next_vec2();
+            let back =
+                validity::back_hits(tracer, sp.p, sp.n_geo, PROBE_RAYS, shift, f32::INFINITY);
+            if back > (MAX_BACK * PROBE_RAYS as f32) as u32 {
+                return None;
+            }
+            let [ua, ub, uc] = texels.triangle_uv[t as usize];
+            let uv = ua * (1.0 - b.x - b.y) + ub * b.x + uc * b.y;
+            let page = texels.triangle_page[t as usize] as usize;
+            let (lookup, _) = bilinear(texels, &valid, page, uv)?;
+            let read =
+                |v: &[Vec3]| -> Vec3 { lookup.iter().map(|&(j, w)| v[j as usize] * w).sum() };
+            let origin = sp.p + sp.n_geo * tracer.epsilon;
+            // Punctual light: the sample's texel values against the exact light about the
+            // shading normal (noise-free: no product needed).
+            let (punctual_texels, exact) = match punctual {
+                Some(p) => (
+                    read(&p.texel),
+                    scene
+                        .lights
+                        .iter()
+                        .map(|l| punctual_irradiance(l, origin, sp.n, tracer))
+                        .sum(),
+                ),
+                None => (Vec3::ZERO, Vec3::ZERO),
+            };
+            let [da, db] = [0usize, 1].map(|r| {
+                let mut rng = Rng::new(seed ^ SALT, k as u64, 1 + r as u64);
+                let h = runs.irradiance[r];
+                read(h) - punctual_texels - gather(origin, sp.n, h, &mut rng)
+            });
+            let dp = punctual_texels - exact;
+            let total = (read(runs.irradiance[0]) + read(runs.irradiance[1])) * 0.5;
+            let point = GatheredPoint {
+                instance: scene.triangle_instance[t as usize],
+                rest_square: (da * db).element_sum() / 3.0,
+                punctual_square: (dp * dp).element_sum() / 3.0,
+                total: total.element_sum() / 3.0,
+            };
+            (point.rest_square.is_finite()
+                && point.punctual_square.is_finite()
+                && point.total.is_finite())
+            .then_some(point)
+        };
+        let per_point =
+            (PROBE_RAYS + 2 * (GATHER_RAYS + light_samples)) as u64 + scene.lights.len() as u64;
+        // Batches until the estimate is precise enough: each point has its own stream, so the
+        // result does not depend on the thread count.
+        let mut sample = GatheredSample::default();
+        let mut drawn = 0;
+        while drawn < MAX_POINTS {
+            let batch: Vec<GatheredPoint> = (drawn..drawn + BATCH)
+                .into_par_iter()
+                .filter_map(point)
+                .collect();
+            drawn += BATCH;
+            sample.points.extend(batch);
+            let (_, lo, hi) = sample.relative_error_bounds();
+            let (rest, stderr) = sample.mean_square(|p| p.rest_square);
+            let mean_square = rest.max(0.0) + sample.mean_square(|p| p.punctual_square).0;
+            let rays = per_point * sample.points.len() as u64;
+            if hi < SMALL * target
+                || (mean_square > 0.0 && 2.0 * stderr <= PRECISION * mean_square)
+                || rays >= budget_rays
+            {
+                break;
+            }
+            // No light at the points, or none visible: more of them will not tell more.
+            if !(lo.is_finite() || drawn < 4 * BATCH) {
+                break;
+            }
+        }
+        sample.drawn = drawn;
+        sample.rays = per_point * sample.points.len() as u64;
+        Some(sample)
+    }
+
+    /// Relative RMS lookup error of all the light (over the points' mean light): the punctual
+    /// and the other light's mean squares added (independent errors, as noise and resolution
+    /// error are). NaN without points or light.
+    pub fn relative_error(&self) -> f32 {
+        self.relative_error_bounds().0
+    }
+
+    /// Relative RMS lookup error of the light other than punctual direct light (its mean
+    /// square clamped at 0).
+    pub fn rest_error(&self) -> f32 {
+        self.relative(self.mean_square(|p| p.rest_square).0)
+    }
+
+    /// Relative RMS lookup error of the punctual direct light at these points.
+    pub fn punctual_error(&self) -> f32 {
+        self.relative(self.mean_square(|p| p.punctual_square).0)
+    }
+
+    /// [`GatheredSample::relative_error`] and the relative errors with the rest's mean square
+    /// ∓ two standard errors (how far the sample's own noise could move it).
+    pub fn relative_error_bounds(&self) -> (f32, f32, f32) {
+        let (rest, stderr) = self.mean_square(|p| p.rest_square);
+        let punctual = self.mean_square(|p| p.punctual_square).0;
+        let at = |r: f64| self.relative(r.max(0.0) + punctual);
+        (at(rest), at(rest - 2.0 * stderr), at(rest + 2.0 * stderr))
+    }
+
+    /// The mean of a per-point square and its standard error (NaN below two points).
+    fn mean_square(&self, square: impl Fn(&GatheredPoint) -> f32) -> (f64, f64) {
+        let n = self.points.len() as f64;
+        if n < 2.0 {
+            return (f64::NAN, f64::NAN);
+        }
+        let mean_square = self.points.iter().map(|p| square(p) as f64).sum::<f64>() / n;
+        let spread = self
+            .points
+            .iter()
+            .map(|p| (square(p) as f64 - mean_square).powi(2))
+            .sum::<f64>()
+            / (n - 1.0);
+        (mean_square, (spread / n).sqrt())
+    }
+
+    /// A mean square over the points' mean light, as a relative RMS error (clamped at 0).
+    fn relative(&self, mean_square: f64) -> f32 {
+        let n = self.points.len() as f64;
+        let mean = self.points.iter().map(|p| p.total as f64).sum::<f64>() / n;
+        if !(mean > 0.0 && mean_square.is_finite()) {
+            return f32::NAN;
+        }
+        (mean_square.max(0.0).sqrt() / mean) as f32
+    }
+}
