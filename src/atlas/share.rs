@@ -495,3 +495,277 @@ fn shelf_pack(sizes: &[[u32; 2]], side: u32) -> Vec<(u32, [u32; 2])> {
         })
         .collect()
 }
+
+#[cfg(test)]
+mod tests {
+    use glam::{Quat, Vec3};
+
+    use super::super::xatlas::tests::{Part, cube, params, quad, scene_of, source};
+    use super::*;
+
+    /// `part` as mesh 1 placed by `node`: scaled, rotated, moved; winding reversed when the
+    /// transform mirrors (as the loader does).
+    fn placed(part: &Part, node: u32, scale: Vec3, turn: f32, offset: Vec3) -> Part {
+        let mut p = part.clone();
+        let rotation = Quat::from_rotation_y(turn);
+        p.positions
+            .iter_mut()
+            .for_each(|x| *x = rotation * (*x * scale) + offset);
+        if scale.x * scale.y * scale.z < 0.0 {
+            p.triangles.iter_mut().for_each(|t| t.swap(1, 2));
+        }
+        p.mesh = 1;
+        p.node = node;
+        p
+    }
+
+    /// A floor (mesh 0, unshared) and a double-sided box (mesh 1) placed by three nodes: as
+    /// is, twice the size, and mirrored at 1.5 times the size.
+    fn boxes() -> Scene {
+        let floor = quad(Vec3::new(-4.0, -4.0, -1.0), 8.0, 8.0);
+        let unit = cube(1.0, 2);
+        let parts = [
+            floor,
+            placed(&unit, 1, Vec3::ONE, 0.0, Vec3::new(-2.0, 0.0, 0.0)),
+            placed(&unit, 2, Vec3::splat(2.0), 0.3, Vec3::new(0.0, 0.0, 0.0)),
+            placed(
+                &unit,
+                3,
+                Vec3::new(-1.5, 1.5, 1.5),
+                0.0,
+                Vec3::new(3.0, 0.0, 0.0),
+            ),
+        ];
+        scene_of(&parts, &[1, 2, 3])
+    }
+
+    fn shared_params(tpu: f32, max_page_size: u32, padding: u32) -> AtlasParams {
+        AtlasParams {
+            padding,
+            instancing: crate::config::Instancing::Share,
+            ..params(tpu, max_page_size)
+        }
+    }
+
+    /// Charts of an instance: triangles joined across edges whose atlas vertices they share.
+    fn charts(inst: &InstanceUv) -> Vec<usize> {
+        let mut parent: Vec<usize> = (0..inst.triangles.len()).collect();
+        fn root(parent: &mut [usize], mut i: usize) -> usize {
+            while parent[i] != i {
+                parent[i] = parent[parent[i]];
+                i = parent[i];
+            }
+            i
+        }
+        let mut first = BTreeMap::new();
+        for (t, tri) in inst.triangles.iter().enumerate() {
+            for k in 0..3 {
+                let (a, b) = (tri[k], tri[(k + 1) % 3]);
+                let other = *first.entry((a.min(b), a.max(b))).or_insert(t);
+                let (ra, rb) = (root(&mut parent, t), root(&mut parent, other));
+                parent[ra] = rb;
+            }
+        }
+        (0..parent.len()).map(|t| root(&mut parent, t)).collect()
+    }
+
+    /// Every texel a triangle touches (sampled every quarter texel) belongs to one chart of
+    /// one instance, and no texel of another chart lies within `padding` texels of it.
+    fn assert_padded(atlas: &Atlas, padding: u32) {
+        let mut owner: Vec<Vec<(u32, usize)>> = atlas
+            .pages
+            .iter()
+            .map(|p| vec![(u32::MAX, 0); (p.width * p.height) as usize])
+            .collect();
+        for (i, inst) in atlas.instances.iter().enumerate() {
+            let chart = charts(inst);
+            for (t, tri) in inst.triangles.iter().enumerate() {
+                let page = inst.triangle_page[t] as usize;
+                let size = atlas.pages[page];
+                let texels = Vec2::new(size.width as f32, size.height as f32);
+                let [a, b, c] = tri.map(|k| inst.uv[k as usize] * texels);
+                let steps = ((b - a).length().max((c - a).length()) * 4.0).ceil() as u32 + 1;
+                for s in 0..=steps {
+                    for r in 0..=steps - s {
+                        let p = a
+                            + (b - a) * (s as f32 / steps as f32)
+                            + (c - a) * (r as f32 / steps as f32);
+                        let x = (p.x as u32).min(size.width - 1);
+                        let y = (p.y as u32).min(size.height - 1);
+                        owner[page][(y * size.width + x) as usize] = (i as u32, chart[t]);
+                    }
+                }
+            }
+        }
+        for (owner, size) in owner.iter().zip(&atlas.pages) {
+            let (w, h) = (i64::from(size.width), i64::from(size.height));
+            let reach = i64::from(padding);
+            for y in 0..h {
+                for x in 0..w {
+                    let me = owner[(y * w + x) as usize];
+                    if me.0 == u32::MAX {
+                        continue;
+                    }
+                    for ny in (y - reach).max(0)..=(y + reach).min(h - 1) {
+                        for nx in (x - reach).max(0)..=(x + reach).min(w - 1) {
+                            let other = owner[(ny * w + nx) as usize];
+                            assert!(
+                                other.0 == u32::MAX || other == me,
+                                "padding {padding}: {me:?} at ({x}, {y}) and {other:?} at ({nx}, {ny})"
+                            );
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// Every node's page UVs are the base layout's `uv * scale + offset` in f32, bit for bit.
+    fn assert_page_uvs_exact(atlas: &Atlas) {
+        for shared in &atlas.shared {
+            for rect in &shared.nodes {
+                for ((_, base), &i) in shared.base.iter().zip(&rect.instances) {
+                    let inst = &atlas.instances[i as usize];
+                    assert_eq!(inst.uv.len(), base.uv.len());
+                    assert_eq!(inst.xref, base.xref);
+                    for (uv, b) in inst.uv.iter().zip(&base.uv) {
+                        let x = b.x * rect.scale.x;
+                        let y = b.y * rect.scale.y;
+                        let expected = [x + rect.offset.x, y + rect.offset.y];
+                        assert_eq!(uv.to_array().map(f32::to_bits), expected.map(f32::to_bits));
+                    }
+                    assert!(inst.triangle_page.iter().all(|&p| p == rect.page));
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn a_mesh_placed_three_times_is_laid_out_once_with_a_padded_rect_per_node() {
+        let scene = boxes();
+        for padding in [1, 2, 4] {
+            let atlas = build_ok(&scene, &shared_params(16.0, 512, padding));
+            assert_eq!(atlas.shared.len(), 1);
+            let shared = &atlas.shared[0];
+            assert_eq!(shared.mesh, 1);
+            // Front and back instance per node.
+            assert_eq!(shared.base.len(), 2);
+            let nodes: Vec<u32> = shared.nodes.iter().map(|n| n.node).collect();
+            assert_eq!(nodes, [1, 2, 3]);
+            assert!(!shared.lowered && shared.nodes.iter().all(|n| !n.capped));
+            assert_page_uvs_exact(&atlas);
+            assert_padded(&atlas, padding);
+            // Copies scale with their node: the lowest density is the base (scale 1 in
+            // texels), the others 2 and 1.5 times it.
+            let texel_scale = |n: &NodeRect| {
+                let page = atlas.pages[n.page as usize];
+                n.scale * Vec2::new(page.width as f32, page.height as f32) / shared.base_size
+            };
+            let s: Vec<Vec2> = shared.nodes.iter().map(texel_scale).collect();
+            for (s, expected) in s.iter().zip([1.0, 2.0, 1.5]) {
+                assert!(
+                    (*s - Vec2::splat(expected)).abs().max_element() < 1e-4,
+                    "{s}"
+                );
+            }
+            // The floor is unshared and unwrapped by xatlas on the first page.
+            assert_eq!(atlas.instances[0].triangle_page, [0, 0]);
+            assert!(shared.nodes.iter().all(|n| n.page >= 1));
+        }
+    }
+
+    #[test]
+    fn a_base_layout_too_large_for_a_page_is_lowered_and_big_copies_capped() {
+        let scene = boxes();
+        // The box at 64 texels per unit: six 64² faces, front and back, do not fit 128².
+        let params = shared_params(64.0, 128, 2);
+        let atlas = build_ok(&scene, &params);
+        let shared = &atlas.shared[0];
+        assert!(shared.lowered);
+        assert!(shared.texels_per_unit < 64.0);
+        assert!(shared.nodes.iter().any(|n| n.capped));
+        assert!(
+            atlas
+                .pages
+                .iter()
+                .all(|p| p.width <= 128 && p.height <= 128)
+        );
+        assert_page_uvs_exact(&atlas);
+        assert_padded(&atlas, 2);
+        let report = ShareReport::of(&atlas).unwrap();
+        assert_eq!((report.meshes, report.nodes, report.lowered), (1, 3, 1));
+        assert!(report.brief().contains("lower density"));
+    }
+
+    #[test]
+    fn blocks_that_differ_are_not_shared() {
+        let unit = cube(1.0, 2);
+        let mut smaller = placed(&unit, 2, Vec3::ONE, 0.0, Vec3::X * 2.0);
+        smaller.triangles.pop();
+        let scene = scene_of(
+            &[placed(&unit, 1, Vec3::ONE, 0.0, Vec3::ZERO), smaller],
+            &[],
+        );
+        assert!(shared_groups(&scene).is_empty());
+        let atlas = build_ok(&scene, &shared_params(16.0, 512, 2));
+        assert!(atlas.shared.is_empty());
+        assert!(shared_instances(&scene).iter().all(|&s| !s));
+        // A block the junction split cut is not shared either.
+        let mut scene = boxes();
+        let cut = scene.instances[2].triangles.len();
+        scene.instances[2].split.sides = vec![0; cut];
+        assert!(shared_groups(&scene).is_empty());
+    }
+
+    #[test]
+    fn shared_layout_is_deterministic() {
+        let scene = boxes();
+        let bits = |atlas: &Atlas| -> Vec<u32> {
+            let mut bits: Vec<u32> = atlas
+                .pages
+                .iter()
+                .flat_map(|p| [p.width, p.height])
+                .collect();
+            for inst in &atlas.instances {
+                bits.extend(
+                    inst.uv
+                        .iter()
+                        .flat_map(|uv| [uv.x.to_bits(), uv.y.to_bits()]),
+                );
+                bits.extend(inst.triangles.iter().flatten());
+                bits.extend(&inst.triangle_page);
+            }
+            bits
+        };
+        let first = bits(&build_ok(&scene, &shared_params(16.0, 256, 2)));
+        for _ in 0..3 {
+            assert!(bits(&build_ok(&scene, &shared_params(16.0, 256, 2))) == first);
+        }
+    }
+
+    #[test]
+    fn shelf_packing_never_overlaps_and_opens_pages() {
+        let sizes: Vec<[u32; 2]> = (0..40u32).map(|k| [10 + 7 * (k % 5), 30 - k / 2]).collect();
+        let placed = shelf_pack(&sizes, 64);
+        assert!(placed.iter().map(|p| p.0).max().unwrap() >= 1);
+        for (a, (pa, [xa, ya])) in placed.iter().enumerate() {
+            let [wa, ha] = sizes[a];
+            assert!(xa + wa <= 64 && ya + ha <= 64);
+            for (b, (pb, [xb, yb])) in placed.iter().enumerate().skip(a + 1) {
+                let [wb, hb] = sizes[b];
+                let apart = pa != pb
+                    || xa + wa <= *xb
+                    || xb + wb <= *xa
+                    || ya + ha <= *yb
+                    || yb + hb <= *ya;
+                assert!(apart, "rects {a} and {b} overlap");
+            }
+        }
+    }
+
+    fn build_ok(scene: &Scene, params: &AtlasParams) -> Atlas {
+        let atlas = super::super::build(scene, &source(), params).unwrap();
+        atlas.validate(scene);
+        atlas
+    }
+}

@@ -472,6 +472,14 @@ fn bake(args: &BakeArgs) -> Result<()> {
     {
         println!("  - {}", junctions.brief());
     }
+    if args.explain
+        && let Some(sharing) = &report.sharing
+    {
+        println!(
+            "  - {}; their instances are not junction-split or shadow-cut",
+            sharing.brief()
+        );
+    }
     if !args.run.quiet {
         println!("{}", report.summary());
         if let Some(gltf) = report.files.first() {
