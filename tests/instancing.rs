@@ -109,6 +109,8 @@ fn share_and_duplicate_bakes_render_alike() {
     let lit = images[0].iter().filter(|c| c.max_element() > 0.0).count();
     assert!(lit > images[0].len() / 2, "{lit} lit pixels");
     // Different layouts, different Monte Carlo noise and texel placement: close, not equal.
+    // Measured 0.55% (bias +0.01%); the share bake read without its node rects (base UVs
+    // looked up on the whole page) measured 32% over 4×4-pixel blocks at 192×144.
     let difference = metrics::rmse_over_rms(&images[1], &images[0], &[]);
     let bias = metrics::relative_bias(&images[1], &images[0], &[]);
     eprintln!(
@@ -116,8 +118,8 @@ fn share_and_duplicate_bakes_render_alike() {
         difference * 100.0,
         bias * 100.0
     );
-    assert!(difference < 0.08, "{difference}");
-    assert!(bias.abs() < 0.03, "{bias}");
+    assert!(difference < 0.03, "{difference}");
+    assert!(bias.abs() < 0.01, "{bias}");
     assert!(
         images[1]
             .iter()
