@@ -106,9 +106,13 @@ impl ShareReport {
     }
 }
 
-/// The meshes that [`unwrap`] shares: per mesh, each node's block (scene instances in scene
-/// order), the first node first. Only blocks that match the first one instance for instance.
-pub(crate) fn shared_groups(scene: &Scene) -> Vec<(u32, Vec<(u32, Vec<u32>)>)> {
+/// Each node placing a mesh and its block: the node's scene instances of the mesh, in scene
+/// order.
+type Blocks = Vec<(u32, Vec<u32>)>;
+
+/// The meshes that [`unwrap`] shares: per mesh, each node's block, the first node first. Only
+/// meshes whose blocks all match the first one instance for instance.
+pub(crate) fn shared_groups(scene: &Scene) -> Vec<(u32, Blocks)> {
     let mut blocks: BTreeMap<u32, BTreeMap<u32, Vec<u32>>> = BTreeMap::new();
     for (i, inst) in scene.instances.iter().enumerate() {
         blocks

@@ -161,8 +161,10 @@ pub fn split_except(
         touch: TOUCH_TEXELS * texel,
     };
     let grid = triangle_grid(&scene, tol.touch, texel);
-    let mut report = JunctionReport::default();
-    report.left_whole = whole.iter().filter(|&&w| w).count();
+    let mut report = JunctionReport {
+        left_whole: whole.iter().filter(|&&w| w).count(),
+        ..Default::default()
+    };
     let splits: Vec<Option<InstanceSplit>> = (0..scene.instances.len())
         .map(|i| match whole.get(i) {
             Some(true) => None,
