@@ -317,7 +317,7 @@ pub fn unwrap(scene: &Scene, source: &Source, params: &AtlasParams) -> Result<At
                 base_layout(atlas, padding)
             };
             match layout {
-                Some((base, size)) if size.max_element() + padding <= max_side => {
+                Some((base, size)) if size.max_element() + padding + 1.0 <= max_side => {
                     break (base, size);
                 }
                 None if sub.triangles.is_empty() => {
@@ -335,8 +335,9 @@ pub fn unwrap(scene: &Scene, source: &Source, params: &AtlasParams) -> Result<At
                 }
             }
         };
-        // Every copy at least as dense as the base layout (so padding holds), at most a page.
-        let fit = (max_side - padding) / base_size.max_element();
+        // Every copy at least as dense as the base layout (so padding holds), at most a page
+        // (a texel less, so rounding the rect up to whole texels still fits).
+        let fit = (max_side - padding - 1.0) / base_size.max_element();
         let node_rects = nodes
             .iter()
             .zip(&effective)
@@ -474,6 +475,7 @@ fn shelf_pack(sizes: &[[u32; 2]], side: u32) -> Vec<(u32, [u32; 2])> {
     sizes
         .iter()
         .map(|&[w, h]| {
+            debug_assert!(w <= side && h <= side, "a {w}×{h} rect on a {side}² page");
             if let Some(shelf) = (shelves.iter_mut()).find(|s| s.height >= h && s.used + w <= side)
             {
                 let at = (shelf.page, [shelf.used, shelf.y]);
