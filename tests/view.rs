@@ -37,6 +37,10 @@ const TOLERANCE: f32 = 0.015;
 /// chart borders change least (thin lines over the lightmap view).
 const MIN_CHANGED: f32 = 0.01;
 
+/// Held by each browser test: two Chromiums drawing with SwiftShader at once on a loaded
+/// machine made the page load time out (30 s) in a full test run.
+static ONE_BROWSER: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
 /// The `lightbake view` server (and its stdout, kept open), ended when dropped.
 struct Server(Child, BufReader<ChildStdout>);
 
@@ -96,6 +100,7 @@ fn viewer_page_in_chromium_matches_render_and_every_view_differs() {
         eprintln!("skipped: set LIGHTBAKE_BROWSER_TEST to playwright-core's node_modules");
         return;
     };
+    let _browser = ONE_BROWSER.lock().unwrap_or_else(|e| e.into_inner());
     let dir = scratch();
     let (out, shots) = (dir.path().join("out"), dir.path().join("shots"));
     std::fs::create_dir(&shots).unwrap();
@@ -250,6 +255,7 @@ fn shared_meshes_in_chromium_match_render() {
         eprintln!("skipped: set LIGHTBAKE_BROWSER_TEST to playwright-core's node_modules");
         return;
     };
+    let _browser = ONE_BROWSER.lock().unwrap_or_else(|e| e.into_inner());
     let dir = scratch();
     let (out, shots) = (dir.path().join("out"), dir.path().join("shots"));
     std::fs::create_dir(&shots).unwrap();
