@@ -15,6 +15,17 @@ pub enum UvMode {
     Auto,
 }
 
+/// How a mesh placed by several nodes gets its lightmap UVs.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Instancing {
+    /// Each placement is unwrapped on its own and the output mesh is duplicated per node.
+    #[default]
+    Duplicate,
+    /// The mesh is unwrapped once and written once; each node gets a rectangle of a page
+    /// (`extras.lightmap.scale_offset` on the node, see `atlas::share`).
+    Share,
+}
+
 /// Lightmap UV layout.
 #[derive(Clone, Debug)]
 pub struct AtlasParams {
@@ -39,6 +50,9 @@ pub struct AtlasParams {
     /// (`scene::shadow_cuts`), so a renderer's filtering does not blur them over a texel. Part
     /// of the junction split: no effect without `split_junctions`.
     pub shadow_cuts: bool,
+    /// Meshes placed by several nodes: duplicated (each placement its own UVs) or shared (one
+    /// unwrap, a page rectangle per node). Unwrapped atlases only.
+    pub instancing: Instancing,
 }
 
 /// How the form factors of stored rows are computed (see the `transport` module of each).
@@ -346,6 +360,7 @@ impl BakeConfig {
                 padding: 2,
                 split_junctions: true,
                 shadow_cuts: true,
+                instancing: Instancing::Duplicate,
             },
             technique: Technique::DEFAULT,
             transport: TransportParams {

@@ -20,7 +20,11 @@
 //!                                                     shadow rays come from a Tracer of the
 //!                                                     uncut scene, passed in by `bake`)
 //!             Tracer::new   ──▶ Tracer                obvhs CWBVH: closest hit, occlusion
-//!            ─ atlas::build ──▶ Atlas                 xatlas charts + pages, or input TEXCOORD_1
+//!            ─ atlas::build ──▶ Atlas                 xatlas charts + pages, or input TEXCOORD_1;
+//!                                                     with --instancing share, one layout per
+//!                                                     mesh several nodes place and a page rect
+//!                                                     per node (atlas::share; the junction
+//!                                                     split leaves those instances whole)
 //!           ─ texels::build ──▶ Texels                one radiosity patch per covered texel
 //!       ─ texels::validity ──▶ Texels                 samples moved out of geometry, invalid marked,
 //!                                                     texels a wall divides kept to one side (cuts)

@@ -11,6 +11,7 @@ mod distributed;
 mod form_factors;
 mod hardening;
 mod hierarchical;
+mod instancing;
 mod junctions;
 mod pipeline;
 mod plan;

@@ -83,6 +83,7 @@ pub fn reuse(scene: &Scene, source: &Source, params: &AtlasParams) -> Result<Atl
         instances,
         texels_per_unit,
         reused_input_uvs: true,
+        shared: Vec::new(),
     })
 }
 

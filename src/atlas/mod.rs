@@ -2,17 +2,20 @@
 //!
 //! Either xatlas charts and packs the instances in world-space units (`xatlas.rs`, the only file
 //! that touches xatlas-rs), or the input's own `TEXCOORD_1` is reused (`existing.rs`), after
-//! checking it is inside \[0,1\] and free of overlaps.
+//! checking it is inside \[0,1\] and free of overlaps. With `--instancing share`, a mesh
+//! placed by several nodes is unwrapped once and each node gets a rect of a page (`share.rs`).
 
 mod existing;
+pub mod share;
 mod xatlas;
 
 pub use existing::Overlaps;
+pub use share::{NodeRect, ShareReport, SharedMesh};
 
 use glam::Vec2;
 
 use crate::Result;
-use crate::config::{AtlasParams, UvMode};
+use crate::config::{AtlasParams, Instancing, UvMode};
 use crate::scene::{Scene, Source};
 
 /// Size of one lightmap page in texels.
@@ -32,6 +35,9 @@ pub struct Atlas {
     pub texels_per_unit: f32,
     /// True when the input's `TEXCOORD_1` was reused.
     pub reused_input_uvs: bool,
+    /// Meshes written once, with a page rect per node (`--instancing share`; empty otherwise).
+    /// `instances` holds every node's page UVs all the same.
+    pub shared: Vec<SharedMesh>,
 }
 
 /// The lightmap parameterisation of one instance. Unwrapping splits vertices along chart seams,
@@ -105,6 +111,16 @@ pub(crate) fn page_side(texels: f32, max: u32) -> u32 {
     side.next_multiple_of(4).clamp(16.min(max), max)
 }
 
+/// Per scene instance: [`build`] will share its mesh's UVs with other nodes (`--instancing
+/// share` and unwrapping), so the junction split must leave it whole.
+pub fn shared_instances(scene: &Scene, source: &Source, params: &AtlasParams) -> Vec<bool> {
+    if params.instancing == Instancing::Share && !reuses_input_uvs(scene, source, params) {
+        share::shared_instances(scene)
+    } else {
+        vec![false; scene.instances.len()]
+    }
+}
+
 /// [`build`] will reuse the input's `TEXCOORD_1` (so the charts cannot change).
 pub fn reuses_input_uvs(scene: &Scene, source: &Source, params: &AtlasParams) -> bool {
     match params.uv {
@@ -116,12 +132,16 @@ pub fn reuses_input_uvs(scene: &Scene, source: &Source, params: &AtlasParams) ->
 
 /// Builds the atlas: reuses the input's `TEXCOORD_1` or unwraps, as `params.uv` says.
 pub fn build(scene: &Scene, source: &Source, params: &AtlasParams) -> Result<Atlas> {
+    let unwrap = || match params.instancing {
+        Instancing::Duplicate => xatlas::unwrap(scene, source, params),
+        Instancing::Share => share::unwrap(scene, source, params),
+    };
     let atlas = match params.uv {
-        UvMode::Unwrap => xatlas::unwrap(scene, source, params)?,
+        UvMode::Unwrap => unwrap()?,
         UvMode::Existing => existing::reuse(scene, source, params)?,
         UvMode::Auto => match existing::reuse(scene, source, params) {
             Ok(atlas) => atlas,
-            Err(_) => xatlas::unwrap(scene, source, params)?,
+            Err(_) => unwrap()?,
         },
     };
     #[cfg(debug_assertions)]

@@ -162,6 +162,7 @@ pub fn unwrap(scene: &Scene, source: &Source, params: &AtlasParams) -> Result<At
         instances,
         texels_per_unit: tpu,
         reused_input_uvs: false,
+        shared: Vec::new(),
     })
 }
 
@@ -1332,6 +1333,7 @@ pub(super) mod tests {
             padding: 2,
             split_junctions: true,
             shadow_cuts: true,
+            instancing: Default::default(),
         }
     }
 

@@ -75,6 +75,10 @@ pub struct Settings {
     pub uv: String,
     pub split_junctions: bool,
     pub shadow_cuts: bool,
+    /// `--instancing share`: shared meshes with a page rect per node (left out when false, so
+    /// files of duplicate-mode bakes are as before).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub share_instances: bool,
     pub gather_rays: u32,
     pub light_samples: u32,
     pub sky: [f32; 3],
@@ -164,6 +168,7 @@ impl Settings {
             .to_string(),
             split_junctions: a.split_junctions,
             shadow_cuts: a.shadow_cuts,
+            share_instances: a.instancing == crate::config::Instancing::Share,
             gather_rays: t.gather_rays,
             light_samples: t.light_samples,
             sky: t.sky.to_array(),
@@ -200,6 +205,9 @@ impl Settings {
         };
         a.split_junctions = self.split_junctions;
         a.shadow_cuts = self.shadow_cuts;
+        if self.share_instances {
+            a.instancing = crate::config::Instancing::Share;
+        }
         let t = &mut c.transport;
         t.gather_rays = self.gather_rays;
         t.light_samples = self.light_samples;

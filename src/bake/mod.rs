@@ -50,6 +50,8 @@ pub struct BakeReport {
     pub seams: Option<lightmap::seams::SeamReport>,
     /// What the junction split cut (`None` when it did not run).
     pub junctions: Option<scene::junctions::JunctionReport>,
+    /// Meshes written once with a page rect per node (`--instancing share`; `None` otherwise).
+    pub sharing: Option<atlas::ShareReport>,
     /// How the directional pages' reconstruction at the texel normals agrees with the lightmap
     /// (`None` without `config.output.directional`).
     pub directional: Option<lightmap::directional::Agreement>,
@@ -82,6 +84,10 @@ impl BakeReport {
             .junctions
             .as_ref()
             .map_or(String::new(), |j| format!("; {}", j.brief()));
+        let sharing = self
+            .sharing
+            .as_ref()
+            .map_or(String::new(), |s| format!("; {}", s.brief()));
         let directional = self.directional.map_or(String::new(), |a| {
             format!(
                 "; directional gather at the texel normals vs the lightmap: {:.1}% RMS, bias {:+.1}% (L1 reconstruction {:.1}%, {:+.1}%)",
@@ -92,7 +98,7 @@ impl BakeReport {
             )
         });
         format!(
-            "{} texels ({} moved out of geometry, {} invalid, {} divided by a wall) on {} page(s), {} triangles, {:.2} M rays, {} iterations, residual {:.1e}{}{}{junctions}{directional}{plan}; {} (total {:.2}s)",
+            "{} texels ({} moved out of geometry, {} invalid, {} divided by a wall) on {} page(s), {} triangles, {:.2} M rays, {} iterations, residual {:.1e}{}{}{junctions}{sharing}{directional}{plan}; {} (total {:.2}s)",
             self.texels,
             self.validity.moved,
             self.validity.invalid,
@@ -189,6 +195,7 @@ fn pass_through(
         instances: Vec::new(),
         texels_per_unit: 0.0,
         reused_input_uvs: false,
+        shared: Vec::new(),
     };
     let stem = output_stem(input);
     let mut staging = Staging::new(out_dir, &protected_files(input, source))?;
@@ -208,6 +215,7 @@ fn pass_through(
         plan: None,
         seams: None,
         junctions: None,
+        sharing: None,
         directional: None,
         stages,
         files,
@@ -320,6 +328,7 @@ fn prepare_loaded(
     {
         let t = Instant::now();
         let texel = 1.0 / config.atlas.texels_per_unit;
+        let whole = atlas::shared_instances(&scene, &source, &config.atlas);
         let (scene, report) = if config.atlas.shadow_cuts && !scene.lights.is_empty() {
             // Shadow rays see the geometry as loaded: the split moves no surface.
             let tracer = Tracer::new(&scene);
@@ -330,9 +339,9 @@ fn prepare_loaded(
                     / 3.0
             };
             let cutter = scene::shadow_cuts::ShadowCutter::new(&scene, &light_at);
-            scene::junctions::split_with(scene, texel, Some(&cutter))
+            scene::junctions::split_except(scene, texel, Some(&cutter), &whole)
         } else {
-            scene::junctions::split(scene, texel)
+            scene::junctions::split_except(scene, texel, None, &whole)
         };
         junctions = Some(report);
         timed(&mut stages, "junctions", t);
@@ -804,6 +813,7 @@ pub fn write(
         plan: baked.plan,
         seams: baked.seams,
         junctions: baked.junctions,
+        sharing: atlas::ShareReport::of(&baked.atlas),
         directional: baked.directional.map(|(_, a, _)| a),
         stages: baked.stages,
         files,

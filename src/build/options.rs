@@ -5,7 +5,7 @@
 use glam::Vec3;
 use serde::Deserialize;
 
-use crate::config::{AutoParams, Keep, LayerGroup, Technique, UvMode};
+use crate::config::{AutoParams, Instancing, Keep, LayerGroup, Technique, UvMode};
 use crate::{BakeConfig, Error, Result};
 
 /// Every option of `lightbake bake` that changes what is baked; `None` (left out) is the
@@ -42,6 +42,8 @@ pub struct Options {
     pub directional_rays: Option<u32>,
     pub no_split_junctions: Option<bool>,
     pub no_shadow_cuts: Option<bool>,
+    /// `duplicate` (the default) or `share`.
+    pub instancing: Option<String>,
     pub no_validity: Option<bool>,
     pub no_denoise: Option<bool>,
     pub no_seams: Option<bool>,
@@ -104,6 +106,11 @@ impl Options {
             "unwrap" => UvMode::Unwrap,
             "existing" => UvMode::Existing,
             other => return Err(expected("uv", other, &["auto", "unwrap", "existing"])),
+        };
+        c.atlas.instancing = match self.instancing.as_deref().unwrap_or("duplicate") {
+            "duplicate" => Instancing::Duplicate,
+            "share" => Instancing::Share,
+            other => return Err(expected("instancing", other, &["duplicate", "share"])),
         };
         if let Some(r) = self.rays {
             c.transport.gather_rays = r;

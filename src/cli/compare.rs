@@ -31,7 +31,8 @@ pub struct Args {
 
 const AFTER_HELP: &str = "\
 Reads the baked scene as `lightbake render` does (TEXCOORD_1 and the EXR page each primitive's
-extras.lightmap names, bilinear lookup with texel centres, clamp-to-edge) at every reference
+extras.lightmap names, or its node's with the node's scale_offset for a mesh baked with
+--instancing share; bilinear lookup with texel centres, clamp-to-edge) at every reference
 point and prints: relative RMSE √mean((x−r)²)/mean(r) over points and channels, also without
 the reference's own noise; median and p95 of per-point relative errors (floored at 5% of the
 mean); the fraction of lookups whose bilinear footprint touches a black texel where the

@@ -19,7 +19,7 @@ use glam::Vec3;
 use lightbake::BakeConfig;
 use lightbake::build::options::{Options, Rgb};
 use lightbake::build::{Gate, SceneResult};
-use lightbake::config::{AutoParams, UvMode};
+use lightbake::config::{AutoParams, Instancing, UvMode};
 use progress::Bars;
 
 #[derive(Parser)]
@@ -76,6 +76,15 @@ enum UvArg {
     Existing,
 }
 
+#[derive(Clone, Copy, ValueEnum)]
+enum InstancingArg {
+    /// Each node placing a mesh gets its own copy of the mesh with its own lightmap UVs.
+    Duplicate,
+    /// The mesh is unwrapped and written once; each node gets a rect of a page in its
+    /// extras.lightmap.scale_offset (uv_page = uv * scale + offset).
+    Share,
+}
+
 /// The names are [`Technique::METHODS`].
 #[derive(Clone, Copy, ValueEnum)]
 enum MethodArg {
@@ -126,6 +135,10 @@ struct AtlasArgs {
     /// renderer's filtering then blurs each such shadow edge over a texel on each side).
     #[arg(long)]
     no_shadow_cuts: bool,
+    /// A mesh placed by several nodes: duplicated per node, or written once with a page rect
+    /// per node (its instances are then not junction-split).
+    #[arg(long, value_enum, default_value = "duplicate")]
+    instancing: InstancingArg,
 }
 
 impl AtlasArgs {
@@ -140,6 +153,7 @@ impl AtlasArgs {
         c.atlas.uv = self.uv.mode();
         c.atlas.split_junctions = !self.no_split_junctions;
         c.atlas.shadow_cuts = !self.no_shadow_cuts;
+        c.atlas.instancing = self.instancing.mode();
         c
     }
 }
@@ -349,6 +363,15 @@ impl Quality {
     }
 }
 
+impl InstancingArg {
+    fn mode(self) -> Instancing {
+        match self {
+            InstancingArg::Duplicate => Instancing::Duplicate,
+            InstancingArg::Share => Instancing::Share,
+        }
+    }
+}
+
 impl UvArg {
     fn mode(self) -> UvMode {
         match self {
@@ -379,6 +402,7 @@ impl BakeArgs {
             uv: Some(value_name(self.atlas.uv)),
             no_split_junctions: Some(self.atlas.no_split_junctions),
             no_shadow_cuts: Some(self.atlas.no_shadow_cuts),
+            instancing: Some(value_name(self.atlas.instancing)),
             rays: self.rays,
             light_samples: self.light_samples,
             sky: Some(Rgb::Rgb(self.sky.to_array())),
@@ -447,6 +471,14 @@ fn bake(args: &BakeArgs) -> Result<()> {
         && let Some(junctions) = &report.junctions
     {
         println!("  - {}", junctions.brief());
+    }
+    if args.explain
+        && let Some(sharing) = &report.sharing
+    {
+        println!(
+            "  - {}; their instances are not junction-split or shadow-cut",
+            sharing.brief()
+        );
     }
     if !args.run.quiet {
         println!("{}", report.summary());

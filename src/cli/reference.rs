@@ -22,7 +22,7 @@ use super::{AtlasArgs, Quality, RunArgs, parse_rgb};
 /// `--view`, the image `-o` (mean radiance per pixel) and `<image stem>_stderr.<ext>`.
 ///
 /// The texels are those of `lightbake bake` with the same scene and the same atlas options
-/// (--quality, --texels-per-unit, --max-page-size, --padding, --uv): unwrapping is
+/// (--quality, --texels-per-unit, --max-page-size, --padding, --uv, --instancing): unwrapping is
 /// deterministic, so the reference and the bake's pages line up texel for texel.
 #[derive(clap::Args)]
 #[command(after_help = AFTER_HELP)]
@@ -88,7 +88,7 @@ pub struct Args {
 const AFTER_HELP: &str = "\
 Writes <stem>_reference<k>.exr (H/π per texel, dilated like bake pages) and
 <stem>_reference<k>_stderr.exr (its standard error) per page. The texels are a bake's when the
-scene and the atlas options (--quality, --texels-per-unit, --max-page-size, --padding, --uv,
+scene and the atlas options (--quality, --texels-per-unit, --max-page-size, --padding, --uv, --instancing,
 --no-validity) are the same (the density is adjusted to the scene's size as bake adjusts it); give --sky and --indirect-only as the bake did. Tracing stops at
 --spp paths per texel, at --target-error (relative RMS standard error √(Σσ²/Σμ²)), or after
 --time seconds, whichever comes first.

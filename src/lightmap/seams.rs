@@ -871,6 +871,7 @@ mod tests {
             }],
             texels_per_unit: 16.0,
             reused_input_uvs: false,
+            shared: Vec::new(),
         };
         (scene, atlas)
     }

@@ -15,6 +15,12 @@
 //!   page's PNG; each baked primitive gets `extras.lightmap = { exr, page }` (an `extras` that is
 //!   not an object is replaced).
 //! - A mesh placed by several nodes is duplicated per node: each placement has its own UVs.
+//!   With `--instancing share` ([`Atlas::shared`]) a shared mesh is written once instead, its
+//!   `TEXCOORD_1` the base layout in \[0,1\], and each node placing it gets
+//!   `extras.lightmap = { exr, page, scale_offset: [sx, sy, ox, oy] }`
+//!   (`uv_page = uv * scale + offset`). Its primitives carry no `extras.lightmap` and its
+//!   materials no `FB_materials_lightmap` (the extension has one texture and no transform per
+//!   node; a material naming one page would light every other node wrongly).
 //!
 //! Primitives the loader skipped (points, lines, skinned, morphed) are left as they are. The
 //! accessors the re-indexed primitives no longer use stay in the file: extensions we do not know
@@ -41,6 +47,15 @@ fn directional_extras(names: &[String; 4]) -> Value {
         v[*name] = json!(encode_uri(file));
     }
     v
+}
+
+/// `extras.lightmap` naming page `page`'s EXR (and its directional pages).
+fn page_extras(files: &PageFiles, page: u32) -> Value {
+    let mut lightmap = json!({"exr": encode_uri(&files.exr), "page": page});
+    if let Some(names) = &files.directional {
+        lightmap["directional"] = directional_extras(names);
+    }
+    lightmap
 }
 
 /// The material extension that carries the lightmap texture.
@@ -88,9 +103,10 @@ pub fn write_gltf(
     reserved.extend(["gltf", "bin", "glb"].map(|ext| format!("{stem}.{ext}")));
     doc.copy_images(source, &reserved, staging)?;
     let page_textures = doc.add_page_textures(pages);
-    let target_meshes = doc.duplicate_meshes(scene)?;
-    doc.bake_primitives(scene, source, atlas, pages, &page_textures, &target_meshes)?;
-    if !scene.instances.is_empty() {
+    let target_meshes = doc.duplicate_meshes(scene, atlas)?;
+    let paged = doc.bake_primitives(scene, source, atlas, pages, &page_textures, &target_meshes)?;
+    doc.add_node_rects(atlas, pages)?;
+    if paged {
         doc.mark_extension_used(LIGHTMAP_EXTENSION);
     }
     doc.append_generator();
@@ -110,7 +126,8 @@ struct Document<'a> {
 /// One baked (instance, page) pair: which atlas triangles go into the output primitive.
 struct Part {
     instance: usize,
-    page: u32,
+    /// `None` for a shared mesh's primitive: every node has its own page.
+    page: Option<u32>,
     triangles: Vec<u32>,
 }
 
@@ -121,7 +138,8 @@ struct MaterialKey {
     material: Option<usize>,
     /// Double-sided surfaces are baked as two single-sided primitives.
     single_sided: bool,
-    page: u32,
+    /// `None`: a shared mesh's material, without `FB_materials_lightmap`.
+    page: Option<u32>,
     /// Where the primitive's own `TEXCOORD_1` moved (textures sampling set 1 follow it).
     uv1_moved_to: Option<u32>,
 }
@@ -307,8 +325,14 @@ impl<'a> Document<'a> {
     }
 
     /// Gives every node that places a baked mesh its own copy of the mesh (the first node keeps
-    /// the original). Returns the output mesh of each (node, mesh).
-    fn duplicate_meshes(&mut self, scene: &Scene) -> Result<BTreeMap<(u32, u32), usize>> {
+    /// the original), except meshes the atlas shares. Returns the output mesh of each
+    /// (node, mesh).
+    fn duplicate_meshes(
+        &mut self,
+        scene: &Scene,
+        atlas: &Atlas,
+    ) -> Result<BTreeMap<(u32, u32), usize>> {
+        let shared: BTreeSet<u32> = atlas.shared.iter().map(|s| s.mesh).collect();
         let mut nodes_of_mesh: BTreeMap<u32, BTreeSet<u32>> = BTreeMap::new();
         for inst in &scene.instances {
             nodes_of_mesh
@@ -333,7 +357,7 @@ impl<'a> Document<'a> {
                 if placed.and_then(Value::as_u64) != Some(mesh as u64) {
                     return Err(self.invalid(format!("node {node} does not place mesh {mesh}")));
                 }
-                let target = if n == 0 {
+                let target = if n == 0 || shared.contains(&mesh) {
                     mesh as usize
                 } else {
                     let mut copy = original.clone();
@@ -361,7 +385,18 @@ impl<'a> Document<'a> {
         pages: &[PageFiles],
         page_textures: &[usize],
         target_meshes: &BTreeMap<(u32, u32), usize>,
-    ) -> Result<()> {
+    ) -> Result<bool> {
+        // A shared mesh is written from its first node's instances, with the base layout.
+        let mut base_of: BTreeMap<usize, &InstanceUv> = BTreeMap::new();
+        let mut shared_copy = BTreeSet::new();
+        for s in &atlas.shared {
+            for (i, base) in &s.base {
+                base_of.insert(*i as usize, base);
+            }
+            for rect in &s.nodes {
+                shared_copy.extend(rect.instances.iter().map(|&i| i as usize));
+            }
+        }
         let original_primitive = |mesh: u32, primitive: u32| {
             source
                 .json
@@ -378,6 +413,17 @@ impl<'a> Document<'a> {
                     inst.mesh, inst.primitive
                 )));
             }
+            if let Some(base) = base_of.get(&i) {
+                parts.push(Part {
+                    instance: i,
+                    page: None,
+                    triangles: (0..base.triangles.len() as u32).collect(),
+                });
+                continue;
+            }
+            if shared_copy.contains(&i) {
+                continue;
+            }
             let mut by_page: BTreeMap<u32, Vec<u32>> = BTreeMap::new();
             for (t, &page) in uv.triangle_page.iter().enumerate() {
                 if page as usize >= pages.len() {
@@ -387,7 +433,7 @@ impl<'a> Document<'a> {
             }
             parts.extend(by_page.into_iter().map(|(page, triangles)| Part {
                 instance: i,
-                page,
+                page: Some(page),
                 triangles,
             }));
         }
@@ -443,19 +489,15 @@ impl<'a> Document<'a> {
             );
             for part in &parts[i..end] {
                 let material = materials[&material_key(part)];
-                let files = &pages[part.page as usize];
-                let mut lightmap = json!({"exr": encode_uri(&files.exr), "page": part.page});
-                if let Some(names) = &files.directional {
-                    lightmap["directional"] = directional_extras(names);
-                }
-                let primitive = self.write_primitive(
-                    original,
-                    &attributes,
-                    &atlas.instances[instance],
-                    part,
-                    material,
-                    lightmap,
-                )?;
+                let lightmap = part
+                    .page
+                    .map(|page| page_extras(&pages[page as usize], page));
+                let uv = base_of
+                    .get(&instance)
+                    .copied()
+                    .unwrap_or(&atlas.instances[instance]);
+                let primitive =
+                    self.write_primitive(original, &attributes, uv, part, material, lightmap)?;
                 replaced.entry(target).or_default().push(primitive);
             }
             i = end;
@@ -468,6 +510,29 @@ impl<'a> Document<'a> {
             primitives.pop();
             primitives.append(&mut new);
             primitives.extend(tail);
+        }
+        Ok(keys.iter().any(|k| k.page.is_some()))
+    }
+
+    /// `extras.lightmap` of every node placing a shared mesh: its page and rect.
+    fn add_node_rects(&mut self, atlas: &Atlas, pages: &[PageFiles]) -> Result<()> {
+        for rect in atlas.shared.iter().flat_map(|s| &s.nodes) {
+            let files = pages.get(rect.page as usize).ok_or_else(|| {
+                self.invalid(format!("atlas page {} has no page files", rect.page))
+            })?;
+            let mut lightmap = page_extras(files, rect.page);
+            // f32 values as JSON numbers that read back to the same f32.
+            lightmap["scale_offset"] =
+                json!([rect.scale.x, rect.scale.y, rect.offset.x, rect.offset.y].map(f64::from));
+            let node = self
+                .json
+                .get_mut("nodes")
+                .and_then(|n| n.get_mut(rect.node as usize))
+                .filter(|n| n.is_object())
+                .ok_or_else(|| {
+                    Error::invalid(self.path, format!("node {} does not exist", rect.node))
+                })?;
+            object_entry(node, "extras").insert("lightmap".to_string(), lightmap);
         }
         Ok(())
     }
@@ -515,9 +580,11 @@ impl<'a> Document<'a> {
                 page,
                 uv1_moved_to,
             } = key;
-            let lightmap = json!({
-                "lightmapTexture": {"index": page_textures[page as usize], "texCoord": 1},
-                "lightmapFactor": [1.0, 1.0, 1.0]
+            let lightmap = page.map(|page| {
+                json!({
+                    "lightmapTexture": {"index": page_textures[page as usize], "texCoord": 1},
+                    "lightmapFactor": [1.0, 1.0, 1.0]
+                })
             });
             // The first key of a material no untouched primitive uses takes over the original.
             let edit_in_place = material.is_some_and(|m| shared.insert(m));
@@ -539,7 +606,11 @@ impl<'a> Document<'a> {
                     (None, Some(m)) => format!("material {m}"),
                     (None, None) => "default".to_string(),
                 };
-                value["name"] = json!(format!("{name} (lightmap {page})"));
+                let suffix = match page {
+                    Some(page) => format!("lightmap {page}"),
+                    None => "shared lightmap".to_string(),
+                };
+                value["name"] = json!(format!("{name} ({suffix})"));
             }
             if single_sided {
                 value["doubleSided"] = json!(false);
@@ -547,7 +618,10 @@ impl<'a> Document<'a> {
             if let Some(set) = uv1_moved_to {
                 retarget_texcoord_1(&mut value, set);
             }
-            object_entry(&mut value, "extensions").insert(LIGHTMAP_EXTENSION.to_string(), lightmap);
+            if let Some(lightmap) = lightmap {
+                object_entry(&mut value, "extensions")
+                    .insert(LIGHTMAP_EXTENSION.to_string(), lightmap);
+            }
             let index = match (edit_in_place, material) {
                 (true, Some(m)) => {
                     self.json["materials"][m] = value;
@@ -605,7 +679,7 @@ impl<'a> Document<'a> {
         uv: &InstanceUv,
         part: &Part,
         material: usize,
-        lightmap: Value,
+        lightmap: Option<Value>,
     ) -> Result<Value> {
         // Compact the atlas vertices this page uses, in order of first use.
         let mut local = vec![u32::MAX; uv.xref.len()];
@@ -672,7 +746,9 @@ impl<'a> Document<'a> {
             primitive["mode"] = json!(4);
         }
         primitive["material"] = json!(material);
-        object_entry(&mut primitive, "extras").insert("lightmap".to_string(), lightmap);
+        if let Some(lightmap) = lightmap {
+            object_entry(&mut primitive, "extras").insert("lightmap".to_string(), lightmap);
+        }
         Ok(primitive)
     }
 
@@ -1149,6 +1225,7 @@ mod tests {
             instances: uvs,
             texels_per_unit: 8.0,
             reused_input_uvs: false,
+            shared: Vec::new(),
         };
         (scene, atlas)
     }

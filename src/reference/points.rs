@@ -35,7 +35,8 @@
 //!
 //! **As a renderer reads it.** [`look_up`] takes a baked output loaded as `lightbake render`
 //! loads it ([`RenderScene`]: the output glTF through the scene loader, each primitive's
-//! `TEXCOORD_1` and the EXR page its `extras.lightmap` names) and, for each point, finds the
+//! `TEXCOORD_1` and the EXR page its `extras.lightmap` names, or its node's with the node's
+//! rect for a shared mesh) and, for each point, finds the
 //! baked surface under it (a short ray along `−n` from just above it; a face seen from behind
 //! — the flipped copy a bake writes for a double-sided primitive, lying in the same plane — is
 //! resolved by a scan for the front-facing triangle under the point), interpolates its

@@ -31,7 +31,8 @@
 //! | `seed` | 0 | random streams are seeded by (seed, pixel) |
 //!
 //! Input: a glTF written by `lightbake bake`: every baked primitive has `TEXCOORD_1` and
-//! `extras.lightmap = {"exr", "page"}`; the EXR pages hold `H/π`. The scene loader resolves
+//! `extras.lightmap = {"exr", "page"}` (a shared mesh's node carries it with its page rect,
+//! `scale_offset`, which the loader applies to `TEXCOORD_1`); the EXR pages hold `H/π`. The scene loader resolves
 //! everything the renderer reads — each instance's EXR page, each material's specular
 //! parameters ([`scene::Surface`]), the cameras — so this module never looks at glTF JSON. Scenes without any lightmap are
 //! refused. As glTF asks, back faces of single-sided materials are culled (rays pass through

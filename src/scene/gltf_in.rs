@@ -611,8 +611,17 @@ impl Loader<'_> {
         scene
             .triangle_instance
             .extend(std::iter::repeat_n(instance, kept.len()));
-        // A baked file names each primitive's EXR page; the renderer reads it.
-        let extras = &self.json["meshes"][mesh.index()]["primitives"][primitive.index()]["extras"];
+        // A baked file names each primitive's EXR page; the renderer reads it. A shared mesh
+        // (`--instancing share`) names it on each node instead, with the node's rect.
+        let node_extras = &self.json["nodes"][node.index()]["extras"];
+        let extras = match node_extras["lightmap"]["exr"].is_string() {
+            true => node_extras,
+            false => &self.json["meshes"][mesh.index()]["primitives"][primitive.index()]["extras"],
+        };
+        if let Some(rect) = scale_offset(&extras["lightmap"]) {
+            let uv1 = &mut scene.uv1[first_vertex as usize..];
+            uv1.iter_mut().for_each(|uv| *uv = page_uv(*uv, rect));
+        }
         let lightmap = extras["lightmap"]["exr"]
             .as_str()
             .map(|uri| self.files.dir.join(percent_decode(uri)));
@@ -765,6 +774,26 @@ impl Loader<'_> {
 /// A node's local transform for placing cameras: glam's composition of the unit rotation, or
 /// the matrix. It rounds differently from the gltf crate's `matrix()` (which places geometry);
 /// cameras have always been placed this way, and rendered views stay bit-identical with it.
+/// `extras.lightmap.scale_offset` of a node placing a shared mesh: `[sx, sy, ox, oy]`.
+fn scale_offset(lightmap: &serde_json::Value) -> Option<[f32; 4]> {
+    let values = lightmap.get("scale_offset")?.as_array()?;
+    let mut rect = [0.0; 4];
+    if values.len() != 4 {
+        return None;
+    }
+    for (r, v) in rect.iter_mut().zip(values) {
+        *r = v.as_f64()? as f32;
+    }
+    rect.iter().all(|v| v.is_finite()).then_some(rect)
+}
+
+/// A base-layout lightmap UV on the node's page, as the writer computed it
+/// (`atlas::share::page_uv`): a multiply, then an add, in f32.
+fn page_uv(uv: Vec2, [sx, sy, ox, oy]: [f32; 4]) -> Vec2 {
+    let scaled = uv * Vec2::new(sx, sy);
+    scaled + Vec2::new(ox, oy)
+}
+
 fn camera_matrix(transform: gltf::scene::Transform) -> Mat4 {
     match transform {
         gltf::scene::Transform::Matrix { matrix } => Mat4::from_cols_array_2d(&matrix),

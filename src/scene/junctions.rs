@@ -80,13 +80,16 @@ pub struct JunctionReport {
     pub shadow_segments: usize,
     pub shadow_samples: usize,
     pub shadow_skipped: usize,
+    /// Instances left uncut because their mesh is shared by several nodes (`--instancing
+    /// share`; the cell map of divided texels covers them).
+    pub left_whole: usize,
 }
 
 impl JunctionReport {
     /// One phrase for the bake's summary line.
     pub fn brief(&self) -> String {
         format!(
-            "junctions: {} receiver(s) split ({} segments, {} extensions, {} triangles → +{}){}{}",
+            "junctions: {} receiver(s) split ({} segments, {} extensions, {} triangles → +{}){}{}{}",
             self.receivers,
             self.segments,
             self.extensions,
@@ -102,6 +105,14 @@ impl JunctionReport {
                     } else {
                         String::new()
                     }
+                )
+            } else {
+                String::new()
+            },
+            if self.left_whole > 0 {
+                format!(
+                    ", {} instance(s) of shared meshes left whole",
+                    self.left_whole
                 )
             } else {
                 String::new()
@@ -131,6 +142,18 @@ pub fn split_with(
     texel: f32,
     shadows: Option<&ShadowCutter>,
 ) -> (Scene, JunctionReport) {
+    split_except(scene, texel, shadows, &[])
+}
+
+/// [`split_with`], leaving the instances marked in `whole` (parallel to `Scene::instances`;
+/// shorter means unmarked) uncut: the instances of a mesh shared by several nodes
+/// (`--instancing share`), which cannot carry one node's cuts. They still cut the others.
+pub fn split_except(
+    scene: Scene,
+    texel: f32,
+    shadows: Option<&ShadowCutter>,
+    whole: &[bool],
+) -> (Scene, JunctionReport) {
     let texel = f64::from(texel);
     let tol = Tolerances {
         texel,
@@ -138,9 +161,15 @@ pub fn split_with(
         touch: TOUCH_TEXELS * texel,
     };
     let grid = triangle_grid(&scene, tol.touch, texel);
-    let mut report = JunctionReport::default();
+    let mut report = JunctionReport {
+        left_whole: whole.iter().filter(|&&w| w).count(),
+        ..Default::default()
+    };
     let splits: Vec<Option<InstanceSplit>> = (0..scene.instances.len())
-        .map(|i| split_instance(&scene, i as u32, &grid, tol, shadows, &mut report))
+        .map(|i| match whole.get(i) {
+            Some(true) => None,
+            _ => split_instance(&scene, i as u32, &grid, tol, shadows, &mut report),
+        })
         .collect();
     if let Some(shadows) = shadows {
         (report.shadow_samples, report.shadow_skipped) = shadows.work();

@@ -4,8 +4,9 @@
 //! The loader ([`load`]) resolves every input quirk (node transforms, instancing, strips and fans,
 //! missing normals, emissive strength, sRGB textures, double-sided materials) so later stages never
 //! look at glTF. It resolves what the renderer needs too — each material's specular parameters
-//! ([`Surface`]), each instance's lightmap page (`extras.lightmap` of a baked file) and the
-//! document's cameras — so `render` never reads glTF either. It also keeps the untouched input
+//! ([`Surface`]), each instance's lightmap page (`extras.lightmap` of a baked file; on the node
+//! for a mesh baked with `--instancing share`, whose `scale_offset` rect is applied to the
+//! instance's `TEXCOORD_1`) and the document's cameras — so `render` never reads glTF either. It also keeps the untouched input
 //! document ([`Source`]) for the output writer.
 //!
 //! Double-sided surfaces: each face of a `doubleSided` primitive receives its own light (a wall
@@ -88,8 +89,9 @@ pub struct Instance {
     pub back: Option<u32>,
     /// The primitive has a `TEXCOORD_1` of its own.
     pub has_uv1: bool,
-    /// The EXR page named by the primitive's `extras.lightmap.exr` (a baked scene; resolved
-    /// against the glTF file's folder), for the renderer.
+    /// The EXR page named by the primitive's `extras.lightmap.exr`, or the node's when it has
+    /// one (a shared mesh; `uv1` then holds the node's page UVs), resolved against the glTF
+    /// file's folder, for the renderer.
     pub lightmap: Option<PathBuf>,
     /// The directional pages named by `extras.lightmap.directional` (L0, L1x, L1y, L1z:
     /// `lightmap::directional`), resolved like `lightmap`.

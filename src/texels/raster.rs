@@ -746,6 +746,7 @@ mod tests {
             }],
             texels_per_unit: width as f32,
             reused_input_uvs: false,
+            shared: Vec::new(),
         };
         (scene, atlas)
     }

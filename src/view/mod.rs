@@ -11,7 +11,9 @@
 //! EXR page each primitive's `extras.lightmap.exr` names (`EXRLoader`, half float, rows
 //! flipped so row 0 is the top as glTF images are, linear filtering, clamp to edge), as
 //! `lightMap` on `TEXCOORD_1` (`channel = 1`) with `lightMapIntensity = π` (three.js divides
-//! a light map by π, a texel holds `H/π`), on a Lambert material without lights. three.js
+//! a light map by π, a texel holds `H/π`), on a Lambert material without lights. A mesh
+//! baked with `--instancing share` takes the page its node's `extras.lightmap` names, and the
+//! node's `scale_offset` as the texture's `repeat` and `offset` (a clone per node). three.js
 //! r187 is vendored under `web/three/` (MIT, `web/three/LICENSE`).
 
 use std::path::{Component, Path, PathBuf};

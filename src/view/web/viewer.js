@@ -1,5 +1,5 @@
 // lightbake's viewer page: the baked glTF drawn by three.js as a renderer would draw it.
-// The four settings that make three.js show a lightbake bake right are marked "(renderer)".
+// The settings that make three.js show a lightbake bake right are marked "(renderer)".
 
 import * as THREE from 'three';
 import { GLTFLoader } from 'three/addons/loaders/GLTFLoader.js';
@@ -47,8 +47,10 @@ async function load() {
     if (o.isCamera) cameras.push(o);
   });
   for (const mesh of found) {
-    const page = mesh.geometry.userData.lightmap?.exr;
-    const lightMap = page === undefined ? null : await loadPage(page);
+    const rect = nodeRect(mesh);
+    const page = (rect ?? mesh.geometry.userData.lightmap)?.exr;
+    let lightMap = page === undefined ? null : await loadPage(page);
+    if (rect && lightMap) lightMap = rectTexture(lightMap, rect.scale_offset);
     meshes.push({ mesh, views: materials(mesh.material, lightMap) });
     if (lightMap) overlays.charts.add(chartBorders(mesh));
   }
@@ -78,6 +80,27 @@ async function loadExr(url) {
   texture.wrapS = texture.wrapT = THREE.ClampToEdgeWrapping;
   texture.channel = 1; // (renderer) the lightmap UVs are TEXCOORD_1
   texture.needsUpdate = true;
+  return texture;
+}
+
+/** extras.lightmap of the node placing a shared mesh (--instancing share): GLTFLoader gives
+ *  node extras to the node's object, the mesh itself or the group of its primitives. */
+function nodeRect(mesh) {
+  for (let o = mesh; o; o = o.parent) {
+    const lightmap = o.userData.lightmap;
+    if (lightmap?.exr !== undefined && Array.isArray(lightmap.scale_offset)) return lightmap;
+  }
+  return undefined;
+}
+
+/** (renderer) A shared mesh's TEXCOORD_1 is its base layout; the node's rect places it on the
+ *  page: uv_page = uv * scale + offset, in the page's glTF orientation (row 0 at the top, which
+ *  loadExr keeps with flipY = false), so offset and repeat take the numbers as they are. */
+function rectTexture(page, [sx, sy, ox, oy]) {
+  const texture = page.clone(); // shares the image, uploads once
+  texture.repeat.set(sx, sy);
+  texture.offset.set(ox, oy);
+  texture.userData.rect = [sx, sy, ox, oy];
   return texture;
 }
 
@@ -119,12 +142,14 @@ function texelChecker(lightMap, side) {
     uniforms: {
       lightMap: { value: lightMap },
       size: { value: new THREE.Vector2(lightMap.image.width, lightMap.image.height) },
+      rect: { value: new THREE.Vector4(...(lightMap.userData.rect ?? [1, 1, 0, 0])) },
     },
     vertexShader: `
       attribute vec2 uv1;
+      uniform vec4 rect;
       varying vec2 vUv1;
       void main() {
-        vUv1 = uv1;
+        vUv1 = uv1 * rect.xy + rect.zw;
         gl_Position = projectionMatrix * modelViewMatrix * vec4(position, 1.0);
       }`,
     fragmentShader: `
