@@ -621,7 +621,8 @@ pub(crate) fn stage_layers(
 
 /// The glTF root's `extras.lightmap_layers`: per layer its name, the lights and emissive
 /// materials (by name) and whether the sky it holds, and its pages, which line up with the
-/// lightmap's (a primitive's `extras.lightmap.page` k is page k of every layer). An engine
+/// lightmap's (page k of a primitive's `extras.lightmap.page`, or of the node's for a mesh
+/// written once under `--instancing share`, is page k of every layer). An engine
 /// mixes them as `lightmap = Σ weight_layer × layer page`.
 pub(crate) fn add_layer_extras(
     json: &mut Value,
