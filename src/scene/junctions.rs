@@ -48,7 +48,8 @@ use super::{Blend, Scene, Split};
 /// (texels).
 pub const SNAP_TEXELS: f64 = 0.25;
 
-/// A corner this close to a patch's plane lies in it (texels): a wall standing on a floor.
+/// A corner this close to a patch's plane lies in it (texels): a wall standing on a floor. A
+/// cut point this close to a vertex or edge of the patch lies on it, likewise.
 pub const TOUCH_TEXELS: f64 = 1.0 / 16.0;
 
 /// A patch is a receiver only when no neighbour of the same mesh continues it more gently than
@@ -278,6 +279,32 @@ struct PatchEdges {
     vertices: Vec<(DVec2, bool)>,
 }
 
+impl PatchEdges {
+    /// The patch vertex nearest to `p` within `within`, else the nearest point of a patch edge
+    /// that close (only the border's when `border_only`), with its border flag.
+    fn nearest(&self, p: DVec2, within: f64, border_only: bool) -> Option<(DVec2, bool)> {
+        let vertex = self
+            .vertices
+            .iter()
+            .filter(|v| v.1 || !border_only)
+            .map(|&(v, border)| (v.distance(p), v, border))
+            .filter(|x| x.0 <= within)
+            .min_by(|x, y| x.0.total_cmp(&y.0));
+        let nearest = vertex.or_else(|| {
+            self.edges
+                .iter()
+                .filter(|e| e.1 || !border_only)
+                .map(|&([a, b], border)| {
+                    let (d, t) = distance_to_segment(p, a, b);
+                    (d, a.lerp(b, t), border)
+                })
+                .filter(|x| x.0 <= within)
+                .min_by(|x, y| x.0.total_cmp(&y.0))
+        });
+        nearest.map(|(_, q, border)| (q, border))
+    }
+}
+
 fn distance_to_segment(p: DVec2, a: DVec2, b: DVec2) -> (f64, f64) {
     let d = b - a;
     let t = if d.length_squared() > 0.0 {
@@ -289,40 +316,22 @@ fn distance_to_segment(p: DVec2, a: DVec2, b: DVec2) -> (f64, f64) {
 }
 
 impl Cuts {
-    /// The index of the point at `p`: an existing point, or a border vertex or border edge point
-    /// within `snap`, or a new one.
-    fn point(&mut self, p: DVec2, patch: &PatchEdges, snap: f64) -> u32 {
-        if let Some(i) = self.points.iter().position(|q| q.distance(p) <= snap) {
+    /// The index of the point at `p`: an existing point within the snap distance, else a border
+    /// vertex or border edge point that close (a cut must end on the border), else a vertex or
+    /// edge point of the patch within the touch distance, else a new point.
+    ///
+    /// Inside the patch a cut stays where the wall stands, up to the touch distance: a cut
+    /// point lying on a mesh edge up to rounding (walls meeting on a floor's diagonal) would
+    /// otherwise stay inside one triangle a millionth of a texel from that edge, and the
+    /// retriangulation would make needles there.
+    fn point(&mut self, p: DVec2, patch: &PatchEdges, tol: Tolerances) -> u32 {
+        if let Some(i) = self.points.iter().position(|q| q.distance(p) <= tol.snap) {
             return i as u32;
         }
-        // Only onto the border: inside the patch a cut stays exactly where the wall stands
-        // (spade splits the edges it crosses), at the border it must end on an edge.
-        let nearest_vertex = patch
-            .vertices
-            .iter()
-            .filter(|v| v.1)
-            .map(|&(v, border)| (v.distance(p), v, border))
-            .filter(|x| x.0 <= snap)
-            .min_by(|x, y| x.0.total_cmp(&y.0));
-        let (q, border) = match nearest_vertex {
-            Some((_, v, border)) => (v, border),
-            None => {
-                let nearest_edge = patch
-                    .edges
-                    .iter()
-                    .filter(|e| e.1)
-                    .map(|&([a, b], border)| {
-                        let (d, t) = distance_to_segment(p, a, b);
-                        (d, a.lerp(b, t), border)
-                    })
-                    .filter(|x| x.0 <= snap)
-                    .min_by(|x, y| x.0.total_cmp(&y.0));
-                match nearest_edge {
-                    Some((_, q, border)) => (q, border),
-                    None => (p, false),
-                }
-            }
-        };
+        let (q, border) = patch
+            .nearest(p, tol.snap, true)
+            .or_else(|| patch.nearest(p, tol.touch, false))
+            .unwrap_or((p, false));
         self.points.push(q);
         self.on_border.push(border);
         (self.points.len() - 1) as u32
@@ -379,7 +388,8 @@ impl Cuts {
 
     /// Extends every free segment end (inside the patch, on no other segment) straight on to
     /// the nearest segment or patch border.
-    fn extend_free_ends(&mut self, patch: &PatchEdges, snap: f64) {
+    fn extend_free_ends(&mut self, patch: &PatchEdges, tol: Tolerances) {
+        let snap = tol.snap;
         let mut p = 0;
         while p < self.points.len() as u32 {
             if self.on_border[p as usize] || self.degree(p) != 1 {
@@ -429,7 +439,7 @@ impl Cuts {
                 }
             }
             if let Some((s, _)) = best {
-                let hit = self.point(origin + dir * s, patch, snap);
+                let hit = self.point(origin + dir * s, patch, tol);
                 self.add(p, hit, true);
                 self.split_at_points(snap);
             }
@@ -525,7 +535,8 @@ fn split_instance(
     };
 
     // Cuts per patch, clipped into its triangles; points on mesh edges collected per welded edge.
-    let mut pieces: BTreeMap<u32, Vec<[End; 2]>> = BTreeMap::new();
+    // Per triangle: the cut pieces inside it, each with its extension flag.
+    let mut pieces: BTreeMap<u32, Vec<([End; 2], bool)>> = BTreeMap::new();
     // Welded edge → (its length, parameters from the lower welded end).
     let mut edge_points: BTreeMap<[u32; 2], (f64, Vec<f64>)> = BTreeMap::new();
     let mut patch_cuts: Vec<Option<Cuts>> = Vec::with_capacity(patches.len());
@@ -543,7 +554,7 @@ fn split_instance(
             for &t in &patch.triangles {
                 let corners = tris[t as usize].map(|v| patch.plane.to_2d(pos(v)));
                 let w = welded(t as usize);
-                for &([a, b], _) in &cuts.segments {
+                for &([a, b], extension) in &cuts.segments {
                     let Some(ends) = clip(
                         cuts.points[a as usize],
                         cuts.points[b as usize],
@@ -566,7 +577,7 @@ fn split_instance(
                         }
                     }
                     if !along_an_edge(ends) {
-                        pieces.entry(t).or_default().push(ends);
+                        pieces.entry(t).or_default().push((ends, extension));
                     }
                 }
             }
@@ -647,7 +658,7 @@ fn split_instance(
         };
         any_split = true;
         report.triangles_split += 1;
-        for face in faces {
+        for (face, along_pieces) in faces {
             let mut tri = [0u32; 3];
             for (c, (p, end)) in face.iter().enumerate() {
                 tri[c] = match end {
@@ -658,7 +669,8 @@ fn split_instance(
                     }
                 };
             }
-            let bits = cuts.map_or([0, 0], |c| cut_bits_of(face.map(|f| f.0), c, tol.snap));
+            let along_cuts = cuts.map_or([0, 0], |c| cut_bits_of(face.map(|f| f.0), c, tol.snap));
+            let bits = [0, 1].map(|k| along_cuts[k] | along_pieces[k]);
             out.triangles.push(tri);
             out.source_triangle.push(inst.source_triangle[t]);
             cut_bits.push(bits);
@@ -893,8 +905,8 @@ fn patch_cuts_of(
         }
         for [s0, s1] in inside_intervals(a, b, &corners2d, tol.snap) {
             if (s1 - s0) * length > tol.snap {
-                let i = cuts.point(a.lerp(b, s0), &patch_edges, tol.snap);
-                let j = cuts.point(a.lerp(b, s1), &patch_edges, tol.snap);
+                let i = cuts.point(a.lerp(b, s0), &patch_edges, tol);
+                let j = cuts.point(a.lerp(b, s1), &patch_edges, tol);
                 cuts.add(i, j, false);
             }
         }
@@ -902,8 +914,8 @@ fn patch_cuts_of(
     // Shadow outlines of punctual lights: cuts never stitched, as junctions are.
     if let Some(shadows) = shadows {
         for [a, b] in shadows.patch_cuts(&patch.plane, &corners2d, (lo, hi), tol.texel, tol.touch) {
-            let i = cuts.point(a, &patch_edges, tol.snap);
-            let j = cuts.point(b, &patch_edges, tol.snap);
+            let i = cuts.point(a, &patch_edges, tol);
+            let j = cuts.point(b, &patch_edges, tol);
             let before = cuts.segments.len();
             cuts.add(i, j, false);
             report.shadow_segments += cuts.segments.len() - before;
@@ -926,7 +938,7 @@ fn patch_cuts_of(
         return None;
     }
     cuts.split_at_points(tol.snap);
-    cuts.extend_free_ends(&patch_edges, tol.snap);
+    cuts.extend_free_ends(&patch_edges, tol);
     Some(cuts)
 }
 
@@ -1004,12 +1016,15 @@ fn along_an_edge(ends: [End; 2]) -> bool {
 type Face = [(DVec2, Option<End>); 3];
 
 /// Triangulates triangle `c` again with the points on its edges (parameters from corner `k`,
-/// ascending) and the cut pieces inside it; `None` when the faces do not add up to its area.
+/// ascending) and the cut pieces inside it (with their extension flags); `None` when the faces
+/// do not add up to its area. Each face comes with the edges that lie along a piece,
+/// `[junction, any cut]` as in [`cut_bits_of`]: a piece ending at a merged edge point or a corner
+/// runs where its cut nearly does, so the constraint edges say what is cut, not the geometry.
 fn retriangulate(
     c: [DVec2; 3],
     on_edges: &[Vec<f64>; 3],
-    pieces: &[[End; 2]],
-) -> Option<Vec<Face>> {
+    pieces: &[([End; 2], bool)],
+) -> Option<Vec<(Face, [u8; 2])>> {
     let mut cdt: ConstrainedDelaunayTriangulation<Point2<f64>> =
         ConstrainedDelaunayTriangulation::new();
     let mut what: BTreeMap<usize, End> = BTreeMap::new();
@@ -1037,21 +1052,47 @@ fn retriangulate(
             cdt.add_constraint_and_split(pair[0], pair[1], |p| p);
         }
     }
-    for piece in pieces {
+    // Each piece as inserted: its end handles and whether it is a junction.
+    let mut inserted: Vec<([spade::handles::FixedVertexHandle; 2], bool)> = Vec::new();
+    for (piece, extension) in pieces {
         let mut handles = [corner[0]; 2];
         for (h, end) in handles.iter_mut().zip(piece) {
             *h = match *end {
                 End::Corner(k) => corner[k],
-                // The merged edge point nearest to where the cut meets the edge.
+                // The merged edge point nearest to where the cut meets the edge, or the corner
+                // when that is nearer (points next to a corner were merged into it).
                 End::Edge(k, t) => on_edge_handles[k]
                     .iter()
+                    .copied()
+                    .chain([(0.0, corner[k]), (1.0, corner[(k + 1) % 3])])
                     .min_by(|x, y| (x.0 - t).abs().total_cmp(&(y.0 - t).abs()))
                     .map(|x| x.1)?,
                 End::Inside(p) => insert(&mut cdt, p, End::Inside(p))?,
             };
         }
-        cdt.add_constraint_and_split(handles[0], handles[1], |p| p);
+        if handles[0] != handles[1] {
+            cdt.add_constraint_and_split(handles[0], handles[1], |p| p);
+            inserted.push((handles, !extension));
+        }
     }
+    let at = |h: spade::handles::FixedVertexHandle| {
+        let q = cdt.vertex(h).position();
+        DVec2::new(q.x, q.y)
+    };
+    let lines: Vec<([DVec2; 2], bool)> = inserted
+        .iter()
+        .map(|&([a, b], junction)| ([at(a), at(b)], junction))
+        .collect();
+    // A constraint edge along an inserted piece (split where pieces cross: its crossing points
+    // lie on it up to rounding).
+    let scale = (c[1] - c[0]).length() + (c[2] - c[1]).length() + (c[0] - c[2]).length();
+    let on_piece = |p: DVec2, q: DVec2| -> Option<bool> {
+        let near = |x: DVec2, [a, b]: [DVec2; 2]| distance_to_segment(x, a, b).0 <= 1e-7 * scale;
+        let along = |line| near(p, line) && near(q, line) && near(0.5 * (p + q), line);
+        let mut hits = lines.iter().filter(|(line, _)| along(*line));
+        let first = hits.next()?;
+        Some(first.1 || hits.any(|h| h.1))
+    };
     let area = 0.5 * (c[1] - c[0]).perp_dot(c[2] - c[0]);
     let mut faces = Vec::new();
     let mut total = 0.0;
@@ -1066,7 +1107,18 @@ fn retriangulate(
             continue;
         }
         total += a;
-        faces.push([0, 1, 2].map(|k| (p[k], what.get(&v[k].fix().index()).copied())));
+        let mut bits = [0u8; 2];
+        for k in 0..3 {
+            let constraint = cdt.exists_constraint(v[k].fix(), v[(k + 1) % 3].fix());
+            if constraint && let Some(junction) = on_piece(p[k], p[(k + 1) % 3]) {
+                bits[1] |= 1 << k;
+                bits[0] |= u8::from(junction) << k;
+            }
+        }
+        faces.push((
+            [0, 1, 2].map(|k| (p[k], what.get(&v[k].fix().index()).copied())),
+            bits,
+        ));
     }
     ((total - area).abs() <= 1e-6 * area && faces.len() > 1).then_some(faces)
 }
