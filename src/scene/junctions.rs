@@ -23,7 +23,8 @@
 //!    Points on a mesh edge are shared by both triangles on it — the other one is cut too, in
 //!    this patch or the next (no T-junctions) — and points on one edge closer than the snap
 //!    distance merge, so no sliver below a quarter texel appears along an edge. A triangle
-//!    whose pieces do not add up to its area is left whole (counted in the report).
+//!    whose pieces do not add up to its area is left uncut (counted in the report), keeping only
+//!    the points on its edges, which its neighbours share.
 //! 4. **Sides**: the instance's triangles are grouped into sides, connected across edges that are
 //!    not cuts; the atlas never puts two sides into one chart.
 //!
@@ -70,8 +71,9 @@ pub struct JunctionReport {
     /// Triangles replaced by their pieces, and how many triangles the scene gained.
     pub triangles_split: usize,
     pub triangles_added: usize,
-    /// Triangles left whole because their pieces did not add up to their area (robustness
-    /// fallback; the cell map of divided texels covers them).
+    /// Triangles left uncut because their pieces did not add up to their area (robustness
+    /// fallback: they keep the points their neighbours share on their edges, so no T-junction;
+    /// the cell map of divided texels covers them).
     pub fallback_triangles: usize,
     /// Junction edges whose two sides stayed connected around the junction (the cell map of
     /// divided texels covers them).
@@ -109,7 +111,7 @@ impl JunctionReport {
             },
             if self.fallback_triangles + self.unseparated_edges > 0 {
                 format!(
-                    ", {} triangles left whole, {} edges unseparated",
+                    ", {} triangles left uncut, {} edges unseparated",
                     self.fallback_triangles, self.unseparated_edges
                 )
             } else {
@@ -647,9 +649,15 @@ fn split_instance(
             None => &own_frame(tris[t].map(pos)),
         };
         let corners = tris[t].map(|v| frame.plane.to_2d(pos(v)));
-        let Some(faces) = retriangulate(corners, &on_edges, own.map_or(&[][..], Vec::as_slice))
-        else {
+        let pieces = own.map_or(&[][..], Vec::as_slice);
+        let faces = retriangulate(corners, &on_edges, pieces).or_else(|| {
             report.fallback_triangles += 1;
+            // Left uncut, but with the points its neighbours share on its edges: no T-junction.
+            (!pieces.is_empty())
+                .then(|| retriangulate(corners, &on_edges, &[]))
+                .flatten()
+        });
+        let Some(faces) = faces else {
             out.triangles.push(tris[t]);
             out.source_triangle.push(inst.source_triangle[t]);
             cut_bits.push([0, 0]);
@@ -657,7 +665,7 @@ fn split_instance(
             continue;
         };
         any_split = true;
-        report.triangles_split += 1;
+        report.triangles_split += usize::from(faces.len() > 1);
         for (face, along_pieces) in faces {
             let mut tri = [0u32; 3];
             for (c, (p, end)) in face.iter().enumerate() {
@@ -1017,7 +1025,8 @@ type Face = [(DVec2, Option<End>); 3];
 
 /// Triangulates triangle `c` again with the points on its edges (parameters from corner `k`,
 /// ascending) and the cut pieces inside it (with their extension flags); `None` when the faces
-/// do not add up to its area. Each face comes with the edges that lie along a piece,
+/// do not add up to its area (one face, the triangle itself, when every piece runs along its
+/// edges). Each face comes with the edges that lie along a piece,
 /// `[junction, any cut]` as in [`cut_bits_of`]: a piece ending at a merged edge point or a corner
 /// runs where its cut nearly does, so the constraint edges say what is cut, not the geometry.
 fn retriangulate(
@@ -1120,7 +1129,8 @@ fn retriangulate(
             bits,
         ));
     }
-    ((total - area).abs() <= 1e-6 * area && faces.len() > 1).then_some(faces)
+    // One face: every piece runs along the triangle's edges (ends merged into its corners).
+    ((total - area).abs() <= 1e-6 * area).then_some(faces)
 }
 
 /// Barycentric weights of `p` in triangle `c`; points on an edge get exactly two weights.
@@ -1361,6 +1371,71 @@ mod tests {
             marked, 4,
             "two triangles on each side of the base have it as an edge"
         );
+    }
+
+    /// Shortest edge and smallest altitude of scene triangle `t`.
+    fn triangle_shape(scene: &Scene, t: usize) -> (f64, f64) {
+        let p = scene.triangles[t].map(|v| scene.positions[v as usize].as_dvec3());
+        let edges = [0, 1, 2].map(|k| p[k].distance(p[(k + 1) % 3]));
+        let longest = edges.iter().copied().fold(0.0, f64::max);
+        let shortest = edges.iter().copied().fold(f64::INFINITY, f64::min);
+        (shortest, 2.0 * triangle_area(scene, t) / longest)
+    }
+
+    /// Two_rooms' ceiling at 16 texels per unit, reduced to one cell: a wall of two quads
+    /// meets the cell's diagonal where its quads meet, (−1, −2). In f32 the diagonal runs
+    /// 4e-7 texel past that cut point, which was left inside one triangle: two needles with an
+    /// edge of 6e-7 texel (the atlas must hide such triangles from xatlas). The point now lies
+    /// on the diagonal, shared by the triangles on both sides.
+    #[test]
+    fn walls_meeting_on_a_diagonal_make_no_needle() {
+        let (x0, x1, z0, z1) = (-4.0 / 3.0, -2.0 / 3.0, -16.0 / 7.0, -12.0 / 7.0);
+        let cell = (
+            vec![
+                Vec3::new(x0, 0.0, z0),
+                Vec3::new(x0, 0.0, z1),
+                Vec3::new(x1, 0.0, z1),
+                Vec3::new(x1, 0.0, z0),
+            ],
+            vec![[0, 1, 2], [0, 2, 3]],
+        );
+        let wall = (
+            [-2.0, -1.0, 0.0]
+                .into_iter()
+                .flat_map(|x| [Vec3::new(x, 0.0, -2.0), Vec3::new(x, 3.0, -2.0)])
+                .collect(),
+            vec![[0, 2, 3], [0, 3, 1], [2, 4, 5], [2, 5, 3]],
+        );
+        let texel = 1.0 / 16.0;
+        let (split, report) = split(scene_of(&[cell, wall]), texel);
+        assert_eq!(report.receivers, 1, "{report:?}");
+        assert_eq!(report.fallback_triangles, 0, "{report:?}");
+        assert_eq!(report.unseparated_edges, 0, "{report:?}");
+        let cell = &split.instances[0];
+        let area: f64 = cell
+            .triangles
+            .clone()
+            .map(|t| triangle_area(&split, t as usize))
+            .sum();
+        assert!((area - 2.0 / 3.0 * 4.0 / 7.0).abs() < 1e-6, "area {area}");
+        assert_no_t_junctions(&split, 0);
+        for t in cell.triangles.clone() {
+            let (edge, altitude) = triangle_shape(&split, t as usize);
+            let texel = f64::from(texel);
+            assert!(
+                edge > 0.25 * texel && altitude > 0.25 * texel,
+                "triangle {t}: shortest edge {:.1e}, altitude {:.1e} texel",
+                edge / texel,
+                altitude / texel
+            );
+            // Every triangle on one side of the wall, and the cut on the wall's line.
+            let zs = split.triangles[t as usize].map(|v| split.positions[v as usize].z);
+            assert!(zs.iter().all(|&z| z <= -2.0 + 1e-6) || zs.iter().all(|&z| z >= -2.0 - 1e-6));
+        }
+        for k in cell.vertices.start + 4..cell.vertices.end {
+            let p = split.positions[k as usize];
+            assert!((p.z + 2.0).abs() < 1e-6, "new vertex {p} off the wall");
+        }
     }
 
     #[test]
