@@ -13,16 +13,21 @@
 //!    candidates) that crosses the patch's plane or has an edge lying in it (a wall standing on
 //!    the floor; corners within [`TOUCH_TEXELS`] of the plane count as on it) gives a segment,
 //!    clipped to the patch's triangles. Coplanar triangles and single touching points give none.
-//! 2. **Make the cuts separate**: segment ends within [`SNAP_TEXELS`] merge, move onto patch
-//!    vertices and edges, and split segments they touch. A segment end left free inside the patch
-//!    (the jamb of a doorway: the floor runs on under the opening) is extended straight on to the
-//!    next segment or the patch's border; that extension is a cut too, but an ordinary seam
-//!    (stitched later), while junction edges are never stitched ([`Split::junction_edges`]).
+//! 2. **Make the cuts separate**: segment ends within [`SNAP_TEXELS`] merge, move onto the patch
+//!    border's vertices and edges, and split segments they touch; inside the patch a cut point
+//!    within [`TOUCH_TEXELS`] of a mesh vertex or edge moves onto it (walls meeting on a floor's
+//!    diagonal: left a millionth of a texel beside it, it made needles). A segment end left free
+//!    inside the patch (the jamb of a doorway: the floor runs on under the opening) is extended
+//!    straight on to the next segment or the patch's border; that extension is a cut too, but an
+//!    ordinary seam (stitched later), while junction edges are never stitched
+//!    ([`Split::junction_edges`]).
 //! 3. **Retriangulate**: each triangle a cut touches is triangulated again with spade's
 //!    constrained Delaunay triangulation (robust predicates; crossing cuts split each other).
 //!    Points on a mesh edge are shared by both triangles on it — the other one is cut too, in
 //!    this patch or the next (no T-junctions) — and points on one edge closer than the snap
-//!    distance merge, so no sliver below a quarter texel appears along an edge. A triangle
+//!    distance merge, so no sliver below a quarter texel appears along an edge; a cut ending
+//!    on an edge next to a corner ends at the corner. Which new edges are cuts comes from the
+//!    triangulation's constraint edges (a cut bent onto a merged point is still a cut). A triangle
 //!    whose pieces do not add up to its area is left uncut (counted in the report), keeping only
 //!    the points on its edges, which its neighbours share.
 //! 4. **Sides**: the instance's triangles are grouped into sides, connected across edges that are
