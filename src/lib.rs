@@ -130,7 +130,7 @@ mod bake;
 
 pub use bake::{
     BakeReport, Baked, Prepared, StageTime, bake, compute, distributed, kept, prepare, relight,
-    write,
+    split_junctions, write,
 };
 pub use build::{BuildReport, Manifest, build};
 pub use config::BakeConfig;

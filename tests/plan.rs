@@ -264,10 +264,16 @@ fn adaptive_density_spends_texels_where_the_light_changes() {
     let baked = lightbake::compute(&fixture("courtyard.gltf"), &config, &NoProgress).unwrap();
     let factors = &baked.config.atlas.instance_density;
     assert_eq!(factors.len(), baked.scene.instances.len(), "{factors:?}");
-    // Instance 0 is the ground, where every shadow falls.
+    // Instance 0 is the ground, where every shadow falls: it gets more texels than the uniform
+    // density, evenly lit instances fewer. (Not necessarily the most: a wall with a shadow across
+    // it can need as much, and the density pilot is a noisy measurement — with the shadow cuts
+    // ending the ground's charts at its shadow edges, a wall came out at 1.68 against the
+    // ground's 1.19 at seed 0, and below the ground at seeds 1 and 2.)
     let ground = factors[0];
+    let mut sorted = factors.clone();
+    sorted.sort_by(f32::total_cmp);
     assert!(
-        factors.iter().all(|&f| f <= ground) && factors.iter().any(|&f| f < 1.0),
+        ground > 1.0 && ground >= sorted[sorted.len() / 2] && sorted[0] < 1.0,
         "{factors:?}"
     );
     let tpu = baked.config.atlas.texels_per_unit as f64;

@@ -257,6 +257,37 @@ impl Prepared {
     }
 }
 
+/// The junction split as a bake runs it on a loaded scene ([`scene::junctions`], cutting along
+/// shadow outlines too when `config` asks for them), at `config`'s texel density; `None` for
+/// the report when the split does not run (turned off, or the input's own UVs are kept).
+pub fn split_junctions(
+    scene: scene::Scene,
+    source: &scene::Source,
+    config: &BakeConfig,
+) -> (scene::Scene, Option<scene::junctions::JunctionReport>) {
+    if !config.atlas.split_junctions || atlas::reuses_input_uvs(&scene, source, &config.atlas) {
+        return (scene, None);
+    }
+    let texel = 1.0 / config.atlas.texels_per_unit;
+    // Shared meshes (`--instancing share`) cannot carry one node's cuts.
+    let whole = atlas::shared_instances(&scene, source, &config.atlas);
+    let (scene, report) = if config.atlas.shadow_cuts && !scene.lights.is_empty() {
+        // Shadow rays see the geometry as loaded: the split moves no surface.
+        let tracer = Tracer::new(&scene);
+        let lights = scene.lights.clone();
+        let light_at = |l: usize, p: Vec3, n: Vec3| {
+            crate::lights::punctual_irradiance(&lights[l], p + n * tracer.epsilon, n, &tracer)
+                .element_sum()
+                / 3.0
+        };
+        let cutter = scene::shadow_cuts::ShadowCutter::new(&scene, &light_at);
+        scene::junctions::split_except(scene, texel, Some(&cutter), &whole)
+    } else {
+        scene::junctions::split_except(scene, texel, None, &whole)
+    };
+    (scene, Some(report))
+}
+
 fn timed(stages: &mut Vec<StageTime>, stage: &'static str, start: Instant) {
     stages.push(StageTime {
         stage,
@@ -322,33 +353,11 @@ fn prepare_loaded(
         config.max_memory.unwrap_or(u64::MAX),
     )?;
     // Receivers are cut at the density's texel size, before the tracer sees their triangles.
-    let mut junctions = None;
-    let scene = if config.atlas.split_junctions
-        && !atlas::reuses_input_uvs(&scene, &source, &config.atlas)
-    {
-        let t = Instant::now();
-        let texel = 1.0 / config.atlas.texels_per_unit;
-        let whole = atlas::shared_instances(&scene, &source, &config.atlas);
-        let (scene, report) = if config.atlas.shadow_cuts && !scene.lights.is_empty() {
-            // Shadow rays see the geometry as loaded: the split moves no surface.
-            let tracer = Tracer::new(&scene);
-            let lights = scene.lights.clone();
-            let light_at = |l: usize, p: Vec3, n: Vec3| {
-                crate::lights::punctual_irradiance(&lights[l], p + n * tracer.epsilon, n, &tracer)
-                    .element_sum()
-                    / 3.0
-            };
-            let cutter = scene::shadow_cuts::ShadowCutter::new(&scene, &light_at);
-            scene::junctions::split_except(scene, texel, Some(&cutter), &whole)
-        } else {
-            scene::junctions::split_except(scene, texel, None, &whole)
-        };
-        junctions = Some(report);
+    let t = Instant::now();
+    let (scene, junctions) = split_junctions(scene, &source, &config);
+    if junctions.is_some() {
         timed(&mut stages, "junctions", t);
-        scene
-    } else {
-        scene
-    };
+    }
 
     let t = Instant::now();
     let tracer = Tracer::new(&scene);

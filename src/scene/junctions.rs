@@ -13,17 +13,23 @@
 //!    candidates) that crosses the patch's plane or has an edge lying in it (a wall standing on
 //!    the floor; corners within [`TOUCH_TEXELS`] of the plane count as on it) gives a segment,
 //!    clipped to the patch's triangles. Coplanar triangles and single touching points give none.
-//! 2. **Make the cuts separate**: segment ends within [`SNAP_TEXELS`] merge, move onto patch
-//!    vertices and edges, and split segments they touch. A segment end left free inside the patch
-//!    (the jamb of a doorway: the floor runs on under the opening) is extended straight on to the
-//!    next segment or the patch's border; that extension is a cut too, but an ordinary seam
-//!    (stitched later), while junction edges are never stitched ([`Split::junction_edges`]).
+//! 2. **Make the cuts separate**: segment ends within [`SNAP_TEXELS`] merge, move onto the patch
+//!    border's vertices and edges, and split segments they touch; inside the patch a cut point
+//!    within [`TOUCH_TEXELS`] of a mesh vertex or edge moves onto it (walls meeting on a floor's
+//!    diagonal: left a millionth of a texel beside it, it made needles). A segment end left free
+//!    inside the patch (the jamb of a doorway: the floor runs on under the opening) is extended
+//!    straight on to the next segment or the patch's border; that extension is a cut too, but an
+//!    ordinary seam (stitched later), while junction edges are never stitched
+//!    ([`Split::junction_edges`]).
 //! 3. **Retriangulate**: each triangle a cut touches is triangulated again with spade's
 //!    constrained Delaunay triangulation (robust predicates; crossing cuts split each other).
 //!    Points on a mesh edge are shared by both triangles on it — the other one is cut too, in
 //!    this patch or the next (no T-junctions) — and points on one edge closer than the snap
-//!    distance merge, so no sliver below a quarter texel appears along an edge. A triangle
-//!    whose pieces do not add up to its area is left whole (counted in the report).
+//!    distance merge, so no sliver below a quarter texel appears along an edge; a cut ending
+//!    on an edge next to a corner ends at the corner. Which new edges are cuts comes from the
+//!    triangulation's constraint edges (a cut bent onto a merged point is still a cut). A triangle
+//!    whose pieces do not add up to its area is left uncut (counted in the report), keeping only
+//!    the points on its edges, which its neighbours share.
 //! 4. **Sides**: the instance's triangles are grouped into sides, connected across edges that are
 //!    not cuts; the atlas never puts two sides into one chart.
 //!
@@ -48,7 +54,8 @@ use super::{Blend, Scene, Split};
 /// (texels).
 pub const SNAP_TEXELS: f64 = 0.25;
 
-/// A corner this close to a patch's plane lies in it (texels): a wall standing on a floor.
+/// A corner this close to a patch's plane lies in it (texels): a wall standing on a floor. A
+/// cut point this close to a vertex or edge of the patch lies on it, likewise.
 pub const TOUCH_TEXELS: f64 = 1.0 / 16.0;
 
 /// A patch is a receiver only when no neighbour of the same mesh continues it more gently than
@@ -69,8 +76,9 @@ pub struct JunctionReport {
     /// Triangles replaced by their pieces, and how many triangles the scene gained.
     pub triangles_split: usize,
     pub triangles_added: usize,
-    /// Triangles left whole because their pieces did not add up to their area (robustness
-    /// fallback; the cell map of divided texels covers them).
+    /// Triangles left uncut because their pieces did not add up to their area (robustness
+    /// fallback: they keep the points their neighbours share on their edges, so no T-junction;
+    /// the cell map of divided texels covers them).
     pub fallback_triangles: usize,
     /// Junction edges whose two sides stayed connected around the junction (the cell map of
     /// divided texels covers them).
@@ -119,7 +127,7 @@ impl JunctionReport {
             },
             if self.fallback_triangles + self.unseparated_edges > 0 {
                 format!(
-                    ", {} triangles left whole, {} edges unseparated",
+                    ", {} triangles left uncut, {} edges unseparated",
                     self.fallback_triangles, self.unseparated_edges
                 )
             } else {
@@ -307,6 +315,32 @@ struct PatchEdges {
     vertices: Vec<(DVec2, bool)>,
 }
 
+impl PatchEdges {
+    /// The patch vertex nearest to `p` within `within`, else the nearest point of a patch edge
+    /// that close (only the border's when `border_only`), with its border flag.
+    fn nearest(&self, p: DVec2, within: f64, border_only: bool) -> Option<(DVec2, bool)> {
+        let vertex = self
+            .vertices
+            .iter()
+            .filter(|v| v.1 || !border_only)
+            .map(|&(v, border)| (v.distance(p), v, border))
+            .filter(|x| x.0 <= within)
+            .min_by(|x, y| x.0.total_cmp(&y.0));
+        let nearest = vertex.or_else(|| {
+            self.edges
+                .iter()
+                .filter(|e| e.1 || !border_only)
+                .map(|&([a, b], border)| {
+                    let (d, t) = distance_to_segment(p, a, b);
+                    (d, a.lerp(b, t), border)
+                })
+                .filter(|x| x.0 <= within)
+                .min_by(|x, y| x.0.total_cmp(&y.0))
+        });
+        nearest.map(|(_, q, border)| (q, border))
+    }
+}
+
 fn distance_to_segment(p: DVec2, a: DVec2, b: DVec2) -> (f64, f64) {
     let d = b - a;
     let t = if d.length_squared() > 0.0 {
@@ -318,40 +352,22 @@ fn distance_to_segment(p: DVec2, a: DVec2, b: DVec2) -> (f64, f64) {
 }
 
 impl Cuts {
-    /// The index of the point at `p`: an existing point, or a border vertex or border edge point
-    /// within `snap`, or a new one.
-    fn point(&mut self, p: DVec2, patch: &PatchEdges, snap: f64) -> u32 {
-        if let Some(i) = self.points.iter().position(|q| q.distance(p) <= snap) {
+    /// The index of the point at `p`: an existing point within the snap distance, else a border
+    /// vertex or border edge point that close (a cut must end on the border), else a vertex or
+    /// edge point of the patch within the touch distance, else a new point.
+    ///
+    /// Inside the patch a cut stays where the wall stands, up to the touch distance: a cut
+    /// point lying on a mesh edge up to rounding (walls meeting on a floor's diagonal) would
+    /// otherwise stay inside one triangle a millionth of a texel from that edge, and the
+    /// retriangulation would make needles there.
+    fn point(&mut self, p: DVec2, patch: &PatchEdges, tol: Tolerances) -> u32 {
+        if let Some(i) = self.points.iter().position(|q| q.distance(p) <= tol.snap) {
             return i as u32;
         }
-        // Only onto the border: inside the patch a cut stays exactly where the wall stands
-        // (spade splits the edges it crosses), at the border it must end on an edge.
-        let nearest_vertex = patch
-            .vertices
-            .iter()
-            .filter(|v| v.1)
-            .map(|&(v, border)| (v.distance(p), v, border))
-            .filter(|x| x.0 <= snap)
-            .min_by(|x, y| x.0.total_cmp(&y.0));
-        let (q, border) = match nearest_vertex {
-            Some((_, v, border)) => (v, border),
-            None => {
-                let nearest_edge = patch
-                    .edges
-                    .iter()
-                    .filter(|e| e.1)
-                    .map(|&([a, b], border)| {
-                        let (d, t) = distance_to_segment(p, a, b);
-                        (d, a.lerp(b, t), border)
-                    })
-                    .filter(|x| x.0 <= snap)
-                    .min_by(|x, y| x.0.total_cmp(&y.0));
-                match nearest_edge {
-                    Some((_, q, border)) => (q, border),
-                    None => (p, false),
-                }
-            }
-        };
+        let (q, border) = patch
+            .nearest(p, tol.snap, true)
+            .or_else(|| patch.nearest(p, tol.touch, false))
+            .unwrap_or((p, false));
         self.points.push(q);
         self.on_border.push(border);
         (self.points.len() - 1) as u32
@@ -408,7 +424,8 @@ impl Cuts {
 
     /// Extends every free segment end (inside the patch, on no other segment) straight on to
     /// the nearest segment or patch border.
-    fn extend_free_ends(&mut self, patch: &PatchEdges, snap: f64) {
+    fn extend_free_ends(&mut self, patch: &PatchEdges, tol: Tolerances) {
+        let snap = tol.snap;
         let mut p = 0;
         while p < self.points.len() as u32 {
             if self.on_border[p as usize] || self.degree(p) != 1 {
@@ -458,7 +475,7 @@ impl Cuts {
                 }
             }
             if let Some((s, _)) = best {
-                let hit = self.point(origin + dir * s, patch, snap);
+                let hit = self.point(origin + dir * s, patch, tol);
                 self.add(p, hit, true);
                 self.split_at_points(snap);
             }
@@ -554,7 +571,8 @@ fn split_instance(
     };
 
     // Cuts per patch, clipped into its triangles; points on mesh edges collected per welded edge.
-    let mut pieces: BTreeMap<u32, Vec<[End; 2]>> = BTreeMap::new();
+    // Per triangle: the cut pieces inside it, each with its extension flag.
+    let mut pieces: BTreeMap<u32, Vec<([End; 2], bool)>> = BTreeMap::new();
     // Welded edge → (its length, parameters from the lower welded end).
     let mut edge_points: BTreeMap<[u32; 2], (f64, Vec<f64>)> = BTreeMap::new();
     let mut patch_cuts: Vec<Option<Cuts>> = Vec::with_capacity(patches.len());
@@ -572,7 +590,7 @@ fn split_instance(
             for &t in &patch.triangles {
                 let corners = tris[t as usize].map(|v| patch.plane.to_2d(pos(v)));
                 let w = welded(t as usize);
-                for &([a, b], _) in &cuts.segments {
+                for &([a, b], extension) in &cuts.segments {
                     let Some(ends) = clip(
                         cuts.points[a as usize],
                         cuts.points[b as usize],
@@ -595,7 +613,7 @@ fn split_instance(
                         }
                     }
                     if !along_an_edge(ends) {
-                        pieces.entry(t).or_default().push(ends);
+                        pieces.entry(t).or_default().push((ends, extension));
                     }
                 }
             }
@@ -665,9 +683,15 @@ fn split_instance(
             None => &own_frame(tris[t].map(pos)),
         };
         let corners = tris[t].map(|v| frame.plane.to_2d(pos(v)));
-        let Some(faces) = retriangulate(corners, &on_edges, own.map_or(&[][..], Vec::as_slice))
-        else {
+        let pieces = own.map_or(&[][..], Vec::as_slice);
+        let faces = retriangulate(corners, &on_edges, pieces).or_else(|| {
             report.fallback_triangles += 1;
+            // Left uncut, but with the points its neighbours share on its edges: no T-junction.
+            (!pieces.is_empty())
+                .then(|| retriangulate(corners, &on_edges, &[]))
+                .flatten()
+        });
+        let Some(faces) = faces else {
             out.triangles.push(tris[t]);
             out.source_triangle.push(inst.source_triangle[t]);
             cut_bits.push([0, 0]);
@@ -675,8 +699,8 @@ fn split_instance(
             continue;
         };
         any_split = true;
-        report.triangles_split += 1;
-        for face in faces {
+        report.triangles_split += usize::from(faces.len() > 1);
+        for (face, along_pieces) in faces {
             let mut tri = [0u32; 3];
             for (c, (p, end)) in face.iter().enumerate() {
                 tri[c] = match end {
@@ -687,7 +711,8 @@ fn split_instance(
                     }
                 };
             }
-            let bits = cuts.map_or([0, 0], |c| cut_bits_of(face.map(|f| f.0), c, tol.snap));
+            let along_cuts = cuts.map_or([0, 0], |c| cut_bits_of(face.map(|f| f.0), c, tol.snap));
+            let bits = [0, 1].map(|k| along_cuts[k] | along_pieces[k]);
             out.triangles.push(tri);
             out.source_triangle.push(inst.source_triangle[t]);
             cut_bits.push(bits);
@@ -922,8 +947,8 @@ fn patch_cuts_of(
         }
         for [s0, s1] in inside_intervals(a, b, &corners2d, tol.snap) {
             if (s1 - s0) * length > tol.snap {
-                let i = cuts.point(a.lerp(b, s0), &patch_edges, tol.snap);
-                let j = cuts.point(a.lerp(b, s1), &patch_edges, tol.snap);
+                let i = cuts.point(a.lerp(b, s0), &patch_edges, tol);
+                let j = cuts.point(a.lerp(b, s1), &patch_edges, tol);
                 cuts.add(i, j, false);
             }
         }
@@ -931,8 +956,8 @@ fn patch_cuts_of(
     // Shadow outlines of punctual lights: cuts never stitched, as junctions are.
     if let Some(shadows) = shadows {
         for [a, b] in shadows.patch_cuts(&patch.plane, &corners2d, (lo, hi), tol.texel, tol.touch) {
-            let i = cuts.point(a, &patch_edges, tol.snap);
-            let j = cuts.point(b, &patch_edges, tol.snap);
+            let i = cuts.point(a, &patch_edges, tol);
+            let j = cuts.point(b, &patch_edges, tol);
             let before = cuts.segments.len();
             cuts.add(i, j, false);
             report.shadow_segments += cuts.segments.len() - before;
@@ -955,7 +980,7 @@ fn patch_cuts_of(
         return None;
     }
     cuts.split_at_points(tol.snap);
-    cuts.extend_free_ends(&patch_edges, tol.snap);
+    cuts.extend_free_ends(&patch_edges, tol);
     Some(cuts)
 }
 
@@ -1033,12 +1058,16 @@ fn along_an_edge(ends: [End; 2]) -> bool {
 type Face = [(DVec2, Option<End>); 3];
 
 /// Triangulates triangle `c` again with the points on its edges (parameters from corner `k`,
-/// ascending) and the cut pieces inside it; `None` when the faces do not add up to its area.
+/// ascending) and the cut pieces inside it (with their extension flags); `None` when the faces
+/// do not add up to its area (one face, the triangle itself, when every piece runs along its
+/// edges). Each face comes with the edges that lie along a piece,
+/// `[junction, any cut]` as in [`cut_bits_of`]: a piece ending at a merged edge point or a corner
+/// runs where its cut nearly does, so the constraint edges say what is cut, not the geometry.
 fn retriangulate(
     c: [DVec2; 3],
     on_edges: &[Vec<f64>; 3],
-    pieces: &[[End; 2]],
-) -> Option<Vec<Face>> {
+    pieces: &[([End; 2], bool)],
+) -> Option<Vec<(Face, [u8; 2])>> {
     let mut cdt: ConstrainedDelaunayTriangulation<Point2<f64>> =
         ConstrainedDelaunayTriangulation::new();
     let mut what: BTreeMap<usize, End> = BTreeMap::new();
@@ -1066,21 +1095,47 @@ fn retriangulate(
             cdt.add_constraint_and_split(pair[0], pair[1], |p| p);
         }
     }
-    for piece in pieces {
+    // Each piece as inserted: its end handles and whether it is a junction.
+    let mut inserted: Vec<([spade::handles::FixedVertexHandle; 2], bool)> = Vec::new();
+    for (piece, extension) in pieces {
         let mut handles = [corner[0]; 2];
         for (h, end) in handles.iter_mut().zip(piece) {
             *h = match *end {
                 End::Corner(k) => corner[k],
-                // The merged edge point nearest to where the cut meets the edge.
+                // The merged edge point nearest to where the cut meets the edge, or the corner
+                // when that is nearer (points next to a corner were merged into it).
                 End::Edge(k, t) => on_edge_handles[k]
                     .iter()
+                    .copied()
+                    .chain([(0.0, corner[k]), (1.0, corner[(k + 1) % 3])])
                     .min_by(|x, y| (x.0 - t).abs().total_cmp(&(y.0 - t).abs()))
                     .map(|x| x.1)?,
                 End::Inside(p) => insert(&mut cdt, p, End::Inside(p))?,
             };
         }
-        cdt.add_constraint_and_split(handles[0], handles[1], |p| p);
+        if handles[0] != handles[1] {
+            cdt.add_constraint_and_split(handles[0], handles[1], |p| p);
+            inserted.push((handles, !extension));
+        }
     }
+    let at = |h: spade::handles::FixedVertexHandle| {
+        let q = cdt.vertex(h).position();
+        DVec2::new(q.x, q.y)
+    };
+    let lines: Vec<([DVec2; 2], bool)> = inserted
+        .iter()
+        .map(|&([a, b], junction)| ([at(a), at(b)], junction))
+        .collect();
+    // A constraint edge along an inserted piece (split where pieces cross: its crossing points
+    // lie on it up to rounding).
+    let scale = (c[1] - c[0]).length() + (c[2] - c[1]).length() + (c[0] - c[2]).length();
+    let on_piece = |p: DVec2, q: DVec2| -> Option<bool> {
+        let near = |x: DVec2, [a, b]: [DVec2; 2]| distance_to_segment(x, a, b).0 <= 1e-7 * scale;
+        let along = |line| near(p, line) && near(q, line) && near(0.5 * (p + q), line);
+        let mut hits = lines.iter().filter(|(line, _)| along(*line));
+        let first = hits.next()?;
+        Some(first.1 || hits.any(|h| h.1))
+    };
     let area = 0.5 * (c[1] - c[0]).perp_dot(c[2] - c[0]);
     let mut faces = Vec::new();
     let mut total = 0.0;
@@ -1095,9 +1150,21 @@ fn retriangulate(
             continue;
         }
         total += a;
-        faces.push([0, 1, 2].map(|k| (p[k], what.get(&v[k].fix().index()).copied())));
+        let mut bits = [0u8; 2];
+        for k in 0..3 {
+            let constraint = cdt.exists_constraint(v[k].fix(), v[(k + 1) % 3].fix());
+            if constraint && let Some(junction) = on_piece(p[k], p[(k + 1) % 3]) {
+                bits[1] |= 1 << k;
+                bits[0] |= u8::from(junction) << k;
+            }
+        }
+        faces.push((
+            [0, 1, 2].map(|k| (p[k], what.get(&v[k].fix().index()).copied())),
+            bits,
+        ));
     }
-    ((total - area).abs() <= 1e-6 * area && faces.len() > 1).then_some(faces)
+    // One face: every piece runs along the triangle's edges (ends merged into its corners).
+    ((total - area).abs() <= 1e-6 * area).then_some(faces)
 }
 
 /// Barycentric weights of `p` in triangle `c`; points on an edge get exactly two weights.
@@ -1338,6 +1405,71 @@ mod tests {
             marked, 4,
             "two triangles on each side of the base have it as an edge"
         );
+    }
+
+    /// Shortest edge and smallest altitude of scene triangle `t`.
+    fn triangle_shape(scene: &Scene, t: usize) -> (f64, f64) {
+        let p = scene.triangles[t].map(|v| scene.positions[v as usize].as_dvec3());
+        let edges = [0, 1, 2].map(|k| p[k].distance(p[(k + 1) % 3]));
+        let longest = edges.iter().copied().fold(0.0, f64::max);
+        let shortest = edges.iter().copied().fold(f64::INFINITY, f64::min);
+        (shortest, 2.0 * triangle_area(scene, t) / longest)
+    }
+
+    /// Two_rooms' ceiling at 16 texels per unit, reduced to one cell: a wall of two quads
+    /// meets the cell's diagonal where its quads meet, (−1, −2). In f32 the diagonal runs
+    /// 4e-7 texel past that cut point, which was left inside one triangle: two needles with an
+    /// edge of 6e-7 texel (the atlas must hide such triangles from xatlas). The point now lies
+    /// on the diagonal, shared by the triangles on both sides.
+    #[test]
+    fn walls_meeting_on_a_diagonal_make_no_needle() {
+        let (x0, x1, z0, z1) = (-4.0 / 3.0, -2.0 / 3.0, -16.0 / 7.0, -12.0 / 7.0);
+        let cell = (
+            vec![
+                Vec3::new(x0, 0.0, z0),
+                Vec3::new(x0, 0.0, z1),
+                Vec3::new(x1, 0.0, z1),
+                Vec3::new(x1, 0.0, z0),
+            ],
+            vec![[0, 1, 2], [0, 2, 3]],
+        );
+        let wall = (
+            [-2.0, -1.0, 0.0]
+                .into_iter()
+                .flat_map(|x| [Vec3::new(x, 0.0, -2.0), Vec3::new(x, 3.0, -2.0)])
+                .collect(),
+            vec![[0, 2, 3], [0, 3, 1], [2, 4, 5], [2, 5, 3]],
+        );
+        let texel = 1.0 / 16.0;
+        let (split, report) = split(scene_of(&[cell, wall]), texel);
+        assert_eq!(report.receivers, 1, "{report:?}");
+        assert_eq!(report.fallback_triangles, 0, "{report:?}");
+        assert_eq!(report.unseparated_edges, 0, "{report:?}");
+        let cell = &split.instances[0];
+        let area: f64 = cell
+            .triangles
+            .clone()
+            .map(|t| triangle_area(&split, t as usize))
+            .sum();
+        assert!((area - 2.0 / 3.0 * 4.0 / 7.0).abs() < 1e-6, "area {area}");
+        assert_no_t_junctions(&split, 0);
+        for t in cell.triangles.clone() {
+            let (edge, altitude) = triangle_shape(&split, t as usize);
+            let texel = f64::from(texel);
+            assert!(
+                edge > 0.25 * texel && altitude > 0.25 * texel,
+                "triangle {t}: shortest edge {:.1e}, altitude {:.1e} texel",
+                edge / texel,
+                altitude / texel
+            );
+            // Every triangle on one side of the wall, and the cut on the wall's line.
+            let zs = split.triangles[t as usize].map(|v| split.positions[v as usize].z);
+            assert!(zs.iter().all(|&z| z <= -2.0 + 1e-6) || zs.iter().all(|&z| z >= -2.0 - 1e-6));
+        }
+        for k in cell.vertices.start + 4..cell.vertices.end {
+            let p = split.positions[k as usize];
+            assert!((p.z + 2.0).abs() < 1e-6, "new vertex {p} off the wall");
+        }
     }
 
     #[test]
