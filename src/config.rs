@@ -225,9 +225,46 @@ pub struct TransportParams {
     /// source; set by the bake when `output.keep_transport` or `output.layers` asks.
     pub split_direct: bool,
     /// Store Monte Carlo rows as their exact ray counts (`transport::Rows::Counts`): the same
-    /// output from 3.6–6.5× fewer row bytes, but sweeps 2–3× slower. Set by the memory check
-    /// (`bake::memory::fit`) when f32 rows would not fit the memory limit and counts would.
+    /// output from 3.6–6.5× fewer row bytes, sweeps somewhat slower (README, "Memory"). Set
+    /// by `row_storage` when forced, else by the memory check (`bake::memory::fit`) when f32
+    /// rows would not fit the memory limit and counts would.
     pub count_rows: bool,
+    /// How stored Monte Carlo rows are held (`--rows`): the planner's choice, or forced.
+    pub row_storage: RowStorage,
+}
+
+/// How stored Monte Carlo rows are held in memory (`--rows`; [`TransportParams::count_rows`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum RowStorage {
+    /// f32 weights, unless their estimated peak exceeds the memory limit and ray counts' does
+    /// not (`plan::choose_row_storage`).
+    #[default]
+    Auto,
+    /// f32 weights whatever the memory estimate (the bake may then switch to the gather
+    /// solver or be refused).
+    F32,
+    /// Exact ray counts whatever the memory estimate.
+    Counts,
+}
+
+impl RowStorage {
+    /// The names `--rows` takes, in the order of the variants.
+    pub const NAMES: [&'static str; 3] = ["auto", "f32", "counts"];
+
+    /// The storage named `name` (one of [`RowStorage::NAMES`]).
+    pub fn from_name(name: &str) -> Option<RowStorage> {
+        match name {
+            "auto" => Some(RowStorage::Auto),
+            "f32" => Some(RowStorage::F32),
+            "counts" => Some(RowStorage::Counts),
+            _ => None,
+        }
+    }
+
+    /// Whether Monte Carlo rows may be stored as counts: forced, or the planner's to choose.
+    pub fn may_count(self) -> bool {
+        self != RowStorage::F32
+    }
 }
 
 /// How the radiosity system is iterated.
@@ -373,6 +410,7 @@ impl BakeConfig {
                 denoise: true,
                 split_direct: false,
                 count_rows: false,
+                row_storage: RowStorage::Auto,
             },
             solve: SolveParams {
                 tolerance,

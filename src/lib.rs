@@ -56,7 +56,8 @@
 //!   scene → trace → atlas → texels → lights
 //!   transport                        rows (one chunked row builder; `storage`: f32 weights, or
 //!                                    Monte Carlo rows as exact ray counts when the planner finds
-//!                                    f32 rows do not fit the memory budget), montecarlo, point,
+//!                                    f32 rows do not fit the memory budget or `--rows counts`
+//!                                    asks), montecarlo, point,
 //!                                    polygon, hierarchical link building and direct light
 //!   solve                            one stopping rule; jacobi, gauss_seidel, southwell on stored
 //!                                    rows; gather (matrix-free) and hierarchical make their own

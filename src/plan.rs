@@ -85,7 +85,7 @@ use glam::Vec3;
 pub use gathered::GatheredSample;
 pub use punctual::PunctualSample;
 
-use crate::config::{BakeConfig, FormFactors, Keep, RowSolver, Technique};
+use crate::config::{BakeConfig, FormFactors, Keep, RowSolver, RowStorage, Technique};
 use crate::metrics;
 use crate::scene::Scene;
 use crate::texels::{NO_TEXEL, Texels};
@@ -594,14 +594,24 @@ pub fn choose_solver(texels: usize, config: &mut BakeConfig, plan: &mut Plan, ke
         n * entries_per_texel(stored, n, config.transport.gather_rays as f64)
             * row_entry_bytes(stored, counts)
     };
-    let counts = stored.is_monte_carlo() && bytes(false) > ROW_MEMORY_LIMIT;
+    let storage = config.transport.row_storage;
+    let counts = stored.is_monte_carlo()
+        && match storage {
+            RowStorage::Auto => bytes(false) > ROW_MEMORY_LIMIT,
+            RowStorage::F32 => false,
+            RowStorage::Counts => true,
+        };
     config.transport.count_rows = counts;
     let rows = bytes(counts);
-    let what = match counts {
-        true => {
+    let what = match (counts, storage) {
+        (true, RowStorage::Counts) => {
+            "stored Monte Carlo rows as exact ray counts (about 1 byte per ray; forced by --rows counts)"
+        }
+        (true, _) => {
             "stored Monte Carlo rows as exact ray counts (about 1 byte per ray; f32 rows would exceed the limit)"
         }
-        false => "stored f32 rows",
+        (false, RowStorage::F32) => "stored f32 rows (forced by --rows f32)",
+        (false, _) => "stored f32 rows",
     };
     config.technique = if config.technique.is_monte_carlo() && rows > ROW_MEMORY_LIMIT {
         config.transport.count_rows = false;
@@ -1149,9 +1159,10 @@ pub fn entries_per_texel(technique: Technique, texels: f64, gather_rays: f64) ->
     }
 }
 
-/// Step 5b, once the rays are chosen: how stored Monte Carlo rows are held — f32 weights
+/// Step 5b, once the rays are chosen: how stored Monte Carlo rows are held (forced by
+/// `config.transport.row_storage`, `--rows`, or chosen here) — f32 weights
 /// (fastest sweeps) when their estimated peak `f32_rows` fits `limit`, else exact ray counts
-/// (`count_rows`: the same output, sweeps 2–3× slower) when theirs does; left as is when
+/// (`count_rows`: the same output, slower sweeps) when theirs does; left as is when
 /// neither fits ([`fit_memory`] may then switch to the gather solver). Sets
 /// `config.transport.count_rows`; returns the reason, with both estimates.
 pub fn choose_row_storage(
@@ -1172,6 +1183,21 @@ pub fn choose_row_storage(
         format_bytes(count_rows.total()),
     );
     let limit_text = format_bytes(limit);
+    match config.transport.row_storage {
+        RowStorage::F32 => {
+            config.transport.count_rows = false;
+            return Some(format!(
+                "rows f32, forced by --rows f32: estimated peak {f32_peak} (as ray counts {counts_peak}); limit {limit_text}"
+            ));
+        }
+        RowStorage::Counts => {
+            config.transport.count_rows = true;
+            return Some(format!(
+                "rows as exact ray counts, forced by --rows counts: estimated peak {counts_peak} (with f32 rows {f32_peak}); limit {limit_text}"
+            ));
+        }
+        RowStorage::Auto => {}
+    }
     if config.transport.count_rows {
         return Some(format!(
             "rows as ray counts (chosen before; estimated peak {counts_peak}, with f32 rows {f32_peak}; limit {limit_text})"
@@ -1179,7 +1205,7 @@ pub fn choose_row_storage(
     }
     if f32_rows.total() <= limit {
         return Some(format!(
-            "rows f32: estimated peak {f32_peak} within the memory limit {limit_text} (as ray counts {counts_peak}: smaller, sweeps 2–3× slower)"
+            "rows f32: estimated peak {f32_peak} within the memory limit {limit_text} (as ray counts {counts_peak}: smaller, slower sweeps)"
         ));
     }
     if count_rows.total() > limit {
@@ -1187,7 +1213,7 @@ pub fn choose_row_storage(
     }
     config.transport.count_rows = true;
     Some(format!(
-        "rows as exact ray counts: the estimated peak with f32 rows {f32_peak} exceeds the memory limit {limit_text}, with counts {counts_peak} fits (the same output; sweeps 2–3× slower)"
+        "rows as exact ray counts: the estimated peak with f32 rows {f32_peak} exceeds the memory limit {limit_text}, with counts {counts_peak} fits (the same output; slower sweeps)"
     ))
 }
 

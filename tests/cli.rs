@@ -89,10 +89,25 @@ fn help_explains_every_option() {
         "--tolerance",
         "--solver",
         "--max-memory",
+        "--rows",
     ] {
         assert!(help.contains(flag), "{flag} missing from help");
     }
     assert!(help.contains("default"), "defaults not shown");
+}
+
+/// `--rows counts` reaches the planner, and `--explain` says the storage was forced.
+#[test]
+fn rows_flag_is_explained_as_forced() {
+    let dir = scratch();
+    let o = bake(
+        &fixture("cornell_box.gltf"),
+        &dir.path().join("o"),
+        &["--rows", "counts", "--explain"],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(stdout.contains("forced by --rows counts"), "{stdout}");
 }
 
 /// Runs a bake that must fail; checks the message and that nothing was written.

@@ -540,3 +540,77 @@ fn the_error_map_marks_a_shadow_edge_above_an_evenly_lit_wall() {
     let gltf = std::fs::read_to_string(dir.path().join("spot_and_directional.gltf")).unwrap();
     assert!(!gltf.contains("_error"));
 }
+
+/// `--rows` forces the storage whatever the memory estimate: f32 where the planner would pick
+/// counts, counts where f32 rows fit; `auto` picks as before.
+#[test]
+fn rows_option_overrides_the_storage_choice() {
+    use lightbake::config::RowStorage;
+    use lightbake::plan::{self, MemoryEstimate};
+    let with_rows = |rows: f64| MemoryEstimate {
+        scene: 1e6,
+        rows,
+        ..MemoryEstimate::default()
+    };
+    let (f32_rows, count_rows) = (with_rows(8e8), with_rows(1e8));
+    let between = 5e8;
+    let above = 1e9;
+    for (storage, limit, counts, forced) in [
+        (RowStorage::Auto, between, true, false),
+        (RowStorage::Auto, above, false, false),
+        (RowStorage::F32, between, false, true),
+        (RowStorage::Counts, above, true, true),
+    ] {
+        let mut config = BakeConfig::medium();
+        config.transport.row_storage = storage;
+        let reason = plan::choose_row_storage(&f32_rows, &count_rows, limit, &mut config)
+            .expect("Monte Carlo rows have a storage");
+        assert_eq!(config.transport.count_rows, counts, "{storage:?} {limit}");
+        assert_eq!(reason.contains("forced by --rows"), forced, "{reason}");
+    }
+}
+
+/// A bake forced to count rows stores them as counts and gives the f32 bake's very lightmap:
+/// counts are exact, so the error bound against f32 rows is zero. Unknown names and methods
+/// without Monte Carlo rows are refused.
+#[test]
+fn forced_count_rows_bake_as_f32_rows_do() {
+    use lightbake::build::options::Options;
+    use lightbake::transport::Rows;
+    let options = |rows: &str| Options {
+        quality: Some("draft".into()),
+        rays: Some(128),
+        rows: Some(rows.into()),
+        ..Options::default()
+    };
+    let bake = |rows: &str| {
+        let config = options(rows).config().unwrap();
+        lightbake::compute(&fixture("cornell_box.gltf"), &config, &NoProgress).unwrap()
+    };
+    let (f32_baked, counted, auto) = (bake("f32"), bake("counts"), bake("auto"));
+    assert!(matches!(f32_baked.transport.rows, Rows::Weights(_)));
+    assert!(matches!(auto.transport.rows, Rows::Weights(_)));
+    assert!(matches!(counted.transport.rows, Rows::Counts(_)));
+    assert!(counted.transport.rows.bytes() * 4 < f32_baked.transport.rows.bytes());
+    assert_eq!(
+        counted.transport.rows.entries(),
+        f32_baked.transport.rows.entries()
+    );
+    assert!(counted.lightmap == f32_baked.lightmap);
+    assert!(auto.lightmap == f32_baked.lightmap);
+    let reasons = |b: &lightbake::Baked| b.plan.as_ref().unwrap().reasons.join("\n");
+    assert!(
+        reasons(&counted).contains("forced by --rows counts"),
+        "{}",
+        reasons(&counted)
+    );
+    assert!(reasons(&f32_baked).contains("forced by --rows f32"));
+    assert!(!reasons(&auto).contains("forced"));
+
+    assert!(options("sideways").config().is_err());
+    let point = Options {
+        method: Some("point".into()),
+        ..options("counts")
+    };
+    assert!(point.config().unwrap_err().to_string().contains("rows"));
+}

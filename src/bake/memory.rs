@@ -154,12 +154,13 @@ impl Sizes {
     /// The least a bake of `config` can need: with the automatic choice of rays, its pilot
     /// (the first pair held while the second is built, the worst case) and a final bake with
     /// the gather solver when the solver may switch; otherwise the configured bake (Monte Carlo
-    /// rows as ray counts, the smaller storage `fit` may choose).
+    /// rows as ray counts, the smaller storage `fit` may choose, unless `--rows f32`).
     fn least(&self, config: &BakeConfig) -> MemoryEstimate {
         let k = PILOT_RAYS as f64;
+        let may_count = config.transport.row_storage.may_count();
         let configured = self.estimate_rows(
             config.technique,
-            true,
+            may_count,
             config.transport.gather_rays as f64,
             0.0,
             0.0,
@@ -180,9 +181,9 @@ impl Sizes {
         match pilot {
             true => larger(
                 worst_pilot,
-                self.estimate_rows(last, true, rays, 2.0, 4.0 * k),
+                self.estimate_rows(last, may_count, rays, 2.0, 4.0 * k),
             ),
-            false => self.estimate_rows(last, true, rays, 0.0, 0.0),
+            false => self.estimate_rows(last, may_count, rays, 0.0, 0.0),
         }
     }
 }
@@ -208,8 +209,10 @@ impl Sizes {
     /// See [`expected_peak`].
     fn expected(&self, config: &BakeConfig, limit: f64) -> MemoryEstimate {
         let rays = config.transport.gather_rays as f64;
+        // Forced counts (`--rows counts`) are known here; the planner's choice is not yet.
+        let counts = config.transport.count_rows;
         let Some(auto) = config.auto else {
-            return self.estimate(config.technique, rays, 0.0, 0.0);
+            return self.estimate_rows(config.technique, counts, rays, 0.0, 0.0);
         };
         // The automatic choice makes the method Monte Carlo unless the user fixed it.
         let technique = match auto.keep.method || config.technique.is_monte_carlo() {
@@ -223,7 +226,7 @@ impl Sizes {
         } else {
             (0.0, 0.0)
         };
-        let mut last = self.estimate(technique, rays, held, held_rays);
+        let mut last = self.estimate_rows(technique, counts, rays, held, held_rays);
         if last.total() > limit && monte_carlo && !auto.keep.solver {
             last = self.estimate(Technique::Gather, rays, held, held_rays);
         }

@@ -5,7 +5,7 @@
 use glam::Vec3;
 use serde::Deserialize;
 
-use crate::config::{AutoParams, Instancing, Keep, LayerGroup, Technique, UvMode};
+use crate::config::{AutoParams, Instancing, Keep, LayerGroup, RowStorage, Technique, UvMode};
 use crate::{BakeConfig, Error, Result};
 
 /// Every option of `lightbake bake` that changes what is baked; `None` (left out) is the
@@ -51,6 +51,9 @@ pub struct Options {
     pub seed: Option<u64>,
     /// Memory the bake may use, e.g. `"512M"`, `"8G"` (binary units) or bytes.
     pub max_memory: Option<String>,
+    /// How stored Monte Carlo rows are held: `auto` (the default: the planner's choice),
+    /// `f32` or `counts`.
+    pub rows: Option<String>,
     /// Also write `<stem>.transport` for `lightbake relight`.
     pub keep_transport: Option<bool>,
     /// Per-light layers: `[]` for a layer per light, or groups `"GROUP=NAME,NAME"`.
@@ -163,6 +166,25 @@ impl Options {
             .map(|specs| specs.iter().map(|s| LayerGroup::parse(s)).collect())
             .next()
             .transpose()?;
+        c.transport.row_storage = match self.rows.as_deref() {
+            None => RowStorage::Auto,
+            Some(name) => RowStorage::from_name(name)
+                .ok_or_else(|| expected("rows", name, &RowStorage::NAMES))?,
+        };
+        c.transport.count_rows = c.transport.row_storage == RowStorage::Counts;
+        let stores_monte_carlo_rows =
+            |c: &BakeConfig| c.technique.is_monte_carlo() && c.technique != Technique::Gather;
+        if c.transport.row_storage != RowStorage::Auto
+            && (self.method.is_some() || self.solver.is_some())
+            && !stores_monte_carlo_rows(&c)
+        {
+            return Err(Error::Option(format!(
+                "rows {:?}: only Monte Carlo rows with a stored-row solver have a storage to \
+                 choose, not {}",
+                self.rows.as_deref().unwrap_or_default(),
+                c.technique
+            )));
+        }
         if let Some(size) = &self.max_memory {
             c.max_memory =
                 Some(parse_memory(size).map_err(|e| Error::Option(format!("max-memory {e}")))?);

@@ -111,6 +111,17 @@ enum SolverArg {
     Gather,
 }
 
+/// The names are [`lightbake::config::RowStorage::NAMES`].
+#[derive(Clone, Copy, ValueEnum)]
+enum RowsArg {
+    /// The planner's choice: f32 weights unless only ray counts fit the memory limit.
+    Auto,
+    /// f32 weights (the fastest sweeps).
+    F32,
+    /// Exact ray counts (the least memory; the same output).
+    Counts,
+}
+
 /// The atlas options, shared by `bake` and `reference` so their texels line up.
 #[derive(clap::Args)]
 struct AtlasArgs {
@@ -249,6 +260,11 @@ struct BakeArgs {
     /// gather solver when that fits (automatic choice only), or is refused before any heavy work.
     #[arg(long, value_name = "SIZE", value_parser = lightbake::build::options::parse_memory)]
     max_memory: Option<u64>,
+    /// How stored Monte Carlo rows are held: auto (f32 weights, or exact ray counts when f32
+    /// rows would not fit the memory limit and counts would), f32, or counts (the same output
+    /// from 3.6–6.5× fewer row bytes; see the README's "Memory").
+    #[arg(long, value_enum, default_value = "auto")]
+    rows: RowsArg,
     /// Also write <stem>.transport beside the output: what `lightbake relight` needs to solve
     /// this bake again with other light and material values without casting a ray.
     #[arg(long)]
@@ -422,6 +438,7 @@ impl BakeArgs {
             exposure: Some(self.exposure),
             seed: Some(self.seed),
             max_memory: self.max_memory.map(|bytes| bytes.to_string()),
+            rows: Some(value_name(self.rows)),
             keep_transport: Some(self.keep_transport),
             layers: self.layers.specs(),
         }

@@ -38,7 +38,8 @@ pub(crate) fn radiosity(h: &[Vec3], albedo: &[Vec3], emitted: &[Vec3]) -> Vec<Ve
 }
 
 /// The new `H` of row `i` of `t`: its direct light plus what the row gathers from `radiosity`.
-#[inline]
+/// Inlined into the sweep's loop, as it was before rows had two storages (a call per row).
+#[inline(always)]
 pub(crate) fn gathered(t: &Transport, i: usize, radiosity: &[Vec3]) -> Vec3 {
     let gathered = t
         .row(i)

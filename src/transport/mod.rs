@@ -125,7 +125,7 @@ impl Sources {
 
 impl Transport {
     /// The entries of row `i` as (source texel, F_ij).
-    #[inline]
+    #[inline(always)]
     pub fn row(&self, i: usize) -> Row<'_> {
         self.rows.row(i)
     }

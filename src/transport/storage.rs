@@ -3,23 +3,35 @@
 //!
 //! A Monte Carlo entry is `F_ij = hits_ij / K_i` (hits of texel `j` among the `K_i` rays of
 //! texel `i`), so a row is stored losslessly as `K_i` and, per entry, the step from the previous
-//! column and the hit count. A non-empty row's bytes are
+//! column and the hit count. A non-empty row's bytes are three streams after a header:
 //!
 //! ```text
-//!   varint(m) · counts (m bytes) · steps (one varint per entry)
+//!   varint(entries) · varint(far bytes) · steps (1 byte per entry) · far · counts
 //! ```
 //!
-//! where each step is the LEB128 varint `gap << 1 | (hits > 1)` (`gap` = column − previous
-//! column − 1; columns are sorted and distinct) and each entry hit more than once takes the next
-//! count byte, `hits − 2` (255 escapes to a 4-byte count). Most entries are hit once and lie
-//! near the previous one, so an entry takes 1–2 bytes instead of 8 (u32 column + f32 weight).
+//! With `gap` = column − previous column − 1 (columns are sorted and distinct; the first gap
+//! counts from column 0), an entry's step byte is `far << 7 | (gap & 63) << 1 | repeated`.
+//! `far` says `gap ≥ 64`: the next far byte holds `gap >> 6` (255 escapes to 4 bytes,
+//! little-endian). `repeated` says the entry was hit more than once: the next count byte holds
+//! `hits − 1` (255 escapes to `hits` in 4 bytes). Most entries are hit once and lie near the
+//! previous one, so an entry takes 1–2 bytes instead of 8 (u32 column + f32 weight).
 //! Decoding rebuilds the very f32 the builder used to store (`hits as f32 / K_i as f32`), so
 //! every sum is bit-identical.
 //!
-//! Why two streams: the counts are read without a branch on the flag (a repeated hit is a coin
-//! toss in small scenes; a mispredicted branch per entry made sweeps 2.5–3× slower than f32
-//! rows), and the step's length branch is well predicted. The varint is written here rather
-//! than taken from a crate for that layout: it is decoded inline in the solvers' sweeps.
+//! Why this layout: a sweep's sum over f32 rows is paced by its chain of adds (one per entry),
+//! and the decoding must fit beside it. Entry `k`'s step byte sits at a fixed place
+//! (`steps[k]`), and the far and count streams advance by a flag of that byte, never by a byte
+//! read from their own stream, so no load waits for the previous entry's. The sweeps
+//! ([`CountRow::fold`]) decode 16 entries at a time before summing them: the near gaps
+//! vectorise, the flags of the block are gathered into bit masks by a multiply, and whether a
+//! block has any far or repeated entry is a predictable branch (most blocks of a small scene
+//! have repeated ones, most of a large one far ones) while which entries do is read without a
+//! branch (a repeated hit is a coin toss). The far and count bytes are therefore read whether or
+//! not the flags ask for them, and the storage ends in a padding byte. The previous layout, a
+//! varint per step decoded entry by entry (its state in memory behind a cold call, branches on
+//! the flags), swept 2.4–3× slower than f32 rows; this one 1.3–1.6× (Gauss–Seidel, README
+//! "Memory"). The streams are written here rather than taken from a crate: they are decoded
+//! inline in the solvers' sweeps.
 
 use std::iter::{Copied, Zip};
 use std::slice::Iter;
@@ -60,15 +72,15 @@ impl Default for WeightRows {
     }
 }
 
-/// Monte Carlo rows as ray counts, varint-coded (see the module docs).
+/// Monte Carlo rows as ray counts (see the module docs).
 #[derive(Clone, Debug, PartialEq)]
 pub struct CountRows {
     /// Row `i` is `bytes[row_start[i]..row_start[i+1]]` (u64: rows of large bakes pass 4 GiB).
     row_start: Vec<u64>,
     /// Gathering rays `K_i` of each row: the denominator of its weights.
     rays: Vec<u32>,
-    /// The rows, then one padding byte: a step's second byte is read before its first says
-    /// whether there is one.
+    /// The rows, then one padding byte: the far and count bytes are read before the step
+    /// byte's flags say whether they are there.
     bytes: Vec<u8>,
     entries: u64,
 }
@@ -84,35 +96,74 @@ impl Default for CountRows {
     }
 }
 
+/// Gaps below this fit in a step byte; larger ones put `gap >> GAP_BITS` in the far stream.
+const GAP_BITS: u32 = 6;
+const NEAR_GAPS: u32 = 1 << GAP_BITS;
+
+/// A far or count byte that says a 4-byte value (little-endian) follows.
+const ESCAPE: u8 = 255;
+
+/// Bytes of `v` in a far or count stream: one byte below [`ESCAPE`], else the escape and 4.
+fn escaped_len(v: u32) -> usize {
+    match v < ESCAPE as u32 {
+        true => 1,
+        false => 5,
+    }
+}
+
+fn write_escaped(out: &mut Vec<u8>, v: u32) {
+    match u8::try_from(v) {
+        Ok(b) if b < ESCAPE => out.push(b),
+        _ => {
+            out.push(ESCAPE);
+            out.extend(v.to_le_bytes());
+        }
+    }
+}
+
 impl CountRows {
     /// Appends a row from the source texels its `rays` rays hit, sorted (a texel hit `n` times
     /// appears `n` times).
     pub fn push_row(&mut self, sorted_hits: &[u32], rays: u32) {
+        // (column, hits) of each entry, and its gap from the previous column.
         let runs = || sorted_hits.chunk_by(|a, b| a == b);
+        let gaps = || {
+            let mut previous = u32::MAX; // the first gap counts from column 0
+            runs().map(move |run| {
+                let gap = run[0].wrapping_sub(previous).wrapping_sub(1);
+                previous = run[0];
+                (gap, run.len() as u32)
+            })
+        };
         self.bytes.pop(); // the padding
         if !sorted_hits.is_empty() {
-            let count_bytes = |hits: usize| match hits {
-                1 => 0,
-                2..=256 => 1,
-                _ => 5,
-            };
-            write_varint(&mut self.bytes, runs().map(|r| count_bytes(r.len())).sum());
-            for run in runs().filter(|r| r.len() > 1) {
-                match u8::try_from(run.len() - 2) {
+            let (mut entries, mut far_bytes) = (0u64, 0);
+            for (gap, _) in gaps() {
+                entries += 1;
+                if gap >= NEAR_GAPS {
+                    far_bytes += escaped_len(gap >> GAP_BITS);
+                }
+            }
+            write_varint(&mut self.bytes, entries);
+            write_varint(&mut self.bytes, far_bytes as u64);
+            for (gap, hits) in gaps() {
+                let far = (gap >= NEAR_GAPS) as u8;
+                let near = (gap % NEAR_GAPS) as u8;
+                self.bytes.push(far << 7 | near << 1 | (hits > 1) as u8);
+            }
+            for (gap, _) in gaps().filter(|&(gap, _)| gap >= NEAR_GAPS) {
+                write_escaped(&mut self.bytes, gap >> GAP_BITS);
+            }
+            for (_, hits) in gaps().filter(|&(_, hits)| hits > 1) {
+                match u8::try_from(hits - 1) {
                     Ok(b) if b < ESCAPE => self.bytes.push(b),
                     _ => {
                         self.bytes.push(ESCAPE);
-                        self.bytes.extend((run.len() as u32).to_le_bytes());
+                        self.bytes.extend(hits.to_le_bytes());
                     }
                 }
             }
-            let mut previous = u32::MAX; // the first gap counts from column 0
-            for run in runs() {
-                let gap = run[0].wrapping_sub(previous).wrapping_sub(1) as u64;
-                write_varint(&mut self.bytes, gap << 1 | (run.len() > 1) as u64);
-                previous = run[0];
-                self.entries += 1;
-            }
+            self.entries += entries;
         }
         self.row_start.push(self.bytes.len() as u64);
         self.bytes.push(0);
@@ -126,7 +177,7 @@ impl CountRows {
             return;
         }
         let start = self.row_start[n - 1];
-        let removed = self.row(n - 1).count() as u64;
+        let removed = self.row(n - 1).len() as u64;
         self.entries -= removed;
         self.bytes.truncate(start as usize);
         self.bytes.push(0);
@@ -152,34 +203,32 @@ impl CountRows {
         self.rays.is_empty()
     }
 
-    /// The entries of row `i` as (source texel, `hits / K_i`).
-    #[inline]
+    /// The entries of row `i` as (source texel, `hits / K_i`). Not inlined: its header's
+    /// varints would keep [`Rows::row`] from being inlined into the f32 rows' sweeps.
+    #[inline(never)]
     pub fn row(&self, i: usize) -> CountRow<'_> {
         let rays = self.rays[i] as f32;
         let (start, end) = (self.row_start[i] as usize, self.row_start[i + 1] as usize);
-        // From the row's start to the padding byte.
-        let bytes = &self.bytes[start..];
-        let (counts, next) = match end > start {
+        let (entries, far_bytes, steps) = match end > start {
             true => {
-                let (m, header) = read_varint(bytes, 0);
-                (header, header + m as usize)
+                let (entries, at) = read_varint(&self.bytes, start);
+                let (far_bytes, at) = read_varint(&self.bytes, at);
+                (entries as usize, far_bytes as usize, at)
             }
-            false => (0, 0),
+            false => (0, 0, start),
         };
+        let far = steps + entries;
         CountRow {
-            bytes,
-            end: end - start,
-            counts,
-            next,
+            steps: self.bytes[steps..far].iter(),
+            // From the far stream to the padding byte.
+            tail: &self.bytes[far..],
+            far: 0,
+            counts: far_bytes,
             col: u32::MAX,
             rays,
-            once: 1.0 / rays,
         }
     }
 }
-
-/// The count byte that says a 4-byte count (little-endian `hits`) follows.
-const ESCAPE: u8 = 255;
 
 fn write_varint(out: &mut Vec<u8>, mut v: u64) {
     while v >= 0x80 {
@@ -191,16 +240,7 @@ fn write_varint(out: &mut Vec<u8>, mut v: u64) {
 
 /// The varint at `bytes[at..]` and the position after it.
 #[inline]
-fn read_varint(bytes: &[u8], at: usize) -> (u64, usize) {
-    let b = bytes[at];
-    if b < 0x80 {
-        return (b as u64, at + 1);
-    }
-    read_varint_tail(bytes, at)
-}
-
-#[cold]
-fn read_varint_tail(bytes: &[u8], mut at: usize) -> (u64, usize) {
+fn read_varint(bytes: &[u8], mut at: usize) -> (u64, usize) {
     let (mut v, mut shift) = (0u64, 0);
     loop {
         let b = bytes[at];
@@ -216,76 +256,206 @@ fn read_varint_tail(bytes: &[u8], mut at: usize) -> (u64, usize) {
 /// The entries of one count row, decoded as they are read.
 #[derive(Clone, Debug)]
 pub struct CountRow<'a> {
-    /// From the row's start to the end of the storage (its padding byte included).
-    bytes: &'a [u8],
-    /// The row's end in `bytes`.
-    end: usize,
-    /// Position of the next count byte.
+    /// The step bytes of the entries not read yet.
+    steps: Iter<'a, u8>,
+    /// From the row's far stream to the end of the storage (its padding byte included).
+    tail: &'a [u8],
+    /// Position of the next far byte in `tail`.
+    far: usize,
+    /// Position of the next count byte in `tail`.
     counts: usize,
-    /// Position of the next step.
-    next: usize,
     /// The previous entry's column (`u32::MAX` before the first).
     col: u32,
+    /// `K_i` as f32: an entry's weight is `hits as f32 / rays`, as the builder's was.
     rays: f32,
-    /// `1 / K_i`: the weight of a single hit, equal to `1 as f32 / K_i`.
+}
+
+/// Decodes the entry whose step byte is `step` from a row's far and count streams (`tail`,
+/// next bytes at `far` and `counts`), after the entry at column `col`: its column and weight.
+/// A free function over the decoder's state, so that the sweeps keep it in registers.
+#[inline(always)]
+fn decode(
+    step: u8,
+    tail: &[u8],
+    far: &mut usize,
+    counts: &mut usize,
+    col: &mut u32,
+    rays: f32,
+) -> (u32, f32) {
+    // The flags as masks, not branches: whether an entry is far or repeated is often a coin
+    // toss, and a mispredicted branch costs more than the entry's whole sum. The far and count
+    // bytes are read either way (in bounds: both positions are below the padding byte's).
+    let far_mask = 0u8.wrapping_sub(step >> 7);
+    let repeated = (step & 1) as usize;
+    let mut high = (tail[*far] & far_mask) as u32;
+    if high == ESCAPE as u32 {
+        high = escaped(tail, *far);
+        *far += 4;
+    }
+    *far += (step >> 7) as usize;
+    *col = col
+        .wrapping_add(high << GAP_BITS | ((step >> 1) as u32 % NEAR_GAPS))
+        .wrapping_add(1);
+    // `hits − 1`, or 0 for a single hit.
+    let count = tail[*counts] & 0u8.wrapping_sub(step & 1);
+    let hits = if count == ESCAPE {
+        let hits = escaped(tail, *counts);
+        *counts += 4;
+        hits
+    } else {
+        count as u32 + 1
+    };
+    *counts += repeated;
+    (*col, hits as f32 / rays)
+}
+
+/// A row's far and count streams as [`CountRow::fold`] reads them, a block at a time.
+struct BlockDecoder<'a> {
+    tail: &'a [u8],
+    far: usize,
+    counts: usize,
+    rays: f32,
     once: f32,
+}
+
+impl BlockDecoder<'_> {
+    /// The column steps (`gap + 1`) and weights of the [`BLOCK`] entries whose step bytes are
+    /// `block`.
+    #[inline(always)]
+    fn block(&mut self, block: &[u8; BLOCK]) -> ([u32; BLOCK], [f32; BLOCK]) {
+        let tail = self.tail;
+        // Column steps of near gaps (vectorised), then the far ones' high bits.
+        let mut delta = [0u32; BLOCK];
+        for (d, &step) in delta.iter_mut().zip(block) {
+            *d = ((step >> 1) as u32 % NEAR_GAPS) + 1;
+        }
+        // Whether a block has far or repeated entries is predictable (most blocks of a small
+        // scene have repeated ones, most of a large one far ones); which entries are is not,
+        // so they are read without a branch on the flag.
+        let (far_flags, repeated_flags) = flags(block);
+        if far_flags != 0 {
+            for (d, &step) in delta.iter_mut().zip(block) {
+                let is_far = (step >> 7) as u32;
+                let mut high = tail[self.far] as u32 & 0u32.wrapping_sub(is_far);
+                if high == ESCAPE as u32 {
+                    high = escaped(tail, self.far);
+                    self.far += 4;
+                }
+                self.far += is_far as usize;
+                *d = d.wrapping_add(high << GAP_BITS);
+            }
+        }
+        let mut weight = [self.once; BLOCK];
+        if repeated_flags != 0 {
+            for (w, &step) in weight.iter_mut().zip(block) {
+                let repeated = (step & 1) as u32;
+                // `hits − 1`, or 0 for a single hit (whose weight is `1 / K_i` too).
+                let count = tail[self.counts] as u32 & 0u32.wrapping_sub(repeated);
+                let hits = if count == ESCAPE as u32 {
+                    self.counts += 4;
+                    escaped(tail, self.counts - 4)
+                } else {
+                    count + 1
+                };
+                self.counts += repeated as usize;
+                *w = hits as f32 / self.rays;
+            }
+        }
+        (delta, weight)
+    }
+}
+
+/// Entries decoded together by [`CountRow::fold`].
+const BLOCK: usize = 16;
+
+/// The far flags (bit 7) and the repeated flags (bit 0) of a block's step bytes, as bit `k`
+/// for entry `k`: each byte's bit gathered into the top byte by a multiply.
+#[inline(always)]
+fn flags(block: &[u8; BLOCK]) -> (u32, u32) {
+    const LOW_BITS: u64 = 0x0101_0101_0101_0101;
+    const GATHER: u64 = 0x0102_0408_1020_4080; // byte i's bit 0 to bit 56 + i
+    let gather = |x: u64| (x & LOW_BITS).wrapping_mul(GATHER) >> 56;
+    let (mut far, mut repeated) = (0, 0);
+    for (half, bytes) in block.chunks_exact(8).enumerate() {
+        let x = u64::from_le_bytes(bytes.try_into().unwrap());
+        far |= (gather(x >> 7) as u32) << (8 * half);
+        repeated |= (gather(x) as u32) << (8 * half);
+    }
+    (far, repeated)
+}
+
+/// The 4-byte value after the escape byte at `tail[at]`.
+#[cold]
+fn escaped(tail: &[u8], at: usize) -> u32 {
+    u32::from_le_bytes(tail[at + 1..at + 5].try_into().unwrap())
 }
 
 impl Iterator for CountRow<'_> {
     type Item = (u32, f32);
 
-    /// The solvers' path: the decoder's state in locals for the whole row.
+    /// The solvers' path: [`BLOCK`] entries at a time, their columns and weights decoded
+    /// before they are summed, so that the decoding runs ahead of the f32 sums (whose chain of
+    /// adds sets the pace) and the flags cost a branch per block, not per entry.
     #[inline]
     fn fold<B, F: FnMut(B, (u32, f32)) -> B>(self, init: B, mut f: F) -> B {
+        let CountRow {
+            steps,
+            tail,
+            far,
+            counts,
+            mut col,
+            rays,
+        } = self;
+        let mut decoder = BlockDecoder {
+            tail,
+            far,
+            counts,
+            rays,
+            once: 1.0 / rays,
+        };
         let mut acc = init;
-        for entry in self {
-            acc = f(acc, entry);
+        let mut blocks = steps.as_slice().chunks_exact(BLOCK);
+        for block in &mut blocks {
+            let (delta, weight) = decoder.block(block.try_into().unwrap());
+            for (&d, &w) in delta.iter().zip(&weight) {
+                col = col.wrapping_add(d);
+                acc = f(acc, (col, w));
+            }
+        }
+        // The last entries as a block padded with zero steps (near, single: they read
+        // nothing), so that short rows decode as fast as long ones.
+        let rest = blocks.remainder();
+        if !rest.is_empty() {
+            let mut block = [0u8; BLOCK];
+            block[..rest.len()].copy_from_slice(rest);
+            let (delta, weight) = decoder.block(&block);
+            for (&d, &w) in delta.iter().zip(&weight).take(rest.len()) {
+                col = col.wrapping_add(d);
+                acc = f(acc, (col, w));
+            }
         }
         acc
     }
 
     #[inline(always)]
     fn next(&mut self) -> Option<(u32, f32)> {
-        if self.next >= self.end {
-            return None;
-        }
-        // A one- or two-byte step without a branch on its length (in small scenes most steps
-        // take one byte, in large ones most take two); longer ones are rare.
-        let (b0, b1) = (self.bytes[self.next], self.bytes[self.next + 1]);
-        let v = if (b0 & b1) >= 0x80 {
-            let (v, next) = read_varint_tail(self.bytes, self.next);
-            self.next = next;
-            v
-        } else {
-            let long = (b0 >> 7) as u64;
-            self.next += 1 + long as usize;
-            (b0 & 0x7f) as u64 | (((b1 as u64) << 7) * long)
-        };
-        self.col = self.col.wrapping_add((v >> 1) as u32).wrapping_add(1);
-        // Read whether or not the entry is repeated (`counts` < `next` ≤ len: in bounds), so
-        // that no branch depends on the flag.
-        let repeated = (v & 1) as usize;
-        let byte = self.bytes[self.counts];
-        let hits = if (repeated == 1) & (byte == ESCAPE) {
-            self.escaped_count()
-        } else {
-            byte as u32 + 2
-        };
-        self.counts += repeated;
-        let weight = hits as f32 / self.rays;
-        Some((self.col, if repeated == 1 { weight } else { self.once }))
+        let &step = self.steps.next()?;
+        Some(decode(
+            step,
+            self.tail,
+            &mut self.far,
+            &mut self.counts,
+            &mut self.col,
+            self.rays,
+        ))
+    }
+
+    fn size_hint(&self) -> (usize, Option<usize>) {
+        self.steps.size_hint()
     }
 }
 
-impl CountRow<'_> {
-    /// The 4-byte count after an escape byte at `counts`; moves past it.
-    #[cold]
-    fn escaped_count(&mut self) -> u32 {
-        let at = self.counts + 1;
-        self.counts += 4;
-        u32::from_le_bytes(self.bytes[at..at + 4].try_into().unwrap())
-    }
-}
+impl ExactSizeIterator for CountRow<'_> {}
 
 impl Rows {
     /// Rows held.
@@ -318,8 +488,9 @@ impl Rows {
         }
     }
 
-    /// The entries of row `i` as (source texel, F_ij).
-    #[inline]
+    /// The entries of row `i` as (source texel, F_ij). Inlined into the sweeps: a call per
+    /// row made f32 sweeps of short rows slower than before there were two storages.
+    #[inline(always)]
     pub fn row(&self, i: usize) -> Row<'_> {
         match self {
             Rows::Weights(w) => {
