@@ -21,6 +21,7 @@
 //!    straight on to the next segment or the patch's border; that extension is a cut too, but an
 //!    ordinary seam (stitched later), while junction edges are never stitched
 //!    ([`Split::junction_edges`]).
+//!    In a patch with shadow outlines extensions are never stitched either (see below).
 //! 3. **Retriangulate**: each triangle a cut touches is triangulated again with spade's
 //!    constrained Delaunay triangulation (robust predicates; crossing cuts split each other).
 //!    Points on a mesh edge are shared by both triangles on it — the other one is cut too, in
@@ -35,7 +36,10 @@
 //!
 //! [`split_with`] cuts along the hard shadow outlines of punctual lights too
 //! ([`super::shadow_cuts`]): they join step 2 as segments that are never stitched, and a patch
-//! with such cuts is bounded by its border in step 4 as well.
+//! with such cuts is bounded by its border in step 4 as well. The extensions of such a patch
+//! are never stitched either: a curved outline's free end is extended along its tangent, which
+//! hugs the shadow's edge, and stitching there blurred the sphere's shadow (`sphere_on_floor`
+//! draft point error 9.28% stitched against 2.81% unstitched; 2.79% now).
 //!
 //! New vertices are blends of at most three source vertices of the same primitive
 //! ([`Blend`]); the output writer blends every attribute the same way, so the split exists only
@@ -812,12 +816,15 @@ fn split_instance(
 }
 
 /// Which edges of `face` (plane coordinates) lie along cuts: `[junction, any cut]`, bit `k`
-/// for edge `k`.
+/// for edge `k`. In a patch with shadow outlines extensions count as junctions (never
+/// stitched): the straight continuation of a curved outline's free end runs along the shadow's
+/// edge, where stitching pulls the lit and the shadowed side together (on the sphere's shadow a
+/// renderer read 0.35 against a reference 0.02).
 fn cut_bits_of(face: [DVec2; 3], cuts: &Cuts, snap: f64) -> [u8; 2] {
     let eps = 1e-3 * snap;
     let on = |x: DVec2, junction: bool| {
         cuts.segments.iter().any(|&([a, b], ext)| {
-            (!junction || !ext)
+            (!junction || !ext || cuts.shadow)
                 && distance_to_segment(x, cuts.points[a as usize], cuts.points[b as usize]).0 <= eps
         })
     };

@@ -21,7 +21,8 @@
 //!    texel long are kept. So an edge whose projection lies in another object's shadow, or
 //!    that the receiver itself hides, gives no cut.
 //! 3. The kept pieces go to the junction split as cuts that are never stitched (as junction
-//!    edges); their free ends are extended like a doorway's jamb, so the two sides separate.
+//!    edges); their free ends are extended like a doorway's jamb, so the two sides separate,
+//!    and in such a patch the extensions are never stitched either (they hug the outline).
 //!
 //! The work is bounded: at most [`MAX_SAMPLES`] boundary samples per scene and
 //! [`MAX_PATCH_CUTS`] pieces per patch (what is left over is counted in the report).
