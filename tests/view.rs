@@ -10,7 +10,7 @@
 //! it also copies each view's picture there (`examples/gallery/view_<view>.png`).
 
 use std::io::{BufRead, BufReader};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::process::{Child, ChildStdout, Command, Stdio};
 
 use glam::Vec3;
@@ -94,21 +94,13 @@ fn blocks(rgb: &[Vec3], size: u32, block: u32) -> Vec<Vec3> {
         .collect()
 }
 
-#[test]
-fn viewer_page_in_chromium_matches_render_and_every_view_differs() {
-    let Some(node_path) = std::env::var_os("LIGHTBAKE_BROWSER_TEST") else {
-        eprintln!("skipped: set LIGHTBAKE_BROWSER_TEST to playwright-core's node_modules");
-        return;
-    };
-    let _browser = ONE_BROWSER.lock().unwrap_or_else(|e| e.into_inner());
-    let dir = scratch();
-    let (out, shots) = (dir.path().join("out"), dir.path().join("shots"));
-    std::fs::create_dir(&shots).unwrap();
-    let scene = fixture("cornell_box.gltf");
-    let baked = out.join("cornell_box.gltf");
-    let size = format!("{SIZE}x{SIZE}");
-    let baked_s = baked.to_str().unwrap();
-    lightbake(&[
+/// Bakes fixture `name` at draft (with the `extra` bake options) into `dir/out` and renders the
+/// bake's first camera at `SIZE`² with `lightbake render`: the fixture, the baked glTF and the
+/// rendered EXR.
+fn bake_and_render(dir: &Path, name: &str, extra: &[&str]) -> (PathBuf, PathBuf, PathBuf) {
+    let (scene, out) = (fixture(name), dir.join("out"));
+    let baked = out.join(name);
+    let mut bake = vec![
         "bake",
         scene.to_str().unwrap(),
         "-o",
@@ -116,11 +108,14 @@ fn viewer_page_in_chromium_matches_render_and_every_view_differs() {
         "--quality",
         "draft",
         "--quiet",
-    ]);
-    let rendered = dir.path().join("render.exr");
+    ];
+    bake.extend(extra);
+    lightbake(&bake);
+    let rendered = dir.join("render.exr");
+    let size = format!("{SIZE}x{SIZE}");
     lightbake(&[
         "render",
-        baked_s,
+        baked.to_str().unwrap(),
         "--camera",
         "0",
         "--size",
@@ -129,6 +124,20 @@ fn viewer_page_in_chromium_matches_render_and_every_view_differs() {
         rendered.to_str().unwrap(),
         "--quiet",
     ]);
+    (scene, baked, rendered)
+}
+
+#[test]
+fn viewer_page_in_chromium_matches_render_and_every_view_differs() {
+    let Some(node_path) = std::env::var_os("LIGHTBAKE_BROWSER_TEST") else {
+        eprintln!("skipped: set LIGHTBAKE_BROWSER_TEST to playwright-core's node_modules");
+        return;
+    };
+    let _browser = ONE_BROWSER.lock().unwrap_or_else(|e| e.into_inner());
+    let dir = scratch();
+    let shots = dir.path().join("shots");
+    std::fs::create_dir(&shots).unwrap();
+    let (scene, baked, rendered) = bake_and_render(dir.path(), "cornell_box.gltf", &[]);
 
     let points = dir.path().join("points.csv");
     lightbake(&[
@@ -257,35 +266,11 @@ fn shared_meshes_in_chromium_match_render() {
     };
     let _browser = ONE_BROWSER.lock().unwrap_or_else(|e| e.into_inner());
     let dir = scratch();
-    let (out, shots) = (dir.path().join("out"), dir.path().join("shots"));
+    let shots = dir.path().join("shots");
     std::fs::create_dir(&shots).unwrap();
-    let scene = fixture("instanced.gltf");
-    let baked = out.join("instanced.gltf");
-    let size = format!("{SIZE}x{SIZE}");
+    let (scene, baked, rendered) =
+        bake_and_render(dir.path(), "instanced.gltf", &["--instancing", "share"]);
     let scene_s = scene.to_str().unwrap();
-    lightbake(&[
-        "bake",
-        scene_s,
-        "-o",
-        out.to_str().unwrap(),
-        "--quality",
-        "draft",
-        "--instancing",
-        "share",
-        "--quiet",
-    ]);
-    let rendered = dir.path().join("render.exr");
-    lightbake(&[
-        "render",
-        baked.to_str().unwrap(),
-        "--camera",
-        "0",
-        "--size",
-        &size,
-        "-o",
-        rendered.to_str().unwrap(),
-        "--quiet",
-    ]);
     let points = dir.path().join("points.csv");
     lightbake(&[
         "reference",

@@ -29,6 +29,8 @@ async function main() {
     const page = context.pages()[0] || await context.newPage();
     page.on('pageerror', (e) => errors.push(`page error: ${e.message}`));
     page.on('console', (m) => { if (m.type() === 'error') errors.push(`console: ${m.text()}`); });
+    // Playwright's 30 s default is short on a loaded 2-core machine (software WebGL).
+    page.setDefaultTimeout(120000);
     await page.goto(url);
     await page.evaluate(() => window.lightbake.ready);
     const rgb = await page.evaluate(([w, h]) => {

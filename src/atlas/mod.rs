@@ -101,6 +101,30 @@ impl Atlas {
     }
 }
 
+#[cfg(test)]
+impl Atlas {
+    /// Every number of the layout as bits (pages, vertices, UVs, triangles, pages of triangles):
+    /// equal for equal layouts, for the determinism tests.
+    pub(crate) fn layout_bits(&self) -> Vec<u32> {
+        let mut bits: Vec<u32> = self
+            .pages
+            .iter()
+            .flat_map(|p| [p.width, p.height])
+            .collect();
+        for inst in &self.instances {
+            bits.extend(&inst.xref);
+            bits.extend(
+                inst.uv
+                    .iter()
+                    .flat_map(|uv| [uv.x.to_bits(), uv.y.to_bits()]),
+            );
+            bits.extend(inst.triangles.iter().flatten());
+            bits.extend(&inst.triangle_page);
+        }
+        bits
+    }
+}
+
 /// Smallest page side that holds `texels` texels: a multiple of 4, within [16, `max`].
 pub(crate) fn page_side(texels: f32, max: u32) -> u32 {
     let side = if texels.is_finite() {

@@ -726,26 +726,9 @@ mod tests {
     #[test]
     fn shared_layout_is_deterministic() {
         let scene = boxes();
-        let bits = |atlas: &Atlas| -> Vec<u32> {
-            let mut bits: Vec<u32> = atlas
-                .pages
-                .iter()
-                .flat_map(|p| [p.width, p.height])
-                .collect();
-            for inst in &atlas.instances {
-                bits.extend(
-                    inst.uv
-                        .iter()
-                        .flat_map(|uv| [uv.x.to_bits(), uv.y.to_bits()]),
-                );
-                bits.extend(inst.triangles.iter().flatten());
-                bits.extend(&inst.triangle_page);
-            }
-            bits
-        };
-        let first = bits(&build_ok(&scene, &shared_params(16.0, 256, 2)));
+        let first = build_ok(&scene, &shared_params(16.0, 256, 2)).layout_bits();
         for _ in 0..3 {
-            assert!(bits(&build_ok(&scene, &shared_params(16.0, 256, 2))) == first);
+            assert!(build_ok(&scene, &shared_params(16.0, 256, 2)).layout_bits() == first);
         }
     }
 

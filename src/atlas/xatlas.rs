@@ -1728,28 +1728,10 @@ pub(super) mod tests {
     #[test]
     fn unwrap_is_deterministic() {
         let scene = box_and_sphere();
-        let bits = |atlas: &Atlas| -> Vec<u32> {
-            let mut bits: Vec<u32> = atlas
-                .pages
-                .iter()
-                .flat_map(|p| [p.width, p.height])
-                .collect();
-            for inst in &atlas.instances {
-                bits.extend(&inst.xref);
-                bits.extend(
-                    inst.uv
-                        .iter()
-                        .flat_map(|uv| [uv.x.to_bits(), uv.y.to_bits()]),
-                );
-                bits.extend(inst.triangles.iter().flatten());
-                bits.extend(&inst.triangle_page);
-            }
-            bits
-        };
-        let first = bits(&unwrap_ok(&scene, &params(24.0, 128)));
+        let first = unwrap_ok(&scene, &params(24.0, 128)).layout_bits();
         for _ in 0..4 {
             assert!(
-                bits(&unwrap_ok(&scene, &params(24.0, 128))) == first,
+                unwrap_ok(&scene, &params(24.0, 128)).layout_bits() == first,
                 "xatlas output changed between runs"
             );
         }
