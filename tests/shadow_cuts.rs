@@ -15,20 +15,21 @@ fn draft(shadow_cuts: bool) -> BakeConfig {
     config
 }
 
-/// Relative RMSE of a draft bake read as a renderer reads it, at `reference`'s points, and the
-/// reference's noise.
-fn error(reference: &PointReference, shadow_cuts: bool) -> (f32, f32) {
+/// Relative RMSE of a bake of fixture `name` with `config`, read as a renderer reads it, at
+/// `reference`'s points, and the reference's noise.
+fn point_error(name: &str, config: &BakeConfig, reference: &PointReference) -> (f32, f32) {
     let dir = scratch();
-    lightbake::bake(
-        &fixture("courtyard.gltf"),
-        dir.path(),
-        &draft(shadow_cuts),
-        &NoProgress,
-    )
-    .expect("bakes");
-    let baked = RenderScene::load(&dir.path().join("courtyard.gltf")).expect("loads");
+    lightbake::bake(&fixture(name), dir.path(), config, &NoProgress).expect("bakes");
+    let stem = name.rsplit_once('.').map_or(name, |(stem, _)| stem);
+    let gltf = dir.path().join(format!("{stem}.gltf"));
+    let baked = RenderScene::load(&gltf).expect("loads");
     let c = points::compare(&baked, reference);
     (c.rmse, c.noise)
+}
+
+/// [`point_error`] of the courtyard at draft, with or without shadow cuts.
+fn error(reference: &PointReference, shadow_cuts: bool) -> (f32, f32) {
+    point_error("courtyard.gltf", &draft(shadow_cuts), reference)
 }
 
 /// The ground within one draft texel (12.5 cm) of the shadow edge the low wall's top casts
@@ -80,22 +81,11 @@ fn the_courtyard_s_sun_shadow_edge_is_sharp_in_a_draft_bake() {
     assert!(off > 0.25, "strip error without the cuts {off}");
 }
 
-/// Relative RMSE and reference noise of a draft bake of `sphere_on_floor.gltf`, stitched or not,
-/// at `reference`'s points.
+/// [`point_error`] of `sphere_on_floor.gltf` at draft with shadow cuts, stitched or not.
 fn sphere_error(reference: &PointReference, seams: bool) -> (f32, f32) {
-    let dir = scratch();
     let mut config = draft(true);
     config.output.seams = seams;
-    lightbake::bake(
-        &fixture("sphere_on_floor.gltf"),
-        dir.path(),
-        &config,
-        &NoProgress,
-    )
-    .expect("bakes");
-    let baked = RenderScene::load(&dir.path().join("sphere_on_floor.gltf")).expect("loads");
-    let c = points::compare(&baked, reference);
-    (c.rmse, c.noise)
+    point_error("sphere_on_floor.gltf", &config, reference)
 }
 
 /// Seam stitching leaves the sphere's hard shadow alone: on the floor around the shadow of the

@@ -125,6 +125,23 @@ impl Atlas {
     }
 }
 
+/// Calls `visit` with the index of every texel of a `size` page that the triangle with page
+/// UVs `uv` touches, sampled every quarter texel (for the layout tests).
+#[cfg(test)]
+pub(crate) fn for_each_touched_texel(uv: [Vec2; 3], size: PageSize, mut visit: impl FnMut(usize)) {
+    let texels = Vec2::new(size.width as f32, size.height as f32);
+    let [a, b, c] = uv.map(|p| p * texels);
+    let steps = ((b - a).length().max((c - a).length()) * 4.0).ceil() as u32 + 1;
+    for i in 0..=steps {
+        for j in 0..=steps - i {
+            let p = a + (b - a) * (i as f32 / steps as f32) + (c - a) * (j as f32 / steps as f32);
+            let x = (p.x as u32).min(size.width - 1);
+            let y = (p.y as u32).min(size.height - 1);
+            visit((y * size.width + x) as usize);
+        }
+    }
+}
+
 /// Smallest page side that holds `texels` texels: a multiple of 4, within [16, `max`].
 pub(crate) fn page_side(texels: f32, max: u32) -> u32 {
     let side = if texels.is_finite() {

@@ -508,6 +508,7 @@ mod tests {
 
     use super::super::xatlas::tests::{Part, cube, params, quad, scene_of, source};
     use super::*;
+    use crate::atlas::for_each_touched_texel;
 
     /// `part` as mesh 1 placed by `node`: scaled, rotated, moved; winding reversed when the
     /// transform mirrors (as the loader does).
@@ -587,20 +588,10 @@ mod tests {
             let chart = charts(inst);
             for (t, tri) in inst.triangles.iter().enumerate() {
                 let page = inst.triangle_page[t] as usize;
-                let size = atlas.pages[page];
-                let texels = Vec2::new(size.width as f32, size.height as f32);
-                let [a, b, c] = tri.map(|k| inst.uv[k as usize] * texels);
-                let steps = ((b - a).length().max((c - a).length()) * 4.0).ceil() as u32 + 1;
-                for s in 0..=steps {
-                    for r in 0..=steps - s {
-                        let p = a
-                            + (b - a) * (s as f32 / steps as f32)
-                            + (c - a) * (r as f32 / steps as f32);
-                        let x = (p.x as u32).min(size.width - 1);
-                        let y = (p.y as u32).min(size.height - 1);
-                        owner[page][(y * size.width + x) as usize] = (i as u32, chart[t]);
-                    }
-                }
+                let uv = tri.map(|k| inst.uv[k as usize]);
+                for_each_touched_texel(uv, atlas.pages[page], |k| {
+                    owner[page][k] = (i as u32, chart[t]);
+                });
             }
         }
         for (owner, size) in owner.iter().zip(&atlas.pages) {

@@ -1151,6 +1151,7 @@ pub(super) mod tests {
 
     use super::super::existing::Overlaps;
     use super::*;
+    use crate::atlas::for_each_touched_texel;
     use crate::config::UvMode;
     use crate::scene::{Material, Scene};
 
@@ -1633,22 +1634,10 @@ pub(super) mod tests {
             .map(|p| vec![u32::MAX; (p.width * p.height) as usize])
             .collect();
         for t in 0..scene.triangles.len() as u32 {
-            let ([a, b, c], page) = atlas.triangle_uv(scene, t);
-            let size = atlas.pages[page as usize];
-            let scale = Vec2::new(size.width as f32, size.height as f32);
-            let (a, b, c) = (a * scale, b * scale, c * scale);
-            let steps = ((b - a).length().max((c - a).length()) * 4.0).ceil() as u32 + 1;
-            for i in 0..=steps {
-                for j in 0..=steps - i {
-                    let p = a
-                        + (b - a) * (i as f32 / steps as f32)
-                        + (c - a) * (j as f32 / steps as f32);
-                    let x = (p.x as u32).min(size.width - 1);
-                    let y = (p.y as u32).min(size.height - 1);
-                    owner[page as usize][(y * size.width + x) as usize] =
-                        scene.triangle_instance[t as usize];
-                }
-            }
+            let (uv, page) = atlas.triangle_uv(scene, t);
+            for_each_touched_texel(uv, atlas.pages[page as usize], |k| {
+                owner[page as usize][k] = scene.triangle_instance[t as usize];
+            });
         }
         owner
     }
