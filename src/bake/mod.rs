@@ -366,8 +366,8 @@ fn prepare_loaded(
         lay_out(&scene, &source, &tracer, &config, progress, &mut stages)?;
     let mut first_pilot = None;
 
-    // Adaptive density: a pilot on the uniform atlas chooses a density per instance, and the
-    // atlas is laid out again with it.
+    // Adaptive density: a pilot on the uniform atlas chooses a density per instance and may
+    // raise the whole density, and the atlas is laid out again with them.
     if let (Some(plan), Some(auto)) = (&mut plan, config.auto)
         && !auto.keep.texels_per_unit
         && !atlas.reused_input_uvs
@@ -378,13 +378,18 @@ fn prepare_loaded(
             texels: &texels,
             tracer: &tracer,
         };
-        match pilot::measure_density(surfaces, &config, plan, progress)? {
-            pilot::Density::Factors(factors) => {
-                config.atlas.instance_density = factors;
-                (atlas, texels, validity) =
-                    lay_out(&scene, &source, &tracer, &config, progress, &mut Vec::new())?;
-            }
-            pilot::Density::Uniform(runs) => first_pilot = runs,
+        let density = pilot::measure_density(surfaces, &config, plan, progress)?;
+        first_pilot = density.pilot;
+        let relayout = density.instance_factors.is_some() || density.texels_per_unit.is_some();
+        if let Some(factors) = density.instance_factors {
+            config.atlas.instance_density = factors;
+        }
+        if let Some(tpu) = density.texels_per_unit {
+            config.atlas.texels_per_unit = tpu;
+        }
+        if relayout {
+            (atlas, texels, validity) =
+                lay_out(&scene, &source, &tracer, &config, progress, &mut Vec::new())?;
         }
         timed(&mut stages, "density", t);
     }

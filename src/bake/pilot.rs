@@ -53,7 +53,7 @@ pub fn choose_transport(
         let mut second = None;
         if plan::needs_second_pilot(first, e) {
             plan.discarded_rays = runs.rays();
-            runs = bake(4 * PILOT_RAYS)?;
+            runs = bake(4 * PILOT_RAYS)?; // (its samples are measured below)
             second = Some(runs.noise(texels, config.transport.indirect_only));
             rays += runs.rays();
         }
@@ -63,17 +63,34 @@ pub fn choose_transport(
         plan.pilot_rays = rays;
         runs.enough = plan::choose_rays(config, plan, first, second);
         let [a, b] = runs.stored(config.transport.indirect_only);
-        let punctual = punctual_sample(surfaces, &config.transport, [&a, &b]);
-        let sampled = Instant::now();
-        let gathered = gathered_sample(
-            surfaces,
-            &config.transport,
-            &runs,
-            punctual.as_ref(),
-            e,
-            plan.pilot_rays / 2,
-        );
-        plan.resolution_seconds = sampled.elapsed().as_secs_f64();
+        // The density pilot's samples, when its pair is the last pilot (the same runs, target
+        // and ray budget): not measured twice.
+        let Samples {
+            punctual,
+            gathered,
+            seconds,
+        } = match runs.samples.take() {
+            Some(samples) => samples,
+            None => {
+                let punctual = punctual_sample(surfaces, &config.transport, [&a, &b]);
+                let sampled = Instant::now();
+                let gathered = gathered_sample(
+                    surfaces,
+                    &config.transport,
+                    &runs,
+                    punctual.as_ref(),
+                    e,
+                    plan.pilot_rays / 2,
+                );
+                let seconds = sampled.elapsed().as_secs_f64();
+                Samples {
+                    punctual,
+                    gathered,
+                    seconds,
+                }
+            }
+        };
+        plan.resolution_seconds = seconds;
         plan::predict_resolution(texels, [&a, &b], punctual.as_ref(), gathered.as_ref(), plan);
         pilot = Some(runs);
     } else if monte_carlo && !keep.rays {
@@ -116,44 +133,71 @@ fn lit(surfaces: Surfaces, transport: &TransportParams) -> bool {
         || !surfaces.scene.lights.is_empty()
 }
 
-/// What the density pilot found: new density factors (the pair is of no use on the new
-/// atlas), or none and the pair, which is the first pilot of [`choose_transport`].
-pub enum Density {
-    Factors(Vec<f32>),
-    Uniform(Option<PilotRuns>),
+/// What the density pilot found: a density factor per instance and a raised density, each
+/// when the measurement asks for it (the pair is then of no use on the new atlas); when the
+/// atlas stays, the pair and its samples, which are the first pilot of [`choose_transport`].
+pub struct Density {
+    pub instance_factors: Option<Vec<f32>>,
+    pub texels_per_unit: Option<f32>,
+    pub pilot: Option<PilotRuns>,
 }
 
-/// Step 1b of the automatic choice, on the uniform atlas: a pilot pair at [`PILOT_RAYS`] and
-/// the density factor per instance it asks for ([`plan::choose_instance_density`]).
+/// Step 1b of the automatic choice, on the uniform atlas: a pilot pair at [`PILOT_RAYS`], the
+/// density factor per instance it asks for ([`plan::choose_instance_density`]) and the raise
+/// of the whole density its lookup error at random points asks for
+/// ([`plan::choose_density_raise`]).
 pub fn measure_density(
     surfaces: Surfaces,
     config: &BakeConfig,
     plan: &mut Plan,
     progress: &dyn Progress,
 ) -> Result<Density> {
+    let mut density = Density {
+        instance_factors: None,
+        texels_per_unit: None,
+        pilot: None,
+    };
     if surfaces.texels.is_empty()
         || !lit(surfaces, &config.transport)
         || !config.technique.is_monte_carlo()
     {
-        return Ok(Density::Uniform(None));
+        return Ok(density);
     }
     let tolerance = (plan.target_error / 10.0).min(1e-3);
-    let runs = PilotRuns::bake(surfaces, &config.transport, PILOT_RAYS, tolerance, progress)?;
+    let mut runs = PilotRuns::bake(surfaces, &config.transport, PILOT_RAYS, tolerance, progress)?;
     let [a, b] = runs.stored(config.transport.indirect_only);
     let punctual = punctual_sample(surfaces, &config.transport, [&a, &b]);
-    Ok(
-        match plan::choose_instance_density(
-            surfaces.scene,
-            surfaces.texels,
-            [&a, &b],
-            punctual.as_ref(),
-            config.atlas.texels_per_unit,
-            plan,
-        ) {
-            Some(factors) => Density::Factors(factors),
-            None => Density::Uniform(Some(runs)),
-        },
-    )
+    let tpu = config.atlas.texels_per_unit;
+    density.instance_factors = plan::choose_instance_density(
+        surfaces.scene,
+        surfaces.texels,
+        [&a, &b],
+        punctual.as_ref(),
+        tpu,
+        plan,
+    );
+    let sampled = Instant::now();
+    let gathered = gathered_sample(
+        surfaces,
+        &config.transport,
+        &runs,
+        punctual.as_ref(),
+        plan.target_error,
+        runs.rays() / 2,
+    );
+    let seconds = sampled.elapsed().as_secs_f64();
+    density.texels_per_unit = gathered
+        .as_ref()
+        .and_then(|g| plan::choose_density_raise(g, plan::surface_area(surfaces.scene), tpu, plan));
+    if density.instance_factors.is_none() && density.texels_per_unit.is_none() {
+        runs.samples = Some(Samples {
+            punctual,
+            gathered,
+            seconds,
+        });
+        density.pilot = Some(runs);
+    }
+    Ok(density)
 }
 
 /// Punctual direct light at the texels and its lookup error at random surface points
@@ -223,6 +267,16 @@ pub struct PilotRuns {
     pub runs: Vec<Lit>,
     /// True when the runs alone reach the target: no further bake is needed.
     pub enough: bool,
+    /// The lookup-error samples of these runs, when the density pilot measured them.
+    samples: Option<Samples>,
+}
+
+/// The lookup-error samples of a pilot pair ([`PunctualSample`], [`GatheredSample`]) and the
+/// seconds the gathered one took.
+struct Samples {
+    punctual: Option<PunctualSample>,
+    gathered: Option<GatheredSample>,
+    seconds: f64,
 }
 
 impl PilotRuns {
@@ -262,6 +316,7 @@ impl PilotRuns {
             light_samples,
             runs,
             enough: false,
+            samples: None,
         })
     }
 
