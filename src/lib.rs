@@ -29,7 +29,8 @@
 //!       ─ texels::validity ──▶ Texels                 samples moved out of geometry, invalid marked,
 //!                                                     texels a wall divides kept to one side (cuts)
 //!  ─ pilot + plan::choose_instance_density ──▶ the three stages above again, with a density
-//!                                                     factor per instance (auto, adaptive)
+//!            + plan::choose_density_raise            factor per instance and a raised density
+//!                                                     where the lookup error asks (auto, adaptive)
 //!   (all of the above is `prepare`, shared by the bake and the reference)
 //!    ─ pilot runs + plan   ──▶ BakeConfig + pilot    rays for the target error, measured (auto)
 //!  ─ one dispatch on config::Technique:

@@ -63,9 +63,19 @@
 //!   the table is in README ("What a renderer shows"). `--explain` says plainly when the
 //!   prediction is above the target, which part dominates, and about how much more texels (a
 //!   range: the error falls as `h²` where light curves smoothly, as `√h` at edges) or rays
-//!   would take. Not yet a control, though measured to pay: on the interior at medium, 20 /m
-//!   instead of 16 gave 4.32% for 5.57% (predicted 4.26%) where the rays of the same time gave
-//!   5.44%.
+//!   would take.
+//! - **The density follows the measured resolution error** ([`choose_density_raise`]): the
+//!   density pilot's pair (on the uniform atlas) is sampled the same way, and where its lookup
+//!   error is surely above the `√(1 − 0.75²) ≈ 0.66` of the target that the rays leave it, the
+//!   whole density rises by the ratio (the error taken to fall as `h`, between the `√h` of edges
+//!   and the `h²` of smooth light; at least ×1.1, at most ×2 and the preset's texel budget) and
+//!   the atlas is laid out again; otherwise the pair and its samples are the first pilot. At
+//!   16 rays a tight target's sample is rarely sure, so when the transport pilot runs its pair
+//!   at 64 rays its sample looks once more (`bake::raise_after_pilot`), and a raise there
+//!   starts the transport pilot over on the new atlas. Measured (README, "What a renderer
+//!   shows"): lamp_room draft 6.4% → 3.8%, the furnished interior at medium 4.7% → 3.5% and at
+//!   high 2.8% → 2.2% (2.1× the texels, at the preset's budget); the other corpus bakes are
+//!   byte-identical.
 //!
 //! - **Error map** ([`error_map`], `--error-map`): the same two parts texel by texel, written
 //!   beside each page so an artist sees where a bake is weak and whether texels or rays would help.
@@ -136,6 +146,11 @@ pub struct Plan {
     /// The texel budget of the preset's density ([`choose_density`]), when the plan chose it:
     /// the most texels a raise of the density ([`choose_density_raise`]) may ask for.
     pub texel_budget: Option<(f64, f64)>,
+    /// Gathering rays per texel of the pilot pair the resolution sample read ([`PILOT_RAYS`],
+    /// or 4× when a second pilot ran).
+    pub resolution_pilot_rays: u32,
+    /// Whether [`choose_density_raise`] raised the density (it does so once).
+    pub density_raised: bool,
     /// Rays of pilot bakes not reused in the result (the first pair, when a second ran).
     pub discarded_rays: u64,
     /// Gathering rays per texel of the last bake where fewer than its `gather_rays` suffice
@@ -442,9 +457,10 @@ pub fn choose_instance_density(
 /// Largest raise of the texel density [`choose_density_raise`] makes (×4 the texels).
 pub const MAX_DENSITY_RAISE: f32 = 2.0;
 
-/// Step 1c, after the density pilot's gathered sample on the uniform atlas: a higher texel
-/// density when the lookup error measured at random surface points (`gathered`, what a
-/// renderer shows) is above what the target `plan.target_error` leaves beside the noise the
+/// Step 1c, after the density pilot's gathered sample on the uniform atlas (or, once, after
+/// the transport pilot's, when it ran at 4× the rays): a higher texel density when the lookup
+/// error measured at random surface points (`measured`, [`GatheredSample::relative_error_bounds`]
+/// of `pilot`'s sample; what a renderer shows) is above what the target `plan.target_error` leaves beside the noise the
 /// rays will aim for ([`NOISE_SHARE`]): `room = e·√(1 − 0.75²)`. Returns the new density
 /// (texels per unit, three significant digits), or `None` to keep `tpu`.
 ///
@@ -459,13 +475,14 @@ pub const MAX_DENSITY_RAISE: f32 = 2.0;
 /// preset's texel budget (`plan.texel_budget`, which bounds time and memory), said in the
 /// reason when the cap leaves the target out of reach.
 pub fn choose_density_raise(
-    gathered: &GatheredSample,
+    measured: (f32, f32, f32),
+    pilot: &str,
     area: f64,
     tpu: f32,
     plan: &mut Plan,
 ) -> Option<f32> {
     let e = plan.target_error;
-    let (r, r_lo, r_hi) = gathered.relative_error_bounds();
+    let (r, r_lo, r_hi) = measured;
     let room = e * (1.0 - NOISE_SHARE * NOISE_SHARE).sqrt();
     if !(r.is_finite() && r_lo.is_finite()) || area <= 0.0 || tpu <= 0.0 {
         return None;
@@ -473,7 +490,7 @@ pub fn choose_density_raise(
     let wanted = r / room;
     if r_lo <= room || wanted < 1.0 + UNIFORM_WITHIN {
         plan.reasons.push(format!(
-            "texel density kept: the density pilot's lookup error at random surface points is \
+            "texel density kept: the {pilot} lookup error at random surface points is \
              {:.2}% ({:.2}…{:.2}%), not surely above the {:.2}% that the {:.1}% target leaves \
              beside noise at {:.0}% of it",
             r * 100.0,
@@ -491,13 +508,14 @@ pub fn choose_density_raise(
     let factor = wanted.min(MAX_DENSITY_RAISE).min(by_budget);
     if factor < 1.0 + UNIFORM_WITHIN {
         plan.reasons.push(format!(
-            "texel density kept: the density pilot's lookup error {:.2}% at random points asks \
+            "texel density kept: the {pilot} lookup error {:.2}% at random points asks \
              for ×{wanted:.2} the density, but the preset's texel budget allows no more",
             r * 100.0
         ));
         return None;
     }
     let raised = round_significant(tpu * factor, 3);
+    plan.density_raised = true;
     let cap = if factor < wanted {
         let which = if by_budget < MAX_DENSITY_RAISE {
             format!(
@@ -515,8 +533,8 @@ pub fn choose_density_raise(
         String::new()
     };
     plan.reasons.push(format!(
-        "texel density raised ×{factor:.2} to {raised} /m (about {:.0} texels): the density \
-         pilot's lookup error at random surface points is {:.2}% ({:.2}…{:.2}%), above the \
+        "texel density raised ×{factor:.2} to {raised} /m (about {:.0} texels): the {pilot} \
+         lookup error at random surface points is {:.2}% ({:.2}…{:.2}%), above the \
          {:.2}% that the {:.1}% target leaves beside noise at {:.0}% of it; taken to fall in \
          proportion to the texel size (between √h at shadow edges narrower than a texel and h² \
          where light curves smoothly){cap}",
@@ -1510,7 +1528,13 @@ mod tests {
         let room = 0.04 * (1.0 - NOISE_SHARE * NOISE_SHARE).sqrt();
         // Twice the room: twice the density (1 m² at 16 /m is far within the budget).
         let mut plan = plan_at(0.04);
-        let raised = choose_density_raise(&sample_of(2.0 * room), 1.0, 16.0, &mut plan);
+        let raised = choose_density_raise(
+            sample_of(2.0 * room).relative_error_bounds(),
+            "density pilot's",
+            1.0,
+            16.0,
+            &mut plan,
+        );
         assert_eq!(raised, Some(32.0));
         assert!(
             plan.reasons[0].contains("raised ×2.00"),
@@ -1519,7 +1543,13 @@ mod tests {
         );
         // Beyond ×2 it is capped, and says so.
         let mut plan = plan_at(0.04);
-        let raised = choose_density_raise(&sample_of(3.0 * room), 1.0, 16.0, &mut plan);
+        let raised = choose_density_raise(
+            sample_of(3.0 * room).relative_error_bounds(),
+            "density pilot's",
+            1.0,
+            16.0,
+            &mut plan,
+        );
         assert_eq!(raised, Some(32.0));
         assert!(
             plan.reasons[0].contains("capped at ×2"),
@@ -1533,20 +1563,41 @@ mod tests {
         }
         unsure.points.truncate(10);
         let mut plan = plan_at(0.04);
-        assert_eq!(choose_density_raise(&unsure, 1.0, 16.0, &mut plan), None);
+        assert_eq!(
+            choose_density_raise(
+                unsure.relative_error_bounds(),
+                "density pilot's",
+                1.0,
+                16.0,
+                &mut plan
+            ),
+            None
+        );
         assert!(plan.reasons[0].contains("not surely"), "{:?}", plan.reasons);
         // Within the room, or less than ×1.1 above it: kept.
         for r in [0.5 * room, 1.05 * room] {
             let mut plan = plan_at(0.04);
             assert_eq!(
-                choose_density_raise(&sample_of(r), 1.0, 16.0, &mut plan),
+                choose_density_raise(
+                    sample_of(r).relative_error_bounds(),
+                    "density pilot's",
+                    1.0,
+                    16.0,
+                    &mut plan
+                ),
                 None
             );
             assert!(plan.reasons[0].contains("kept"), "{:?}", plan.reasons);
         }
         // 512 m² at 16 /m are half the budget's 262 144 texels: at most ×√2.
         let mut plan = plan_at(0.04);
-        let raised = choose_density_raise(&sample_of(2.0 * room), 512.0, 16.0, &mut plan);
+        let raised = choose_density_raise(
+            sample_of(2.0 * room).relative_error_bounds(),
+            "density pilot's",
+            512.0,
+            16.0,
+            &mut plan,
+        );
         assert_eq!(raised, Some(22.6));
         assert!(
             plan.reasons[0].contains("texel budget"),
@@ -1555,7 +1606,13 @@ mod tests {
         );
         // At the budget already: kept, and the reason says what stopped it.
         let mut plan = plan_at(0.04);
-        let raised = choose_density_raise(&sample_of(2.0 * room), 1024.0, 16.0, &mut plan);
+        let raised = choose_density_raise(
+            sample_of(2.0 * room).relative_error_bounds(),
+            "density pilot's",
+            1024.0,
+            16.0,
+            &mut plan,
+        );
         assert_eq!(raised, None);
         assert!(
             plan.reasons[0].contains("allows no more"),
@@ -1565,7 +1622,16 @@ mod tests {
         // No light at the points: nothing measured, nothing said.
         let mut plan = plan_at(0.04);
         let dark = GatheredSample::default();
-        assert_eq!(choose_density_raise(&dark, 1.0, 16.0, &mut plan), None);
+        assert_eq!(
+            choose_density_raise(
+                dark.relative_error_bounds(),
+                "density pilot's",
+                1.0,
+                16.0,
+                &mut plan
+            ),
+            None
+        );
         assert!(plan.reasons.is_empty());
     }
 }

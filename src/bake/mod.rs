@@ -447,6 +447,31 @@ fn lay_out(
     Ok((atlas, texels, validity))
 }
 
+/// The density raised once more, from the transport pilot's lookup-error sample, when that
+/// read a pair at 4× the rays (the density pilot's 16 rays cannot tell a 1.8% error from a 0.5%
+/// one at a 2% target) and the density is the plan's and not yet raised: the new density and
+/// the plan as it was before the transport pilot, with the reason added.
+fn raise_after_pilot(
+    prepared: &Prepared,
+    before: &Plan,
+    plan: &Plan,
+    keep: &crate::config::Keep,
+) -> Option<(f32, Plan)> {
+    if keep.texels_per_unit
+        || prepared.atlas.reused_input_uvs
+        || plan.density_raised
+        || plan.resolution_pilot_rays <= plan::PILOT_RAYS
+    {
+        return None;
+    }
+    let measured = plan.resolution_parts?.gathered?;
+    let mut raised = before.clone();
+    let pilot = format!("{}-ray pilot's", plan.resolution_pilot_rays);
+    let area = plan::surface_area(&prepared.scene);
+    let tpu = prepared.config.atlas.texels_per_unit;
+    plan::choose_density_raise(measured, &pilot, area, tpu, &mut raised).map(|t| (t, raised))
+}
+
 /// Runs every stage up to the dilated pages, in memory.
 pub fn compute(input: &Path, config: &BakeConfig, progress: &dyn Progress) -> Result<Baked> {
     compute_prepared(prepare(input, config, progress)?, progress)
@@ -474,25 +499,48 @@ pub(crate) fn light(
     lit: light::LightFn,
 ) -> Result<Lighting> {
     let first = prepared.first_pilot.take();
-    let surfaces = prepared.surfaces();
     let (mut config, mut plan, mut stages) = (
         prepared.config.clone(),
         prepared.plan.clone(),
         prepared.stages.clone(),
     );
 
-    let input = prepared.source.path.as_path();
-    let sizes = memory::Sizes::counted(&prepared.scene, &prepared.source, &prepared.texels)
-        .per_process(prepared.processes);
+    let sizes_of = |p: &Prepared| {
+        memory::Sizes::counted(&p.scene, &p.source, &p.texels).per_process(p.processes)
+    };
+    let mut sizes = sizes_of(prepared);
     let limit = config.max_memory.unwrap_or(u64::MAX);
-    memory::check(input, &sizes, &config, limit)?;
+    memory::check(&prepared.source.path, &sizes, &config, limit)?;
     let mut pilot = None;
     if let (Some(plan), Some(auto)) = (&mut plan, config.auto) {
         let t = Instant::now();
+        let (config_before, plan_before) = (config.clone(), plan.clone());
+        let surfaces = prepared.surfaces();
         pilot = pilot::choose_transport(surfaces, &mut config, plan, &auto.keep, progress, first)?;
+        if let Some((tpu, raised)) = raise_after_pilot(prepared, &plan_before, plan, &auto.keep) {
+            // The transport pilot's choices were made for the old texels: start them again.
+            (config, *plan) = (config_before, raised);
+            config.atlas.texels_per_unit = tpu;
+            prepared.config.atlas.texels_per_unit = tpu;
+            (prepared.atlas, prepared.texels, prepared.validity) = lay_out(
+                &prepared.scene,
+                &prepared.source,
+                &prepared.tracer,
+                &config,
+                progress,
+                &mut Vec::new(),
+            )?;
+            sizes = sizes_of(prepared);
+            memory::check(&prepared.source.path, &sizes, &config, limit)?;
+            let surfaces = prepared.surfaces();
+            pilot =
+                pilot::choose_transport(surfaces, &mut config, plan, &auto.keep, progress, None)?;
+        }
         config.validate()?;
         timed(&mut stages, "plan", t);
     }
+    let surfaces = prepared.surfaces();
+    let input = prepared.source.path.as_path();
     // A kept transport (and layers) must describe the lightmap written: one run's rows, so the
     // pilot runs are not mixed in (their rays are spent on the choice only), and every texel
     // casts the chosen rays, so the kept settings say all a fresh bake needs to cast the same

@@ -91,6 +91,7 @@ pub fn choose_transport(
             }
         };
         plan.resolution_seconds = seconds;
+        plan.resolution_pilot_rays = runs.gather_rays;
         plan::predict_resolution(texels, [&a, &b], punctual.as_ref(), gathered.as_ref(), plan);
         pilot = Some(runs);
     } else if monte_carlo && !keep.rays {
@@ -186,9 +187,16 @@ pub fn measure_density(
         runs.rays() / 2,
     );
     let seconds = sampled.elapsed().as_secs_f64();
-    density.texels_per_unit = gathered
-        .as_ref()
-        .and_then(|g| plan::choose_density_raise(g, plan::surface_area(surfaces.scene), tpu, plan));
+    density.texels_per_unit = gathered.as_ref().and_then(|g| {
+        let area = plan::surface_area(surfaces.scene);
+        plan::choose_density_raise(
+            g.relative_error_bounds(),
+            "density pilot's",
+            area,
+            tpu,
+            plan,
+        )
+    });
     if density.instance_factors.is_none() && density.texels_per_unit.is_none() {
         runs.samples = Some(Samples {
             punctual,
