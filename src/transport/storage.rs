@@ -393,7 +393,7 @@ fn escaped(tail: &[u8], at: usize) -> u32 {
 impl Iterator for CountRow<'_> {
     type Item = (u32, f32);
 
-    /// The solvers' path: [`BLOCK`] entries at a time, their columns and weights decoded
+    /// The solvers' path: `BLOCK` entries at a time, their columns and weights decoded
     /// before they are summed, so that the decoding runs ahead of the f32 sums (whose chain of
     /// adds sets the pace) and the flags cost a branch per block, not per entry.
     #[inline]
