@@ -1,4 +1,5 @@
-//! The seam table of `lightmap::seams`' module docs, measured: per scene, the seam edges, the
+//! The seam table of `lightmap::seams`' module docs, measured: per scene, the seam edges (and
+//! the texels the stitch solves for), the
 //! mean and maximum `|A − B|` along them before and after stitching, with the surface term
 //! off (μ = 0, stitching as before it existed) and at the default μ, and the stitch's time.
 //!
@@ -57,7 +58,7 @@ fn main() {
         ..on.clone()
     };
     println!(
-        "| scene | edges | mean before → μ = 0 / μ = {} | max before → μ = 0 / μ = {} | mean value | time μ = 0 / μ = {} |",
+        "| scene | edges (texels solved) | mean before → μ = 0 / μ = {} | max before → μ = 0 / μ = {} | mean value | time μ = 0 / μ = {} |",
         on.surface_weight, on.surface_weight, on.surface_weight
     );
     println!("|---|---|---|---|---|---|");
@@ -68,18 +69,20 @@ fn main() {
             let t = Instant::now();
             let found = seams::find(&baked.scene, &baked.atlas, params);
             let mut stitched = baked.pages.clone();
-            seams::stitch(&found, &mut stitched, params);
+            let (texels, _) = seams::stitch(&found, &mut stitched, params);
             let seconds = t.elapsed().as_secs_f64();
             results.push((
                 seams::measure(&found, &baked.pages),
                 seams::measure(&found, &stitched),
                 seconds,
+                texels,
             ));
         }
         let before = results[0].0;
         println!(
-            "| {name} | {} | {:.4} → {:.5} / {:.5} | {:.3} → {:.4} / {:.4} | {:.3} | {:.0} / {:.0} ms |",
+            "| {name} | {} ({}) | {:.4} → {:.5} / {:.5} | {:.3} → {:.4} / {:.4} | {:.3} | {:.0} / {:.0} ms |",
             before.edges,
+            results[1].3,
             before.mean_abs_diff,
             results[0].1.mean_abs_diff,
             results[1].1.mean_abs_diff,
