@@ -362,10 +362,11 @@ fn surface_reads(scene: &Scene, atlas: &Atlas) -> Vec<Vec<f32>> {
             continue;
         }
         let size = atlas.pages[page as usize];
+        // At most 4096² pieces: a triangle the size of a 4096² page still gets one per texel².
         let k = (area * READ_SAMPLES_PER_TEXEL)
             .sqrt()
             .ceil()
-            .clamp(1.0, 64.0) as u32;
+            .clamp(1.0, 4096.0) as u32;
         let piece = area / (k * k) as f32;
         let (du, dv) = ((b - a) / k as f32, (c - a) / k as f32);
         let out = &mut reads[page as usize];
