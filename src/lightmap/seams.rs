@@ -66,9 +66,10 @@
 //! border zigzags along a row of triangles: every other triangle of the row goes to each chart
 //! (a "zipper"), and all the row's edges, across it and along its diagonals, are seam edges.
 //! Such a seam constrains the two sides over the row's width, not along a line. On
-//! `furnished_interior` at draft 977 of the 2269 seam edges are such rows of the floor (a row
-//! at z ∈ [−0.04, 0.04] runs the room's length, 1 cm inside the table's edge, in its shadow)
-//! and 1067 are rows of the north and south walls (one behind the sofa). They are seams like
+//! `furnished_interior` at draft 977 of the 2269 seam edges lie on the floor, most of them in
+//! such rows (199 in the row z ∈ [−0.04, 0.04], which runs the room's length 1 cm inside a
+//! table's edge, in its shadow), and 1067 on the north and south walls (one row behind the
+//! sofa). They are seams like
 //! any other — the surface is smooth and both sides show it — but the light varies within the
 //! row, and the stitch moved texels the charts show beside it (the surface term below).
 //!
