@@ -71,6 +71,7 @@ fn main() {
         let t_only = Seams {
             edges: all.edges[shared.edges.len()..].to_vec(),
             samples: all.samples[shared.samples.len()..].to_vec(),
+            surface_reads: all.surface_reads.clone(),
         };
         let mut shared_only = baked.pages.clone();
         seams::stitch(&shared, &mut shared_only, &on);
