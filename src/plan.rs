@@ -1520,41 +1520,33 @@ mod tests {
 
     #[test]
     fn the_density_rises_with_the_measured_lookup_error_within_the_budget() {
-        let plan_at = |e: f32| Plan {
-            target_error: e,
-            texel_budget: Some(texel_budget(16.0)),
-            ..Default::default()
-        };
         let room = 0.04 * (1.0 - NOISE_SHARE * NOISE_SHARE).sqrt();
+        // The raise for a 4% target at 16 /m over `area` m², and the reason it gives.
+        let raise = |sample: &GatheredSample, area: f64| {
+            let mut plan = Plan {
+                target_error: 0.04,
+                texel_budget: Some(texel_budget(16.0)),
+                ..Default::default()
+            };
+            let measured = sample.relative_error_bounds();
+            let raised = choose_density_raise(measured, "density pilot's", area, 16.0, &mut plan);
+            (raised, plan.reasons.join(" | "))
+        };
+        let expect = |(raised, reason): (Option<f32>, String), want: Option<f32>, says: &str| {
+            assert_eq!(raised, want, "{reason}");
+            assert!(reason.contains(says), "{reason}");
+        };
         // Twice the room: twice the density (1 m² at 16 /m is far within the budget).
-        let mut plan = plan_at(0.04);
-        let raised = choose_density_raise(
-            sample_of(2.0 * room).relative_error_bounds(),
-            "density pilot's",
-            1.0,
-            16.0,
-            &mut plan,
-        );
-        assert_eq!(raised, Some(32.0));
-        assert!(
-            plan.reasons[0].contains("raised ×2.00"),
-            "{:?}",
-            plan.reasons
+        expect(
+            raise(&sample_of(2.0 * room), 1.0),
+            Some(32.0),
+            "raised ×2.00",
         );
         // Beyond ×2 it is capped, and says so.
-        let mut plan = plan_at(0.04);
-        let raised = choose_density_raise(
-            sample_of(3.0 * room).relative_error_bounds(),
-            "density pilot's",
-            1.0,
-            16.0,
-            &mut plan,
-        );
-        assert_eq!(raised, Some(32.0));
-        assert!(
-            plan.reasons[0].contains("capped at ×2"),
-            "{:?}",
-            plan.reasons
+        expect(
+            raise(&sample_of(3.0 * room), 1.0),
+            Some(32.0),
+            "capped at ×2",
         );
         // An estimate above the room whose range reaches below it: kept.
         let mut unsure = sample_of(1.5 * room);
@@ -1562,76 +1554,25 @@ mod tests {
             p.rest_square *= if i % 2 == 0 { 0.0 } else { 2.0 };
         }
         unsure.points.truncate(10);
-        let mut plan = plan_at(0.04);
-        assert_eq!(
-            choose_density_raise(
-                unsure.relative_error_bounds(),
-                "density pilot's",
-                1.0,
-                16.0,
-                &mut plan
-            ),
-            None
-        );
-        assert!(plan.reasons[0].contains("not surely"), "{:?}", plan.reasons);
+        expect(raise(&unsure, 1.0), None, "not surely");
         // Within the room, or less than ×1.1 above it: kept.
         for r in [0.5 * room, 1.05 * room] {
-            let mut plan = plan_at(0.04);
-            assert_eq!(
-                choose_density_raise(
-                    sample_of(r).relative_error_bounds(),
-                    "density pilot's",
-                    1.0,
-                    16.0,
-                    &mut plan
-                ),
-                None
-            );
-            assert!(plan.reasons[0].contains("kept"), "{:?}", plan.reasons);
+            expect(raise(&sample_of(r), 1.0), None, "kept");
         }
         // 512 m² at 16 /m are half the budget's 262 144 texels: at most ×√2.
-        let mut plan = plan_at(0.04);
-        let raised = choose_density_raise(
-            sample_of(2.0 * room).relative_error_bounds(),
-            "density pilot's",
-            512.0,
-            16.0,
-            &mut plan,
-        );
-        assert_eq!(raised, Some(22.6));
-        assert!(
-            plan.reasons[0].contains("texel budget"),
-            "{:?}",
-            plan.reasons
+        expect(
+            raise(&sample_of(2.0 * room), 512.0),
+            Some(22.6),
+            "texel budget",
         );
         // At the budget already: kept, and the reason says what stopped it.
-        let mut plan = plan_at(0.04);
-        let raised = choose_density_raise(
-            sample_of(2.0 * room).relative_error_bounds(),
-            "density pilot's",
-            1024.0,
-            16.0,
-            &mut plan,
-        );
-        assert_eq!(raised, None);
-        assert!(
-            plan.reasons[0].contains("allows no more"),
-            "{:?}",
-            plan.reasons
+        expect(
+            raise(&sample_of(2.0 * room), 1024.0),
+            None,
+            "allows no more",
         );
         // No light at the points: nothing measured, nothing said.
-        let mut plan = plan_at(0.04);
-        let dark = GatheredSample::default();
-        assert_eq!(
-            choose_density_raise(
-                dark.relative_error_bounds(),
-                "density pilot's",
-                1.0,
-                16.0,
-                &mut plan
-            ),
-            None
-        );
-        assert!(plan.reasons.is_empty());
+        expect(raise(&GatheredSample::default(), 1.0), None, "");
+        assert!(raise(&GatheredSample::default(), 1.0).1.is_empty());
     }
 }

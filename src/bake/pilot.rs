@@ -72,22 +72,9 @@ pub fn choose_transport(
         } = match runs.samples.take() {
             Some(samples) => samples,
             None => {
-                let punctual = punctual_sample(surfaces, &config.transport, [&a, &b]);
-                let sampled = Instant::now();
-                let gathered = gathered_sample(
-                    surfaces,
-                    &config.transport,
-                    &runs,
-                    punctual.as_ref(),
-                    e,
-                    plan.pilot_rays / 2,
-                );
-                let seconds = sampled.elapsed().as_secs_f64();
-                Samples {
-                    punctual,
-                    gathered,
-                    seconds,
-                }
+                let stored = [a.as_slice(), b.as_slice()];
+                let budget = plan.pilot_rays / 2;
+                Samples::measure(surfaces, &config.transport, &runs, stored, e, budget)
             }
         };
         plan.resolution_seconds = seconds;
@@ -167,27 +154,19 @@ pub fn measure_density(
     let tolerance = (plan.target_error / 10.0).min(1e-3);
     let mut runs = PilotRuns::bake(surfaces, &config.transport, PILOT_RAYS, tolerance, progress)?;
     let [a, b] = runs.stored(config.transport.indirect_only);
-    let punctual = punctual_sample(surfaces, &config.transport, [&a, &b]);
+    let (stored, budget) = ([a.as_slice(), b.as_slice()], runs.rays() / 2);
+    let target = plan.target_error;
+    let samples = Samples::measure(surfaces, &config.transport, &runs, stored, target, budget);
     let tpu = config.atlas.texels_per_unit;
     density.instance_factors = plan::choose_instance_density(
         surfaces.scene,
         surfaces.texels,
-        [&a, &b],
-        punctual.as_ref(),
+        stored,
+        samples.punctual.as_ref(),
         tpu,
         plan,
     );
-    let sampled = Instant::now();
-    let gathered = gathered_sample(
-        surfaces,
-        &config.transport,
-        &runs,
-        punctual.as_ref(),
-        plan.target_error,
-        runs.rays() / 2,
-    );
-    let seconds = sampled.elapsed().as_secs_f64();
-    density.texels_per_unit = gathered.as_ref().and_then(|g| {
+    density.texels_per_unit = samples.gathered.as_ref().and_then(|g| {
         let area = plan::surface_area(surfaces.scene);
         plan::choose_density_raise(
             g.relative_error_bounds(),
@@ -198,11 +177,7 @@ pub fn measure_density(
         )
     });
     if density.instance_factors.is_none() && density.texels_per_unit.is_none() {
-        runs.samples = Some(Samples {
-            punctual,
-            gathered,
-            seconds,
-        });
+        runs.samples = Some(samples);
         density.pilot = Some(runs);
     }
     Ok(density)
@@ -285,6 +260,35 @@ struct Samples {
     punctual: Option<PunctualSample>,
     gathered: Option<GatheredSample>,
     seconds: f64,
+}
+
+impl Samples {
+    /// Both samples of `runs`, whose stored values are `stored`; the gathered one for the
+    /// relative error `target`, casting up to `budget_rays` past its first batch.
+    fn measure(
+        surfaces: Surfaces,
+        transport: &TransportParams,
+        runs: &PilotRuns,
+        stored: [&[Vec3]; 2],
+        target: f32,
+        budget_rays: u64,
+    ) -> Samples {
+        let punctual = punctual_sample(surfaces, transport, stored);
+        let start = Instant::now();
+        let gathered = gathered_sample(
+            surfaces,
+            transport,
+            runs,
+            punctual.as_ref(),
+            target,
+            budget_rays,
+        );
+        Samples {
+            punctual,
+            gathered,
+            seconds: start.elapsed().as_secs_f64(),
+        }
+    }
 }
 
 impl PilotRuns {
