@@ -314,6 +314,54 @@ fn reference_view_writes_an_image_and_its_standard_error() {
     }
 }
 
+/// A strip reference (`reference --points N --strip …`): every point in the strip; a strip that
+/// is not seven numbers, or that no surface reaches, is refused by name and writes nothing.
+#[test]
+fn reference_points_in_a_strip() {
+    let dir = scratch();
+    let csv = dir.path().join("strip.csv");
+    let scene = fixture("two_rooms.gltf");
+    let run = |strip: &str| {
+        lightbake(&[
+            "reference",
+            scene.to_str().unwrap(),
+            "--points",
+            "64",
+            "--spp",
+            "4",
+            "--strip",
+            strip,
+            "-q",
+            "-o",
+            csv.to_str().unwrap(),
+        ])
+    };
+    let o = run("0,0,0,1,0,0,0.05");
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let reference = lightbake::reference::points::PointReference::from_csv(&text, &csv).unwrap();
+    assert_eq!(reference.points.len(), 64);
+    let x = reference.points.iter().map(|p| p.position.x);
+    assert!(
+        x.clone().all(|x| x > 0.0 && x <= 0.05),
+        "{:?}",
+        x.collect::<Vec<_>>()
+    );
+    std::fs::remove_file(&csv).unwrap();
+
+    let o = run("0,0,0,1,0");
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("seven numbers"), "{}", stderr(&o));
+    let o = run("50,0,0,1,0,0,0.1");
+    assert_eq!(o.status.code(), Some(1));
+    let e = stderr(&o);
+    assert!(
+        e.contains("two_rooms.gltf") && e.contains("no surface"),
+        "{e}"
+    );
+    assert!(list_files(dir.path()).is_empty());
+}
+
 /// SIGTERM or SIGINT during a bake (issue 14): the bake stops within a few seconds with exit
 /// code 128 + the signal and "interrupted", and leaves no file behind, neither an output nor a
 /// temporary one.

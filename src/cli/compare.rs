@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 use glam::Vec3;
-use lightbake::reference::points::{self, PointReference};
+use lightbake::reference::points::{self, PointReference, Strip};
 use lightbake::render::RenderScene;
 
 /// Prints the point figures of a bake in one block (or, with --view, a rendered image's error).
@@ -26,7 +26,7 @@ pub struct Args {
     /// plane, its normal towards the side measured, the strip's width; points on surfaces
     /// parallel to the plane are left out (the junction strip along a wall).
     #[arg(long, value_name = "X,Y,Z,NX,NY,NZ,W")]
-    strip: Option<String>,
+    strip: Option<Strip>,
 }
 
 const AFTER_HELP: &str = "\
@@ -51,15 +51,7 @@ pub fn run(args: &Args) -> Result<()> {
         .with_context(|| format!("reading {} failed", points.display()))?;
     let mut reference = PointReference::from_csv(&text, points)?;
     if let Some(strip) = &args.strip {
-        let v: Vec<f32> = strip
-            .split(',')
-            .map(|x| x.trim().parse::<f32>())
-            .collect::<std::result::Result<_, _>>()
-            .context("--strip takes seven numbers: x,y,z,nx,ny,nz,width")?;
-        let [x, y, z, nx, ny, nz, width] = v[..] else {
-            anyhow::bail!("--strip takes seven numbers: x,y,z,nx,ny,nz,width");
-        };
-        reference = reference.in_strip(Vec3::new(x, y, z), Vec3::new(nx, ny, nz), width);
+        reference = reference.in_strip(strip);
     }
     let baked = RenderScene::load(&args.baked)
         .with_context(|| format!("loading {} failed", args.baked.display()))?;

@@ -9,6 +9,7 @@ use glam::Vec3;
 use lightbake::config::{AutoParams, Keep};
 use lightbake::lightmap::{self, LightmapPages};
 use lightbake::output::{self, Staging};
+use lightbake::reference::points::Strip;
 use lightbake::reference::{self, ReferenceParams};
 use lightbake::render::Image;
 use lightbake::{BakeConfig, Progress, texels};
@@ -40,6 +41,11 @@ pub struct Args {
     /// for `lightbake compare`.
     #[arg(long, value_name = "N", conflicts_with = "view")]
     points: Option<usize>,
+    /// With --points, draw all N points in a strip beside a plane: "x,y,z,nx,ny,nz,width" — a
+    /// point of the plane, its normal towards the side measured, the strip's width (the
+    /// junction strip along a wall, a texel wide; as `compare --strip` selects).
+    #[arg(long, value_name = "X,Y,Z,NX,NY,NZ,W", requires = "points")]
+    strip: Option<Strip>,
     #[command(flatten)]
     camera: ViewArgs,
     /// Exposure of a --view PNG in stops (ignored for EXR).
@@ -107,7 +113,10 @@ H/π there (about the shading normal) and its standard error: `#` comment lines,
 x,y,z,nx,ny,nz,r,g,b,se_r,se_g,se_b,snx,sny,snz, one row per point (world position, unit face
 normal, H/π, standard error, unit shading normal). Compare bakes with it:
   lightbake reference scene.gltf --points 4096 --spp 4096 --target-error 0.01 -o points.csv
-  lightbake compare baked/scene.gltf --points points.csv";
+  lightbake compare baked/scene.gltf --points points.csv
+With --strip, every point lies in the strip (the dark side of a wall, one texel wide):
+  lightbake reference two_rooms.gltf --points 2048 --strip 0,0,0,1,0,0,0.03 -o strip.csv
+  lightbake compare baked/two_rooms.gltf --points strip.csv";
 
 impl Args {
     fn config(&self) -> BakeConfig {
@@ -259,8 +268,9 @@ fn points(args: &Args, n: usize, config: &BakeConfig, params: &ReferenceParams) 
         bail!("--points must be at least 1");
     }
     let bars = Bars::new(args.run.quiet);
-    let (points, traced) = reference::points::compute(&args.scene, config, params, n, &bars)
-        .with_context(|| format!("tracing points of {} failed", args.scene.display()))?;
+    let (points, traced) =
+        reference::points::compute_in(&args.scene, config, params, n, args.strip.as_ref(), &bars)
+            .with_context(|| format!("tracing points of {} failed", args.scene.display()))?;
     if bars.aborted() {
         bail!("aborted");
     }
