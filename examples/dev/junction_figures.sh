@@ -2,15 +2,17 @@
 # Junction splitting as a renderer shows it (README, "Junction splitting"): the two-room
 # fixtures baked at every preset with the split on and off, read along the wall's dark side and
 # rendered from room B, against path-traced references.
-#   examples/dev/junction_figures.sh BIN OUT
+#   examples/dev/junction_figures.sh BIN OUT [PRESETS]
 # References (made once into OUT): per scene a strip reference, 8192 points within 12.5 cm of
 # the wall on room B's side (`reference --points --strip`, 2048 paths each), and 160 × 120 views
 # at 4096 paths per pixel. Each preset is read in the strip one of its texels wide (8, 16, 32
 # texels/m: the split bakes keep these densities), over the whole strip and "along the wall"
 # (more than 10 cm from the doorway's span, which the strip crosses on the floor: there the
-# jambs cast a penumbra across it).
+# jambs cast a penumbra across it). PRESETS (default all): draft, medium, high, and dense —
+# high at 64 texels/m with 2048 rays and 512 light samples a texel, to see whether the bake
+# converges to the references.
 set -eu
-bin="$1"; out="$2"; mkdir -p "$out"
+bin="$1"; out="$2"; presets="${3:-draft medium high dense}"; mkdir -p "$out"
 # scene, the wall plane's normal towards room B, the wall's direction (along it), its views
 # (the glTF camera, or NAME=EYE:TARGET)
 cases=("two_rooms 1,0,0 0,0,1 camera foot=1.5,1.2,0.6:0,0.2,-1"
@@ -28,8 +30,12 @@ for c in "${cases[@]}"; do
     [ -e "$ref" ] || "$bin" reference "fixtures/$s.gltf" --view $(camera "$v") --size 160x120 \
         --spp 4096 --quiet -o "$ref"
   done
-  for q in draft medium high; do
-    case $q in draft) w=0.125 ;; medium) w=0.0625 ;; high) w=0.03125 ;; esac
+  for q in $presets; do
+    settings=(--quality "$q")
+    case $q in draft) w=0.125 ;; medium) w=0.0625 ;; high) w=0.03125 ;;
+      dense) w=0.015625
+             settings=(--quality high --texels-per-unit 64 --rays 2048 --light-samples 512) ;;
+    esac
     # The strip a texel wide, and its part along the wall (away from the doorway).
     IFS=, read -r nx _ nz <<< "$n"; IFS=, read -r ax _ az <<< "$a"
     for part in all wall; do
@@ -42,7 +48,7 @@ for c in "${cases[@]}"; do
     for split in on off; do
       d="$out/$s-$q-$split"; rm -rf "$d"
       flag=(); [ $split = off ] && flag=(--no-split-junctions)
-      "$bin" bake "fixtures/$s.gltf" -o "$d" --quality "$q" --quiet "${flag[@]}"
+      "$bin" bake "fixtures/$s.gltf" -o "$d" "${settings[@]}" --quiet "${flag[@]}"
       line="$s $q split $split:"
       for part in all wall; do
         r=$("$bin" compare "$d/$s.gltf" --points "$out/$s-$q-$part.csv")
