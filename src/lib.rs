@@ -87,8 +87,9 @@
 //! specular layer; it reads only the [`scene::Scene`] and the EXR pages its instances name,
 //! never glTF JSON) and [`metrics`] (the error measures of every accuracy figure). The
 //! reference also measures what a renderer shows: [`reference::points`] path-traces random
-//! visible surface points and reads the written bake there as a renderer does (`TEXCOORD_1`,
-//! bilinear lookup in the EXR page). [`view`] serves a page that shows a bake in a browser with
+//! visible surface points (over the whole scene, or within a [`reference::points::Strip`] beside
+//! a wall, where leaks would show) and reads the written bake there as a renderer does
+//! (`TEXCOORD_1`, bilinear lookup in the EXR page). [`view`] serves a page that shows a bake in a browser with
 //! three.js (vendored, offline), loaded exactly as a three.js user would load it.
 //!
 //! ## Conventions
