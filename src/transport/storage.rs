@@ -35,9 +35,9 @@
 //! branch (a repeated hit is a coin toss). The far and count bytes are therefore read whether or
 //! not the flags ask for them, and the storage ends in a padding byte. The previous layout, a
 //! varint per step decoded entry by entry (its state in memory behind a cold call, branches on
-//! the flags), swept 2.4–3× slower than f32 rows; this one 1.3–1.6× (Gauss–Seidel, README
-//! "Memory"). The streams are written here rather than taken from a crate: they are decoded
-//! inline in the solvers' sweeps.
+//! the flags), swept 2.4–3× slower than f32 rows; this one 1.4–2.1× (Gauss–Seidel; Jacobi
+//! 1.9–2.7×; README "Memory"). The streams are written here rather than taken from a crate:
+//! they are decoded inline in the solvers' sweeps.
 
 use std::iter::{Copied, Zip};
 use std::slice::Iter;
@@ -193,7 +193,7 @@ impl CountRows {
     /// Appends the end of the last row (the next one's start), at `at` in `bytes`.
     fn push_start(&mut self, at: u64) {
         let n = self.start_len();
-        if n % GROUP == 0 {
+        if n.is_multiple_of(GROUP) {
             self.base.push(at);
         }
         let relative = at - self.base.last().unwrap();
@@ -223,7 +223,7 @@ impl CountRows {
             Starts::Narrow(s) => _ = s.pop(),
             Starts::Wide(s) => _ = s.pop(),
         }
-        if self.start_len() % GROUP == 0 {
+        if self.start_len().is_multiple_of(GROUP) {
             self.base.pop();
         }
     }
