@@ -1197,17 +1197,19 @@ pub fn format_bytes(bytes: f64) -> String {
 /// Bytes of one stored f32 row entry: the source texel (u32) and its form factor (f32).
 pub const ROW_ENTRY_BYTES: f64 = 8.0;
 /// Bytes per gathering ray of Monte Carlo rows stored as ray counts ([`crate::transport::Rows`]),
-/// besides `TEXEL_BYTES`' per-row part: measured 0.66 (Cornell box, K = 1024), 0.71 and 0.80
-/// (64k-triangle furnished interior, K = 256 and 64; `examples/dev/row_storage.rs`); rounded up
-/// for scenes whose rays land farther apart.
+/// their headers included, besides `TEXEL_BYTES`' per-row part (a row's start, 2.25 bytes):
+/// measured 0.67 (Cornell box, K = 1024), 0.71 and 0.82 (64k-triangle furnished interior,
+/// K = 256 and 64), 1.12 (two rooms, K = 1024, whose rays land farther apart;
+/// `examples/dev/row_storage.rs`).
 pub const COUNT_BYTES_PER_RAY: f64 = 1.0;
 /// Rows are built in chunks and then concatenated: both copies exist for a moment, and a
 /// chunk's vectors grow by doubling.
 const ROW_BUILD_FACTOR: f64 = 2.5;
 /// Per texel: `Texels` (96 bytes of positions, normals, area, albedo, emission, page, xy,
-/// triangle, footprint, jitter), a transport's escape, direct light, row start and rays (29),
+/// triangle, footprint, jitter), a transport's escape, direct light and row start (20; rows as
+/// ray counts keep `K` in their bytes, with a 2.25-byte start),
 /// the solver's iterates and solution (4 RGB vectors, 48), the lightmap and the denoiser's
-/// copies (36).
+/// copies (36): 200, rounded up.
 const TEXEL_BYTES: f64 = 210.0;
 /// Per texel of a finished transport and solution that is kept (a pilot run).
 const HELD_RUN_TEXEL_BYTES: f64 = 32.0;

@@ -262,7 +262,7 @@ struct BakeArgs {
     max_memory: Option<u64>,
     /// How stored Monte Carlo rows are held: auto (f32 weights, or exact ray counts when f32
     /// rows would not fit the memory limit and counts would), f32, or counts (the same output
-    /// from 3.6–6.5× fewer row bytes; see the README's "Memory").
+    /// from 4.1–6.5× fewer row bytes; see the README's "Memory").
     #[arg(long, value_enum, default_value = "auto")]
     rows: RowsArg,
     /// Also write <stem>.transport beside the output: what `lightbake relight` needs to solve

@@ -91,6 +91,10 @@ pub(crate) fn build(
     };
     weights.row_start.push(0);
     let mut counts = CountRows::default();
+    if counted {
+        let rows = chunks.iter().map(|c| c.counts.len()).sum();
+        counts.reserve(rows, chunks.iter().map(|c| c.counts.byte_len()).sum());
+    }
     let mut t = Transport {
         escape: Vec::with_capacity(n),
         direct: Vec::with_capacity(n),

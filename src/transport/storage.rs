@@ -3,11 +3,17 @@
 //!
 //! A Monte Carlo entry is `F_ij = hits_ij / K_i` (hits of texel `j` among the `K_i` rays of
 //! texel `i`), so a row is stored losslessly as `K_i` and, per entry, the step from the previous
-//! column and the hit count. A non-empty row's bytes are three streams after a header:
+//! column and the hit count. A non-empty row's bytes are three streams after a header (an
+//! empty row has no bytes, and no `K_i`: its weights are never read):
 //!
 //! ```text
-//!   varint(entries) · varint(far bytes) · steps (1 byte per entry) · far · counts
+//!   varint(entries) · varint(far bytes) · varint(K_i) · steps (1 byte per entry) · far · counts
 //! ```
+//!
+//! Rows are found by their start in the bytes, a u16 offset per row (u32 once any group's rows
+//! pass 64 KiB) from a u64 base every 32 rows: short rows are common (most of a large scene's
+//! texels see few others, many none), and a u64 start and u32 `K_i` per row were a fifth of
+//! their bytes.
 //!
 //! With `gap` = column − previous column − 1 (columns are sorted and distinct; the first gap
 //! counts from column 0), an entry's step byte is `far << 7 | (gap & 63) << 1 | repeated`.
@@ -29,9 +35,9 @@
 //! branch (a repeated hit is a coin toss). The far and count bytes are therefore read whether or
 //! not the flags ask for them, and the storage ends in a padding byte. The previous layout, a
 //! varint per step decoded entry by entry (its state in memory behind a cold call, branches on
-//! the flags), swept 2.4–3× slower than f32 rows; this one 1.3–1.6× (Gauss–Seidel, README
-//! "Memory"). The streams are written here rather than taken from a crate: they are decoded
-//! inline in the solvers' sweeps.
+//! the flags), swept 2.4–3× slower than f32 rows; this one 1.4–2.1× (Gauss–Seidel; Jacobi
+//! 1.9–2.7×; README "Memory"). The streams are written here rather than taken from a crate:
+//! they are decoded inline in the solvers' sweeps.
 
 use std::iter::{Copied, Zip};
 use std::slice::Iter;
@@ -75,26 +81,40 @@ impl Default for WeightRows {
 /// Monte Carlo rows as ray counts (see the module docs).
 #[derive(Clone, Debug, PartialEq)]
 pub struct CountRows {
-    /// Row `i` is `bytes[row_start[i]..row_start[i+1]]` (u64: rows of large bakes pass 4 GiB).
-    row_start: Vec<u64>,
-    /// Gathering rays `K_i` of each row: the denominator of its weights.
-    rays: Vec<u32>,
+    /// Where row `i` begins in `bytes`: `base[i / GROUP] + start[i]` (`start` has one more
+    /// entry than there are rows: the last row's end).
+    start: Starts,
+    base: Vec<u64>,
     /// The rows, then one padding byte: the far and count bytes are read before the step
     /// byte's flags say whether they are there.
     bytes: Vec<u8>,
     entries: u64,
 }
 
+/// Row starts relative to their group's base: u16 while every group's rows fit in 64 KiB
+/// (rows of up to ~2000 rays), else u32 for all. A u64 per row, as before, was a sixth of a
+/// short row's bytes; the offsets are relative because rows of large bakes pass 4 GiB.
+#[derive(Clone, Debug, PartialEq)]
+enum Starts {
+    Narrow(Vec<u16>),
+    Wide(Vec<u32>),
+}
+
 impl Default for CountRows {
     fn default() -> CountRows {
         CountRows {
-            row_start: vec![0],
-            rays: Vec::new(),
+            start: Starts::Narrow(vec![0]),
+            base: vec![0],
             bytes: vec![0],
             entries: 0,
         }
     }
 }
+
+/// Rows sharing one u64 base offset. A row takes at most 15 header bytes and 11 per ray
+/// (`gather_rays` ≤ 2^20, [`crate::config`]), so a group spans less than 4 GiB: the u32
+/// offsets always fit.
+const GROUP: usize = 32;
 
 /// Gaps below this fit in a step byte; larger ones put `gap >> GAP_BITS` in the far stream.
 const GAP_BITS: u32 = 6;
@@ -146,6 +166,7 @@ impl CountRows {
             }
             write_varint(&mut self.bytes, entries);
             write_varint(&mut self.bytes, far_bytes as u64);
+            write_varint(&mut self.bytes, rays as u64);
             for (gap, hits) in gaps() {
                 let far = (gap >= NEAR_GAPS) as u8;
                 let near = (gap % NEAR_GAPS) as u8;
@@ -165,31 +186,96 @@ impl CountRows {
             }
             self.entries += entries;
         }
-        self.row_start.push(self.bytes.len() as u64);
+        self.push_start(self.bytes.len() as u64);
         self.bytes.push(0);
-        self.rays.push(rays);
     }
 
-    /// Empties the last row (its ray count stays).
+    /// Appends the end of the last row (the next one's start), at `at` in `bytes`.
+    fn push_start(&mut self, at: u64) {
+        let n = self.start_len();
+        if n.is_multiple_of(GROUP) {
+            self.base.push(at);
+        }
+        let relative = at - self.base.last().unwrap();
+        let relative = u32::try_from(relative).expect("a group of count rows within 4 GiB");
+        if let Starts::Narrow(narrow) = &mut self.start {
+            match u16::try_from(relative) {
+                Ok(r) => return narrow.push(r),
+                Err(_) => self.start = Starts::Wide(narrow.iter().map(|&r| r as u32).collect()),
+            }
+        }
+        if let Starts::Wide(wide) = &mut self.start {
+            wide.push(relative);
+        }
+    }
+
+    /// Entries of `start` (rows + 1).
+    fn start_len(&self) -> usize {
+        match &self.start {
+            Starts::Narrow(s) => s.len(),
+            Starts::Wide(s) => s.len(),
+        }
+    }
+
+    /// Drops the last entry of `start` (and its group's base if it began one).
+    fn pop_start(&mut self) {
+        match &mut self.start {
+            Starts::Narrow(s) => _ = s.pop(),
+            Starts::Wide(s) => _ = s.pop(),
+        }
+        if self.start_len().is_multiple_of(GROUP) {
+            self.base.pop();
+        }
+    }
+
+    /// Where row `i` begins in `bytes` (`i` = rows: where the last one ends). Which offsets
+    /// are held is the same for every row: a predicted branch.
+    #[inline(always)]
+    fn start(&self, i: usize) -> usize {
+        let relative = match &self.start {
+            Starts::Narrow(s) => s[i] as u64,
+            Starts::Wide(s) => s[i] as u64,
+        };
+        (self.base[i / GROUP] + relative) as usize
+    }
+
+    /// Empties the last row.
     pub fn clear_last_row(&mut self) {
-        let n = self.rays.len();
+        let n = self.len();
         if n == 0 {
             return;
         }
-        let start = self.row_start[n - 1];
+        let start = self.start(n - 1);
         let removed = self.row(n - 1).len() as u64;
         self.entries -= removed;
-        self.bytes.truncate(start as usize);
+        self.bytes.truncate(start);
         self.bytes.push(0);
-        self.row_start[n] = start;
+        self.pop_start();
+        self.push_start(start as u64);
+    }
+
+    /// Makes room for `rows` more rows of `bytes` bytes in all, so that appending chunks
+    /// does not leave up to twice their bytes allocated.
+    pub fn reserve(&mut self, rows: usize, bytes: usize) {
+        match &mut self.start {
+            Starts::Narrow(s) => s.reserve_exact(rows),
+            Starts::Wide(s) => s.reserve_exact(rows),
+        }
+        self.base.reserve_exact(rows.div_ceil(GROUP) + 1);
+        self.bytes.reserve_exact(bytes);
+    }
+
+    /// Bytes of the rows (the padding byte left out).
+    pub fn byte_len(&self) -> usize {
+        self.bytes.len() - 1
     }
 
     /// Appends the rows of `other` after these.
     pub fn append(&mut self, other: CountRows) {
-        let base = *self.row_start.last().unwrap();
-        self.row_start
-            .extend(other.row_start[1..].iter().map(|s| s + base));
-        self.rays.extend(other.rays);
+        let at = self.start(self.len()) as u64;
+        for i in 1..other.start_len() {
+            self.push_start(at + other.start(i) as u64);
+        }
         self.bytes.pop();
         self.bytes.extend(other.bytes);
         self.entries += other.entries;
@@ -197,25 +283,26 @@ impl CountRows {
 
     /// Rows held.
     pub fn len(&self) -> usize {
-        self.rays.len()
+        self.start_len() - 1
     }
     pub fn is_empty(&self) -> bool {
-        self.rays.is_empty()
+        self.len() == 0
     }
 
     /// The entries of row `i` as (source texel, `hits / K_i`). Not inlined: its header's
     /// varints would keep [`Rows::row`] from being inlined into the f32 rows' sweeps.
     #[inline(never)]
     pub fn row(&self, i: usize) -> CountRow<'_> {
-        let rays = self.rays[i] as f32;
-        let (start, end) = (self.row_start[i] as usize, self.row_start[i + 1] as usize);
-        let (entries, far_bytes, steps) = match end > start {
+        let (start, end) = (self.start(i), self.start(i + 1));
+        let (entries, far_bytes, rays, steps) = match end > start {
             true => {
                 let (entries, at) = read_varint(&self.bytes, start);
                 let (far_bytes, at) = read_varint(&self.bytes, at);
-                (entries as usize, far_bytes as usize, at)
+                let (rays, at) = read_varint(&self.bytes, at);
+                (entries as usize, far_bytes as usize, rays as f32, at)
             }
-            false => (0, 0, start),
+            // An empty row's weights are never read.
+            false => (0, 0, 1.0, start),
         };
         let far = steps + entries;
         CountRow {
@@ -483,7 +570,11 @@ impl Rows {
         match self {
             Rows::Weights(w) => size(w.row_start.len(), 4) + size(w.col.len(), 8),
             Rows::Counts(c) => {
-                size(c.row_start.len(), 8) + size(c.rays.len(), 4) + c.bytes.len() as u64
+                let start = match &c.start {
+                    Starts::Narrow(s) => size(s.len(), 2),
+                    Starts::Wide(s) => size(s.len(), 4),
+                };
+                start + size(c.base.len(), 8) + c.bytes.len() as u64
             }
         }
     }
@@ -655,6 +746,41 @@ mod tests {
                 assert!(a.irradiance == baked.solution.irradiance);
                 assert!(b.irradiance == f32_baked.solution.irradiance);
             }
+        }
+    }
+
+    /// Rows across group bases, a row cleared whose end is a group's base, and a row whose bytes pass
+    /// 64 KiB (the offsets widen to u32) all keep their entries.
+    #[test]
+    fn groups_and_wide_offsets_keep_rows() {
+        let mut rows = CountRows::default();
+        let mut expected: Vec<Vec<u32>> = Vec::new();
+        let push = |rows: &mut CountRows, expected: &mut Vec<_>, hits: Vec<u32>| {
+            rows.push_row(&hits, 8);
+            expected.push(hits);
+        };
+        for i in 0..2 * GROUP as u32 {
+            push(&mut rows, &mut expected, vec![i, i + 100, i + 100]);
+        }
+        rows.clear_last_row(); // its end is the third group's base
+        *expected.last_mut().unwrap() = vec![];
+        assert!(matches!(rows.start, Starts::Narrow(_)));
+        let far_apart = (0..70_000).map(|j| j * 100).collect();
+        push(&mut rows, &mut expected, far_apart);
+        assert!(matches!(rows.start, Starts::Wide(_)));
+        let mut more = CountRows::default();
+        more.push_row(&[3], 8);
+        rows.append(more);
+        expected.push(vec![3]);
+        let rows = Rows::Counts(rows);
+        assert_eq!(rows.len(), expected.len());
+        for (i, hits) in expected.iter().enumerate() {
+            let mut want: Vec<(u32, f32)> = hits
+                .chunk_by(|a, b| a == b)
+                .map(|run| (run[0], run.len() as f32 / 8.0))
+                .collect();
+            want.dedup();
+            assert_eq!(rows.row(i).collect::<Vec<_>>(), want, "row {i}");
         }
     }
 
