@@ -13,7 +13,6 @@
 
 use std::path::{Path, PathBuf};
 
-use glam::Vec3;
 use lightbake::lightmap::Page;
 use lightbake::output::{png, read_exr};
 
@@ -56,35 +55,25 @@ fn main() {
         }
     }
     // The error maps: signed for the images, the reference's standard error (≥ 0) under it.
-    let block_mean = |page: &Page, bx: u32, by: u32| {
-        let mut sum = Vec3::ZERO;
-        for y in by * BLOCK..(by + 1) * BLOCK {
-            for x in bx * BLOCK..(bx + 1) * BLOCK {
-                sum += page.rgb[(y * w + x) as usize];
-            }
-        }
-        (sum / (BLOCK * BLOCK) as f32).element_sum() / 3.0
+    // `f` summed over a block's pixels (each pixel's channel mean).
+    let block = |page: &Page, bx: u32, by: u32, f: fn(f32) -> f32| {
+        let pixels = (by * BLOCK..(by + 1) * BLOCK)
+            .flat_map(|y| (bx * BLOCK..(bx + 1) * BLOCK).map(move |x| (y * w + x) as usize));
+        pixels
+            .map(|i| f(page.rgb[i].element_sum() / 3.0))
+            .sum::<f32>()
     };
-    let block_stderr = |bx: u32, by: u32| {
-        let mut var = 0.0;
-        for y in by * BLOCK..(by + 1) * BLOCK {
-            for x in bx * BLOCK..(bx + 1) * BLOCK {
-                let s = stderr.rgb[(y * w + x) as usize].element_sum() / 3.0;
-                var += s * s;
-            }
-        }
-        var.sqrt() / (BLOCK * BLOCK) as f32
-    };
+    let pixels = (BLOCK * BLOCK) as f32;
     for by in 0..h / BLOCK {
         for bx in 0..w / BLOCK {
-            let base = block_mean(&r, bx, by) + floor;
-            let mut errors = vec![block_stderr(bx, by) / base];
-            errors.extend(
-                images
-                    .iter()
-                    .map(|i| (block_mean(i, bx, by) - block_mean(&r, bx, by)) / base),
-            );
-            for (panel, e) in errors.into_iter().enumerate() {
+            let mean = |page: &Page| block(page, bx, by, |v| v) / pixels;
+            let reference = mean(&r);
+            let base = reference + floor;
+            // The standard error of a block mean: √Σσ² / pixels.
+            let noise = block(&stderr, bx, by, |s| s * s).sqrt() / pixels;
+            let errors = std::iter::once(noise / base)
+                .chain(images.iter().map(|i| (mean(i) - reference) / base));
+            for (panel, e) in errors.enumerate() {
                 for y in by * BLOCK..(by + 1) * BLOCK {
                     for x in bx * BLOCK..(bx + 1) * BLOCK {
                         put(panel as u32, 1, x, y, diverging(e));
