@@ -33,11 +33,15 @@ pub struct AtlasParams {
     /// Texel density in texels per world unit (metre). Higher = sharper shadows, quadratically
     /// more texels, rays and memory.
     pub texels_per_unit: f32,
-    /// Adaptive density: a factor on `texels_per_unit` per scene instance (parallel to
-    /// `Scene::instances`), chosen by the automatic plan from the pilot's light
-    /// ([`crate::plan::choose_instance_density`]). Empty: one density everywhere. Unwrapped
-    /// atlases only (reused `TEXCOORD_1` keeps its layout).
+    /// A factor on `texels_per_unit` per scene instance (parallel to `Scene::instances`).
+    /// Empty: one density everywhere. Unwrapped atlases only (reused `TEXCOORD_1` keeps its
+    /// layout).
     pub instance_density: Vec<f32>,
+    /// Adaptive density: a further factor per scene triangle (parallel to `Scene::triangles`),
+    /// chosen by the automatic plan per density region from where the pilot's lookup error
+    /// sits ([`crate::plan::density`]). Empty: 1 everywhere. Shared meshes
+    /// (`--instancing share`) keep one layout and ignore it.
+    pub triangle_density: Vec<f32>,
     /// Pages are at most this many texels on a side; more pages are made when charts do not fit.
     pub max_page_size: u32,
     /// Empty texels between charts (room for dilation and bilinear filtering). At least 1.
@@ -393,6 +397,7 @@ impl BakeConfig {
                 uv: UvMode::Auto,
                 texels_per_unit,
                 instance_density: Vec::new(),
+                triangle_density: Vec::new(),
                 max_page_size: 1024,
                 padding: 2,
                 split_junctions: true,

@@ -33,14 +33,15 @@
 //!   fixtures this saves 1.8–3.0% of the rays (emitters are small) and never touches lit texels.
 //! - **Tolerance** E/10: the solver stops once its remaining error is well below the Monte
 //!   Carlo error, not later.
-//! - **Adaptive texel density** ([`choose_instance_density`]): a pilot pair on the uniform
-//!   atlas measures where the lookup error sits, and each instance gets a density factor
-//!   (cube root of its mean square error, within ×¼…×4; unlit or buried instances ×¼; a floor
-//!   of [`MIN_INSTANCE_TEXELS`] texels for every seen, lit instance) at the uniform texel
-//!   count; the atlas, texels and validity are then laid out again and the rest of the plan
-//!   runs on them. Only where the sampled punctual error is the larger part (the second
-//!   differences alone are a lower bound); when the atlas stays, its pilot pair is the first
-//!   pilot below. Per instance, not per chart: a floor with one shadow is raised whole.
+//! - **Texel density where the error is** ([`density`]): a pilot pair on the uniform atlas and
+//!   its lookup-error sample at random surface points ([`GatheredSample`]) give each region of
+//!   the surfaces (a connected surface between creases: a wall, a cabinet door, a cup) a
+//!   density factor, ∝ the fourth root of its measured mean square error, within ×¼…×4; regions
+//!   nobody sees (buried, facing into geometry) or no light reaches get ×⅛. The factors keep the
+//!   uniform atlas's texel count, or raise it (up to ×4 and the preset's budget) when the sample
+//!   is sure the error is above what the target leaves beside the noise. The atlas, texels and
+//!   validity are then laid out again; when every factor is 1 the atlas stays and its pilot
+//!   pair is the first pilot below.
 //! - **Resolution error** is predicted ([`predict_resolution`]): what a renderer shows
 //!   between texel centres, where it blends four texels bilinearly, differs from the light at
 //!   that point where the light changes within a texel.
@@ -64,19 +65,6 @@
 //!   prediction is above the target, which part dominates, and about how much more texels (a
 //!   range: the error falls as `h²` where light curves smoothly, as `√h` at edges) or rays
 //!   would take.
-//! - **The density follows the measured resolution error** ([`choose_density_raise`]): the
-//!   density pilot's pair (on the uniform atlas) is sampled the same way, and where its lookup
-//!   error is surely above the `√(1 − 0.75²) ≈ 0.66` of the target that the rays leave it, the
-//!   whole density rises by the ratio (the error taken to fall as `h`, between the `√h` of edges
-//!   and the `h²` of smooth light; at least ×1.1, at most ×2 and the preset's texel budget) and
-//!   the atlas is laid out again; otherwise the pair and its samples are the first pilot. At
-//!   16 rays a tight target's sample is rarely sure, so when the transport pilot runs its pair
-//!   at 64 rays its sample looks once more (`bake::raise_after_pilot`), and a raise there
-//!   starts the transport pilot over on the new atlas. Measured (README, "What a renderer
-//!   shows"): lamp_room draft 6.4% → 3.8%, the furnished interior at medium 4.7% → 3.5% and at
-//!   high 2.8% → 2.2% (2.1× the texels, at the preset's budget); the other corpus bakes are
-//!   byte-identical.
-//!
 //! - **Error map** ([`error_map`], `--error-map`): the same two parts texel by texel, written
 //!   beside each page so an artist sees where a bake is weak and whether texels or rays would help.
 //!
@@ -86,6 +74,7 @@
 //! sunlit terrain at the same target. The denoiser's gain is not counted (it lowers the error
 //! at low K and leaves it at high K), so the choice errs towards more rays.
 
+pub mod density;
 pub mod error_map;
 pub mod gathered;
 pub mod punctual;
@@ -144,13 +133,11 @@ pub struct Plan {
     pub resolution_seconds: f64,
     pub pilot_rays: u64,
     /// The texel budget of the preset's density ([`choose_density`]), when the plan chose it:
-    /// the most texels a raise of the density ([`choose_density_raise`]) may ask for.
+    /// the most texels the density regions ([`density`]) may ask for.
     pub texel_budget: Option<(f64, f64)>,
     /// Gathering rays per texel of the pilot pair the resolution sample read ([`PILOT_RAYS`],
     /// or 4× when a second pilot ran).
     pub resolution_pilot_rays: u32,
-    /// Whether [`choose_density_raise`] raised the density (it does so once).
-    pub density_raised: bool,
     /// Rays of pilot bakes not reused in the result (the first pair, when a second ran).
     pub discarded_rays: u64,
     /// Gathering rays per texel of the last bake where fewer than its `gather_rays` suffice
@@ -271,282 +258,6 @@ pub fn choose_density(scene: &Scene, config: &mut BakeConfig, plan: &mut Plan, k
         "texel density {chosen} /m: {why} (about {:.0} texels)",
         area * (chosen as f64).powi(2)
     ));
-}
-
-/// Light-driven density factors of [`choose_instance_density`] stay within this range.
-pub const DENSITY_RANGE: (f32, f32) = (0.25, 4.0);
-/// Every seen and lit instance gets at least this many texels (at most [`MAX_FLOOR_FACTOR`]
-/// times the base density): no visible object is reduced to a handful of texels.
-pub const MIN_INSTANCE_TEXELS: f64 = 64.0;
-/// Largest density factor the texel floor may ask for (a 1 cm² object gets what it can).
-pub const MAX_FLOOR_FACTOR: f32 = 8.0;
-/// Factors all this close to 1 keep the uniform atlas (not worth laying it out again).
-const UNIFORM_WITHIN: f32 = 0.1;
-
-/// Step 1b, after a pilot on a uniform atlas: a density factor per scene instance
-/// (`AtlasParams::instance_density`), from the pilot's light (`pilot`, the two runs' stored
-/// values at `texels`), within the texel count of the uniform density. `None` when every
-/// factor is within 10% of 1, or when the sampled punctual error is not the larger part of
-/// the resolution error (scenes lit mainly by emitters): the uniform atlas stays.
-///
-/// **Where texels pay.** Per instance, `m` is the mean square of the bilinear lookup's error:
-/// the sampled error of punctual direct light at the instance's points (`punctual`,
-/// [`PunctualSample`]) plus the area mean of the rest's from the pilot's second differences
-/// (`resolution_squares`, noise-free by the product of two independent runs); the scene's mean
-/// where an instance has no points or no second differences. At a hard shadow or cone edge — the error that dominates —
-/// the error sits in a band one texel wide, so the mean square falls as the texel size `h`:
-/// an instance of area `A` at density factor `s` contributes `A·m/s`. Minimising `Σ A·m/s`
-/// at a fixed texel count `Σ A·s²` gives `s ∝ m^⅓`. Factors stay within [`DENSITY_RANGE`];
-/// an instance the pilot found unlit (below 10⁻³ of the scene's mean light)
-/// or whose texels are all buried in geometry gets the smallest factor: nothing there needs
-/// resolving. Then a floor: every other instance gets [`MIN_INSTANCE_TEXELS`] (thin legs,
-/// cups, books). The factors are scaled together so the texels add up to the uniform count,
-/// and rounded to two decimals.
-pub fn choose_instance_density(
-    scene: &Scene,
-    texels: &Texels,
-    pilot: [&[Vec3]; 2],
-    punctual: Option<&PunctualSample>,
-    tpu: f32,
-    plan: &mut Plan,
-) -> Option<Vec<f32>> {
-    let instances = scene.instances.len();
-    if instances < 2 || texels.is_empty() {
-        return None;
-    }
-    let mut area = vec![0.0f64; instances];
-    for (t, &i) in scene.triangle_instance.iter().enumerate() {
-        let p = |k: usize| scene.positions[scene.triangles[t][k] as usize].as_dvec3();
-        area[i as usize] += 0.5 * (p(1) - p(0)).cross(p(2) - p(0)).length();
-    }
-    let without = without_punctual(pilot, punctual);
-    let (square, skip) = resolution_squares(texels, [&without[0], &without[1]]);
-    let mut invalid = vec![false; texels.len()];
-    for &i in &texels.invalid {
-        invalid[i as usize] = true;
-    }
-    let mut no_difference = vec![false; texels.len()];
-    for &i in &skip {
-        no_difference[i as usize] = true;
-    }
-    // Per instance: Σ w·square and Σ w over texels with a second difference; Σ w·light and
-    // Σ w over valid texels.
-    let (mut error, mut error_weight) = (vec![0.0f64; instances], vec![0.0f64; instances]);
-    let (mut light, mut seen) = (vec![0.0f64; instances], vec![0.0f64; instances]);
-    for i in 0..texels.len() {
-        if invalid[i] {
-            continue;
-        }
-        let inst = scene.triangle_instance[texels.triangle[i] as usize] as usize;
-        let w = texels.area[i] as f64;
-        let value = (pilot[0][i] + pilot[1][i]).element_sum() as f64 / 6.0;
-        light[inst] += w * value;
-        seen[inst] += w;
-        if !no_difference[i] {
-            error[inst] += w * square[i].element_sum() as f64 / 3.0;
-            error_weight[inst] += w;
-        }
-    }
-    // Per instance, the mean square lookup error: the curvature of the light other than
-    // punctual direct light, plus the sampled error of that at the instance's points (the
-    // scene's mean where an instance has none of either).
-    let (mut sampled, mut count) = (vec![0.0f64; instances], vec![0usize; instances]);
-    for p in punctual.map_or(&[][..], |p| &p.points) {
-        sampled[p.instance as usize] += f64::from(p.square);
-        count[p.instance as usize] += 1;
-    }
-    let scene_curved =
-        (error.iter().sum::<f64>() / error_weight.iter().sum::<f64>().max(1e-300)).max(0.0);
-    let scene_sampled = sampled.iter().sum::<f64>() / (count.iter().sum::<usize>().max(1) as f64);
-    let mean_square: Vec<f64> = (0..instances)
-        .map(|i| {
-            let curved = if error_weight[i] > 0.0 {
-                (error[i] / error_weight[i]).max(0.0)
-            } else {
-                scene_curved
-            };
-            let sampled = if count[i] > 0 {
-                sampled[i] / count[i] as f64
-            } else {
-                scene_sampled
-            };
-            curved + sampled
-        })
-        .collect();
-    // The factors follow a measurement, not a bound: where the sampled punctual error is not
-    // the larger part, the second differences (a lower bound, noisy at pilot rays) would steer
-    // them, and on the furnished interior (emitter panels) that tripled the time and raised
-    // the point error from 4.8% to 6.7% at medium.
-    if scene_sampled <= scene_curved {
-        return None;
-    }
-    let scene_light = light.iter().sum::<f64>() / seen.iter().sum::<f64>().max(f64::MIN_POSITIVE);
-    let scene_error = scene_curved + scene_sampled;
-    if !(scene_light > 0.0 && scene_error > 0.0) {
-        return None;
-    }
-    let (lo, hi) = DENSITY_RANGE;
-    // Light-driven factor before scaling, and the floor, per instance.
-    let mut wanted = vec![lo; instances];
-    let mut floor = vec![0.0f32; instances];
-    let mut dark = 0;
-    for i in 0..instances {
-        if area[i] <= 0.0 {
-            wanted[i] = 1.0;
-            continue;
-        }
-        if seen[i] <= 0.0 || light[i] / seen[i] <= 1e-3 * scene_light {
-            dark += 1;
-            continue;
-        }
-        wanted[i] = ((mean_square[i] / scene_error).cbrt() as f32).max(1e-3);
-        let texels_now = area[i] * f64::from(tpu).powi(2);
-        floor[i] = ((MIN_INSTANCE_TEXELS / texels_now).sqrt() as f32).min(MAX_FLOOR_FACTOR);
-    }
-    let budget: f64 = area.iter().sum();
-    let factors = |c: f32| -> Vec<f32> {
-        (0..instances)
-            .map(|i| (c * wanted[i]).clamp(lo, hi).max(floor[i]))
-            .collect()
-    };
-    let texels_at = |f: &[f32]| -> f64 {
-        f.iter()
-            .zip(&area)
-            .map(|(f, a)| a * f64::from(*f).powi(2))
-            .sum()
-    };
-    // The texel count grows with the common scale `c`: bisect on log c.
-    let (mut c_lo, mut c_hi) = (1e-3f32, 1e3f32);
-    for _ in 0..60 {
-        let c = (c_lo * c_hi).sqrt();
-        if texels_at(&factors(c)) > budget {
-            c_hi = c;
-        } else {
-            c_lo = c;
-        }
-    }
-    // Two decimals read well and keep the choice stable.
-    let chosen: Vec<f32> = factors(c_lo)
-        .into_iter()
-        .map(|f| (f * 100.0).round() / 100.0)
-        .collect();
-    if chosen.iter().all(|&f| (f - 1.0).abs() <= UNIFORM_WITHIN) {
-        return None;
-    }
-    let floored = (0..instances)
-        .filter(|&i| floor[i] > (c_lo * wanted[i]).clamp(lo, hi))
-        .count();
-    let denser = chosen.iter().filter(|&&f| f > 1.0).count();
-    let sparser = chosen.iter().filter(|&&f| f < 1.0).count();
-    let (min, max) = chosen
-        .iter()
-        .fold((f32::INFINITY, 0.0f32), |(a, b), &f| (a.min(f), b.max(f)));
-    plan.reasons.push(format!(
-        "adaptive texel density per instance (×{min:.2}…×{max:.2} of {tpu} /m, {} texels in all as \
-         uniform would have about {budget_texels:.0}): {denser} of {instances} instances denser \
-         where the pilot's light curves or steps within a texel (shadow and cone edges; factor \
-         ∝ the cube root of their resolution error), {sparser} sparser where it is even; \
-         {dark} unlit or buried get ×{lo}; {floored} small ones raised to at least \
-         {MIN_INSTANCE_TEXELS} texels",
-        format_args!("{:.0}", texels_at(&chosen) * f64::from(tpu).powi(2)),
-        budget_texels = budget * f64::from(tpu).powi(2),
-    ));
-    Some(chosen)
-}
-
-/// Largest raise of the texel density [`choose_density_raise`] makes (×4 the texels).
-pub const MAX_DENSITY_RAISE: f32 = 2.0;
-
-/// Step 1c, after the density pilot's gathered sample on the uniform atlas (or, once, after
-/// the transport pilot's, when it ran at 4× the rays): a higher texel density when the lookup
-/// error measured at random surface points (`measured`, [`GatheredSample::relative_error_bounds`]
-/// of `pilot`'s sample; what a renderer shows) is above what the target `plan.target_error` leaves beside the noise the
-/// rays will aim for ([`NOISE_SHARE`]): `room = e·√(1 − 0.75²)`. Returns the new density
-/// (texels per unit, three significant digits), or `None` to keep `tpu`.
-///
-/// **How much.** The lookup error falls as `h²` where the light curves smoothly and as `√h`
-/// at edges narrower than a texel (their band is one texel wide); a scene has both, so the
-/// factor takes the middle, error ∝ `h`: `×r/room` the density. Measured on the furnished
-/// interior at medium, 16 → 20 texels/m lowered the point error from 5.57% to 4.32%
-/// (∝ `h^1.1`). Raised only when the sample is sure: the lower end of its two-standard-error
-/// range above `room` — at the pilot's 16 rays and a 2% target the range reaches down to 0, and
-/// its central estimate then raised the Cornell box at `--quality high` ×1.37 (3.5× the time)
-/// for a bake already at 1.2%. The factor is the central estimate's, at least ×1.1, capped at [`MAX_DENSITY_RAISE`] and at the
-/// preset's texel budget (`plan.texel_budget`, which bounds time and memory), said in the
-/// reason when the cap leaves the target out of reach.
-pub fn choose_density_raise(
-    measured: (f32, f32, f32),
-    pilot: &str,
-    area: f64,
-    tpu: f32,
-    plan: &mut Plan,
-) -> Option<f32> {
-    let e = plan.target_error;
-    let (r, r_lo, r_hi) = measured;
-    let room = e * (1.0 - NOISE_SHARE * NOISE_SHARE).sqrt();
-    if !(r.is_finite() && r_lo.is_finite()) || area <= 0.0 || tpu <= 0.0 {
-        return None;
-    }
-    let wanted = r / room;
-    if r_lo <= room || wanted < 1.0 + UNIFORM_WITHIN {
-        plan.reasons.push(format!(
-            "texel density kept: the {pilot} lookup error at random surface points is \
-             {:.2}% ({:.2}…{:.2}%), not surely above the {:.2}% that the {:.1}% target leaves \
-             beside noise at {:.0}% of it",
-            r * 100.0,
-            r_lo * 100.0,
-            r_hi * 100.0,
-            room * 100.0,
-            e * 100.0,
-            NOISE_SHARE * 100.0,
-        ));
-        return None;
-    }
-    let by_budget = plan.texel_budget.map_or(f32::INFINITY, |(_, hi)| {
-        (hi / (area * f64::from(tpu).powi(2))).sqrt() as f32
-    });
-    let factor = wanted.min(MAX_DENSITY_RAISE).min(by_budget);
-    if factor < 1.0 + UNIFORM_WITHIN {
-        plan.reasons.push(format!(
-            "texel density kept: the {pilot} lookup error {:.2}% at random points asks \
-             for ×{wanted:.2} the density, but the preset's texel budget allows no more",
-            r * 100.0
-        ));
-        return None;
-    }
-    let raised = round_significant(tpu * factor, 3);
-    plan.density_raised = true;
-    let cap = if factor < wanted {
-        let which = if by_budget < MAX_DENSITY_RAISE {
-            format!(
-                "the preset's texel budget ({:.0} texels)",
-                plan.texel_budget.map_or(0.0, |b| b.1)
-            )
-        } else {
-            format!("×{MAX_DENSITY_RAISE} the density")
-        };
-        format!(
-            " — it asked for ×{wanted:.2}, capped at {which}: expect the resolution error \
-             above its share"
-        )
-    } else {
-        String::new()
-    };
-    plan.reasons.push(format!(
-        "texel density raised ×{factor:.2} to {raised} /m (about {:.0} texels): the {pilot} \
-         lookup error at random surface points is {:.2}% ({:.2}…{:.2}%), above the \
-         {:.2}% that the {:.1}% target leaves beside noise at {:.0}% of it; taken to fall in \
-         proportion to the texel size (between √h at shadow edges narrower than a texel and h² \
-         where light curves smoothly){cap}",
-        area * f64::from(raised).powi(2),
-        r * 100.0,
-        r_lo * 100.0,
-        r_hi * 100.0,
-        room * 100.0,
-        e * 100.0,
-        NOISE_SHARE * 100.0,
-    ));
-    Some(raised)
 }
 
 /// `x` rounded to `digits` significant digits: a chosen number that reads well and is stable.
@@ -1503,78 +1214,5 @@ mod tests {
     fn budget_scales_with_density() {
         assert_eq!(texel_budget(16.0), (4096.0, 262_144.0));
         assert_eq!(texel_budget(32.0), (16_384.0, 1_048_576.0));
-    }
-
-    /// A sample whose every point has the lookup error `r` relative to its light.
-    fn sample_of(r: f32) -> GatheredSample {
-        let point = gathered::GatheredPoint {
-            instance: 0,
-            rest_square: r * r,
-            punctual_square: 0.0,
-            total: 1.0,
-        };
-        GatheredSample {
-            points: vec![point; 1000],
-            rays: 0,
-            drawn: 1000,
-        }
-    }
-
-    #[test]
-    fn the_density_rises_with_the_measured_lookup_error_within_the_budget() {
-        let room = 0.04 * (1.0 - NOISE_SHARE * NOISE_SHARE).sqrt();
-        // The raise for a 4% target at 16 /m over `area` m², and the reason it gives.
-        let raise = |sample: &GatheredSample, area: f64| {
-            let mut plan = Plan {
-                target_error: 0.04,
-                texel_budget: Some(texel_budget(16.0)),
-                ..Default::default()
-            };
-            let measured = sample.relative_error_bounds();
-            let raised = choose_density_raise(measured, "density pilot's", area, 16.0, &mut plan);
-            (raised, plan.reasons.join(" | "))
-        };
-        let expect = |(raised, reason): (Option<f32>, String), want: Option<f32>, says: &str| {
-            assert_eq!(raised, want, "{reason}");
-            assert!(reason.contains(says), "{reason}");
-        };
-        // Twice the room: twice the density (1 m² at 16 /m is far within the budget).
-        expect(
-            raise(&sample_of(2.0 * room), 1.0),
-            Some(32.0),
-            "raised ×2.00",
-        );
-        // Beyond ×2 it is capped, and says so.
-        expect(
-            raise(&sample_of(3.0 * room), 1.0),
-            Some(32.0),
-            "capped at ×2",
-        );
-        // An estimate above the room whose range reaches below it: kept.
-        let mut unsure = sample_of(1.5 * room);
-        for (i, p) in unsure.points.iter_mut().enumerate() {
-            p.rest_square *= if i % 2 == 0 { 0.0 } else { 2.0 };
-        }
-        unsure.points.truncate(10);
-        expect(raise(&unsure, 1.0), None, "not surely");
-        // Within the room, or less than ×1.1 above it: kept.
-        for r in [0.5 * room, 1.05 * room] {
-            expect(raise(&sample_of(r), 1.0), None, "kept");
-        }
-        // 512 m² at 16 /m are half the budget's 262 144 texels: at most ×√2.
-        expect(
-            raise(&sample_of(2.0 * room), 512.0),
-            Some(22.6),
-            "texel budget",
-        );
-        // At the budget already: kept, and the reason says what stopped it.
-        expect(
-            raise(&sample_of(2.0 * room), 1024.0),
-            None,
-            "allows no more",
-        );
-        // No light at the points: nothing measured, nothing said.
-        expect(raise(&GatheredSample::default(), 1.0), None, "");
-        assert!(raise(&GatheredSample::default(), 1.0).1.is_empty());
     }
 }

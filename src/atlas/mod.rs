@@ -7,7 +7,7 @@
 
 mod existing;
 pub mod share;
-mod xatlas;
+pub(crate) mod xatlas;
 
 pub use existing::Overlaps;
 pub use share::{NodeRect, ShareReport, SharedMesh};

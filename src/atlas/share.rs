@@ -268,11 +268,25 @@ pub fn unwrap(scene: &Scene, source: &Source, params: &AtlasParams) -> Result<At
     let has_triangles = |i: &u32| !scene.instances[*i as usize].triangles.is_empty();
     if unshared.iter().any(has_triangles) {
         let sub = sub_scene(scene, &unshared);
+        // The sub-scene holds the unshared instances' triangles in instance order.
+        let triangle_density = if params.triangle_density.is_empty() {
+            Vec::new()
+        } else {
+            unshared
+                .iter()
+                .flat_map(|&i| {
+                    let r = &scene.instances[i as usize].triangles;
+                    params.triangle_density[r.start as usize..r.end as usize].iter()
+                })
+                .copied()
+                .collect()
+        };
         let sub_params = AtlasParams {
             instance_density: unshared
                 .iter()
                 .map(|&i| density(i) / params.texels_per_unit)
                 .collect(),
+            triangle_density,
             ..params.clone()
         };
         let atlas = xatlas::unwrap(&sub, source, &sub_params)?;
@@ -308,6 +322,7 @@ pub fn unwrap(scene: &Scene, source: &Source, params: &AtlasParams) -> Result<At
             let sub_params = AtlasParams {
                 texels_per_unit: tpu,
                 instance_density: Vec::new(),
+                triangle_density: Vec::new(),
                 ..params.clone()
             };
             let layout = if sub.triangles.is_empty() {

@@ -89,11 +89,9 @@ const NEEDLE_EDGE_TEXELS: f64 = 1e-3;
 /// Unwraps every instance with xatlas at `params.texels_per_unit` and packs the charts.
 pub fn unwrap(scene: &Scene, source: &Source, params: &AtlasParams) -> Result<Atlas> {
     let tpu = params.texels_per_unit;
-    let tpus = instance_densities(scene, params);
+    let tpus = triangle_densities(scene, params);
     let estimated_texels: f64 = (0..scene.triangles.len())
-        .map(|t| {
-            world_area(scene, t) * f64::from(tpus[scene.triangle_instance[t] as usize]).powi(2)
-        })
+        .map(|t| world_area(scene, t) * f64::from(tpus[t]).powi(2))
         .sum();
     if estimated_texels > MAX_TEXELS {
         return Err(Error::Option(format!(
@@ -131,7 +129,10 @@ pub fn unwrap(scene: &Scene, source: &Source, params: &AtlasParams) -> Result<At
     let mut instances = Vec::with_capacity(scene.instances.len());
     for (i, inst) in scene.instances.iter().enumerate() {
         let uv = match &output.meshes[i] {
-            Some(mesh) => instance_uv(scene, source, inst, mesh, tpus[i], output.page_count)?,
+            Some(mesh) => {
+                let tpus = &tpus[inst.triangles.start as usize..inst.triangles.end as usize];
+                instance_uv(scene, source, inst, mesh, tpus, output.page_count)?
+            }
             None => InstanceUv::default(),
         };
         instances.push(uv);
@@ -166,12 +167,19 @@ pub fn unwrap(scene: &Scene, source: &Source, params: &AtlasParams) -> Result<At
     })
 }
 
-/// Texels per unit of each scene instance: `texels_per_unit` times the instance's factor in
-/// `instance_density` (1 where it has none). xatlas is given positions in texel units, so an
-/// instance's density is the scale of its positions.
-fn instance_densities(scene: &Scene, params: &AtlasParams) -> Vec<f32> {
-    (0..scene.instances.len())
-        .map(|i| params.texels_per_unit * params.instance_density.get(i).copied().unwrap_or(1.0))
+/// Texels per unit of each scene triangle: `texels_per_unit` times its instance's factor in
+/// `instance_density` and its own in `triangle_density` (1 where there is none). xatlas is
+/// given positions in texel units, so a triangle's density is the scale of its positions;
+/// triangles of different densities go to xatlas in different meshes (no chart has two).
+fn triangle_densities(scene: &Scene, params: &AtlasParams) -> Vec<f32> {
+    let factor = |v: &[f32], i: usize| v.get(i).copied().unwrap_or(1.0);
+    (0..scene.triangles.len())
+        .map(|t| {
+            let i = scene.triangle_instance[t] as usize;
+            params.texels_per_unit
+                * factor(&params.instance_density, i)
+                * factor(&params.triangle_density, t)
+        })
         .collect()
 }
 
@@ -281,21 +289,30 @@ fn blocks(scene: &Scene, inst: &Instance, mut triangles: Vec<u32>) -> Vec<Block>
         .collect()
 }
 
-/// [`blocks`] per side of a junction split (`Split::sides`): sides go to xatlas as separate
-/// meshes, so no chart crosses a junction.
-fn blocks_by_side(scene: &Scene, inst: &Instance, triangles: Vec<u32>) -> Vec<Block> {
-    let sides = &inst.split.sides;
-    if sides.is_empty() {
-        return blocks(scene, inst, triangles);
-    }
-    let mut by_side: std::collections::BTreeMap<u32, Vec<u32>> = Default::default();
+/// [`blocks`] per group of a side of a junction split (`Split::sides`) and a density (`tpus`,
+/// instance-local): groups go to xatlas as separate meshes, so no chart crosses a junction or
+/// has two densities.
+fn blocks_by_group(
+    scene: &Scene,
+    inst: &Instance,
+    tpus: &[f32],
+    triangles: Vec<u32>,
+) -> Vec<Block> {
+    let mut by_group: std::collections::BTreeMap<(u32, u32), Vec<u32>> = Default::default();
     for t in triangles {
-        by_side.entry(sides[t as usize]).or_default().push(t);
+        by_group.entry(group(inst, tpus, t)).or_default().push(t);
     }
-    by_side
+    by_group
         .into_values()
-        .flat_map(|side| blocks(scene, inst, side))
+        .flat_map(|group| blocks(scene, inst, group))
         .collect()
+}
+
+/// The chart group of instance-local triangle `t`: its side of a junction split and its
+/// density's bits. Charts never join triangles of two groups.
+fn group(inst: &Instance, tpus: &[f32], t: u32) -> (u32, u32) {
+    let side = inst.split.sides.get(t as usize).copied().unwrap_or(0);
+    (side, tpus[t as usize].to_bits())
 }
 
 /// Interleaves the low 10 bits of x, y, z.
@@ -338,7 +355,7 @@ struct Limits {
 fn planar_regions(
     scene: &Scene,
     index: u32,
-    tpu: f32,
+    tpus: &[f32],
     limits: Limits,
     excluded: &BTreeSet<(u32, u32)>,
 ) -> (Vec<Region>, Vec<u32>) {
@@ -346,7 +363,9 @@ fn planar_regions(
     let tris = &scene.triangles[inst.triangles.start as usize..inst.triangles.end as usize];
     let first_vertex = inst.vertices.start;
     let local = |t: u32| tris[t as usize].map(|v| v - first_vertex);
-    let at = |v: u32| scene.positions[(first_vertex + v) as usize].as_dvec3() * f64::from(tpu);
+    // In texels of a triangle's density (regions never mix densities).
+    let at =
+        |v: u32, tpu: f32| scene.positions[(first_vertex + v) as usize].as_dvec3() * f64::from(tpu);
 
     // Faces meet where their corners have the same position (+0.0 folds −0.0 into 0.0).
     let key = |v: u32| (scene.positions[(first_vertex + v) as usize] + Vec3::ZERO).to_array();
@@ -382,15 +401,15 @@ fn planar_regions(
     let mut normal = Vec::with_capacity(tris.len());
     let mut ignored = Vec::with_capacity(tris.len());
     for t in 0..tris.len() as u32 {
-        let [a, b, c] = local(t).map(at);
+        let [a, b, c] = local(t).map(|v| at(v, tpus[t as usize]));
         let n = (b - a).cross(c - a);
         normal.push(n.normalize_or_zero());
         // xatlas leaves faces this small out of every chart; they neither join nor bound regions.
         ignored.push(0.5 * n.length() <= f64::from(f32::EPSILON));
     }
 
-    // Sides of a junction split never join one region.
-    let side = |t: u32| inst.split.sides.get(t as usize).copied().unwrap_or(0);
+    // Sides of a junction split and triangles of other densities never join one region.
+    let side = |t: u32| group(inst, tpus, t);
     let mut region_of = vec![u32::MAX; tris.len()];
     let (mut regions, mut rest) = (Vec::new(), Vec::new());
     let mut stack = Vec::new();
@@ -406,7 +425,8 @@ fn planar_regions(
         members.clear();
         members.push(seed);
         let n = normal[seed as usize];
-        let d = n.dot(at(local(seed)[0]));
+        let tpu = tpus[seed as usize];
+        let d = n.dot(at(local(seed)[0], tpu));
         if !ignored[seed as usize] {
             stack.push(seed);
         }
@@ -420,7 +440,7 @@ fn planar_regions(
                         && normal[u as usize].dot(n) > 0.0
                         && local(u)
                             .iter()
-                            .all(|&v| (n.dot(at(v)) - d).abs() <= PLANE_TOLERANCE);
+                            .all(|&v| (n.dot(at(v, tpu)) - d).abs() <= PLANE_TOLERANCE);
                     if joins {
                         region_of[u as usize] = seed;
                         members.push(u);
@@ -466,7 +486,7 @@ fn planar_regions(
             let mut plane: Vec<DVec2> = vertices
                 .iter()
                 .map(|&v| {
-                    let p = at(v);
+                    let p = at(v, tpu);
                     DVec2::new(p.dot(u_axis), p.dot(v_axis))
                 })
                 .collect();
@@ -587,7 +607,7 @@ fn placement(
     linear.is_finite().then_some((page, linear, offset))
 }
 
-/// Charts and packs the scene in one xatlas atlas, instance `i` at `tpus[i]` texels per unit.
+/// Charts and packs the scene in one xatlas atlas, triangle `t` at `tpus[t]` texels per unit.
 /// `Err` lists the regions (instance, seed)
 /// whose outline xatlas did not place as one planar chart; run again with them excluded.
 fn run_xatlas(
@@ -626,11 +646,12 @@ fn run_xatlas(
             given.push(Vec::new());
             continue;
         }
-        let tpu = tpus[index];
-        let (inst_regions, rest) = planar_regions(scene, index as u32, tpu, limits, excluded);
+        let tpus = &tpus[inst.triangles.start as usize..inst.triangles.end as usize];
+        let (inst_regions, rest) = planar_regions(scene, index as u32, tpus, limits, excluded);
         regions.extend(inst_regions);
-        let inst_blocks = blocks_by_side(scene, inst, rest);
+        let inst_blocks = blocks_by_group(scene, inst, tpus, rest);
         for block in &inst_blocks {
+            let tpu = tpus[block.triangles[0] as usize];
             let (positions, normals, indices) = mesh_input(scene, inst, block, tpu);
             let needles: Vec<bool> = block
                 .triangles
@@ -817,7 +838,7 @@ fn instance_uv(
     source: &Source,
     inst: &Instance,
     mesh: &MeshOutput,
-    tpu: f32,
+    tpus: &[f32],
     page_count: u32,
 ) -> Result<InstanceUv> {
     let fail = |what: String| {
@@ -837,7 +858,8 @@ fn instance_uv(
             triangles.len()
         )));
     }
-    let scaled = |global: u32| scene.positions[global as usize].as_dvec3() * f64::from(tpu);
+    let scaled =
+        |global: u32, tpu: f32| scene.positions[global as usize].as_dvec3() * f64::from(tpu);
 
     let mut uv = InstanceUv::default();
     // Atlas vertex of each (xatlas vertex, local source vertex) pair, in first-seen order.
@@ -859,6 +881,7 @@ fn instance_uv(
         }
         let charted = page >= 0;
         let global_t = inst.triangles.start as usize + local_t;
+        let tpu = tpus[local_t];
         if !charted
             && world_area(scene, global_t) * f64::from(tpu).powi(2) > NEGLIGIBLE_TEXEL_AREA
             && !is_needle(scene, global_t, tpu)
@@ -869,7 +892,7 @@ fn instance_uv(
         for (corner, (&global, (&o, v))) in tri.iter().zip(out.iter().zip([a, b, c])).enumerate() {
             let xref_global = inst.vertices.start + v.xref;
             if v.xref >= inst.vertices.end - inst.vertices.start
-                || DVec3::distance(scaled(xref_global), scaled(global)) > 1e-3
+                || DVec3::distance(scaled(xref_global, tpu), scaled(global, tpu)) > 1e-3
             {
                 return Err(fail(format!("reordered the corners of triangle {local_t}")));
             }
@@ -1146,7 +1169,7 @@ mod ffi {
 }
 
 #[cfg(test)]
-pub(super) mod tests {
+pub(crate) mod tests {
     use glam::{Vec2, Vec3};
 
     use super::super::existing::Overlaps;
@@ -1330,6 +1353,7 @@ pub(super) mod tests {
             uv: UvMode::Unwrap,
             texels_per_unit,
             instance_density: Vec::new(),
+            triangle_density: Vec::new(),
             max_page_size,
             padding: 2,
             split_junctions: true,
@@ -1423,6 +1447,61 @@ pub(super) mod tests {
         assert!((a - 64.0).abs() < 0.5, "{a}");
         assert!((b - 400.0).abs() < 2.0, "{b}");
         assert_eq!(first_page_overlaps(&scene, &atlas).overlapping, 0);
+    }
+
+    #[test]
+    fn triangle_density_scales_each_face_of_a_cube_without_shared_charts() {
+        // A cube of 8 × 8 quads a face (large enough for the planar-region path) with its
+        // top face at ×2 and its bottom at ×⅛ (a face nobody sees), on one instance.
+        let scene = scene_of(&[cube(1.0, 8)], &[]);
+        let up = |t: u32| {
+            let [a, b, c] = scene.triangles[t as usize].map(|v| scene.positions[v as usize]);
+            (b - a).cross(c - a).normalize().y
+        };
+        let factor = |t: u32| match up(t) {
+            y if y > 0.9 => 2.0,
+            y if y < -0.9 => 0.125,
+            _ => 1.0,
+        };
+        let triangle_density: Vec<f32> = (0..scene.triangles.len() as u32).map(factor).collect();
+        let atlas = unwrap_ok(
+            &scene,
+            &AtlasParams {
+                triangle_density,
+                ..params(16.0, 1024)
+            },
+        );
+        // Texel area over world area per face group.
+        let mut texels = [0.0f64; 3];
+        let mut world = [0.0f64; 3];
+        for t in 0..scene.triangles.len() as u32 {
+            let ([a, b, c], page) = atlas.triangle_uv(&scene, t);
+            let size = atlas.pages[page as usize];
+            let g = match factor(t) {
+                2.0 => 0,
+                1.0 => 1,
+                _ => 2,
+            };
+            texels[g] += 0.5
+                * f64::from((b - a).perp_dot(c - a).abs())
+                * f64::from(size.width * size.height);
+            world[g] += world_area(&scene, t as usize);
+        }
+        let density = [0, 1, 2].map(|g| texels[g] / world[g]);
+        assert!((density[0] - 1024.0).abs() < 8.0, "{density:?}");
+        assert!((density[1] - 256.0).abs() < 2.0, "{density:?}");
+        assert!((density[2] - 4.0).abs() < 0.5, "{density:?}");
+        assert_eq!(first_page_overlaps(&scene, &atlas).overlapping, 0);
+        // Same input, same layout.
+        let again = unwrap_ok(&scene, &atlas_params_of(&scene, factor));
+        assert_eq!(atlas.layout_bits(), again.layout_bits());
+    }
+
+    fn atlas_params_of(scene: &Scene, factor: impl Fn(u32) -> f32) -> AtlasParams {
+        AtlasParams {
+            triangle_density: (0..scene.triangles.len() as u32).map(factor).collect(),
+            ..params(16.0, 1024)
+        }
     }
 
     #[test]
@@ -1526,7 +1605,8 @@ pub(super) mod tests {
             max_chart_area: 0.25 * 1024.0 * 1024.0,
             max_chart_size: 1020.0,
         };
-        planar_regions(scene, 0, tpu, limits, &BTreeSet::new())
+        let tpus = vec![tpu; scene.instances[0].triangles.len()];
+        planar_regions(scene, 0, &tpus, limits, &BTreeSet::new())
     }
 
     #[test]
@@ -1604,7 +1684,7 @@ pub(super) mod tests {
             disc.triangles.push([0, 1 + s, 1 + (s + 1) % 1024]);
         }
         let scene = scene_of(&[disc], &[]);
-        assert!(run_xatlas(&scene, &[16.0], 1024, 2, &BTreeSet::new()).is_err());
+        assert!(run_xatlas(&scene, &[16.0; 1024], 1024, 2, &BTreeSet::new()).is_err());
         let atlas = unwrap_ok(&scene, &params(16.0, 1024));
         let overlaps = first_page_overlaps(&scene, &atlas);
         assert_eq!(overlaps.overlapping, 0, "{overlaps:?}");

@@ -70,6 +70,9 @@ pub struct Settings {
     pub solver: String,
     pub texels_per_unit: f32,
     pub instance_density: Vec<f32>,
+    /// Per scene triangle (`AtlasParams::triangle_density`); empty in files that predate it.
+    #[serde(default)]
+    pub triangle_density: Vec<f32>,
     pub max_page_size: u32,
     pub padding: u32,
     pub uv: String,
@@ -158,6 +161,7 @@ impl Settings {
             solver: config.technique.solver().to_string(),
             texels_per_unit: a.texels_per_unit,
             instance_density: a.instance_density.clone(),
+            triangle_density: a.triangle_density.clone(),
             max_page_size: a.max_page_size,
             padding: a.padding,
             uv: match a.uv {
@@ -196,6 +200,7 @@ impl Settings {
         let a = &mut c.atlas;
         a.texels_per_unit = self.texels_per_unit;
         a.instance_density = self.instance_density.clone();
+        a.triangle_density = self.triangle_density.clone();
         a.max_page_size = self.max_page_size;
         a.padding = self.padding;
         a.uv = match self.uv.as_str() {

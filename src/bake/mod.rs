@@ -380,14 +380,8 @@ fn prepare_loaded(
         };
         let density = pilot::measure_density(surfaces, &config, plan, progress)?;
         first_pilot = density.pilot;
-        let relayout = density.instance_factors.is_some() || density.texels_per_unit.is_some();
-        if let Some(factors) = density.instance_factors {
-            config.atlas.instance_density = factors;
-        }
-        if let Some(tpu) = density.texels_per_unit {
-            config.atlas.texels_per_unit = tpu;
-        }
-        if relayout {
+        if let Some(factors) = density.triangle_factors {
+            config.atlas.triangle_density = factors;
             (atlas, texels, validity) =
                 lay_out(&scene, &source, &tracer, &config, progress, &mut Vec::new())?;
         }
@@ -447,31 +441,6 @@ fn lay_out(
     Ok((atlas, texels, validity))
 }
 
-/// The density raised once more, from the transport pilot's lookup-error sample, when that
-/// read a pair at 4× the rays (the density pilot's 16 rays cannot tell a 1.8% error from a 0.5%
-/// one at a 2% target) and the density is the plan's and not yet raised: the new density and
-/// the plan as it was before the transport pilot, with the reason added.
-fn raise_after_pilot(
-    prepared: &Prepared,
-    before: &Plan,
-    plan: &Plan,
-    keep: &crate::config::Keep,
-) -> Option<(f32, Plan)> {
-    if keep.texels_per_unit
-        || prepared.atlas.reused_input_uvs
-        || plan.density_raised
-        || plan.resolution_pilot_rays <= plan::PILOT_RAYS
-    {
-        return None;
-    }
-    let measured = plan.resolution_parts?.gathered?;
-    let mut raised = before.clone();
-    let pilot = format!("{}-ray pilot's", plan.resolution_pilot_rays);
-    let area = plan::surface_area(&prepared.scene);
-    let tpu = prepared.config.atlas.texels_per_unit;
-    plan::choose_density_raise(measured, &pilot, area, tpu, &mut raised).map(|t| (t, raised))
-}
-
 /// Runs every stage up to the dilated pages, in memory.
 pub fn compute(input: &Path, config: &BakeConfig, progress: &dyn Progress) -> Result<Baked> {
     compute_prepared(prepare(input, config, progress)?, progress)
@@ -508,34 +477,14 @@ pub(crate) fn light(
     let sizes_of = |p: &Prepared| {
         memory::Sizes::counted(&p.scene, &p.source, &p.texels).per_process(p.processes)
     };
-    let mut sizes = sizes_of(prepared);
+    let sizes = sizes_of(prepared);
     let limit = config.max_memory.unwrap_or(u64::MAX);
     memory::check(&prepared.source.path, &sizes, &config, limit)?;
     let mut pilot = None;
     if let (Some(plan), Some(auto)) = (&mut plan, config.auto) {
         let t = Instant::now();
-        let (config_before, plan_before) = (config.clone(), plan.clone());
         let surfaces = prepared.surfaces();
         pilot = pilot::choose_transport(surfaces, &mut config, plan, &auto.keep, progress, first)?;
-        if let Some((tpu, raised)) = raise_after_pilot(prepared, &plan_before, plan, &auto.keep) {
-            // The transport pilot's choices were made for the old texels: start them again.
-            (config, *plan) = (config_before, raised);
-            config.atlas.texels_per_unit = tpu;
-            prepared.config.atlas.texels_per_unit = tpu;
-            (prepared.atlas, prepared.texels, prepared.validity) = lay_out(
-                &prepared.scene,
-                &prepared.source,
-                &prepared.tracer,
-                &config,
-                progress,
-                &mut Vec::new(),
-            )?;
-            sizes = sizes_of(prepared);
-            memory::check(&prepared.source.path, &sizes, &config, limit)?;
-            let surfaces = prepared.surfaces();
-            pilot =
-                pilot::choose_transport(surfaces, &mut config, plan, &auto.keep, progress, None)?;
-        }
         config.validate()?;
         timed(&mut stages, "plan", t);
     }

@@ -121,19 +121,17 @@ fn lit(surfaces: Surfaces, transport: &TransportParams) -> bool {
         || !surfaces.scene.lights.is_empty()
 }
 
-/// What the density pilot found: a density factor per instance and a raised density, each
-/// when the measurement asks for it (the pair is then of no use on the new atlas); when the
-/// atlas stays, the pair and its samples, which are the first pilot of [`choose_transport`].
+/// What the density pilot found: a density factor per scene triangle when the measurement asks
+/// for one (the pair is then of no use on the new atlas); when the atlas stays, the pair and
+/// its samples, which are the first pilot of [`choose_transport`].
 pub struct Density {
-    pub instance_factors: Option<Vec<f32>>,
-    pub texels_per_unit: Option<f32>,
+    pub triangle_factors: Option<Vec<f32>>,
     pub pilot: Option<PilotRuns>,
 }
 
-/// Step 1b of the automatic choice, on the uniform atlas: a pilot pair at [`PILOT_RAYS`], the
-/// density factor per instance it asks for ([`plan::choose_instance_density`]) and the raise
-/// of the whole density its lookup error at random points asks for
-/// ([`plan::choose_density_raise`]).
+/// Step 1b of the automatic choice, on the uniform atlas: a pilot pair at [`PILOT_RAYS`], its
+/// lookup error at random surface points, and the density per region that asks for
+/// ([`plan::density`]).
 pub fn measure_density(
     surfaces: Surfaces,
     config: &BakeConfig,
@@ -141,8 +139,7 @@ pub fn measure_density(
     progress: &dyn Progress,
 ) -> Result<Density> {
     let mut density = Density {
-        instance_factors: None,
-        texels_per_unit: None,
+        triangle_factors: None,
         pilot: None,
     };
     if surfaces.texels.is_empty()
@@ -158,25 +155,10 @@ pub fn measure_density(
     let target = plan.target_error;
     let samples = Samples::measure(surfaces, &config.transport, &runs, stored, target, budget);
     let tpu = config.atlas.texels_per_unit;
-    density.instance_factors = plan::choose_instance_density(
-        surfaces.scene,
-        surfaces.texels,
-        stored,
-        samples.punctual.as_ref(),
-        tpu,
-        plan,
-    );
-    density.texels_per_unit = samples.gathered.as_ref().and_then(|g| {
-        let area = plan::surface_area(surfaces.scene);
-        plan::choose_density_raise(
-            g.relative_error_bounds(),
-            "density pilot's",
-            area,
-            tpu,
-            plan,
-        )
+    density.triangle_factors = samples.gathered.as_ref().and_then(|g| {
+        plan::density::choose_region_density(surfaces.scene, surfaces.texels, stored, g, tpu, plan)
     });
-    if density.instance_factors.is_none() && density.texels_per_unit.is_none() {
+    if density.triangle_factors.is_none() {
         runs.samples = Some(samples);
         density.pilot = Some(runs);
     }

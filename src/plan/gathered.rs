@@ -70,6 +70,8 @@ const SALT: u64 = 0x6A7E_5EED_0F90_1275;
 #[derive(Clone, Copy, Debug)]
 pub struct GatheredPoint {
     pub instance: u32,
+    /// The scene triangle the point lies on.
+    pub triangle: u32,
     /// `d_a·d_b` of the light other than punctual direct light (emitters, sky,
     /// interreflection): the lookup of each run's values less the punctual sample's texels,
     /// against the gather through that run. An unbiased estimate of its squared lookup error.
@@ -81,11 +83,23 @@ pub struct GatheredPoint {
     pub total: f32,
 }
 
+/// What became of one drawn point.
+enum Drawn {
+    Kept(GatheredPoint),
+    /// On this triangle, where nobody sees it.
+    Unseen(u32),
+    /// Degenerate or not finite.
+    Skipped,
+}
+
 /// The lookup error of the pilot's lightmap at random surface points against a gather there.
 #[derive(Clone, Debug, Default)]
 pub struct GatheredSample {
     /// One per visible sampled point (points on buried or unrasterised texels are left out).
     pub points: Vec<GatheredPoint>,
+    /// The triangles of drawn points left out as nobody's to see: facing into geometry (the
+    /// probe test) or on a buried texel.
+    pub unseen: Vec<u32>,
     /// Rays cast at the kept points (probes, gathering, light samples and punctual shadow rays).
     pub rays: u64,
     /// Points drawn, the left-out ones included.
@@ -182,13 +196,13 @@ impl GatheredSample {
             }
             emitted + reflected / kf + runs.sky * (PI * escaped as f32 / kf)
         };
-        let point = |k: usize| -> Option<GatheredPoint> {
+        let point = |k: usize| -> Drawn {
             let mut rng = Rng::new(seed ^ SALT, k as u64, 0);
             let t = sampling::sample_cdf(&cdf, rng.next_f32()) as u32;
             let b = sampling::triangle_point(rng.next_vec2());
             let sp = scene.surface_point(t, b);
             if sp.n_geo == Vec3::ZERO {
-                return None;
+                return Drawn::Skipped;
             }
             // Points nobody sees (faces looking into geometry: a floor under a cabinet, the
             // bottom of a box on the floor) are left out, as the point yardstick leaves them.
@@ -196,12 +210,14 @@ impl GatheredSample {
             let back =
                 validity::back_hits(tracer, sp.p, sp.n_geo, PROBE_RAYS, shift, f32::INFINITY);
             if back > (MAX_BACK * PROBE_RAYS as f32) as u32 {
-                return None;
+                return Drawn::Unseen(t);
             }
             let [ua, ub, uc] = texels.triangle_uv[t as usize];
             let uv = ua * (1.0 - b.x - b.y) + ub * b.x + uc * b.y;
             let page = texels.triangle_page[t as usize] as usize;
-            let (lookup, _) = bilinear(texels, &valid, page, uv)?;
+            let Some((lookup, _)) = bilinear(texels, &valid, page, uv) else {
+                return Drawn::Unseen(t);
+            };
             let read =
                 |v: &[Vec3]| -> Vec3 { lookup.iter().map(|&(j, w)| v[j as usize] * w).sum() };
             let origin = sp.p + sp.n_geo * tracer.epsilon;
@@ -227,14 +243,19 @@ impl GatheredSample {
             let total = (read(runs.irradiance[0]) + read(runs.irradiance[1])) * 0.5;
             let point = GatheredPoint {
                 instance: scene.triangle_instance[t as usize],
+                triangle: t,
                 rest_square: (da * db).element_sum() / 3.0,
                 punctual_square: (dp * dp).element_sum() / 3.0,
                 total: total.element_sum() / 3.0,
             };
-            (point.rest_square.is_finite()
+            if point.rest_square.is_finite()
                 && point.punctual_square.is_finite()
-                && point.total.is_finite())
-            .then_some(point)
+                && point.total.is_finite()
+            {
+                Drawn::Kept(point)
+            } else {
+                Drawn::Skipped
+            }
         };
         let per_point =
             (PROBE_RAYS + 2 * (GATHER_RAYS + light_samples)) as u64 + scene.lights.len() as u64;
@@ -243,12 +264,15 @@ impl GatheredSample {
         let mut sample = GatheredSample::default();
         let mut drawn = 0;
         while drawn < MAX_POINTS {
-            let batch: Vec<GatheredPoint> = (drawn..drawn + BATCH)
-                .into_par_iter()
-                .filter_map(point)
-                .collect();
+            let batch: Vec<Drawn> = (drawn..drawn + BATCH).into_par_iter().map(point).collect();
             drawn += BATCH;
-            sample.points.extend(batch);
+            for d in batch {
+                match d {
+                    Drawn::Kept(p) => sample.points.push(p),
+                    Drawn::Unseen(t) => sample.unseen.push(t),
+                    Drawn::Skipped => {}
+                }
+            }
             let (_, lo, hi) = sample.relative_error_bounds();
             let (rest, stderr) = sample.mean_square(|p| p.rest_square);
             let mean_square = rest.max(0.0) + sample.mean_square(|p| p.punctual_square).0;
@@ -294,6 +318,19 @@ impl GatheredSample {
         let punctual = self.mean_square(|p| p.punctual_square).0;
         let at = |r: f64| self.relative(r.max(0.0) + punctual);
         (at(rest), at(rest - 2.0 * stderr), at(rest + 2.0 * stderr))
+    }
+
+    /// The mean square lookup error of all the light (the rest's and the punctual light's
+    /// squares added per point) and its standard error, in absolute units (NaN below two
+    /// points).
+    pub fn mean_square_total(&self) -> (f64, f64) {
+        self.mean_square(|p| p.rest_square + p.punctual_square)
+    }
+
+    /// The points' mean light (what relative errors divide by).
+    pub fn mean_light(&self) -> f64 {
+        let n = self.points.len() as f64;
+        self.points.iter().map(|p| p.total as f64).sum::<f64>() / n
     }
 
     /// The mean of a per-point square and its standard error (NaN below two points).

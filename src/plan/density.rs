@@ -1,0 +1,689 @@
+//! Texel density where the error is: a density factor per *region* of the surfaces, from where
+//! the density pilot's lookup error sits.
+//!
+//! **Regions.** A region is a connected surface of one instance, bounded by open edges, creases
+//! of 60° or more and the sides of a junction split ([`Regions::of`]): a wall, a cabinet's
+//! door, the top of a shelf, a cup. xatlas never grows a chart over those borders, so giving
+//! each region its own density adds no chart border; the atlas sends regions of different
+//! densities to xatlas as different meshes (`AtlasParams::triangle_density`).
+//!
+//! **What each region asks for.** The density pilot's [`GatheredSample`] holds, per random
+//! visible surface point, an unbiased estimate of the squared lookup error a renderer shows
+//! there (all the light). Each point counts for its region. A region's mean square `m_r` is
+//! its points' mean shrunk towards its instance's, and the instance's towards the scene's
+//! (normal–normal: each mean weighs by its points over the per-point variance, the prior by
+//! one over the between-region variance τ², estimated from the sample): small regions get few
+//! points (a cup's face has one or none in 4096) and borrow from their object. A region is made
+//! sparser than the scene only as far as the upper end of its estimate (`m_r` + two posterior
+//! standard deviations) allows: the pilot's products are noisy, and a noisy zero must not thin
+//! a wall. The error is taken to fall as the texel size (the mean square as `s^−Q`,
+//! [`ERROR_EXPONENT`]: between the `√h` of edges narrower than a texel and the `h²` of smoothly
+//! curving light; the furnished interior measured `h^1.0–1.4`). Minimising the area-weighted
+//! mean square `Σ A_r·m_r·s_r^−Q` for a texel count `Σ A_r·s_r²` gives
+//! `s_r ∝ m_r^{1/(Q+2)}` — the fourth root: a region with 16× the scene's mean square gets
+//! twice the density. Factors stay within [`DENSITY_RANGE`], on quarter-octave steps (few
+//! distinct densities: few xatlas meshes, a stable choice), with a floor of
+//! [`MIN_REGION_TEXELS`] texels for every seen, lit region.
+//!
+//! **What nobody sees.** A region whose texels the validity pass found all buried, whose drawn
+//! points were all left out as unseen (faces looking into geometry: the back of a wall standing
+//! against another, the bottom of a box on the floor), or which the pilot found unlit gets
+//! [`HIDDEN_FACTOR`]: it still has texels (a renderer reads something sane there), 1/64 as many.
+//!
+//! **How many texels in all.** The factors are scaled together: first to the uniform atlas's
+//! texel count (the same cost, spent where the error is); then, when even the lower end of the
+//! sample's two-standard-error range predicts an error above what the target leaves beside the
+//! noise (`room`), up until the central prediction meets it, at most ×[`MAX_TEXEL_RAISE`] the
+//! texels and the preset's texel budget. The choice is never lowered below the uniform count
+//! on a guess: a sample that is not sure leaves the total as it is.
+
+use std::collections::BTreeMap;
+
+use glam::Vec3;
+
+use super::{GatheredSample, NOISE_SHARE, Plan, round_significant};
+use crate::scene::Scene;
+use crate::texels::Texels;
+
+/// Light-driven factors stay within this range of the preset's density.
+pub const DENSITY_RANGE: (f32, f32) = (0.25, 4.0);
+/// Factor of regions nobody sees or no light reaches (1/64 of the texels).
+pub const HIDDEN_FACTOR: f32 = 0.125;
+/// Every seen, lit region gets at least this many texels (up to the top of [`DENSITY_RANGE`]).
+pub const MIN_REGION_TEXELS: f64 = 16.0;
+/// The mean square lookup error is taken to fall as `s^−ERROR_EXPONENT` with the density `s`.
+pub const ERROR_EXPONENT: f64 = 2.0;
+/// Most texels a raise may ask for, as a multiple of the uniform atlas's.
+pub const MAX_TEXEL_RAISE: f64 = 4.0;
+/// A region whose drawn points were all unseen, with at least this many drawn, is hidden.
+const HIDDEN_POINTS: u32 = 3;
+/// Two regions meet over an edge when their faces turn less than 60° (xatlas' own limit).
+const SMOOTH_DOT: f64 = 0.5;
+/// Factors on quarter-octave steps.
+const STEPS_PER_OCTAVE: f32 = 4.0;
+
+/// The scene's density regions (see the module docs).
+#[derive(Clone, Debug, Default)]
+pub struct Regions {
+    /// Region of each scene triangle.
+    pub of_triangle: Vec<u32>,
+    /// World area of each region (m²).
+    pub area: Vec<f64>,
+    /// Instance of each region.
+    pub instance: Vec<u32>,
+}
+
+impl Regions {
+    /// Connected surfaces of each instance: triangles sharing an edge (corners at the same
+    /// positions) on the same side of a junction split, facing within 60° of each other.
+    pub fn of(scene: &Scene) -> Regions {
+        let mut regions = Regions {
+            of_triangle: vec![u32::MAX; scene.triangles.len()],
+            ..Default::default()
+        };
+        let normal: Vec<glam::DVec3> = scene
+            .triangles
+            .iter()
+            .map(|t| {
+                let [a, b, c] = t.map(|v| scene.positions[v as usize].as_dvec3());
+                (b - a).cross(c - a).normalize_or_zero()
+            })
+            .collect();
+        for (index, inst) in scene.instances.iter().enumerate() {
+            let range = inst.triangles.start as usize..inst.triangles.end as usize;
+            // Edges by their corners' positions, so split vertices (other normals or UVs)
+            // still join their faces.
+            let key = |v: u32| {
+                (scene.positions[v as usize] + Vec3::ZERO)
+                    .to_array()
+                    .map(f32::to_bits)
+            };
+            let mut edges: BTreeMap<([u32; 3], [u32; 3]), Vec<u32>> = BTreeMap::new();
+            for t in range.clone() {
+                let tri = scene.triangles[t];
+                for k in 0..3 {
+                    let (a, b) = (key(tri[k]), key(tri[(k + 1) % 3]));
+                    if a != b {
+                        edges
+                            .entry((a.min(b), a.max(b)))
+                            .or_default()
+                            .push(t as u32);
+                    }
+                }
+            }
+            let side = |t: u32| {
+                let local = (t - inst.triangles.start) as usize;
+                inst.split.sides.get(local).copied().unwrap_or(0)
+            };
+            let mut neighbours: Vec<Vec<u32>> = vec![Vec::new(); range.len()];
+            for faces in edges.values() {
+                for &a in faces {
+                    for &b in faces {
+                        if a != b
+                            && side(a) == side(b)
+                            && normal[a as usize].dot(normal[b as usize]) >= SMOOTH_DOT
+                        {
+                            neighbours[(a - inst.triangles.start) as usize].push(b);
+                        }
+                    }
+                }
+            }
+            let mut stack = Vec::new();
+            for seed in range.clone() {
+                if regions.of_triangle[seed] != u32::MAX {
+                    continue;
+                }
+                let region = regions.area.len() as u32;
+                regions.area.push(0.0);
+                regions.instance.push(index as u32);
+                regions.of_triangle[seed] = region;
+                stack.push(seed as u32);
+                while let Some(t) = stack.pop() {
+                    regions.area[region as usize] += triangle_area(scene, t as usize);
+                    for &u in &neighbours[(t - inst.triangles.start) as usize] {
+                        if regions.of_triangle[u as usize] == u32::MAX {
+                            regions.of_triangle[u as usize] = region;
+                            stack.push(u);
+                        }
+                    }
+                }
+            }
+        }
+        regions
+    }
+
+    pub fn len(&self) -> usize {
+        self.area.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.area.is_empty()
+    }
+}
+
+fn triangle_area(scene: &Scene, t: usize) -> f64 {
+    let [a, b, c] = scene.triangles[t].map(|v| scene.positions[v as usize].as_dvec3());
+    0.5 * (b - a).cross(c - a).length()
+}
+
+/// What the sample and the pilot say of one region.
+#[derive(Clone, Copy, Debug, Default)]
+struct Evidence {
+    points: Moments,
+    unseen: u32,
+    /// Σ area and Σ area·light over the region's valid texels; all its texels' area.
+    valid_area: f64,
+    light: f64,
+    texel_area: f64,
+}
+
+/// The density factor of every scene triangle (`AtlasParams::triangle_density`) from the
+/// density pilot's pair (`pilot`, stored values at `texels`) and its lookup-error `sample`;
+/// `None` when every factor is 1 (the uniform atlas stays, and its pilot is reused). Reasons
+/// go to `plan`. `tpu` is the preset's density the factors multiply.
+pub fn choose_region_density(
+    scene: &Scene,
+    texels: &Texels,
+    pilot: [&[Vec3]; 2],
+    sample: &GatheredSample,
+    tpu: f32,
+    plan: &mut Plan,
+) -> Option<Vec<f32>> {
+    let regions = Regions::of(scene);
+    if regions.len() < 2 || sample.points.len() < 2 || texels.is_empty() {
+        plan.reasons.push(format!(
+            "texel density uniform: {} region(s), {} sampled point(s)",
+            regions.len(),
+            sample.points.len()
+        ));
+        return None;
+    }
+    let n = regions.len();
+    let mut evidence = vec![Evidence::default(); n];
+    let valid = texels.valid_mask();
+    for i in 0..texels.len() {
+        let e = &mut evidence[regions.of_triangle[texels.triangle[i] as usize] as usize];
+        let w = f64::from(texels.area[i]);
+        e.texel_area += w;
+        if valid[i] {
+            e.valid_area += w;
+            e.light += w * f64::from((pilot[0][i] + pilot[1][i]).element_sum()) / 6.0;
+        }
+    }
+    for p in &sample.points {
+        let e = &mut evidence[regions.of_triangle[p.triangle as usize] as usize];
+        e.points.add(f64::from(p.rest_square + p.punctual_square));
+    }
+    for &t in &sample.unseen {
+        evidence[regions.of_triangle[t as usize] as usize].unseen += 1;
+    }
+    let (scene_square, scene_stderr) = sample.mean_square_total();
+    let mean_light = sample.mean_light();
+    let scene_light = evidence.iter().map(|e| e.light).sum::<f64>()
+        / evidence
+            .iter()
+            .map(|e| e.valid_area)
+            .sum::<f64>()
+            .max(f64::MIN_POSITIVE);
+    if !(scene_square.is_finite() && scene_square > 0.0 && mean_light > 0.0 && scene_light > 0.0) {
+        plan.reasons.push(
+            "texel density uniform: the density pilot's sample measured no lookup error".into(),
+        );
+        return None;
+    }
+    let scene_square = scene_square.max(0.0);
+
+    // Shrunk means: region → instance → scene (normal–normal, with the between-region
+    // variance of the true means τ² by the method of moments, at least (m̄/10)²).
+    let all = sample.points.iter().fold(Moments::default(), |mut m, p| {
+        m.add(f64::from(p.rest_square + p.punctual_square));
+        m
+    });
+    let point_variance = all.variance().max(f64::MIN_POSITIVE);
+    let measured: Vec<&Moments> = evidence
+        .iter()
+        .map(|e| &e.points)
+        .filter(|m| m.n > 0.0)
+        .collect();
+    let spread = measured
+        .iter()
+        .map(|m| (m.mean() - all.mean()).powi(2))
+        .sum::<f64>()
+        / measured.len().max(1) as f64;
+    let sampling =
+        measured.iter().map(|m| point_variance / m.n).sum::<f64>() / measured.len().max(1) as f64;
+    let tau2 = (spread - sampling)
+        .max((0.1 * scene_square).powi(2))
+        .max(f64::MIN_POSITIVE);
+    let instances = scene.instances.len();
+    let mut inst_points = vec![Moments::default(); instances];
+    for (r, e) in evidence.iter().enumerate() {
+        inst_points[regions.instance[r] as usize].merge(&e.points);
+    }
+    let inst_mean: Vec<f64> = inst_points
+        .iter()
+        .map(|m| shrink(m, point_variance, all.mean(), tau2).0)
+        .collect();
+    let (lo, hi) = DENSITY_RANGE;
+    let tpu2 = f64::from(tpu).powi(2);
+    let mut hidden = vec![false; n];
+    let (mut m, mut m_high) = (vec![0.0f64; n], vec![0.0f64; n]);
+    let mut floor = vec![0.0f32; n];
+    for (r, e) in evidence.iter().enumerate() {
+        let buried = e.texel_area > 0.0 && e.valid_area <= 0.0;
+        let unseen = e.points.n == 0.0 && e.unseen >= HIDDEN_POINTS;
+        let dark = e.valid_area > 0.0 && e.light / e.valid_area <= 1e-3 * scene_light;
+        if buried || unseen || dark || regions.area[r] <= 0.0 {
+            hidden[r] = true;
+            continue;
+        }
+        let prior = inst_mean[regions.instance[r] as usize];
+        let (mean, variance) = shrink(&e.points, point_variance, prior, tau2);
+        m[r] = mean.max(0.0);
+        m_high[r] = (mean + 2.0 * variance.sqrt()).max(0.0);
+        let texels_now = regions.area[r] * tpu2;
+        floor[r] = ((MIN_REGION_TEXELS / texels_now).sqrt() as f32).min(hi);
+    }
+    let seen_area: f64 = (0..n)
+        .filter(|&r| !hidden[r])
+        .map(|r| regions.area[r])
+        .sum();
+    if seen_area <= 0.0 {
+        plan.reasons
+            .push("texel density uniform: no region is seen and lit".into());
+        return None;
+    }
+    // Relative weights w_r = (m_r / m̄)^{1/(Q+2)}, the factor at scale c is c·w_r, clamped. A
+    // region is made sparser than the rest only as far as the upper end of its estimate allows:
+    // a noisy sample never thins a surface on a guess.
+    let root = |m: f64| {
+        (m / scene_square)
+            .max(1e-12)
+            .powf(1.0 / (ERROR_EXPONENT + 2.0))
+    };
+    let weight: Vec<f64> = (0..n)
+        .map(|r| root(m[r]).max(root(m_high[r]).min(1.0)))
+        .collect();
+    let factors = |c: f64| -> Vec<f32> {
+        (0..n)
+            .map(|r| {
+                if hidden[r] {
+                    HIDDEN_FACTOR
+                } else {
+                    quantise(((c * weight[r]) as f32).clamp(lo, hi).max(floor[r]))
+                }
+            })
+            .collect()
+    };
+    let texels_at = |f: &[f32]| -> f64 {
+        f.iter()
+            .zip(&regions.area)
+            .map(|(f, a)| a * f64::from(*f).powi(2))
+            .sum::<f64>()
+            * tpu2
+    };
+    // The relative RMS lookup error predicted at these factors, the sample's mean square
+    // scaled by `scale` (its bounds).
+    let predicted = |f: &[f32], scale: f64| -> f64 {
+        let square: f64 = (0..n)
+            .filter(|&r| !hidden[r])
+            .map(|r| regions.area[r] * m[r] * scale * f64::from(f[r]).powf(-ERROR_EXPONENT))
+            .sum::<f64>()
+            / seen_area;
+        square.max(0.0).sqrt() / mean_light
+    };
+    // The scale at which `more_is_better(factors)` turns false, by bisection on log c.
+    let solve = |over: &dyn Fn(&[f32]) -> bool| -> f64 {
+        let (mut a, mut b) = (1e-3f64, 1e3f64);
+        for _ in 0..50 {
+            let c = (a * b).sqrt();
+            if over(&factors(c)) {
+                a = c;
+            } else {
+                b = c;
+            }
+        }
+        b
+    };
+    let uniform_texels = regions.area.iter().sum::<f64>() * tpu2;
+    let same = solve(&|f| texels_at(f) < uniform_texels);
+    let room = f64::from(plan.target_error) * (1.0 - f64::from(NOISE_SHARE).powi(2)).sqrt();
+    let lower = ((scene_square - 2.0 * scene_stderr) / scene_square).max(0.0);
+    let at_same = factors(same);
+    let (error_same, error_lower) = (predicted(&at_same, 1.0), predicted(&at_same, lower));
+    let cap = plan
+        .texel_budget
+        .map_or(f64::INFINITY, |(_, hi)| hi)
+        .min(MAX_TEXEL_RAISE * uniform_texels);
+    let mut scale = same;
+    let mut total_why = format!(
+        "the same texels as the uniform atlas: its predicted lookup error {:.2}% (lower end \
+         {:.2}%) is not surely above the {:.2}% the {:.1}% target leaves beside the noise",
+        error_same * 100.0,
+        error_lower * 100.0,
+        room * 100.0,
+        plan.target_error * 100.0
+    );
+    if error_lower > room && cap > uniform_texels {
+        let wanted = solve(&|f| predicted(f, 1.0) > room);
+        let capped = solve(&|f| texels_at(f) < cap);
+        scale = wanted.min(capped).max(same);
+        let reached = predicted(&factors(scale), 1.0);
+        total_why = format!(
+            "×{:.2} the uniform atlas's texels: its predicted lookup error {:.2}% (lower end \
+             {:.2}%) is above the {:.2}% the {:.1}% target leaves beside the noise; {}",
+            texels_at(&factors(scale)) / uniform_texels,
+            error_same * 100.0,
+            error_lower * 100.0,
+            room * 100.0,
+            plan.target_error * 100.0,
+            if wanted > capped {
+                format!(
+                    "capped at {:.0} texels (the preset's budget or ×{MAX_TEXEL_RAISE}): \
+                     predicted {:.2}%, above its share",
+                    cap,
+                    reached * 100.0
+                )
+            } else {
+                format!("predicted {:.2}%", reached * 100.0)
+            }
+        );
+    }
+    let chosen = factors(scale);
+    if chosen.iter().all(|&f| f == 1.0) {
+        plan.reasons.push(format!(
+            "texel density uniform: every region's lookup error is near the scene's ({total_why})"
+        ));
+        return None;
+    }
+    let hidden_count = hidden.iter().filter(|&&h| h).count();
+    let hidden_area: f64 = (0..n).filter(|&r| hidden[r]).map(|r| regions.area[r]).sum();
+    let texels = texels_at(&chosen);
+    plan.reasons.push(format!(
+        "texel density per region ({n} regions, about {texels:.0} texels against {uniform_texels:.0} \
+         uniform, factors ×{:.2}…×{:.2} of {tpu} /m, ∝ the fourth root of each region's lookup \
+         error at the density pilot's {} points): {total_why}; {hidden_count} regions \
+         ({hidden_area:.2} m²) buried, unseen or unlit get ×{HIDDEN_FACTOR}",
+        chosen.iter().copied().fold(f32::INFINITY, f32::min),
+        chosen.iter().copied().fold(0.0, f32::max),
+        sample.points.len(),
+    ));
+    // The regions that got most and least, and why.
+    let mut order: Vec<usize> = (0..n).filter(|&r| !hidden[r]).collect();
+    order.sort_by(|&a, &b| {
+        chosen[b]
+            .total_cmp(&chosen[a])
+            .then(regions.area[b].total_cmp(&regions.area[a]))
+    });
+    let describe = |r: usize| {
+        let inst = &scene.instances[regions.instance[r] as usize];
+        let e = &evidence[r];
+        format!(
+            "node {} mesh {} ({:.3} m², {} points, RMS lookup error {:.1}% of the mean light) ×{:.2}",
+            inst.node,
+            inst.mesh,
+            regions.area[r],
+            e.points.n,
+            m[r].sqrt() / mean_light * 100.0,
+            chosen[r]
+        )
+    };
+    let shown = 3.min(order.len());
+    let most: Vec<String> = order[..shown].iter().map(|&r| describe(r)).collect();
+    let least: Vec<String> = order[order.len() - shown..]
+        .iter()
+        .rev()
+        .map(|&r| describe(r))
+        .collect();
+    plan.reasons
+        .push(format!("densest regions: {}", most.join("; ")));
+    plan.reasons
+        .push(format!("sparsest seen regions: {}", least.join("; ")));
+    Some(
+        regions
+            .of_triangle
+            .iter()
+            .map(|&r| chosen[r as usize])
+            .collect(),
+    )
+}
+
+/// Count, sum and sum of squares of a region's per-point squared lookup errors.
+#[derive(Clone, Copy, Debug, Default)]
+struct Moments {
+    n: f64,
+    sum: f64,
+    sum2: f64,
+}
+
+impl Moments {
+    fn add(&mut self, x: f64) {
+        self.n += 1.0;
+        self.sum += x;
+        self.sum2 += x * x;
+    }
+
+    fn merge(&mut self, o: &Moments) {
+        self.n += o.n;
+        self.sum += o.sum;
+        self.sum2 += o.sum2;
+    }
+
+    fn mean(&self) -> f64 {
+        self.sum / self.n.max(1.0)
+    }
+
+    fn variance(&self) -> f64 {
+        if self.n < 2.0 {
+            return 0.0;
+        }
+        ((self.sum2 - self.sum * self.sum / self.n) / (self.n - 1.0)).max(0.0)
+    }
+}
+
+/// The posterior mean and variance of a mean from `m`'s points (each of variance `variance`)
+/// with the prior (`prior`, `tau2`): normal–normal shrinkage.
+fn shrink(m: &Moments, variance: f64, prior: f64, tau2: f64) -> (f64, f64) {
+    let precision = m.n / variance + 1.0 / tau2;
+    (
+        (m.sum / variance + prior / tau2) / precision,
+        1.0 / precision,
+    )
+}
+
+/// `f` on a quarter-octave step (1 stays 1).
+fn quantise(f: f32) -> f32 {
+    let step = (f.log2() * STEPS_PER_OCTAVE).round() / STEPS_PER_OCTAVE;
+    round_significant(step.exp2(), 3)
+}
+
+#[cfg(test)]
+mod tests {
+    use glam::Vec3;
+
+    use super::*;
+    use crate::atlas::xatlas::tests::{cube, quad, scene_of};
+    use crate::plan::gathered::GatheredPoint;
+
+    /// A 1 m cube (six regions) beside a 4 × 4 m floor (one region).
+    fn cube_and_floor() -> Scene {
+        let floor = quad(Vec3::new(2.0, 0.0, 0.0), 4.0, 4.0);
+        let mut box_ = cube(1.0, 2);
+        box_.node = 1;
+        scene_of(&[floor, box_], &[])
+    }
+
+    /// One texel per triangle, of the triangle's area and light 1.
+    fn texels_of(scene: &Scene) -> Texels {
+        let n = scene.triangles.len();
+        Texels {
+            position: vec![Vec3::ZERO; n],
+            area: (0..n).map(|t| triangle_area(scene, t) as f32).collect(),
+            triangle: (0..n as u32).collect(),
+            ..Texels::default()
+        }
+    }
+
+    /// `per_triangle` points on every triangle, their squared lookup error from `square`.
+    fn sample(
+        scene: &Scene,
+        per_triangle: usize,
+        square: impl Fn(u32, usize) -> f32,
+    ) -> GatheredSample {
+        let mut points = Vec::new();
+        for t in 0..scene.triangles.len() as u32 {
+            for k in 0..per_triangle {
+                points.push(GatheredPoint {
+                    instance: scene.triangle_instance[t as usize],
+                    triangle: t,
+                    rest_square: square(t, k),
+                    punctual_square: 0.0,
+                    total: 1.0,
+                });
+            }
+        }
+        GatheredSample {
+            drawn: points.len(),
+            points,
+            ..Default::default()
+        }
+    }
+
+    fn choose(scene: &Scene, sample: &GatheredSample, target: f32) -> (Option<Vec<f32>>, Plan) {
+        let mut plan = Plan {
+            target_error: target,
+            texel_budget: Some((0.0, 1e9)),
+            ..Default::default()
+        };
+        let texels = texels_of(scene);
+        let light = vec![Vec3::ONE; texels.len()];
+        let chosen =
+            choose_region_density(scene, &texels, [&light, &light], sample, 16.0, &mut plan);
+        (chosen, plan)
+    }
+
+    #[test]
+    fn regions_end_at_creases_and_instances() {
+        let scene = cube_and_floor();
+        let regions = Regions::of(&scene);
+        assert_eq!(regions.len(), 7, "the floor and six cube faces");
+        assert!((regions.area[0] - 16.0).abs() < 1e-9);
+        assert!(regions.area[1..].iter().all(|a| (a - 1.0).abs() < 1e-9));
+        // A curved surface is one region however finely it is tessellated.
+        let sphere = crate::atlas::xatlas::tests::sphere(Vec3::ZERO, 1.0, 16, 32);
+        assert_eq!(Regions::of(&scene_of(&[sphere], &[])).len(), 1);
+    }
+
+    #[test]
+    fn texels_go_where_the_error_is_at_the_same_count() {
+        let scene = cube_and_floor();
+        let floor_triangles = scene.instances[0].triangles.clone();
+        // The cube's faces read 16× the floor's mean square lookup error, measured precisely.
+        let on_cube = |t: u32| !floor_triangles.contains(&t);
+        let precise = sample(&scene, 64, |t, k| {
+            let m = if on_cube(t) { 16e-4 } else { 1e-4 };
+            m * if k % 2 == 0 { 0.9 } else { 1.1 }
+        });
+        let (factors, plan) = choose(&scene, &precise, 0.5);
+        let factors = factors.expect("not uniform");
+        let (floor, cube) = (factors[0], factors[floor_triangles.end as usize]);
+        // The fourth root of 16 is 2: the cube gets about twice the floor's density.
+        assert!((1.6..2.5).contains(&(cube / floor)), "{cube} / {floor}");
+        assert!(floor < 1.0 && cube > 1.0, "{floor} {cube}");
+        let reasons = plan.reasons.join(" | ");
+        assert!(
+            reasons.contains("the same texels as the uniform atlas"),
+            "{reasons}"
+        );
+        // Two texels per unit area at most off the uniform count (quarter-octave steps).
+        let texels: f64 = (0..scene.triangles.len())
+            .map(|t| triangle_area(&scene, t) * f64::from(factors[t]).powi(2))
+            .sum();
+        assert!((texels / 22.0 - 1.0).abs() < 0.25, "{texels}");
+    }
+
+    #[test]
+    fn a_noisy_zero_does_not_thin_a_surface() {
+        let scene = cube_and_floor();
+        let floor_triangles = scene.instances[0].triangles.clone();
+        // The floor's products average zero with a large spread; the cube's are steady.
+        let noisy = sample(&scene, 8, |t, k| {
+            if floor_triangles.contains(&t) {
+                if k % 2 == 0 { 4e-3 } else { -4e-3 }
+            } else {
+                4e-4
+            }
+        });
+        let (factors, _) = choose(&scene, &noisy, 0.5);
+        if let Some(factors) = factors {
+            assert!(factors[0] >= 1.0, "{factors:?}");
+        }
+    }
+
+    #[test]
+    fn a_sure_error_above_the_target_raises_the_texels_within_the_cap() {
+        let scene = cube_and_floor();
+        // 4% RMS everywhere against a 2% target (room 1.32%): about (4 / 1.32)² = 9× the
+        // density squared, capped at MAX_TEXEL_RAISE × the texels.
+        let steady = sample(&scene, 64, |_, k| {
+            16e-4 * if k % 2 == 0 { 0.9 } else { 1.1 }
+        });
+        let (factors, plan) = choose(&scene, &steady, 0.02);
+        let factors = factors.expect("raised");
+        let texels: f64 = (0..scene.triangles.len())
+            .map(|t| triangle_area(&scene, t) * f64::from(factors[t]).powi(2))
+            .sum();
+        assert!(
+            (3.0..=MAX_TEXEL_RAISE * 1.2).contains(&(texels / 22.0)),
+            "{texels}"
+        );
+        assert!(
+            plan.reasons.join(" ").contains("capped"),
+            "{:?}",
+            plan.reasons
+        );
+        // Within the room: the same texels.
+        let (_, plan) = choose(&scene, &steady, 0.2);
+        assert!(
+            plan.reasons.join(" ").contains("not surely above"),
+            "{:?}",
+            plan.reasons
+        );
+    }
+
+    #[test]
+    fn regions_nobody_sees_get_the_hidden_factor() {
+        let scene = cube_and_floor();
+        let bottom: Vec<u32> = {
+            // The cube face looking down (−Y is the fifth axis of `cube`): every drawn point
+            // there was unseen.
+            let regions = Regions::of(&scene);
+            let normal_down = |t: usize| {
+                let [a, b, c] = scene.triangles[t].map(|v| scene.positions[v as usize]);
+                (b - a).cross(c - a).normalize().y < -0.9
+            };
+            let r = (0..scene.triangles.len())
+                .find(|&t| normal_down(t))
+                .unwrap();
+            let region = regions.of_triangle[r];
+            (0..scene.triangles.len() as u32)
+                .filter(|&t| regions.of_triangle[t as usize] == region)
+                .collect()
+        };
+        let mut s = sample(&scene, 16, |_, k| 1e-4 * if k % 2 == 0 { 0.5 } else { 1.5 });
+        s.points.retain(|p| !bottom.contains(&p.triangle));
+        s.unseen = bottom.iter().flat_map(|&t| [t; 4]).collect();
+        let (factors, plan) = choose(&scene, &s, 0.5);
+        let factors = factors.expect("not uniform");
+        assert_eq!(
+            factors[bottom[0] as usize], HIDDEN_FACTOR,
+            "{:?}",
+            plan.reasons
+        );
+        assert!(
+            plan.reasons.join(" ").contains("1 regions"),
+            "{:?}",
+            plan.reasons
+        );
+    }
+}
