@@ -2091,6 +2091,225 @@ pub fn furnished_interior() -> GltfBuilder {
     gltf
 }
 
+/// Narrow faces of [`narrow_faces`]: a name, a world box (min, max) around the face and its
+/// outward normal (zero: any horizontal normal). Faces narrower than two texels at every
+/// preset, in slots or beside bright surfaces, where a texel that reads light from beyond the
+/// face's edge shows (issue 27).
+pub const NARROW_FACES: [(&str, Vec3, Vec3, Vec3); 9] = [
+    // The door's top: 4 cm deep, 4 mm under the head of its lining.
+    (
+        "door top",
+        Vec3::new(-1.43, 2.075, -1.54),
+        Vec3::new(-0.573, 2.077, -1.5),
+        Vec3::Y,
+    ),
+    // The door's bottom: 4 cm deep, 8 mm over the threshold.
+    (
+        "door bottom",
+        Vec3::new(-1.43, 0.007, -1.54),
+        Vec3::new(-0.573, 0.009, -1.5),
+        Vec3::NEG_Y,
+    ),
+    // The door's latch edge: 4 cm deep, 3 mm from the jamb.
+    (
+        "door edge",
+        Vec3::new(-0.574, 0.008, -1.54),
+        Vec3::new(-0.572, 2.076, -1.5),
+        Vec3::X,
+    ),
+    // The shelf board's front edge: 2 cm tall, 1 cm proud of the wall.
+    (
+        "shelf front",
+        Vec3::new(1.989, 1.18, -0.4),
+        Vec3::new(1.991, 1.2, 0.4),
+        Vec3::NEG_X,
+    ),
+    // The ceiling light's border: 1.5 cm of white round its emitting face, four strips.
+    (
+        "light border",
+        Vec3::new(-0.431, 2.619, -0.331),
+        Vec3::new(-0.415, 2.621, 0.331),
+        Vec3::NEG_Y,
+    ),
+    (
+        "light border",
+        Vec3::new(0.415, 2.619, -0.331),
+        Vec3::new(0.431, 2.621, 0.331),
+        Vec3::NEG_Y,
+    ),
+    (
+        "light border",
+        Vec3::new(-0.415, 2.619, -0.331),
+        Vec3::new(0.415, 2.621, -0.315),
+        Vec3::NEG_Y,
+    ),
+    (
+        "light border",
+        Vec3::new(-0.415, 2.619, 0.315),
+        Vec3::new(0.415, 2.621, 0.331),
+        Vec3::NEG_Y,
+    ),
+    // The light's sides (4 cm) and the recess's walls (6 cm), 2 cm apart.
+    (
+        "light recess",
+        Vec3::new(-0.451, 2.6, -0.351),
+        Vec3::new(0.451, 2.66, 0.351),
+        Vec3::ZERO,
+    ),
+];
+
+/// Whether a point at `position` on a face with unit normal `normal` lies on one of the
+/// [`NARROW_FACES`]; its name if so.
+pub fn narrow_face(position: Vec3, normal: Vec3) -> Option<&'static str> {
+    NARROW_FACES.iter().find_map(|&(name, min, max, n)| {
+        let facing = if n == Vec3::ZERO {
+            normal.y.abs() < 0.1
+        } else {
+            normal.dot(n) > 0.99
+        };
+        (facing && position.cmpge(min).all() && position.cmple(max).all()).then_some(name)
+    })
+}
+
+/// `n` visible points on the [`NARROW_FACES`] of a scene loaded from [`narrow_faces`]: points
+/// drawn area-weighted over the whole scene ([`crate::reference::points::draw`], batches of
+/// 16384 with seeds `seed`, `seed + 1`, …), those on a narrow face kept in draw order.
+pub fn narrow_face_points(
+    scene: &crate::scene::Scene,
+    tracer: &crate::trace::Tracer,
+    n: usize,
+    seed: u64,
+) -> Result<crate::reference::points::PointSet> {
+    use crate::reference::points::{PointSet, draw};
+    let mut set = PointSet::default();
+    for batch in 0..256 {
+        let drawn = draw(scene, tracer, 16384, seed + batch)?;
+        set.hidden += drawn.hidden;
+        for p in drawn.points {
+            if set.points.len() < n && narrow_face(p.position, p.normal).is_some() {
+                set.points.push(p);
+            }
+        }
+        if set.points.len() == n {
+            return Ok(set);
+        }
+    }
+    Err(Error::Option(format!(
+        "only {} points on narrow faces",
+        set.points.len()
+    )))
+}
+
+/// A closed room (4 × 3 m, 2.6 m high) built as a modeller exports one: every wall, slab, frame
+/// and fitting a closed, single-sided box facing outward, boxes meeting or overlapping where
+/// they join. In the north wall a door leaf (4 cm thick) sits in a lined opening, 4 mm under
+/// the head, 8 mm over the threshold and 3 mm from the latch-side jamb, its hinge end 1 cm inside
+/// the other jamb; in the east wall a
+/// shelf board (2 cm) spans a 12 cm recess, its ends 1 cm inside the recess's sides; a light
+/// panel (Le 10, a 1.5 cm white border round it) sits in a 6 cm recess of the ceiling, 2 cm from
+/// the recess's walls; a window pane (Le 2, cool) in the west wall. Its narrow faces
+/// ([`NARROW_FACES`]) are narrower than two texels at every preset: the door's top, bottom and
+/// edge in their slots (dark), the shelf's front edge, the panel's border and sides (next to
+/// the light).
+pub fn narrow_faces() -> GltfBuilder {
+    let mut gltf = GltfBuilder::new("narrow_faces");
+    let plaster = gltf.add_material(Material::diffuse("plaster", [0.78, 0.76, 0.72]));
+    let boards = gltf.add_material(Material::diffuse("boards", [0.5, 0.38, 0.26]));
+    let wood = gltf.add_material(Material::diffuse("wood", [0.62, 0.45, 0.3]));
+    let paint = gltf.add_material(Material::grey("frame", 0.8));
+    let light = gltf.add_material(Material::grey("light", 0.8).emitting([1.0, 0.96, 0.88], 10.0));
+    let sky = gltf.add_material(Material::grey("window", 0.1).emitting([0.8, 0.9, 1.0], 2.0));
+    let solid = |boxes: &[(Vec3, Vec3)]| {
+        let mut g = Geometry::default();
+        for &(min, max) in boxes {
+            g.append(&Geometry::box_faces(min, max, &Face::ALL, 1));
+        }
+        g.without_uv0()
+    };
+    let v = Vec3::new;
+    let (t, h) = (0.15f32, 2.6f32); // wall and slab thickness, room height
+    let floor = solid(&[(v(-2.0, -t, -1.5), v(2.0, 0.0, 1.5))]);
+    // The ceiling slab around a 0.9 × 0.7 m recess, 6 cm deep.
+    let ceiling = solid(&[
+        (v(-2.0, h, -1.5), v(-0.45, h + t, 1.5)),
+        (v(0.45, h, -1.5), v(2.0, h + t, 1.5)),
+        (v(-0.45, h, -1.5), v(0.45, h + t, -0.35)),
+        (v(-0.45, h, 0.35), v(0.45, h + t, 1.5)),
+        (v(-0.45, h + 0.06, -0.35), v(0.45, h + t, 0.35)),
+    ]);
+    // North wall around a 0.9 × 2.1 m door opening; south wall plain.
+    let (nz0, nz1) = (-1.5 - t, -1.5);
+    let mut walls = solid(&[
+        (v(-2.0 - t, -t, nz0), v(-1.45, h + t, nz1)),
+        (v(-0.55, -t, nz0), v(2.0 + t, h + t, nz1)),
+        (v(-1.45, 2.1, nz0), v(-0.55, h + t, nz1)),
+        (v(-1.45, -t, nz0), v(-0.55, 0.0, nz1)),
+        (v(-2.0 - t, -t, 1.5), v(2.0 + t, h + t, 1.5 + t)),
+    ]);
+    // West wall around a 1.2 × 1.1 m window opening.
+    walls.append(&solid(&[
+        (v(-2.0 - t, -t, -1.5), v(-2.0, h + t, -0.6)),
+        (v(-2.0 - t, -t, 0.6), v(-2.0, h + t, 1.5)),
+        (v(-2.0 - t, -t, -0.6), v(-2.0, 0.9, 0.6)),
+        (v(-2.0 - t, 2.0, -0.6), v(-2.0, h + t, 0.6)),
+    ]));
+    // East wall around a 0.8 × 0.6 m recess, 12 cm deep.
+    walls.append(&solid(&[
+        (v(2.0, -t, -1.5), v(2.0 + t, h + t, -0.4)),
+        (v(2.0, -t, 0.4), v(2.0 + t, h + t, 1.5)),
+        (v(2.0, -t, -0.4), v(2.0 + t, 0.9, 0.4)),
+        (v(2.0, 1.5, -0.4), v(2.0 + t, h + t, 0.4)),
+        (v(2.12, 0.9, -0.4), v(2.0 + t, 1.5, 0.4)),
+    ]));
+    let shell = gltf.add_mesh("floor", floor, boards);
+    gltf.add_primitive(shell, walls, plaster);
+    gltf.add_primitive(shell, ceiling, plaster);
+    gltf.add_mesh_node("room", shell);
+    // The door's lining (2 cm, 1 cm proud of the wall) and its leaf.
+    let lining = solid(&[
+        (v(-1.45, 0.0, nz0), v(-1.43, 2.1, nz1 + 0.01)),
+        (v(-0.57, 0.0, nz0), v(-0.55, 2.1, nz1 + 0.01)),
+        (v(-1.43, 2.08, nz0), v(-0.57, 2.1, nz1 + 0.01)),
+    ]);
+    let lining = gltf.add_mesh("door_lining", lining, paint);
+    gltf.add_mesh_node("door_lining", lining);
+    let leaf = solid(&[(v(-1.44, 0.008, -1.54), v(-0.573, 2.076, -1.5))]);
+    let leaf = gltf.add_mesh("door", leaf, wood);
+    gltf.add_mesh_node("door", leaf);
+    let shelf = solid(&[(v(1.99, 1.18, -0.41), v(2.12, 1.2, 0.41))]);
+    let shelf = gltf.add_mesh("shelf", shelf, wood);
+    gltf.add_mesh_node("shelf", shelf);
+    // The ceiling light: a 4 cm box against the recess's back, its underside an emitting face
+    // framed by a 1.5 cm border.
+    let (lx, lz, ly) = (0.43f32, 0.33f32, h + 0.02);
+    let (ex, ez) = (lx - 0.015, lz - 0.015);
+    let mut body = Geometry::box_faces(
+        v(-lx, ly, -lz),
+        v(lx, h + 0.06, lz),
+        &[Face::PosX, Face::NegX, Face::PosY, Face::PosZ, Face::NegZ],
+        1,
+    );
+    for (min, max) in [
+        (v(-lx, ly, -lz), v(-ex, ly, lz)),
+        (v(ex, ly, -lz), v(lx, ly, lz)),
+        (v(-ex, ly, -lz), v(ex, ly, -ez)),
+        (v(-ex, ly, ez), v(ex, ly, lz)),
+    ] {
+        body.append(&Geometry::box_face(min, max, Face::NegY, 1, 1));
+    }
+    let panel = gltf.add_mesh("light", body.without_uv0(), paint);
+    let face = Geometry::box_face(v(-ex, ly, -ez), v(ex, ly, ez), Face::NegY, 1, 1);
+    gltf.add_primitive(panel, face.without_uv0(), light);
+    gltf.add_mesh_node("light", panel);
+    // The window pane, 2 cm, in the middle of the west wall.
+    let pane = solid(&[(v(-2.085, 0.9, -0.6), v(-2.065, 2.0, 0.6))]);
+    let pane = gltf.add_mesh("window", pane, sky);
+    gltf.add_mesh_node("window", pane);
+    let camera = Camera::perspective("camera", 1.0, Some(1.5));
+    gltf.add_camera_node(camera, v(1.2, 1.5, 1.2), v(-1.0, 1.6, -1.5));
+    gltf
+}
+
 /// Every committed fixture: file name in `fixtures/` and its bytes.
 pub fn fixture_files() -> Vec<(&'static str, Vec<u8>)> {
     vec![
@@ -2117,6 +2336,7 @@ pub fn fixture_files() -> Vec<(&'static str, Vec<u8>)> {
             "furnished_interior.glb",
             furnished_interior().to_glb_bytes(),
         ),
+        ("narrow_faces.gltf", narrow_faces().to_gltf_bytes()),
     ]
 }
 

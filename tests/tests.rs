@@ -13,6 +13,7 @@ mod hardening;
 mod hierarchical;
 mod instancing;
 mod junctions;
+mod narrow_faces;
 mod pipeline;
 mod plan;
 mod points;
