@@ -229,7 +229,7 @@ pub struct TransportParams {
     /// source; set by the bake when `output.keep_transport` or `output.layers` asks.
     pub split_direct: bool,
     /// Store Monte Carlo rows as their exact ray counts (`transport::Rows::Counts`): the same
-    /// output from 4.1–6.5× fewer row bytes, sweeps somewhat slower (README, "Memory"). Set
+    /// output from 4.1–6.5× fewer row bytes, sweeps somewhat slower ([`crate::guide::baking`], "Memory"). Set
     /// by `row_storage` when forced, else by the memory check (`bake::memory::fit`) when f32
     /// rows would not fit the memory limit and counts would.
     pub count_rows: bool,

@@ -5,6 +5,9 @@
 //! by radiosity: every lightmap texel is a patch, form factors between texels come from
 //! ray-cast visibility, and the system is iterated to a residual tolerance.
 //!
+//! How to use it — the output contract, the options, engines, the build step — is the user
+//! [`guide`] (the README and its chapters, with every example compiled).
+//!
 //! ## Pipeline
 //!
 //! Each stage is a plain data type in and a plain data type out; the module tree follows it:
@@ -109,6 +112,7 @@ pub mod atlas;
 pub mod build;
 pub mod config;
 pub mod error;
+pub mod guide;
 pub mod lightmap;
 pub mod lights;
 pub mod metrics;

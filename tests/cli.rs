@@ -145,6 +145,21 @@ fn missing_file_is_named() {
     fails(Path::new("/nonexistent/scene.gltf"), &[], "scene.gltf");
 }
 
+/// Issue 30: a missing input said its cause twice (`error: baking x.gltf failed: x.gltf: No
+/// such file or directory (os error 2): No such file or directory (os error 2)`).
+#[test]
+fn missing_input_says_the_cause_once() {
+    let dir = scratch();
+    let missing = dir.path().join("x.gltf");
+    let o = bake(&missing, &dir.path().join("out"), &[]);
+    assert_eq!(o.status.code(), Some(1));
+    let err = stderr(&o);
+    let os = std::fs::read(&missing).unwrap_err().to_string();
+    assert_eq!(err.matches(&os).count(), 1, "{err}");
+    assert!(err.contains(&missing.display().to_string()), "{err}");
+    assert_eq!(err.lines().count(), 1, "{err}");
+}
+
 #[test]
 fn malformed_json_is_named() {
     let dir = scratch();

@@ -1,7 +1,7 @@
 //! Directional lightmaps (`lightmap::directional`): irradiance reconstructed from the L1 pages
 //! at normals tilted 30° and 60° from the surface, against the path tracer at those normals.
 //!
-//! Run with `--nocapture` to see the figures the README quotes.
+//! Run with `--nocapture` to see the figures the guide quotes (src/guide/performance.md).
 
 use std::f32::consts::PI;
 

@@ -75,7 +75,7 @@ fn strip_error(reference: &PointReference, split_junctions: bool) -> f32 {
 
 /// The junction strip: points within a draft texel (12.5 cm) of the wall on room B's side
 /// (floor, ceiling and side walls along the wall, and the floor across the doorway).
-/// Measured at 8192 points × 2048 paths (README, "Junction splitting"): 16.8% with the split,
+/// Measured at 8192 points × 2048 paths (src/guide/performance.md, "Lightmap quality"): 16.8% with the split,
 /// 96% without (room A's light read through texels under the wall), reference noise 2.9%.
 /// Here 1024 points × 128 paths: the split must stay below 30%, and without it the error is
 /// above 60%.

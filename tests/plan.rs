@@ -306,7 +306,7 @@ fn adaptive_density_spends_texels_where_the_light_changes() {
 /// leaves beside the noise, the whole density rises (`plan::choose_density_raise`), and what a
 /// renderer shows gets closer to the light: lamp_room at draft (point and spot light, hard
 /// shadows of table and cabinet) is raised ×1.67 and measured 6.41% → 3.77% against a 2048-point
-/// reference (README). Here, against a smaller one, the automatic density (per-instance factors
+/// reference. Here, against a smaller one, the automatic density (per-instance factors
 /// at a constant texel count, then the raise: 2.5× the texels) must be at least a fifth better
 /// than the preset's uniform density: measured 3.3% against 10.5%.
 #[test]

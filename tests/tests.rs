@@ -8,6 +8,7 @@ mod cli;
 mod denoise;
 mod directional;
 mod distributed;
+mod docs;
 mod form_factors;
 mod hardening;
 mod hierarchical;

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Junction splitting as a renderer shows it (README, "Junction splitting"): the two-room
+# Junction splitting as a renderer shows it (src/guide/performance.md, "Lightmap quality"): the two-room
 # fixtures baked at every preset with the split on and off, read along the wall's dark side and
 # rendered from room B, against path-traced references.
 #   examples/dev/junction_figures.sh BIN OUT [PRESETS]

@@ -1,5 +1,5 @@
-//! A rendered view against its path-traced reference, as a picture: for README's "Junction
-//! splitting" (`examples/gallery/junction_views.png`).
+//! A rendered view against its path-traced reference, as a picture: for the guide's "Junction
+//! splitting" (src/guide/baking.md) (`examples/gallery/junction_views.png`).
 //!
 //! ```text
 //! cargo run --release --example junction_views -- OUT.png REF.exr IMAGE.exr [IMAGE.exr ...]

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Predicted against measured point error of automatic bakes (README, "What a renderer shows").
+# Predicted against measured point error of automatic bakes (src/guide/performance.md, "How good --explain's prediction is").
 #   examples/dev/predict_figures.sh BIN OUT REFS [QUALITIES]
 # Bakes each corpus scene with `BIN bake --quality Q --explain` into OUT, compares the output with
 # the point reference REFS/<stem>.csv (made once with

@@ -211,7 +211,7 @@ fn solve_shared(
     exchange: &mut Exchange,
 ) -> Result<Lit> {
     if config.technique != Technique::DEFAULT {
-        return Err(Error::Option(format!(
+        return Err(Error::Internal(format!(
             "a distributed bake runs {} only; the plan chose {}",
             Technique::DEFAULT,
             config.technique
@@ -478,7 +478,7 @@ impl Exchange {
             round: self.round + 1,
             values: Vec::new(),
             rays: 0,
-            failure: Some(error.to_string()),
+            failure: Some(error.with_causes()),
         };
         let _ = self.round(share);
     }

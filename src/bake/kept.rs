@@ -279,12 +279,12 @@ pub fn encode(
     let n = texels.len();
     let sources = transport.sources.len();
     if transport.direct_terms.len() != n * sources || transport.len() != n {
-        return Err(Error::Option(
+        return Err(Error::Internal(
             "the transport holds no direct light by source: it cannot be kept".to_string(),
         ));
     }
     let json = serde_json::to_vec(settings)
-        .map_err(|e| Error::Option(format!("cannot serialise the bake's settings: {e}")))?;
+        .map_err(|e| Error::Internal(format!("cannot serialise the bake's settings: {e}")))?;
     let mut w = Writer::default();
     w.u64(json.len() as u64);
     w.0.extend_from_slice(&json);

@@ -661,7 +661,7 @@ pub(crate) fn add_layer_extras(
         .collect();
     let root = json
         .as_object_mut()
-        .ok_or_else(|| Error::Option("the glTF is not a JSON object".to_string()))?;
+        .ok_or_else(|| Error::Internal("the glTF is not a JSON object".to_string()))?;
     let extras = root.entry("extras").or_insert_with(|| json!({}));
     let extras = extras.as_object_mut().ok_or_else(|| {
         Error::Option(
@@ -777,8 +777,9 @@ pub(crate) fn edit_gltf(
 ) -> Result<Vec<u8>> {
     let mut json = json_of(bytes, path)?;
     edit(&mut json)?;
-    let invalid =
-        |e: serde_json::Error| Error::invalid(path, format!("cannot write the glTF: {e}"));
+    let invalid = |e: serde_json::Error| {
+        Error::Internal(format!("{}: cannot write the glTF: {e}", path.display()))
+    };
     if bytes.starts_with(b"glTF") {
         let glb = gltf::binary::Glb::from_slice(bytes)
             .map_err(|e| Error::invalid(path, format!("not a GLB: {e}")))?;

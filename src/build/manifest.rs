@@ -1,5 +1,5 @@
 //! The manifest file (`lightbake.toml`): `[defaults]` and one `[[scene]]` per scene; the format
-//! is documented in the README.
+//! is documented in the guide ([`crate::guide::build`]).
 
 use std::path::{Path, PathBuf};
 

@@ -320,7 +320,11 @@ fn scene_report(
 ) -> SceneReport {
     let (status, result, error) = match outcome {
         Ok((status, result)) => (status, result, None),
-        Err(e) => (Status::Failed, SceneResult::default(), Some(e.to_string())),
+        Err(e) => (
+            Status::Failed,
+            SceneResult::default(),
+            Some(e.with_causes()),
+        ),
     };
     SceneReport {
         path: scene.path.clone(),

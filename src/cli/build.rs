@@ -12,7 +12,7 @@ use crate::{GateArgs, RunArgs};
 #[derive(clap::Args)]
 #[command(after_help = AFTER_HELP)]
 pub struct Args {
-    /// The manifest (TOML; see the README's "Building many scenes").
+    /// The manifest (TOML; see the guide, src/guide/build.md).
     #[arg(default_value = "lightbake.toml")]
     manifest: PathBuf,
     /// Bake every scene, even those whose outputs are up to date.

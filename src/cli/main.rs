@@ -230,11 +230,11 @@ struct BakeArgs {
     #[arg(long)]
     rgbm: bool,
     /// Also write each page's per-texel error estimate as <stem>_lightmap<k>_error.exr:
-    /// relative resolution error, noise and total in R, G, B (see the README's "Error map").
+    /// relative resolution error, noise and total in R, G, B (see the guide, src/guide/baking.md).
     #[arg(long)]
     error_map: bool,
     /// Also write directional lightmaps: per page <stem>_lightmap<k>_{L0,L1x,L1y,L1z}.exr, L1
-    /// spherical harmonics of the incident radiance (see the README's "Directional lightmaps").
+    /// spherical harmonics of the incident radiance (see the guide, src/guide/output.md).
     #[arg(long)]
     directional: bool,
     /// Hemisphere rays per texel of the directional gather.
@@ -262,7 +262,7 @@ struct BakeArgs {
     max_memory: Option<u64>,
     /// How stored Monte Carlo rows are held: auto (f32 weights, or exact ray counts when f32
     /// rows would not fit the memory limit and counts would), f32, or counts (the same output
-    /// from 4.1–6.5× fewer row bytes; see the README's "Memory").
+    /// from 4.1–6.5× fewer row bytes; see the guide, src/guide/baking.md).
     #[arg(long, value_enum, default_value = "auto")]
     rows: RowsArg,
     /// Also write <stem>.transport beside the output: what `lightbake relight` needs to solve
@@ -507,8 +507,16 @@ fn bake(args: &BakeArgs) -> Result<()> {
     check_gate(args.gate.gate().problems(&result))
 }
 
+/// With this environment variable set, `lightbake` parses its command line and exits (0 when
+/// it parses, 2 with clap's message when not): `tests/docs.rs` checks every command of the
+/// README and the guide with it.
+const PARSE_ONLY: &str = "LIGHTBAKE_PARSE_ONLY";
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    if std::env::var_os(PARSE_ONLY).is_some() {
+        return ExitCode::SUCCESS;
+    }
     let result = match &cli.command {
         Command::Render(args) => render::run(args),
         Command::Reference(args) => reference::run(args),

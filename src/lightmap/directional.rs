@@ -43,8 +43,8 @@
 //!
 //! (uniform hemisphere: `E(θ) = πL(1+cos θ)/2`, which has no band-2 part; one direction `l`:
 //! `E_L1/π = P(1/4 + n·l/2)/π` against `P·max(0, n·l)/π`.) Real lighting lies between: the
-//! sharper (more punctual) the light, the larger the error — see the README's "Directional
-//! lightmaps" for the fixtures' figures.
+//! sharper (more punctual) the light, the larger the error — see the guide's "Accuracy and
+//! speed" ([`crate::guide::performance`]) for the fixtures' figures.
 //!
 //! ## How it is computed
 //!

@@ -85,9 +85,8 @@ pub fn write_gltf(
     stem: &str,
 ) -> Result<()> {
     if atlas.instances.len() != scene.instances.len() {
-        return Err(Error::invalid(
-            &source.path,
-            "the atlas does not match the scene's instances",
+        return Err(Error::Internal(
+            "the atlas does not match the scene's instances".to_string(),
         ));
     }
     let mut doc = Document::merge_buffers(source)?;
@@ -529,9 +528,7 @@ impl<'a> Document<'a> {
                 .get_mut("nodes")
                 .and_then(|n| n.get_mut(rect.node as usize))
                 .filter(|n| n.is_object())
-                .ok_or_else(|| {
-                    Error::invalid(self.path, format!("node {} does not exist", rect.node))
-                })?;
+                .ok_or_else(|| Error::Internal(format!("node {} does not exist", rect.node)))?;
             object_entry(node, "extras").insert("lightmap".to_string(), lightmap);
         }
         Ok(())
@@ -858,9 +855,7 @@ impl<'a> Document<'a> {
             } else {
                 serde_json::to_vec(json)
             };
-            bytes.map_err(|e| {
-                Error::invalid(self.path, format!("cannot serialise the output glTF: {e}"))
-            })
+            bytes.map_err(|e| Error::Internal(format!("cannot serialise the output glTF: {e}")))
         };
         if glb {
             let json = serialize(&self.json, false)?;

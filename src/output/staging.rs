@@ -56,7 +56,7 @@ impl Staging {
             )));
         }
         if self.names.iter().any(|n| n == name) {
-            return Err(Error::Option(format!(
+            return Err(Error::Internal(format!(
                 "output file {name} would be written twice"
             )));
         }
@@ -91,7 +91,9 @@ impl Staging {
     fn staged(&self, name: &str) -> Result<()> {
         match self.contains(name) {
             true => Ok(()),
-            false => Err(Error::Option(format!("output file {name} was not staged"))),
+            false => Err(Error::Internal(format!(
+                "output file {name} was not staged"
+            ))),
         }
     }
 
@@ -102,7 +104,7 @@ impl Staging {
                 .components()
                 .any(|c| !matches!(c, std::path::Component::Normal(_)))
         {
-            return Err(Error::Option(format!(
+            return Err(Error::Internal(format!(
                 "output file name {name:?} must be a plain relative path"
             )));
         }

@@ -137,7 +137,7 @@ impl<'a> Stopping<'a> {
         });
         self.progress.advance(1);
         if !error_estimate.is_finite() {
-            return Err(Error::Option(format!(
+            return Err(Error::Internal(format!(
                 "the {} solver diverged (residual {residual}, error estimate {error_estimate}) \
                  after {} {}",
                 self.solver, self.count, self.unit

@@ -36,7 +36,7 @@
 //! not the flags ask for them, and the storage ends in a padding byte. The previous layout, a
 //! varint per step decoded entry by entry (its state in memory behind a cold call, branches on
 //! the flags), swept 2.4–3× slower than f32 rows; this one 1.4–2.1× (Gauss–Seidel; Jacobi
-//! 1.9–2.7×; README "Memory"). The streams are written here rather than taken from a crate:
+//! 1.9–2.7×; the guide's "Accuracy and speed", "Memory"). The streams are written here rather than taken from a crate:
 //! they are decoded inline in the solvers' sweeps.
 
 use std::iter::{Copied, Zip};

@@ -221,8 +221,12 @@ pub fn serve(viewer: &Viewer, server: &tiny_http::Server) {
 
 /// Binds the viewer's HTTP server on 127.0.0.1 (`port` 0: any free port).
 pub fn bind(port: u16) -> Result<tiny_http::Server> {
-    tiny_http::Server::http(("127.0.0.1", port))
-        .map_err(|e| Error::Option(format!("cannot listen on 127.0.0.1:{port}: {e}")))
+    tiny_http::Server::http(("127.0.0.1", port)).map_err(|e| {
+        Error::io(
+            format!("cannot listen on 127.0.0.1:{port}"),
+            std::io::Error::other(e),
+        )
+    })
 }
 
 #[cfg(test)]
