@@ -64,6 +64,8 @@
 //! - Page size: xatlas places each chart at the best of random positions within the area used so
 //!   far, so charts pack from the origin outwards. Packing at `max_page_size` and trimming each
 //!   page to its used extent gives small pages for small scenes in one xatlas run.
+//! - Dense meshes: an instance whose triangles are far below a texel is charted by smooth
+//!   patches instead ([`dense`]), handed over like the planar regions (outline, then placement).
 
 use std::collections::BTreeSet;
 
