@@ -24,6 +24,8 @@
 //!                                                     uncut scene, passed in by `bake`)
 //!             Tracer::new   ──▶ Tracer                obvhs CWBVH: closest hit, occlusion
 //!            ─ atlas::build ──▶ Atlas                 xatlas charts + pages, or input TEXCOORD_1;
+//!                                                     meshes far finer than a texel charted by
+//!                                                     smooth patches, xatlas packing them;
 //!                                                     with --instancing share, one layout per
 //!                                                     mesh several nodes place and a page rect
 //!                                                     per node (atlas::share; the junction

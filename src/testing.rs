@@ -1611,6 +1611,93 @@ pub fn large_hall() -> GltfBuilder {
     gltf
 }
 
+/// Height of the wavy field of [`height_field`] at (x, z) and its gradient (m, per m).
+fn wave(x: f32, z: f32) -> (f32, Vec2) {
+    use std::f32::consts::TAU;
+    let (a, b) = (TAU * (1.5 * x + 0.3), TAU * 1.2 * z);
+    let c = TAU * (4.0 * x + 3.0 * z);
+    let h = 0.02 * a.sin() * b.cos() + 0.006 * c.sin();
+    let dx = 0.02 * TAU * 1.5 * a.cos() * b.cos() + 0.006 * TAU * 4.0 * c.cos();
+    let dz = -0.02 * TAU * 1.2 * a.sin() * b.sin() + 0.006 * TAU * 3.0 * c.cos();
+    (h, Vec2::new(dx, dz))
+}
+
+/// A wavy 1 × 1 m height field of `quads × quads` squares cut into two triangles each (smooth
+/// normals, connected), centred at `center`, facing +y; waves of ±2.6 cm, slopes up to about
+/// 15°. 708 quads give 1 002 528 triangles of 1.4 mm: a scanned or sculpted surface.
+pub fn wavy_field(center: Vec3, quads: u32) -> Geometry {
+    let mut field = Geometry::grid(
+        center + Vec3::new(-0.5, 0.0, 0.5),
+        Vec3::X,
+        Vec3::NEG_Z,
+        quads,
+        quads,
+    )
+    .without_uv0();
+    let normals = field.normals.as_mut().expect("grid normals");
+    for (p, n) in field.positions.iter_mut().zip(normals) {
+        let (h, grad) = wave(p.x - center.x, p.z - center.z);
+        p.y = center.y + h;
+        *n = Vec3::new(-grad.x, 1.0, -grad.y).normalize();
+    }
+    field
+}
+
+/// The dense-mesh benchmark (not a committed fixture: generated on demand): a wavy 1 × 1 m
+/// height field of at least `triangles` triangles ([`wavy_field`] with ⌈√(triangles/2)⌉ quads a
+/// side; 1 000 000 gives the 1 002 528 of issue 28) under one point light 1 m above it.
+pub fn height_field(triangles: usize) -> GltfBuilder {
+    let quads = ((triangles as f64 / 2.0).sqrt().ceil() as u32).max(1);
+    let mut gltf = GltfBuilder::new("height_field");
+    let material = gltf.add_material(Material::grey("field", 0.6));
+    let mesh = gltf.add_mesh("field", wavy_field(Vec3::ZERO, quads), material);
+    gltf.add_mesh_node("field", mesh);
+    gltf.add_light_node(
+        Light::point("light", [1.0; 3], 2.0),
+        Vec3::new(0.2, 1.0, 0.1),
+        Vec3::NEG_Y,
+    );
+    let camera = Camera::perspective("camera", 0.8, None);
+    gltf.add_camera_node(camera, Vec3::new(0.0, 1.0, 1.4), Vec3::ZERO);
+    gltf
+}
+
+/// The dense-room benchmark (not a committed fixture): a 5 × 3 × 5 m room (coarse walls) under
+/// a point light, holding four dense props of about `triangles / 4` triangles each — two wavy
+/// 1 × 1 m fields ([`wavy_field`]) on the floor and two smooth spheres of radius 0.35 m.
+pub fn dense_room(triangles: usize) -> GltfBuilder {
+    let per_prop = triangles as f64 / 4.0;
+    let mut gltf = GltfBuilder::new("dense_room");
+    let walls_m = gltf.add_material(Material::grey("walls", 0.7));
+    let field_m = gltf.add_material(Material::diffuse("field", [0.5, 0.6, 0.4]));
+    let sphere_m = gltf.add_material(Material::diffuse("sphere", [0.8, 0.6, 0.5]));
+    let (min, max) = (Vec3::new(-2.5, 0.0, -2.5), Vec3::new(2.5, 3.0, 2.5));
+    let room = Geometry::box_faces(min, max, &Face::ALL, 10).flipped();
+    let room_mesh = gltf.add_mesh("room", room, walls_m);
+    gltf.add_mesh_node("room", room_mesh);
+    let quads = ((per_prop / 2.0).sqrt().ceil() as u32).max(1);
+    for (k, x) in [-1.2f32, 1.2].into_iter().enumerate() {
+        let field = wavy_field(Vec3::new(x, 0.03, -1.0), quads);
+        let mesh = gltf.add_mesh(&format!("field_{k}"), field, field_m);
+        gltf.add_mesh_node(&format!("field_{k}"), mesh);
+    }
+    // nu = 2·nv segments: 4·nv² − 4·nv triangles.
+    let rings = (((per_prop / 4.0).sqrt()).ceil() as u32 + 1).max(2);
+    for (k, x) in [-1.0f32, 1.0].into_iter().enumerate() {
+        let sphere = Geometry::uv_sphere(Vec3::new(x, 0.35, 1.0), 0.35, 2 * rings, rings);
+        let mesh = gltf.add_mesh(&format!("sphere_{k}"), sphere.without_uv0(), sphere_m);
+        gltf.add_mesh_node(&format!("sphere_{k}"), mesh);
+    }
+    gltf.add_light_node(
+        Light::point("light", [1.0; 3], 30.0),
+        Vec3::new(0.3, 2.8, 0.2),
+        Vec3::NEG_Y,
+    );
+    let camera = Camera::perspective("camera", 1.0, None);
+    gltf.add_camera_node(camera, Vec3::new(0.0, 2.0, 2.4), Vec3::new(0.0, 0.3, 0.0));
+    gltf
+}
+
 /// A smooth sphere (radius 0.5, 24 × 12 segments) on a 3 × 3 m floor under a point light and
 /// a dim sky: xatlas cuts the sphere into several charts, so its lightmap has UV seams across
 /// a smooth surface (`lightmap::seams`). Not a committed fixture: generated on demand.

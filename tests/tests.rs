@@ -6,6 +6,7 @@ mod analytic;
 mod build;
 mod cli;
 mod denoise;
+mod dense;
 mod directional;
 mod distributed;
 mod docs;

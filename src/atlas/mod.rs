@@ -173,8 +173,18 @@ pub fn reuses_input_uvs(scene: &Scene, source: &Source, params: &AtlasParams) ->
 
 /// Builds the atlas: reuses the input's `TEXCOORD_1` or unwraps, as `params.uv` says.
 pub fn build(scene: &Scene, source: &Source, params: &AtlasParams) -> Result<Atlas> {
+    build_with(scene, source, params, &crate::NoProgress)
+}
+
+/// [`build`], telling `progress` how the unwrapping goes (stage "atlas").
+pub fn build_with(
+    scene: &Scene,
+    source: &Source,
+    params: &AtlasParams,
+    progress: &dyn crate::Progress,
+) -> Result<Atlas> {
     let unwrap = || match params.instancing {
-        Instancing::Duplicate => xatlas::unwrap(scene, source, params),
+        Instancing::Duplicate => xatlas::unwrap_with(scene, source, params, progress),
         Instancing::Share => share::unwrap(scene, source, params),
     };
     let atlas = match params.uv {

@@ -64,17 +64,22 @@
 //! - Page size: xatlas places each chart at the best of random positions within the area used so
 //!   far, so charts pack from the origin outwards. Packing at `max_page_size` and trimming each
 //!   page to its used extent gives small pages for small scenes in one xatlas run.
+//! - Dense meshes: an instance whose triangles are far below a texel is charted by smooth
+//!   patches instead ([`dense`]), handed over like the planar regions (outline, then placement).
 
 use std::collections::BTreeSet;
 
 use glam::{DMat2, DVec2, DVec3, Vec2, Vec3};
+use rayon::prelude::*;
 // Only for the vendored C++ library (and libstdc++) it builds and links; see [`ffi`].
 use xatlas_rs as _;
 
 use super::{Atlas, InstanceUv, PageSize, page_side};
 use crate::config::AtlasParams;
 use crate::scene::{Instance, Scene, Source};
-use crate::{Error, Result};
+use crate::{Error, NoProgress, Progress, Result};
+
+mod dense;
 
 /// Refuse to unwrap beyond this many texels (the pipeline's memory check is coarser).
 const MAX_TEXELS: f64 = 64.0 * 1024.0 * 1024.0;
@@ -88,6 +93,16 @@ const NEEDLE_EDGE_TEXELS: f64 = 1e-3;
 
 /// Unwraps every instance with xatlas at `params.texels_per_unit` and packs the charts.
 pub fn unwrap(scene: &Scene, source: &Source, params: &AtlasParams) -> Result<Atlas> {
+    unwrap_with(scene, source, params, &NoProgress)
+}
+
+/// [`unwrap`], telling `progress` of the triangles charted (stage "atlas").
+pub fn unwrap_with(
+    scene: &Scene,
+    source: &Source,
+    params: &AtlasParams,
+    progress: &dyn Progress,
+) -> Result<Atlas> {
     let tpu = params.texels_per_unit;
     let tpus = triangle_densities(scene, params);
     let estimated_texels: f64 = (0..scene.triangles.len())
@@ -112,12 +127,16 @@ pub fn unwrap(scene: &Scene, source: &Source, params: &AtlasParams) -> Result<At
     // A region outline xatlas did not place as one planar chart is charted as triangles again;
     // charting is per chart group, so the second run places every remaining outline alike.
     let mut excluded = BTreeSet::new();
+    progress.begin("atlas", scene.triangles.len() as u64);
+    let mut shown = progress;
     let output = loop {
-        match run_xatlas(scene, &tpus, resolution, params.padding, &excluded) {
+        match run_xatlas(scene, &tpus, resolution, params.padding, &excluded, shown) {
             Ok(output) => break output,
             Err(failed) => excluded.extend(failed),
         }
+        shown = &NoProgress;
     };
+    progress.end();
     if output.page_count == 0 {
         return Err(Error::invalid(
             &source.path,
@@ -616,6 +635,7 @@ fn run_xatlas(
     resolution: u32,
     padding: u32,
     excluded: &BTreeSet<(u32, u32)>,
+    progress: &dyn Progress,
 ) -> std::result::Result<XatlasOutput, Vec<(u32, u32)>> {
     // Big charts are split while growing (`max_chart_area`) and, as a last resort, scaled down
     // to fit an empty page (`max_chart_size`), so no chart is ever left unplaced.
@@ -638,16 +658,39 @@ fn run_xatlas(
         max_chart_size: f64::from(pack_options.max_chart_size),
     };
 
+    // Each instance's regions, in parallel and collected in instance order: smooth patches of
+    // dense instances ([`dense`]), planar regions of the others.
+    let found: Vec<(Vec<Region>, Vec<u32>)> = (0..scene.instances.len())
+        .into_par_iter()
+        .map(|index| {
+            let count = scene.instances[index].triangles.len();
+            if count == 0 {
+                return Default::default();
+            }
+            let inst = &scene.instances[index];
+            let tpus = &tpus[inst.triangles.start as usize..inst.triangles.end as usize];
+            let i = index as u32;
+            // The dense path charts one density; an instance the plan gave several (regions
+            // of other densities) goes the planar-region way.
+            let one_density = tpus.iter().all(|&t| t == tpus[0]);
+            let found = one_density
+                .then(|| dense::smooth_regions(scene, i, tpus[0], limits, excluded))
+                .flatten()
+                .unwrap_or_else(|| planar_regions(scene, i, tpus, limits, excluded));
+            progress.advance(count as u64);
+            found
+        })
+        .collect();
+
     let atlas = ffi::Handle::create();
     let mut given: Vec<Vec<Block>> = Vec::with_capacity(scene.instances.len());
     let mut regions = Vec::new();
-    for (index, inst) in scene.instances.iter().enumerate() {
+    for (inst, (inst_regions, rest)) in scene.instances.iter().zip(found) {
         if inst.triangles.is_empty() {
             given.push(Vec::new());
             continue;
         }
         let tpus = &tpus[inst.triangles.start as usize..inst.triangles.end as usize];
-        let (inst_regions, rest) = planar_regions(scene, index as u32, tpus, limits, excluded);
         regions.extend(inst_regions);
         let inst_blocks = blocks_by_group(scene, inst, tpus, rest);
         for block in &inst_blocks {
@@ -1684,7 +1727,8 @@ pub(crate) mod tests {
             disc.triangles.push([0, 1 + s, 1 + (s + 1) % 1024]);
         }
         let scene = scene_of(&[disc], &[]);
-        assert!(run_xatlas(&scene, &[16.0; 1024], 1024, 2, &BTreeSet::new()).is_err());
+        let tpus = [16.0; 1024];
+        assert!(run_xatlas(&scene, &tpus, 1024, 2, &BTreeSet::new(), &NoProgress).is_err());
         let atlas = unwrap_ok(&scene, &params(16.0, 1024));
         let overlaps = first_page_overlaps(&scene, &atlas);
         assert_eq!(overlaps.overlapping, 0, "{overlaps:?}");

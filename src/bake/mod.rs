@@ -418,7 +418,7 @@ fn lay_out(
     texels::validity::ValidityReport,
 )> {
     let t = Instant::now();
-    let atlas = atlas::build(scene, source, &config.atlas)?;
+    let atlas = atlas::build_with(scene, source, &config.atlas, progress)?;
     timed(stages, "atlas", t);
     check_aborted(progress)?;
 

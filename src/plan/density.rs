@@ -312,7 +312,12 @@ pub fn choose_region_density(
                 } else {
                     // Never below the preset's density: thinning on the pilot's noisy products
                     // cost the furnished interior 2.2% → 4.9% at high.
-                    quantise(((c * weight[r]) as f32).clamp(lo, hi).max(floor[r]).max(1.0))
+                    quantise(
+                        ((c * weight[r]) as f32)
+                            .clamp(lo, hi)
+                            .max(floor[r])
+                            .max(1.0),
+                    )
                 }
             })
             .collect()
@@ -355,7 +360,11 @@ pub fn choose_region_density(
     // Surely: the lower end of the sample's own range (its gathered part's noise; the punctual
     // part is exact at each point), as the sample reports it.
     let (r, r_lo, _) = sample.relative_error_bounds();
-    let lower = if r > 0.0 { f64::from(r_lo / r).powi(2) } else { 0.0 };
+    let lower = if r > 0.0 {
+        f64::from(r_lo / r).powi(2)
+    } else {
+        0.0
+    };
     let at_same = factors(same);
     let (error_same, error_lower) = (predicted(&at_same, 1.0), predicted(&at_same, lower));
     let cap = plan
@@ -596,7 +605,10 @@ mod tests {
         assert_eq!(floor, 1.0);
         assert_eq!(cube, 1.41);
         let reasons = plan.reasons.join(" | ");
-        assert!(reasons.contains("the preset's density on every seen region"), "{reasons}");
+        assert!(
+            reasons.contains("the preset's density on every seen region"),
+            "{reasons}"
+        );
     }
 
     #[test]
@@ -667,7 +679,9 @@ mod tests {
                 .filter(|&t| regions.of_triangle[t as usize] == region)
                 .collect()
         };
-        let mut s = sample(&scene, 64.0, |_, k| 1e-4 * if k % 2 == 0 { 0.5 } else { 1.5 });
+        let mut s = sample(&scene, 64.0, |_, k| {
+            1e-4 * if k % 2 == 0 { 0.5 } else { 1.5 }
+        });
         s.points.retain(|p| !bottom.contains(&p.triangle));
         s.unseen = bottom.iter().flat_map(|&t| [t; 4]).collect();
         let (factors, plan) = choose(&scene, &s, 0.5);

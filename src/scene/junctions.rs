@@ -69,6 +69,14 @@ const SMOOTH_DOT: f64 = 0.866;
 /// Grid cells per axis of the broad phase, at most.
 const MAX_GRID_CELLS: f64 = 64.0;
 
+/// An instance of at least this many triangles averaging at most [`DENSE_TEXELS`] texel², and
+/// not planar, is no receiver (it still cuts others): a scanned or sculpted surface, curved at
+/// the scale of its triangles, where no flat patch is a receiver anyway, but finding that out
+/// took 16–19 s for the million triangles of `testing::height_field`. The atlas charts such
+/// instances by smooth patches (`atlas::xatlas`, dense meshes), with the same thresholds.
+const DENSE_TRIANGLES: usize = 4096;
+const DENSE_TEXELS: f64 = 1.0 / 16.0;
+
 /// What [`split`] did.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct JunctionReport {
@@ -180,6 +188,7 @@ pub fn split_except(
     let splits: Vec<Option<InstanceSplit>> = (0..scene.instances.len())
         .map(|i| match whole.get(i) {
             Some(true) => None,
+            _ if dense_and_curved(&scene, i, texel) => None,
             _ => split_instance(&scene, i as u32, &grid, tol, shadows, &mut report),
         })
         .collect();
@@ -190,6 +199,35 @@ pub fn split_except(
         return (scene, report);
     }
     (assemble(scene, splits, &mut report), report)
+}
+
+/// Whether instance `i` is dense and curved at a texel of `texel` (see [`DENSE_TRIANGLES`]):
+/// one pass over its triangles.
+fn dense_and_curved(scene: &Scene, i: usize, texel: f64) -> bool {
+    let inst = &scene.instances[i];
+    let tris = &scene.triangles[inst.triangles.start as usize..inst.triangles.end as usize];
+    if tris.len() < DENSE_TRIANGLES {
+        return false;
+    }
+    let normal = |t: &[u32; 3]| {
+        let [a, b, c] = t.map(|v| scene.positions[v as usize].as_dvec3());
+        (b - a).cross(c - a)
+    };
+    let area: f64 = tris.iter().map(|t| 0.5 * normal(t).length()).sum();
+    if area / tris.len() as f64 > DENSE_TEXELS * texel * texel {
+        return false;
+    }
+    let Some(first) = tris
+        .iter()
+        .map(|t| normal(t).normalize_or_zero())
+        .find(|n| *n != DVec3::ZERO)
+    else {
+        return false;
+    };
+    tris.iter().any(|t| {
+        let n = normal(t).normalize_or_zero();
+        n != DVec3::ZERO && n.dot(first) < 1.0 - 1e-9
+    })
 }
 
 #[derive(Clone, Copy)]
