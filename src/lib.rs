@@ -33,9 +33,10 @@
 //!           ─ texels::build ──▶ Texels                one radiosity patch per covered texel
 //!       ─ texels::validity ──▶ Texels                 samples moved out of geometry, invalid marked,
 //!                                                     texels a wall divides kept to one side (cuts)
-//!  ─ pilot + plan::choose_instance_density ──▶ the three stages above again, with a density
-//!            + plan::choose_density_raise            factor per instance and a raised density
-//!                                                     where the lookup error asks (auto, adaptive)
+//!  ─ pilot + plan::density ──▶ the three stages above again, with a density factor per
+//!                                                     region (connected surface between creases)
+//!                                                     where the pilot's lookup error sits; ×⅛ on
+//!                                                     what nobody sees (auto, adaptive)
 //!   (all of the above is `prepare`, shared by the bake and the reference)
 //!    ─ pilot runs + plan   ──▶ BakeConfig + pilot    rays for the target error, measured (auto)
 //!  ─ one dispatch on config::Technique:

@@ -255,36 +255,32 @@ fn emitter_and_unlit_texels_cast_fewer_rays() {
     );
 }
 
-/// Adaptive density: on the sun-lit courtyard (hard shadows across the ground, evenly lit
-/// walls) the pilot gives the instances different densities within about the uniform texel
-/// count; a density the user fixed stays uniform.
+/// Texel density per region (`plan::density`): on the sun-lit courtyard (hard shadows across
+/// the ground, evenly lit walls) the density pilot gives some regions more than the preset's
+/// density, none of the seen ones less, and the faces nobody sees (walls' bottoms on the
+/// ground, backs against each other) ×⅛; a density the user fixed stays uniform.
 #[test]
 fn adaptive_density_spends_texels_where_the_light_changes() {
     let config = auto(BakeConfig::draft(), 0.08, Keep::default());
     let baked = lightbake::compute(&fixture("courtyard.gltf"), &config, &NoProgress).unwrap();
-    let factors = &baked.config.atlas.instance_density;
-    assert_eq!(factors.len(), baked.scene.instances.len(), "{factors:?}");
-    // Instance 0 is the ground, where every shadow falls: it gets more texels than the uniform
-    // density, evenly lit instances fewer. (Not necessarily the most: a wall with a shadow across
-    // it can need as much, and the density pilot is a noisy measurement — with the shadow cuts
-    // ending the ground's charts at its shadow edges, a wall came out at 1.68 against the
-    // ground's 1.19 at seed 0, and below the ground at seeds 1 and 2.)
-    let ground = factors[0];
-    let mut sorted = factors.clone();
-    sorted.sort_by(f32::total_cmp);
+    let factors = &baked.config.atlas.triangle_density;
+    assert_eq!(factors.len(), baked.scene.triangles.len());
+    let hidden = lightbake::plan::density::HIDDEN_FACTOR;
+    assert!(factors.iter().any(|&f| f > 1.0), "none denser");
+    assert!(factors.contains(&hidden), "none hidden");
     assert!(
-        ground > 1.0 && ground >= sorted[sorted.len() / 2] && sorted[0] < 1.0,
-        "{factors:?}"
+        factors.iter().all(|&f| f >= 1.0 || f == hidden),
+        "a seen region was thinned"
     );
     let tpu = baked.config.atlas.texels_per_unit as f64;
     let uniform = lightbake::plan::surface_area(&baked.scene) * tpu * tpu;
     let ratio = baked.texels.len() as f64 / uniform;
-    assert!((0.8..1.3).contains(&ratio), "{ratio}");
+    assert!((0.5..2.0).contains(&ratio), "{ratio}");
     let plan = baked.plan.unwrap();
     assert!(
         plan.reasons
             .iter()
-            .any(|r| r.starts_with("adaptive texel density")),
+            .any(|r| r.starts_with("texel density per region")),
         "{:?}",
         plan.reasons
     );
@@ -299,16 +295,15 @@ fn adaptive_density_spends_texels_where_the_light_changes() {
         &NoProgress,
     )
     .unwrap();
-    assert!(fixed.config.atlas.instance_density.is_empty());
+    assert!(fixed.config.atlas.triangle_density.is_empty());
 }
 
 /// Where the density pilot's lookup error at random points is surely above what the target
-/// leaves beside the noise, the whole density rises (`plan::choose_density_raise`), and what a
+/// leaves beside the noise, the regions' texels rise together (`plan::density`), and what a
 /// renderer shows gets closer to the light: lamp_room at draft (point and spot light, hard
-/// shadows of table and cabinet) is raised ×1.67 and measured 6.41% → 3.77% against a 2048-point
-/// reference. Here, against a smaller one, the automatic density (per-instance factors
-/// at a constant texel count, then the raise: 2.5× the texels) must be at least a fifth better
-/// than the preset's uniform density: measured 3.3% against 10.5%.
+/// shadows of table and cabinet) gets about 2.9× the uniform atlas's texels. Against a small
+/// point reference the automatic density must be at least a fifth better than the preset's
+/// uniform density.
 #[test]
 fn the_density_rises_where_the_lookup_error_asks_for_it() {
     use lightbake::reference::points;
@@ -335,7 +330,7 @@ fn the_density_rises_where_the_lookup_error_asks_for_it() {
     assert!(
         plan.reasons
             .iter()
-            .any(|r| r.starts_with("texel density raised")),
+            .any(|r| r.starts_with("texel density per region") && r.contains("is above")),
         "{:?}",
         plan.reasons
     );
@@ -552,13 +547,16 @@ fn memory_estimate_and_the_gather_switch() {
 /// build cache's outputs, not in the glTF), finite, and the box's sun-shadow edge on the floor
 /// (x = 1.2 for z in −1.0 … −0.5: the box's top edge at x = 0.9 seen along the light) is
 /// marked weaker than the evenly lit back wall. Shadow cuts are off: with them that edge is a
-/// chart border and no lookup blends across it, so there is no weak edge left to mark.
+/// chart border and no lookup blends across it, so there is no weak edge left to mark. The
+/// density is fixed: this is a test of the map, and the density plan gives the floor with the
+/// edge more texels than the wall (which is what the map tells it).
 #[test]
 fn the_error_map_marks_a_shadow_edge_above_an_evenly_lit_wall() {
     let input = fixture("spot_and_directional.gltf");
     let options = lightbake::build::options::Options {
         error_map: Some(true),
         no_shadow_cuts: Some(true),
+        texels_per_unit: Some(16.0),
         ..Default::default()
     };
     let config = options.config().unwrap();
@@ -591,7 +589,9 @@ fn the_error_map_marks_a_shadow_edge_above_an_evenly_lit_wall() {
         wall.len()
     );
     // Total (B) and resolution part (R): the mean along the edge against the wall's median.
-    for (part, factor) in [(2, 3.0), (0, 10.0)] {
+    // The total holds the wall's noise too: 2.3× measured with the wall at the preset's
+    // density (the per-instance rule before `plan::density` thinned it to ×0.26).
+    for (part, factor) in [(0, 10.0), (2, 2.0)] {
         let edge_mean = edge.iter().map(|e| e[part]).sum::<f32>() / edge.len() as f32;
         let wall_median = metrics::median(&wall.iter().map(|e| e[part]).collect::<Vec<_>>());
         assert!(

@@ -366,8 +366,8 @@ fn prepare_loaded(
         lay_out(&scene, &source, &tracer, &config, progress, &mut stages)?;
     let mut first_pilot = None;
 
-    // Adaptive density: a pilot on the uniform atlas chooses a density per instance and may
-    // raise the whole density, and the atlas is laid out again with them.
+    // Adaptive density: a pilot on the uniform atlas chooses a density per region
+    // (`plan::density`), and the atlas is laid out again with them.
     if let (Some(plan), Some(auto)) = (&mut plan, config.auto)
         && !auto.keep.texels_per_unit
         && !atlas.reused_input_uvs
