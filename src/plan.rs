@@ -61,7 +61,7 @@
 //!   measured point error (reference noise out), draft / medium: furnished interior 8.9% / 4.9%
 //!   for 8.1% / 5.6% (the second differences predicted 6.5% / 3.5%), Cornell box 6.6% / 3.0% for
 //!   6.2% / 2.8%, lamp_room 8.0% / 4.2% for 7.1% / 2.6%, two_rooms 6.3% / 3.4% for 4.3% / 1.4%;
-//!   the table is in README ("What a renderer shows"). `--explain` says plainly when the
+//!   the table is in the guide (`src/guide/performance.md`). `--explain` says plainly when the
 //!   prediction is above the target, which part dominates, and about how much more texels (a
 //!   range: the error falls as `h²` where light curves smoothly, as `√h` at edges) or rays
 //!   would take.
@@ -940,7 +940,7 @@ const BVH_TRIANGLE_BYTES: f64 = 128.0;
 /// texels, from ~90 MiB; the resident memory stays up afterwards (glibc keeps the freed heap,
 /// one arena or many alike) and later stages reuse only part of it. With this figure the
 /// estimate ÷ measured peak is 0.94 and 0.99 there, 0.81 and 0.77 on the Cornell box and two
-/// rooms at high (README, "Memory").
+/// rooms at high (the guide, `src/guide/performance.md`, "Memory").
 const ATLAS_TRIANGLE_BYTES: f64 = 2560.0;
 /// The input as read and as decoded (JSON tree, buffers).
 const INPUT_FACTOR: f64 = 2.0;
@@ -949,7 +949,7 @@ const PROCESS_BYTES: f64 = 8.0 * 1024.0 * 1024.0;
 
 /// Peak memory of a bake of `m`, before light transport starts: every part a bake holds at
 /// once when its last rows are built (stages before are smaller: the atlas's and validity's
-/// working sets are per chart and per texel). Checked against measured peaks in README
+/// working sets are per chart and per texel). Checked against measured peaks in the guide
 /// ("Memory").
 pub fn memory_estimate(m: &MemoryInputs) -> MemoryEstimate {
     let transposed = matches!(

@@ -31,7 +31,7 @@
 //! **Cost.** Per point, 16 probe rays, 2 runs × ([`GATHER_RAYS`] + [`LIGHT_SAMPLES`]) and one
 //! shadow ray per punctual light; [`BATCH`] points at least, more while the estimate is not
 //! precise and the sample has cast less than its budget (the bake gives it half the pilot's
-//! rays). Measured (README, "What a renderer shows"): 0.1–0.3 s for the first batch, as much as
+//! rays). Measured (the guide, `src/guide/performance.md`): 0.1–0.3 s for the first batch, as much as
 //! a sub-second bake; 9% of the furnished interior's draft bake and 4% of its medium one.
 
 use std::f32::consts::PI;
