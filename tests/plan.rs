@@ -478,14 +478,16 @@ fn memory_estimate_and_the_gather_switch() {
         "{f32_rows:?} against {stored:?}"
     );
 
-    // Storage: f32 rows with room for them, counts below their estimate, nothing below both.
+    // Storage: f32 rows with room for them, counts below their estimate, nothing below both
+    // (texels counted as ten times more, so the bytes-per-texel rule stays aside here).
     for (limit, counts, chosen) in [
         (f32_rows.total() + 1.0, false, true),
         ((f32_rows.total() + stored.total()) / 2.0, true, true),
         (stored.total() - 1.0, false, false),
     ] {
         let mut config = lightbake::BakeConfig::medium();
-        let reason = plan::choose_row_storage(&f32_rows, &stored, limit, &mut config);
+        let reason =
+            plan::choose_row_storage(&f32_rows, &stored, limit, 10.0 * inputs.texels, &mut config);
         assert_eq!(config.transport.count_rows, counts, "limit {limit}");
         assert_eq!(reason.is_some(), chosen, "{reason:?}");
     }
@@ -637,11 +639,22 @@ fn rows_option_overrides_the_storage_choice() {
     ] {
         let mut config = BakeConfig::medium();
         config.transport.row_storage = storage;
-        let reason = plan::choose_row_storage(&f32_rows, &count_rows, limit, &mut config)
+        let reason = plan::choose_row_storage(&f32_rows, &count_rows, limit, 1e6, &mut config)
             .expect("Monte Carlo rows have a storage");
         assert_eq!(config.transport.count_rows, counts, "{storage:?} {limit}");
         assert_eq!(reason.contains("forced by --rows"), forced, "{reason}");
     }
+    // A large bake whose f32 rows would take 8 KiB per texel stores counts though f32 fits.
+    let mut config = BakeConfig::medium();
+    let reason = plan::choose_row_storage(&f32_rows, &count_rows, above, 1e5, &mut config)
+        .expect("Monte Carlo rows have a storage");
+    assert!(config.transport.count_rows, "{reason}");
+    assert!(reason.contains("per texel"), "{reason}");
+    // A small one keeps f32 rows whatever its bytes per texel.
+    let small = with_rows(1e8);
+    let mut config = BakeConfig::medium();
+    plan::choose_row_storage(&small, &with_rows(1e7), above, 1e3, &mut config);
+    assert!(!config.transport.count_rows);
 }
 
 /// A bake forced to count rows stores them as counts and gives the f32 bake's very lightmap:

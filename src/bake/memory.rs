@@ -135,9 +135,10 @@ impl Sizes {
         estimate
     }
 
-    /// The pilot's peak: its second run built while the first is held, or with a `second`
-    /// pilot at 4× the rays, its second pair's second run while the first pair and the other
-    /// run are held.
+    /// The pilot's peak: its second run built while the first is held (its solution; a pilot
+    /// run's rows go once it is solved, `PilotRuns::bake`), or with a `second` pilot at 4× the
+    /// rays, its second pair's second run while the first pair (the rows of its second run)
+    /// and the other run are held.
     fn pilot_peak(&self, second: bool) -> MemoryEstimate {
         let k = PILOT_RAYS as f64;
         // Every process of a distributed bake runs the pilots whole, before any exchange.
@@ -146,8 +147,8 @@ impl Sizes {
             ..*self
         };
         match second {
-            false => whole.estimate(Technique::DEFAULT, k, 1.0, k),
-            true => whole.estimate(Technique::DEFAULT, 4.0 * k, 3.0, (2.0 * k + 4.0 * k) / 3.0),
+            false => whole.estimate(Technique::DEFAULT, k, 1.0, 0.0),
+            true => whole.estimate(Technique::DEFAULT, 4.0 * k, 3.0, k / 3.0),
         }
     }
 
@@ -221,11 +222,8 @@ impl Sizes {
         };
         let monte_carlo = technique.is_monte_carlo();
         let pilot = !auto.keep.rays && monte_carlo;
-        let (held, held_rays) = if pilot {
-            (2.0, PILOT_RAYS as f64)
-        } else {
-            (0.0, 0.0)
-        };
+        // A pilot pair's solutions are held while the final rows are built; its rows are not.
+        let (held, held_rays) = if pilot { (2.0, 0.0) } else { (0.0, 0.0) };
         let mut last = self.estimate_rows(technique, counts, rays, held, held_rays);
         if last.total() > limit && monte_carlo && !auto.keep.solver {
             last = self.estimate(Technique::Gather, rays, held, held_rays);
@@ -259,8 +257,10 @@ pub fn fit(
     limit: u64,
     progress: &dyn Progress,
 ) -> Result<()> {
+    // The pilot pair's rows are dropped before a final bake builds its own
+    // (`pilot::final_bake`); when they suffice, they are the result's.
     let (held, held_rays, more) = match pilot {
-        Some((k, enough)) => (2.0, k as f64, !enough),
+        Some((k, enough)) => (2.0, if enough { k as f64 / 2.0 } else { 0.0 }, !enough),
         None => (0.0, 0.0, true),
     };
     let texel_rays = plan.as_ref().and_then(|p| p.texel_rays.as_ref());
@@ -285,7 +285,8 @@ pub fn fit(
             sizes.processes
         ));
     }
-    let storage = plan::choose_row_storage(&f32_rows, &count_rows, limit as f64, config);
+    let storage =
+        plan::choose_row_storage(&f32_rows, &count_rows, limit as f64, sizes.texels, config);
     if let Some(plan) = plan.as_deref_mut() {
         plan.reasons.extend(storage);
     }

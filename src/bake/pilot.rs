@@ -295,14 +295,20 @@ impl PilotRuns {
                     ..transport.clone()
                 };
                 let technique = Technique::DEFAULT;
-                transport_and_solve(
+                let mut lit = transport_and_solve(
                     surfaces,
                     technique,
                     &params,
                     None,
                     &solve_params,
                     &CancelOnly(progress),
-                )
+                )?;
+                // Only the last run's rows can be a result's (`final_bake`, when the pair
+                // suffices): the first run's go before the second builds its own.
+                if stream == 0 {
+                    lit.transport.rows = Default::default();
+                }
+                Ok(lit)
             })
             .collect::<Result<Vec<_>>>()?;
         Ok(PilotRuns {
@@ -392,6 +398,15 @@ pub fn final_bake(
             texel_gather_rays,
         });
     };
+    // Only the pilots' solutions and direct light enter the mean: their rows go before the final
+    // bake builds its own (on the furnished interior at high, 128 rays' rows per texel beside
+    // the final 224).
+    let mut pilot = pilot;
+    if !pilot.enough {
+        for run in &mut pilot.runs {
+            run.transport.rows = Default::default();
+        }
+    }
     let mut runs: Vec<(f32, Lit)> = pilot
         .runs
         .into_iter()
