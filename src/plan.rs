@@ -203,13 +203,8 @@ impl Plan {
 
 /// Total surface area of the scene's triangles (m²).
 pub fn surface_area(scene: &Scene) -> f64 {
-    scene
-        .triangles
-        .iter()
-        .map(|t| {
-            let p = |i: usize| scene.positions[t[i] as usize].as_dvec3();
-            0.5 * (p(1) - p(0)).cross(p(2) - p(0)).length()
-        })
+    (0..scene.triangles.len())
+        .map(|t| scene.triangle_area(t))
         .sum()
 }
 

@@ -106,7 +106,7 @@ pub fn unwrap_with(
     let tpu = params.texels_per_unit;
     let tpus = triangle_densities(scene, params);
     let estimated_texels: f64 = (0..scene.triangles.len())
-        .map(|t| world_area(scene, t) * f64::from(tpus[t]).powi(2))
+        .map(|t| scene.triangle_area(t) * f64::from(tpus[t]).powi(2))
         .sum();
     if estimated_texels > MAX_TEXELS {
         return Err(Error::Option(format!(
@@ -200,12 +200,6 @@ fn triangle_densities(scene: &Scene, params: &AtlasParams) -> Vec<f32> {
                 * factor(&params.triangle_density, t)
         })
         .collect()
-}
-
-/// World-space area of scene triangle `t`.
-fn world_area(scene: &Scene, t: usize) -> f64 {
-    let [a, b, c] = scene.triangles[t].map(|v| scene.positions[v as usize].as_dvec3());
-    0.5 * (b - a).cross(c - a).length()
 }
 
 /// Whether scene triangle `t` has an edge below [`NEEDLE_EDGE_TEXELS`] at `tpu` texels per unit.
@@ -926,7 +920,7 @@ fn instance_uv(
         let global_t = inst.triangles.start as usize + local_t;
         let tpu = tpus[local_t];
         if !charted
-            && world_area(scene, global_t) * f64::from(tpu).powi(2) > NEGLIGIBLE_TEXEL_AREA
+            && scene.triangle_area(global_t) * f64::from(tpu).powi(2) > NEGLIGIBLE_TEXEL_AREA
             && !is_needle(scene, global_t, tpu)
         {
             return Err(fail(format!("left triangle {local_t} out of every chart")));
@@ -1451,7 +1445,7 @@ pub(crate) mod tests {
                 * f64::from(size.width * size.height);
         }
         let world: f64 = (0..scene.triangles.len())
-            .map(|t| world_area(scene, t))
+            .map(|t| scene.triangle_area(t))
             .sum();
         texels / (world * f64::from(atlas.texels_per_unit).powi(2))
     }
@@ -1465,7 +1459,7 @@ pub(crate) mod tests {
             texels += 0.5
                 * f64::from((b - a).perp_dot(c - a).abs())
                 * f64::from(size.width * size.height);
-            world += world_area(scene, t as usize);
+            world += scene.triangle_area(t as usize);
         }
         texels / world
     }
@@ -1528,7 +1522,7 @@ pub(crate) mod tests {
             texels[g] += 0.5
                 * f64::from((b - a).perp_dot(c - a).abs())
                 * f64::from(size.width * size.height);
-            world[g] += world_area(&scene, t as usize);
+            world[g] += scene.triangle_area(t as usize);
         }
         let density = [0, 1, 2].map(|g| texels[g] / world[g]);
         assert!((density[0] - 1024.0).abs() < 8.0, "{density:?}");

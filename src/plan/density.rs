@@ -13,10 +13,7 @@
 //! its points' mean shrunk towards its instance's, and the instance's towards the scene's
 //! (normal–normal: each mean weighs by its points over the per-point variance, the prior by
 //! one over the between-region variance τ², estimated from the sample): small regions get few
-//! points (a cup's face has one or none in 4096) and borrow from their object. A region is made
-//! sparser than the scene only as far as the upper end of its estimate (`m_r` + two posterior
-//! standard deviations) allows: the pilot's products are noisy, and a noisy zero must not thin
-//! a wall. The error is taken to fall as the texel size (the mean square as `s^−Q`,
+//! points (a cup's face has one or none in 4096) and borrow from their object. The error is taken to fall as the texel size (the mean square as `s^−Q`,
 //! [`ERROR_EXPONENT`]: between the `√h` of edges narrower than a texel and the `h²` of smoothly
 //! curving light; the furnished interior measured `h^1.0–1.4`). Minimising the area-weighted
 //! mean square `Σ A_r·m_r·s_r^−Q` for a texel count `Σ A_r·s_r²` gives
@@ -30,12 +27,16 @@
 //! against another, the bottom of a box on the floor), or which the pilot found unlit gets
 //! [`HIDDEN_FACTOR`]: it still has texels (a renderer reads something sane there), 1/64 as many.
 //!
-//! **How many texels in all.** The factors are scaled together: first to the uniform atlas's
-//! texel count (the same cost, spent where the error is); then, when even the lower end of the
+//! **How many texels in all.** No seen region goes below the preset's density: the pilot's
+//! products are noisy (thinning on them at the uniform texel count took the furnished interior
+//! from 2.20% to 4.94% at `high`), so a region at or below the scene's mean square keeps the
+//! preset's density and one above gets `(m_r/m̄)^¼` of it. When even the lower end of the
 //! sample's two-standard-error range predicts an error above what the target leaves beside the
-//! noise (`room`), up until the central prediction meets it, at most ×[`MAX_TEXEL_RAISE`] the
-//! texels and the preset's texel budget. The choice is never lowered below the uniform count
-//! on a guess: a sample that is not sure leaves the total as it is.
+//! noise (`room`), the factors are scaled up together until the central prediction meets it,
+//! at most ×[`MAX_TEXEL_RAISE`] the uniform atlas's texels and the preset's texel budget; in
+//! that raise a region whose central estimate is low but uncertain rises as far as the upper
+//! end of its estimate (`m_r` + two posterior standard deviations, capped at the scene's)
+//! allows, so a noisy zero does not keep a wall at the preset's density while the rest rise.
 
 use std::collections::BTreeMap;
 
@@ -139,7 +140,7 @@ impl Regions {
                 regions.of_triangle[seed] = region;
                 stack.push(seed as u32);
                 while let Some(t) = stack.pop() {
-                    regions.area[region as usize] += triangle_area(scene, t as usize);
+                    regions.area[region as usize] += scene.triangle_area(t as usize);
                     for &u in &neighbours[(t - inst.triangles.start) as usize] {
                         if regions.of_triangle[u as usize] == u32::MAX {
                             regions.of_triangle[u as usize] = region;
@@ -159,11 +160,6 @@ impl Regions {
     pub fn is_empty(&self) -> bool {
         self.area.is_empty()
     }
-}
-
-fn triangle_area(scene: &Scene, t: usize) -> f64 {
-    let [a, b, c] = scene.triangles[t].map(|v| scene.positions[v as usize].as_dvec3());
-    0.5 * (b - a).cross(c - a).length()
 }
 
 /// What the sample and the pilot say of one region.
@@ -534,7 +530,7 @@ mod tests {
         let n = scene.triangles.len();
         Texels {
             position: vec![Vec3::ZERO; n],
-            area: (0..n).map(|t| triangle_area(scene, t) as f32).collect(),
+            area: (0..n).map(|t| scene.triangle_area(t) as f32).collect(),
             triangle: (0..n as u32).collect(),
             ..Texels::default()
         }
@@ -545,7 +541,7 @@ mod tests {
     fn sample(scene: &Scene, per_m2: f64, square: impl Fn(u32, usize) -> f32) -> GatheredSample {
         let mut points = Vec::new();
         for t in 0..scene.triangles.len() as u32 {
-            for k in 0..(per_m2 * triangle_area(scene, t as usize)).round() as usize {
+            for k in 0..(per_m2 * scene.triangle_area(t as usize)).round() as usize {
                 points.push(GatheredPoint {
                     instance: scene.triangle_instance[t as usize],
                     triangle: t,
@@ -612,24 +608,6 @@ mod tests {
     }
 
     #[test]
-    fn a_noisy_zero_does_not_thin_a_surface() {
-        let scene = cube_and_floor();
-        let floor_triangles = scene.instances[0].triangles.clone();
-        // The floor's products average zero with a large spread; the cube's are steady.
-        let noisy = sample(&scene, 8.0, |t, k| {
-            if floor_triangles.contains(&t) {
-                if k % 2 == 0 { 4e-3 } else { -4e-3 }
-            } else {
-                4e-4
-            }
-        });
-        let (factors, _) = choose(&scene, &noisy, 0.5);
-        if let Some(factors) = factors {
-            assert!(factors[0] >= 1.0, "{factors:?}");
-        }
-    }
-
-    #[test]
     fn a_sure_error_above_the_target_raises_the_texels_within_the_cap() {
         let scene = cube_and_floor();
         // 4% RMS everywhere against a 2% target (room 1.32%): about (4 / 1.32)² = 9× the
@@ -640,7 +618,7 @@ mod tests {
         let (factors, plan) = choose(&scene, &steady, 0.02);
         let factors = factors.expect("raised");
         let texels: f64 = (0..scene.triangles.len())
-            .map(|t| triangle_area(&scene, t) * f64::from(factors[t]).powi(2))
+            .map(|t| scene.triangle_area(t) * f64::from(factors[t]).powi(2))
             .sum();
         assert!(
             (3.0..=MAX_TEXEL_RAISE * 1.2).contains(&(texels / 22.0)),

@@ -1360,11 +1360,6 @@ mod tests {
         (p, vec![[0, 1, 2], [0, 2, 3]])
     }
 
-    fn triangle_area(scene: &Scene, t: usize) -> f64 {
-        let [a, b, c] = scene.triangles[t].map(|v| scene.positions[v as usize].as_dvec3());
-        0.5 * (b - a).cross(c - a).length()
-    }
-
     /// No vertex the split added lies strictly inside an edge of the instance's triangles.
     fn assert_no_t_junctions(scene: &Scene, i: usize) {
         let inst = &scene.instances[i];
@@ -1420,7 +1415,7 @@ mod tests {
         let area: f64 = floor
             .triangles
             .clone()
-            .map(|t| triangle_area(&split, t as usize))
+            .map(|t| split.triangle_area(t as usize))
             .sum();
         assert!((area - 16.0).abs() < 1e-5, "area {area}");
         assert_sides_of_wall(&split, 2.0);
@@ -1458,7 +1453,7 @@ mod tests {
         let edges = [0, 1, 2].map(|k| p[k].distance(p[(k + 1) % 3]));
         let longest = edges.iter().copied().fold(0.0, f64::max);
         let shortest = edges.iter().copied().fold(f64::INFINITY, f64::min);
-        (shortest, 2.0 * triangle_area(scene, t) / longest)
+        (shortest, 2.0 * scene.triangle_area(t) / longest)
     }
 
     /// Two_rooms' ceiling at 16 texels per unit, reduced to one cell: a wall of two quads
@@ -1494,7 +1489,7 @@ mod tests {
         let area: f64 = cell
             .triangles
             .clone()
-            .map(|t| triangle_area(&split, t as usize))
+            .map(|t| split.triangle_area(t as usize))
             .sum();
         assert!((area - 2.0 / 3.0 * 4.0 / 7.0).abs() < 1e-6, "area {area}");
         assert_no_t_junctions(&split, 0);
@@ -1571,7 +1566,7 @@ mod tests {
     fn two_rooms_is_cut_along_every_junction_of_its_partition() {
         let path = concat!(env!("CARGO_MANIFEST_DIR"), "/fixtures/two_rooms.gltf");
         let (scene, _) = crate::scene::load(std::path::Path::new(path)).expect("fixture loads");
-        let area = |s: &Scene| -> f64 { (0..s.triangles.len()).map(|t| triangle_area(s, t)).sum() };
+        let area = |s: &Scene| -> f64 { (0..s.triangles.len()).map(|t| s.triangle_area(t)).sum() };
         let before = area(&scene);
         let (split, report) = split(scene, 1.0 / 16.0);
         // Floor, and the shell's ceiling and side walls; nothing left whole or connected.

@@ -315,6 +315,12 @@ pub struct SurfacePoint {
 
 impl Scene {
     /// The point of triangle `t` at barycentrics `b` (`p = (1−u−v)·p0 + u·p1 + v·p2`).
+    /// World-space area of triangle `t` (in f64: sums over many small triangles stay exact).
+    pub fn triangle_area(&self, t: usize) -> f64 {
+        let [a, b, c] = self.triangles[t].map(|v| self.positions[v as usize].as_dvec3());
+        0.5 * (b - a).cross(c - a).length()
+    }
+
     pub fn surface_point(&self, t: u32, b: Vec2) -> SurfacePoint {
         let [i0, i1, i2] = self.triangles[t as usize].map(|v| v as usize);
         let w = Vec3::new(1.0 - b.x - b.y, b.x, b.y);
