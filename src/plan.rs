@@ -33,15 +33,16 @@
 //!   fixtures this saves 1.8–3.0% of the rays (emitters are small) and never touches lit texels.
 //! - **Tolerance** E/10: the solver stops once its remaining error is well below the Monte
 //!   Carlo error, not later.
-//! - **Texel density where the error is** ([`density`]): a pilot pair on the uniform atlas and
-//!   its lookup-error sample at random surface points ([`GatheredSample`]) give each region of
-//!   the surfaces (a connected surface between creases: a wall, a cabinet door, a cup) a
-//!   density factor, ∝ the fourth root of its measured mean square error, within ×¼…×4; regions
-//!   nobody sees (buried, facing into geometry) or no light reaches get ×⅛. The factors keep the
-//!   uniform atlas's texel count, or raise it (up to ×4 and the preset's budget) when the sample
-//!   is sure the error is above what the target leaves beside the noise. The atlas, texels and
-//!   validity are then laid out again; when every factor is 1 the atlas stays and its pilot
-//!   pair is the first pilot below.
+//! - **Texel density where the error is** ([`density`]): a pilot pair on a uniform atlas of its
+//!   own (quickly charted, at most [`density::PILOT_TEXELS`] texels) and its lookup-error sample
+//!   at random surface points ([`GatheredSample`]) give each region of the surfaces (a
+//!   connected surface between creases: a wall, a cabinet door, a cup) a density factor, ∝ the
+//!   fourth root of its measured mean square error, within ×¼…×4; regions nobody sees (buried,
+//!   facing into geometry) or no light reaches get ×⅛. Seen regions keep at least the preset's
+//!   density; the total rises (up to ×4 and the preset's budget) when the sample is sure the
+//!   error is above what the target leaves beside the noise. The atlas, texels and validity
+//!   are then laid out once, and the pilot's noise at [`PILOT_RAYS`] is the transport plan's
+//!   first measurement (its pair is not cast again on the new atlas).
 //! - **Resolution error** is predicted ([`predict_resolution`]): what a renderer shows
 //!   between texel centres, where it blends four texels bilinearly, differs from the light at
 //!   that point where the light changes within a texel.
@@ -138,8 +139,15 @@ pub struct Plan {
     /// Gathering rays per texel of the pilot pair the resolution sample read ([`PILOT_RAYS`],
     /// or 4× when a second pilot ran).
     pub resolution_pilot_rays: u32,
-    /// Rays of pilot bakes not reused in the result (the first pair, when a second ran).
+    /// Rays of pilot bakes not reused in the result (the density pilot's, and the first pair
+    /// when a second ran).
     pub discarded_rays: u64,
+    /// Wall seconds of planning whose work the result does not contain: the density pilot (its
+    /// atlas, pair and sample), pilot pairs not reused, the lookup-error samples. Pilot pairs
+    /// the final bake averages in are the bake's own work, not counted here.
+    pub overhead_seconds: f64,
+    /// Whether the noise at [`PILOT_RAYS`] behind the rays is the density pilot's.
+    pub noise_from_density_pilot: bool,
     /// Gathering rays per texel of the last bake where fewer than its `gather_rays` suffice
     /// (emitters, black and unlit texels, measured by the pilot); `None`: `gather_rays`
     /// everywhere. Monte Carlo rows only (not the gather solver, not hierarchical).
@@ -374,10 +382,14 @@ pub fn choose_rays(
         )
     };
     plan.reasons.push(format!(
-        "gathering rays K={} in all: the pilot ({} bakes, {:.2}s) measured {measured}; \
+        "gathering rays K={} in all: the pilot ({}, {:.2}s) measured {measured}; \
          K≥{wanted:.0} reaches 75% of the {:.1}% target; expected {:.2}%; {reuse}{}",
         plan.total_rays.unwrap_or(k),
-        if second.is_some() { 4 } else { 2 },
+        match (second.is_some(), plan.noise_from_density_pilot) {
+            (true, true) => "2 bakes here and the density pilot's 2",
+            (true, false) => "4 bakes",
+            (false, _) => "2 bakes",
+        },
         plan.pilot_seconds,
         e * 100.0,
         predicted * 100.0,

@@ -171,6 +171,22 @@ pub fn reuses_input_uvs(scene: &Scene, source: &Source, params: &AtlasParams) ->
     }
 }
 
+/// An atlas for measuring, not for output (the density pilot's): every instance of one density
+/// is charted by smooth patches ([`xatlas`]'s dense path) whatever its triangles' size, which
+/// costs a fraction of xatlas' chart growing on curved meshes and gives more, smaller charts.
+/// Shared instancing and reused `TEXCOORD_1` are laid out as [`build_with`] does.
+pub fn build_quick(
+    scene: &Scene,
+    source: &Source,
+    params: &AtlasParams,
+    progress: &dyn crate::Progress,
+) -> Result<Atlas> {
+    if params.instancing == Instancing::Duplicate && !reuses_input_uvs(scene, source, params) {
+        return xatlas::unwrap_charted(scene, source, params, xatlas::Charting::Quick, progress);
+    }
+    build_with(scene, source, params, progress)
+}
+
 /// Builds the atlas: reuses the input's `TEXCOORD_1` or unwraps, as `params.uv` says.
 pub fn build(scene: &Scene, source: &Source, params: &AtlasParams) -> Result<Atlas> {
     build_with(scene, source, params, &crate::NoProgress)

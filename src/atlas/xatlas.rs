@@ -103,6 +103,26 @@ pub fn unwrap_with(
     params: &AtlasParams,
     progress: &dyn Progress,
 ) -> Result<Atlas> {
+    unwrap_charted(scene, source, params, Charting::Xatlas, progress)
+}
+
+/// How the triangles outside planar regions are charted.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Charting {
+    /// Smooth patches for dense instances ([`dense`]), xatlas for the rest: the output atlas.
+    Xatlas,
+    /// Smooth patches for every instance of one density (`crate::atlas::build_quick`).
+    Quick,
+}
+
+/// [`unwrap_with`], charting as `charting` says.
+pub(crate) fn unwrap_charted(
+    scene: &Scene,
+    source: &Source,
+    params: &AtlasParams,
+    charting: Charting,
+    progress: &dyn Progress,
+) -> Result<Atlas> {
     let tpu = params.texels_per_unit;
     let tpus = triangle_densities(scene, params);
     let estimated_texels: f64 = (0..scene.triangles.len())
@@ -130,7 +150,10 @@ pub fn unwrap_with(
     progress.begin("atlas", scene.triangles.len() as u64);
     let mut shown = progress;
     let output = loop {
-        match run_xatlas(scene, &tpus, resolution, params.padding, &excluded, shown) {
+        let padding = params.padding;
+        match run_xatlas(
+            scene, &tpus, resolution, padding, &excluded, charting, shown,
+        ) {
             Ok(output) => break output,
             Err(failed) => excluded.extend(failed),
         }
@@ -629,6 +652,7 @@ fn run_xatlas(
     resolution: u32,
     padding: u32,
     excluded: &BTreeSet<(u32, u32)>,
+    charting: Charting,
     progress: &dyn Progress,
 ) -> std::result::Result<XatlasOutput, Vec<(u32, u32)>> {
     // Big charts are split while growing (`max_chart_area`) and, as a last resort, scaled down
@@ -667,10 +691,22 @@ fn run_xatlas(
             // The dense path charts one density; an instance the plan gave several (regions
             // of other densities) goes the planar-region way.
             let one_density = tpus.iter().all(|&t| t == tpus[0]);
-            let found = one_density
-                .then(|| dense::smooth_regions(scene, i, tpus[0], limits, excluded))
-                .flatten()
-                .unwrap_or_else(|| planar_regions(scene, i, tpus, limits, excluded));
+            let found = match charting {
+                Charting::Xatlas => one_density
+                    .then(|| dense::smooth_regions(scene, i, tpus[0], limits, excluded, false))
+                    .flatten()
+                    .unwrap_or_else(|| planar_regions(scene, i, tpus, limits, excluded)),
+                // Planar regions where they cover the instance (walls, boxes: the same charts
+                // as the output's), smooth patches where anything is left for xatlas.
+                Charting::Quick => {
+                    let planar = planar_regions(scene, i, tpus, limits, excluded);
+                    match planar.1.is_empty() || !one_density {
+                        true => planar,
+                        false => dense::smooth_regions(scene, i, tpus[0], limits, excluded, true)
+                            .unwrap_or(planar),
+                    }
+                }
+            };
             progress.advance(count as u64);
             found
         })
@@ -1722,7 +1758,18 @@ pub(crate) mod tests {
         }
         let scene = scene_of(&[disc], &[]);
         let tpus = [16.0; 1024];
-        assert!(run_xatlas(&scene, &tpus, 1024, 2, &BTreeSet::new(), &NoProgress).is_err());
+        assert!(
+            run_xatlas(
+                &scene,
+                &tpus,
+                1024,
+                2,
+                &BTreeSet::new(),
+                Charting::Xatlas,
+                &NoProgress
+            )
+            .is_err()
+        );
         let atlas = unwrap_ok(&scene, &params(16.0, 1024));
         let overlaps = first_page_overlaps(&scene, &atlas);
         assert_eq!(overlaps.overlapping, 0, "{overlaps:?}");

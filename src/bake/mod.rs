@@ -69,6 +69,13 @@ impl BakeReport {
             .map(|s| format!("{} {:.2}s", s.stage, s.seconds))
             .collect();
         let total: f64 = self.stages.iter().map(|s| s.seconds).sum();
+        let overhead = self.plan.as_ref().map_or(String::new(), |p| {
+            format!(
+                ", of which planning {:.2}s ({:.0}%)",
+                p.overhead_seconds,
+                100.0 * p.overhead_seconds / total.max(1e-9)
+            )
+        });
         let plan = self
             .plan
             .as_ref()
@@ -98,7 +105,7 @@ impl BakeReport {
             )
         });
         format!(
-            "{} texels ({} moved out of geometry, {} invalid, {} divided by a wall) on {} page(s), {} triangles, {:.2} M rays, {} iterations, residual {:.1e}{}{}{junctions}{sharing}{directional}{plan}; {} (total {:.2}s)",
+            "{} texels ({} moved out of geometry, {} invalid, {} divided by a wall) on {} page(s), {} triangles, {:.2} M rays, {} iterations, residual {:.1e}{}{}{junctions}{sharing}{directional}{plan}; {} (total {:.2}s{overhead})",
             self.texels,
             self.validity.moved,
             self.validity.invalid,
@@ -236,9 +243,9 @@ pub struct Prepared {
     pub config: BakeConfig,
     /// The automatic choice so far (the density), when `config.auto` asks for one.
     pub plan: Option<Plan>,
-    /// The density pilot's pair when the atlas stayed uniform: the first pilot of the
-    /// transport choice.
-    pub first_pilot: Option<pilot::PilotRuns>,
+    /// The density pilot's relative noise at `plan::PILOT_RAYS`, which the transport choice
+    /// starts from.
+    pub density_noise: Option<f32>,
     /// What the junction split cut (`None` when it did not run).
     pub junctions: Option<scene::junctions::JunctionReport>,
     pub stages: Vec<StageTime>,
@@ -362,31 +369,40 @@ fn prepare_loaded(
     let t = Instant::now();
     let tracer = Tracer::new(&scene);
     timed(&mut stages, "bvh", t);
-    let (mut atlas, mut texels, mut validity) =
-        lay_out(&scene, &source, &tracer, &config, progress, &mut stages)?;
-    let mut first_pilot = None;
 
-    // Adaptive density: a pilot on the uniform atlas chooses a density per region
-    // (`plan::density`), and the atlas is laid out again with them.
+    // Adaptive density: a pilot on a uniform atlas of its own, charted quickly and at most
+    // `plan::density::PILOT_TEXELS` texels, chooses a density per region (`plan::density`);
+    // the atlas is then laid out at those densities.
+    let mut density_noise = None;
     if let (Some(plan), Some(auto)) = (&mut plan, config.auto)
         && !auto.keep.texels_per_unit
-        && !atlas.reused_input_uvs
+        && !atlas::reuses_input_uvs(&scene, &source, &config.atlas)
+        && pilot::density_measurable(&scene, &config)
     {
         let t = Instant::now();
+        let tpu = config.atlas.texels_per_unit;
+        let uniform = plan::surface_area(&scene) * f64::from(tpu).powi(2);
+        let scale = (plan::density::PILOT_TEXELS / uniform.max(1.0))
+            .sqrt()
+            .min(1.0);
+        let mut coarse = config.clone();
+        coarse.atlas.texels_per_unit = tpu * scale as f32;
+        let texels = pilot_layout(&scene, &source, &tracer, &coarse, progress)?;
         let surfaces = Surfaces {
             scene: &scene,
             texels: &texels,
             tracer: &tracer,
         };
-        let density = pilot::measure_density(surfaces, &config, plan, progress)?;
-        first_pilot = density.pilot;
+        let density = pilot::measure_density(surfaces, &coarse, tpu, plan, progress)?;
+        density_noise = density.noise;
         if let Some(factors) = density.triangle_factors {
             config.atlas.triangle_density = factors;
-            (atlas, texels, validity) =
-                lay_out(&scene, &source, &tracer, &config, progress, &mut Vec::new())?;
         }
-        timed(&mut stages, "density", t);
+        timed(&mut stages, "density pilot", t);
+        plan.overhead_seconds += t.elapsed().as_secs_f64();
     }
+    let (atlas, texels, validity) =
+        lay_out(&scene, &source, &tracer, &config, progress, &mut stages)?;
 
     Ok(Prepared {
         scene,
@@ -397,7 +413,7 @@ fn prepare_loaded(
         validity,
         config,
         plan,
-        first_pilot,
+        density_noise,
         junctions,
         stages,
         processes,
@@ -441,6 +457,28 @@ fn lay_out(
     Ok((atlas, texels, validity))
 }
 
+/// The density pilot's texels: a quickly charted atlas (`atlas::build_quick`) and its validity
+/// pass.
+fn pilot_layout(
+    scene: &scene::Scene,
+    source: &scene::Source,
+    tracer: &Tracer,
+    config: &BakeConfig,
+    progress: &dyn Progress,
+) -> Result<texels::Texels> {
+    let atlas = atlas::build_quick(scene, source, &config.atlas, progress)?;
+    check_aborted(progress)?;
+    let mut texels = texels::build(scene, &atlas)?;
+    if config.transport.validity {
+        let params = texels::validity::ValidityParams {
+            seed: config.transport.seed,
+            ..Default::default()
+        };
+        texels::validity::fix(&mut texels, scene, tracer, &params, progress)?;
+    }
+    Ok(texels)
+}
+
 /// Runs every stage up to the dilated pages, in memory.
 pub fn compute(input: &Path, config: &BakeConfig, progress: &dyn Progress) -> Result<Baked> {
     compute_prepared(prepare(input, config, progress)?, progress)
@@ -467,7 +505,7 @@ pub(crate) fn light(
     progress: &dyn Progress,
     lit: light::LightFn,
 ) -> Result<Lighting> {
-    let first = prepared.first_pilot.take();
+    let density_noise = prepared.density_noise;
     let (mut config, mut plan, mut stages) = (
         prepared.config.clone(),
         prepared.plan.clone(),
@@ -484,7 +522,14 @@ pub(crate) fn light(
     if let (Some(plan), Some(auto)) = (&mut plan, config.auto) {
         let t = Instant::now();
         let surfaces = prepared.surfaces();
-        pilot = pilot::choose_transport(surfaces, &mut config, plan, &auto.keep, progress, first)?;
+        pilot = pilot::choose_transport(
+            surfaces,
+            &mut config,
+            plan,
+            &auto.keep,
+            progress,
+            density_noise,
+        )?;
         config.validate()?;
         timed(&mut stages, "plan", t);
     }

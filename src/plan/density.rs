@@ -13,7 +13,9 @@
 //! its points' mean shrunk towards its instance's, and the instance's towards the scene's
 //! (normal–normal: each mean weighs by its points over the per-point variance, the prior by
 //! one over the between-region variance τ², estimated from the sample): small regions get few
-//! points (a cup's face has one or none in 4096) and borrow from their object. The error is taken to fall as the texel size (the mean square as `s^−Q`,
+//! points (a cup's face has one or none in 4096) and borrow from their object. Only a region's
+//! seen part shows its error while all of it costs texels, so `m_r` is weighed by the share of
+//! the points drawn there that were seen (a shelf's underside behind a cabinet, a lamp's inside). The error is taken to fall as the texel size (the mean square as `s^−Q`,
 //! [`ERROR_EXPONENT`]: between the `√h` of edges narrower than a texel and the `h²` of smoothly
 //! curving light; the furnished interior measured `h^1.0–1.4`). Minimising the area-weighted
 //! mean square `Σ A_r·m_r·s_r^−Q` for a texel count `Σ A_r·s_r²` gives
@@ -21,6 +23,10 @@
 //! twice the density. Factors stay within [`DENSITY_RANGE`], on quarter-octave steps (few
 //! distinct densities: few xatlas meshes, a stable choice), with a floor of
 //! [`MIN_REGION_TEXELS`] texels for every seen, lit region.
+//!
+//! **The pilot's atlas** is its own: uniform, charted quickly (`crate::atlas::build_quick`), at
+//! the preset's density or, when that would pass [`PILOT_TEXELS`] texels, coarser; mean
+//! squares measured there are carried to the preset's density by [`PILOT_EXPONENT`].
 //!
 //! **What nobody sees.** A region whose texels the validity pass found all buried, whose drawn
 //! points were all left out as unseen (faces looking into geometry: the back of a wall standing
@@ -56,6 +62,15 @@ pub const MIN_REGION_TEXELS: f64 = 16.0;
 pub const ERROR_EXPONENT: f64 = 2.0;
 /// Most texels a raise may ask for, as a multiple of the uniform atlas's.
 pub const MAX_TEXEL_RAISE: f64 = 4.0;
+/// The density pilot's atlas holds at most about this many texels: below the preset's density
+/// when the preset's atlas is larger (its mean squares are carried to the preset's density by
+/// [`ERROR_EXPONENT`]), so that the pilot costs a bounded share of a large bake.
+pub const PILOT_TEXELS: f64 = 131_072.0;
+/// The mean square lookup error of a pilot coarser than the preset is carried to the preset's
+/// density as `s^−PILOT_EXPONENT`: the `√h` of edges narrower than a texel, the slowest fall
+/// (from the furnished interior's pilot at 16.5 /m to its atlas at 32 /m the error fell as
+/// `h^0.66`; `ERROR_EXPONENT` predicted 1.79% where the bake's own pilot measured 2.28%).
+pub const PILOT_EXPONENT: f64 = 1.0;
 /// A region whose drawn points were all unseen, with at least this many drawn, is hidden.
 const HIDDEN_POINTS: u32 = 3;
 /// Two regions meet over an edge when their faces turn less than 60° (xatlas' own limit).
@@ -173,16 +188,28 @@ struct Evidence {
     texel_area: f64,
 }
 
+impl Evidence {
+    /// The share of the points drawn on the region that were seen (1 when none was drawn).
+    fn seen_share(&self) -> f64 {
+        let drawn = self.points.n + f64::from(self.unseen);
+        if drawn > 0.0 {
+            self.points.n / drawn
+        } else {
+            1.0
+        }
+    }
+}
+
 /// The density factor of every scene triangle (`AtlasParams::triangle_density`) from the
 /// density pilot's pair (`pilot`, stored values at `texels`) and its lookup-error `sample`;
-/// `None` when every factor is 1 (the uniform atlas stays, and its pilot is reused). Reasons
-/// go to `plan`. `tpu` is the preset's density the factors multiply.
+/// `None` when every factor is 1. Reasons go to `plan`. `tpu` is the preset's density the
+/// factors multiply; the pilot's atlas had `pilot_tpu`.
 pub fn choose_region_density(
     scene: &Scene,
     texels: &Texels,
     pilot: [&[Vec3]; 2],
     sample: &GatheredSample,
-    tpu: f32,
+    (tpu, pilot_tpu): (f32, f32),
     plan: &mut Plan,
 ) -> Option<Vec<f32>> {
     let regions = Regions::of(scene);
@@ -275,8 +302,11 @@ pub fn choose_region_density(
         }
         let prior = inst_mean[regions.instance[r] as usize];
         let (mean, variance) = shrink(&e.points, point_variance, prior, tau2);
-        m[r] = mean.max(0.0);
-        m_high[r] = (mean + 2.0 * variance.sqrt()).max(0.0);
+        // The error a viewer sees is the region's mean square over its seen part only, while
+        // texels cost over all of it: weigh by the seen share of the points drawn there.
+        let seen = e.seen_share();
+        m[r] = mean.max(0.0) * seen;
+        m_high[r] = (mean + 2.0 * variance.sqrt()).max(0.0) * seen;
         let texels_now = regions.area[r] * tpu2;
         floor[r] = ((MIN_REGION_TEXELS / texels_now).sqrt() as f32).min(hi);
     }
@@ -325,12 +355,17 @@ pub fn choose_region_density(
             .sum::<f64>()
             * tpu2
     };
-    // The relative RMS lookup error predicted at these factors, the sample's mean square
-    // scaled by `scale` (its bounds).
+    // The relative RMS lookup error predicted at these factors of the preset's density: the
+    // sample's mean square, scaled by `scale` (its bounds), carried from the pilot's density
+    // to the preset's by [`PILOT_EXPONENT`] and from there by [`ERROR_EXPONENT`].
+    let to_preset = f64::from(pilot_tpu / tpu).powf(PILOT_EXPONENT);
     let predicted = |f: &[f32], scale: f64| -> f64 {
         let square: f64 = (0..n)
             .filter(|&r| !hidden[r])
-            .map(|r| regions.area[r] * m[r] * scale * f64::from(f[r]).powf(-ERROR_EXPONENT))
+            .map(|r| {
+                let f = f64::from(f[r]).powf(-ERROR_EXPONENT);
+                regions.area[r] * m[r] * scale * to_preset * f
+            })
             .sum::<f64>()
             / seen_area;
         square.max(0.0).sqrt() / mean_light
@@ -414,7 +449,7 @@ pub fn choose_region_density(
     plan.reasons.push(format!(
         "texel density per region ({n} regions, about {texels:.0} texels against {uniform_texels:.0} \
          uniform, factors ×{:.2}…×{:.2} of {tpu} /m, ∝ the fourth root of each region's lookup \
-         error at the density pilot's {} points): {total_why}; {hidden_count} regions \
+         error at the density pilot's {} points, on an atlas at {pilot_tpu} /m): {total_why}; {hidden_count} regions \
          ({hidden_area:.2} m²) buried, unseen or unlit get ×{HIDDEN_FACTOR}",
         chosen.iter().copied().fold(f32::INFINITY, f32::min),
         chosen.iter().copied().fold(0.0, f32::max),
@@ -431,12 +466,14 @@ pub fn choose_region_density(
         let inst = &scene.instances[regions.instance[r] as usize];
         let e = &evidence[r];
         format!(
-            "node {} mesh {} ({:.3} m², {} points, RMS lookup error {:.1}% of the mean light) ×{:.2}",
+            "node {} mesh {} ({:.3} m², {} points, {:.0}% of those drawn there seen, RMS lookup \
+             error {:.1}% of the mean light at the pilot's density) ×{:.2}",
             inst.node,
             inst.mesh,
             regions.area[r],
             e.points.n,
-            m[r].sqrt() / mean_light * 100.0,
+            100.0 * e.seen_share(),
+            (m[r] / e.seen_share().max(1e-12)).sqrt() / mean_light * 100.0,
             chosen[r]
         )
     };
@@ -566,8 +603,14 @@ mod tests {
         };
         let texels = texels_of(scene);
         let light = vec![Vec3::ONE; texels.len()];
-        let chosen =
-            choose_region_density(scene, &texels, [&light, &light], sample, 16.0, &mut plan);
+        let chosen = choose_region_density(
+            scene,
+            &texels,
+            [&light, &light],
+            sample,
+            (16.0, 16.0),
+            &mut plan,
+        );
         (chosen, plan)
     }
 

@@ -77,23 +77,24 @@ const REST: u32 = u32::MAX - 1;
 
 /// For a dense instance `index` (at `tpu` texels per unit): its smooth patches as regions for
 /// xatlas to pack, and the instance-local triangles (ascending) left to xatlas to chart.
-/// `None` when the instance is not dense. Patches whose seed (lowest triangle) is in
-/// `excluded` are left to xatlas.
+/// `None` when the instance is not dense (`any_size` charts it so anyway). Patches whose seed
+/// (lowest triangle) is in `excluded` are left to xatlas.
 pub(super) fn smooth_regions(
     scene: &Scene,
     index: u32,
     tpu: f32,
     limits: Limits,
     excluded: &BTreeSet<(u32, u32)>,
+    any_size: bool,
 ) -> Option<(Vec<Region>, Vec<u32>)> {
     let inst = &scene.instances[index as usize];
     let tris = &scene.triangles[inst.triangles.start as usize..inst.triangles.end as usize];
-    if tris.len() < MIN_TRIANGLES {
+    if tris.len() < MIN_TRIANGLES && !any_size {
         return None;
     }
     let mut mesh = Mesh::new(scene, index, tpu);
     let mean = mesh.area.iter().sum::<f64>() / tris.len() as f64;
-    if mean > MAX_MEAN_TRIANGLE_TEXELS {
+    if mean > MAX_MEAN_TRIANGLE_TEXELS && !any_size {
         return None;
     }
 
@@ -559,7 +560,8 @@ mod tests {
     fn a_dense_wavy_field_is_charted_in_smooth_patches() {
         // 80 000 triangles of 0.003 texel² at 16 texels per unit.
         let scene = scene_of(&[wavy(200)], &[]);
-        let (regions, rest) = smooth_regions(&scene, 0, 16.0, limits(), &BTreeSet::new()).unwrap();
+        let (regions, rest) =
+            smooth_regions(&scene, 0, 16.0, limits(), &BTreeSet::new(), false).unwrap();
         assert!(rest.is_empty(), "{} triangles left to xatlas", rest.len());
         assert!(regions.len() < 30, "{} patches", regions.len());
         let atlas = unwrap(&scene, &source(), &params(16.0, 1024)).unwrap();
@@ -585,10 +587,10 @@ mod tests {
     #[test]
     fn coarse_or_small_meshes_are_not_dense() {
         let sphere = scene_of(&[sphere(Vec3::ZERO, 1.0, 48, 48)], &[]);
-        assert!(smooth_regions(&sphere, 0, 16.0, limits(), &BTreeSet::new()).is_none());
+        assert!(smooth_regions(&sphere, 0, 16.0, limits(), &BTreeSet::new(), false).is_none());
         let small = scene_of(&[wavy(40)], &[]);
         assert!(small.triangles.len() < MIN_TRIANGLES);
-        assert!(smooth_regions(&small, 0, 16.0, limits(), &BTreeSet::new()).is_none());
+        assert!(smooth_regions(&small, 0, 16.0, limits(), &BTreeSet::new(), false).is_none());
     }
 
     #[test]
@@ -614,7 +616,8 @@ mod tests {
             }
         }
         let scene = scene_of(&[ramp], &[]);
-        let (regions, rest) = smooth_regions(&scene, 0, 8.0, limits(), &BTreeSet::new()).unwrap();
+        let (regions, rest) =
+            smooth_regions(&scene, 0, 8.0, limits(), &BTreeSet::new(), false).unwrap();
         assert!(!rest.is_empty(), "{} patches", regions.len());
         let atlas = unwrap(&scene, &source(), &params(8.0, 1024)).unwrap();
         atlas.validate(&scene);
