@@ -84,7 +84,13 @@ pub fn choose_transport(
         runs.enough = plan::choose_rays(config, plan, first, second);
         let [a, b] = runs.stored(config.transport.indirect_only);
         let stored = [a.as_slice(), b.as_slice()];
-        let budget = plan.pilot_rays / 2;
+        // After a density pilot (which sampled the scene in full) this sample confirms the
+        // laid-out atlas, on a quarter of the usual budget.
+        let budget = if density_noise.is_some() {
+            plan.pilot_rays / 8
+        } else {
+            plan.pilot_rays / 2
+        };
         let Samples {
             punctual,
             gathered,
