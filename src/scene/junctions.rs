@@ -52,7 +52,7 @@ use spade::{ConstrainedDelaunayTriangulation, Point2, Triangulation};
 
 use super::geometry::{BoxGrid, Plane, clip_interval, inside_intervals, weld};
 use super::shadow_cuts::ShadowCutter;
-use super::{Blend, Scene, Split};
+use super::{Blend, Instance, Scene, Split};
 
 /// Cut end points closer than this merge, and move onto a patch vertex or edge this close
 /// (texels).
@@ -536,108 +536,212 @@ fn split_instance(
     report: &mut JunctionReport,
 ) -> Option<InstanceSplit> {
     let inst = &scene.instances[index as usize];
-    let first = inst.vertices.start;
-    let tris: Vec<[u32; 3]> = scene.triangles
-        [inst.triangles.start as usize..inst.triangles.end as usize]
-        .iter()
-        .map(|t| t.map(|v| v - first))
-        .collect();
-    if tris.is_empty() {
-        return None;
-    }
-    let pos = |v: u32| scene.positions[(first + v) as usize].as_dvec3();
-    let weld = weld(&scene.positions[inst.vertices.start as usize..inst.vertices.end as usize]);
-    let welded = |t: usize| tris[t].map(|v| weld[v as usize]);
-    let edges = edge_list(tris.len(), welded);
-    let faces_at = |a: u32, b: u32| faces_on(&edges, a, b);
-    let normal: Vec<DVec3> = tris
-        .iter()
-        .map(|t| {
-            let [a, b, c] = t.map(pos);
-            (b - a).cross(c - a).normalize_or_zero()
+    let mesh = LocalMesh::new(scene, inst)?;
+    let patches = Patches::new(&mesh, tol);
+    // Steps 1 and 2 of the module docs: each receiver patch's cuts.
+    let patch_cuts: Vec<Option<Cuts>> = (patches.list.iter().enumerate())
+        .map(|(id, patch)| {
+            let cuts = patches
+                .is_receiver(&mesh, id as u32)
+                .then(|| {
+                    let pos = |v: u32| mesh.pos(v);
+                    let (tris, weld) = (&mesh.triangles, &mesh.weld);
+                    patch_cuts_of(
+                        scene, index, patch, tris, weld, pos, grid, tol, shadows, report,
+                    )
+                })
+                .flatten();
+            if let Some(cuts) = &cuts {
+                report.segments += cuts.segments.iter().filter(|s| !s.1).count();
+                report.extensions += cuts.segments.iter().filter(|s| s.1).count();
+            }
+            cuts
         })
         .collect();
+    // Step 3: clipped into the triangles, which are triangulated again; step 4: sides.
+    let cuts = InstanceCuts::clip(&mesh, &patches, patch_cuts, tol.snap)?;
+    let retriangulated = Retriangulated::new(inst, &mesh, &patches, &cuts, tol.snap, report)?;
+    report.receivers += 1;
+    Some(retriangulated.into_split(&mesh, &cuts, report))
+}
 
-    // Flat patches; a patch a neighbour continues gently is part of a curved surface.
-    let mut patch_of = vec![u32::MAX; tris.len()];
-    let mut patches: Vec<Patch> = Vec::new();
-    for seed in 0..tris.len() {
-        if patch_of[seed] != u32::MAX || normal[seed] == DVec3::ZERO {
-            continue;
+/// One instance's triangles in instance-local vertices, welded by position, with their edges
+/// and normals: the mesh every step of [`split_instance`] walks.
+struct LocalMesh<'a> {
+    /// The instance's vertex positions.
+    positions: &'a [Vec3],
+    triangles: Vec<[u32; 3]>,
+    /// The welded vertex of each vertex (one per position).
+    weld: Vec<u32>,
+    /// [`edge_list`] of the welded triangles.
+    edges: Vec<([u32; 2], u32, u8)>,
+    /// Each triangle's unit normal (zero when degenerate).
+    normal: Vec<DVec3>,
+}
+
+impl<'a> LocalMesh<'a> {
+    /// `None` for an instance without triangles.
+    fn new(scene: &'a Scene, inst: &Instance) -> Option<Self> {
+        let first = inst.vertices.start;
+        let triangles: Vec<[u32; 3]> = scene.triangles
+            [inst.triangles.start as usize..inst.triangles.end as usize]
+            .iter()
+            .map(|t| t.map(|v| v - first))
+            .collect();
+        if triangles.is_empty() {
+            return None;
         }
-        let id = patches.len() as u32;
-        let n = normal[seed];
-        let origin = pos(tris[seed][0]);
-        let mut members = vec![seed as u32];
-        patch_of[seed] = id;
-        let mut k = 0;
-        while k < members.len() {
-            let w = welded(members[k] as usize);
-            k += 1;
-            for e in 0..3 {
-                for &(_, u, _) in faces_at(w[e], w[(e + 1) % 3]) {
-                    let u = u as usize;
-                    if patch_of[u] == u32::MAX
-                        && normal[u].dot(n) > 1.0 - 1e-9
-                        && tris[u]
-                            .iter()
-                            .all(|&v| (pos(v) - origin).dot(n).abs() <= tol.touch)
-                    {
-                        patch_of[u] = id;
-                        members.push(u as u32);
+        let positions = &scene.positions[inst.vertices.start as usize..inst.vertices.end as usize];
+        let weld = weld(positions);
+        let edges = edge_list(triangles.len(), |t| triangles[t].map(|v| weld[v as usize]));
+        let pos = |v: u32| positions[v as usize].as_dvec3();
+        let normal = triangles
+            .iter()
+            .map(|t| {
+                let [a, b, c] = t.map(pos);
+                (b - a).cross(c - a).normalize_or_zero()
+            })
+            .collect();
+        Some(LocalMesh {
+            positions,
+            triangles,
+            weld,
+            edges,
+            normal,
+        })
+    }
+
+    fn pos(&self, v: u32) -> DVec3 {
+        self.positions[v as usize].as_dvec3()
+    }
+
+    /// Source vertices (new ones are blends numbered after them).
+    fn vertex_count(&self) -> u32 {
+        self.positions.len() as u32
+    }
+
+    fn welded(&self, t: usize) -> [u32; 3] {
+        self.triangles[t].map(|v| self.weld[v as usize])
+    }
+
+    /// The triangles on the edge between welded vertices `a` and `b`.
+    fn faces_at(&self, a: u32, b: u32) -> &[([u32; 2], u32, u8)] {
+        faces_on(&self.edges, a, b)
+    }
+}
+
+/// An instance's flat patches; a patch a neighbour continues gently is part of a curved
+/// surface, no receiver.
+struct Patches {
+    /// The patch of each triangle (`u32::MAX` for degenerate ones).
+    of: Vec<u32>,
+    list: Vec<Patch>,
+}
+
+impl Patches {
+    /// Grows a patch from each triangle not yet in one, over edges to triangles facing the
+    /// same way with every corner within the touch distance of the seed's plane.
+    fn new(mesh: &LocalMesh, tol: Tolerances) -> Self {
+        let tris = &mesh.triangles;
+        let mut patch_of = vec![u32::MAX; tris.len()];
+        let mut patches: Vec<Patch> = Vec::new();
+        for seed in 0..tris.len() {
+            if patch_of[seed] != u32::MAX || mesh.normal[seed] == DVec3::ZERO {
+                continue;
+            }
+            let id = patches.len() as u32;
+            let n = mesh.normal[seed];
+            let origin = mesh.pos(tris[seed][0]);
+            let mut members = vec![seed as u32];
+            patch_of[seed] = id;
+            let mut k = 0;
+            while k < members.len() {
+                let w = mesh.welded(members[k] as usize);
+                k += 1;
+                for e in 0..3 {
+                    for &(_, u, _) in mesh.faces_at(w[e], w[(e + 1) % 3]) {
+                        let u = u as usize;
+                        if patch_of[u] == u32::MAX
+                            && mesh.normal[u].dot(n) > 1.0 - 1e-9
+                            && tris[u]
+                                .iter()
+                                .all(|&v| (mesh.pos(v) - origin).dot(n).abs() <= tol.touch)
+                        {
+                            patch_of[u] = id;
+                            members.push(u as u32);
+                        }
                     }
                 }
             }
+            members.sort_unstable();
+            let u = n.any_orthonormal_vector();
+            patches.push(Patch {
+                triangles: members,
+                plane: Plane {
+                    origin,
+                    axes: [u, n.cross(u)],
+                    normal: n,
+                },
+            });
         }
-        members.sort_unstable();
-        let u = n.any_orthonormal_vector();
-        patches.push(Patch {
-            triangles: members,
-            plane: Plane {
-                origin,
-                axes: [u, n.cross(u)],
-                normal: n,
-            },
-        });
+        Patches {
+            of: patch_of,
+            list: patches,
+        }
     }
-    let receiver = |p: &Patch, id: u32| {
+
+    /// Whether patch `id` is a receiver: no neighbour across its border continues it more
+    /// gently than [`SMOOTH_DOT`].
+    fn is_receiver(&self, mesh: &LocalMesh, id: u32) -> bool {
+        let p = &self.list[id as usize];
         p.triangles.iter().all(|&t| {
-            let w = welded(t as usize);
+            let w = mesh.welded(t as usize);
             (0..3).all(|e| {
-                faces_at(w[e], w[(e + 1) % 3]).iter().all(|&(_, u, _)| {
-                    patch_of[u as usize] == id
-                        || normal[u as usize].dot(p.plane.normal) < SMOOTH_DOT
-                })
+                mesh.faces_at(w[e], w[(e + 1) % 3])
+                    .iter()
+                    .all(|&(_, u, _)| {
+                        self.of[u as usize] == id
+                            || mesh.normal[u as usize].dot(p.plane.normal) < SMOOTH_DOT
+                    })
             })
         })
-    };
+    }
+}
 
-    // Cuts per patch, clipped into its triangles; points on mesh edges collected per welded edge.
-    // Per triangle: the cut pieces inside it, each with its extension flag.
-    let mut pieces: BTreeMap<u32, Vec<([End; 2], bool)>> = BTreeMap::new();
-    // Welded edge → (its length, parameters from the lower welded end).
-    let mut edge_points: BTreeMap<[u32; 2], (f64, Vec<f64>)> = BTreeMap::new();
-    let mut patch_cuts: Vec<Option<Cuts>> = Vec::with_capacity(patches.len());
-    for (id, patch) in patches.iter().enumerate() {
-        let cuts = receiver(patch, id as u32)
-            .then(|| {
-                patch_cuts_of(
-                    scene, index, patch, &tris, &weld, pos, grid, tol, shadows, report,
-                )
-            })
-            .flatten();
-        if let Some(cuts) = &cuts {
-            report.segments += cuts.segments.iter().filter(|s| !s.1).count();
-            report.extensions += cuts.segments.iter().filter(|s| s.1).count();
+/// An instance's cuts: per patch, clipped into its triangles, and the points they put on mesh
+/// edges, which both triangles on an edge share.
+struct InstanceCuts {
+    /// Per patch, its cuts (`None` for no receiver, or nothing meeting it).
+    patches: Vec<Option<Cuts>>,
+    /// Per triangle: the cut pieces inside it, each with its extension flag.
+    pieces: BTreeMap<u32, Vec<([End; 2], bool)>>,
+    /// Welded edge → (its length, parameters from the lower welded end).
+    edge_points: BTreeMap<[u32; 2], (f64, Vec<f64>)>,
+}
+
+impl InstanceCuts {
+    /// Clips each patch's cuts into its triangles and merges the points on each mesh edge;
+    /// `None` when no cut touches a triangle.
+    fn clip(
+        mesh: &LocalMesh,
+        patches: &Patches,
+        patch_cuts: Vec<Option<Cuts>>,
+        snap: f64,
+    ) -> Option<Self> {
+        let mut pieces: BTreeMap<u32, Vec<([End; 2], bool)>> = BTreeMap::new();
+        let mut edge_points: BTreeMap<[u32; 2], (f64, Vec<f64>)> = BTreeMap::new();
+        for (patch, cuts) in patches.list.iter().zip(&patch_cuts) {
+            let Some(cuts) = cuts else { continue };
             for &t in &patch.triangles {
-                let corners = tris[t as usize].map(|v| patch.plane.to_2d(pos(v)));
-                let w = welded(t as usize);
+                let tri = mesh.triangles[t as usize];
+                let corners = tri.map(|v| patch.plane.to_2d(mesh.pos(v)));
+                let w = mesh.welded(t as usize);
                 for &([a, b], extension) in &cuts.segments {
                     let Some(ends) = clip(
                         cuts.points[a as usize],
                         cuts.points[b as usize],
                         corners,
-                        tol.snap,
+                        snap,
                     ) else {
                         continue;
                     };
@@ -645,8 +749,7 @@ fn split_instance(
                         if let End::Edge(k, s) = end {
                             let key = [w[k], w[(k + 1) % 3]];
                             let s = if key[0] < key[1] { s } else { 1.0 - s };
-                            let tri = tris[t as usize];
-                            let length = pos(tri[k]).distance(pos(tri[(k + 1) % 3]));
+                            let length = mesh.pos(tri[k]).distance(mesh.pos(tri[(k + 1) % 3]));
                             edge_points
                                 .entry([key[0].min(key[1]), key[0].max(key[1])])
                                 .or_insert_with(|| (length, Vec::new()))
@@ -660,14 +763,45 @@ fn split_instance(
                 }
             }
         }
-        patch_cuts.push(cuts);
+        if pieces.is_empty() && edge_points.is_empty() {
+            return None;
+        }
+        merge_edge_points(&mut edge_points, snap);
+        Some(InstanceCuts {
+            patches: patch_cuts,
+            pieces,
+            edge_points,
+        })
     }
-    if pieces.is_empty() && edge_points.is_empty() {
-        return None;
+
+    /// The cuts of patch `id`, if any.
+    fn of_patch(&self, id: u32) -> Option<&Cuts> {
+        self.patches.get(id as usize).and_then(Option::as_ref)
     }
-    // Points on one edge closer than the snap distance merge; none next to a corner.
+
+    /// The points on each edge of a triangle with welded corners `w`, as parameters from the
+    /// edge's first corner, ascending.
+    fn on_edges(&self, w: [u32; 3]) -> [Vec<f64>; 3] {
+        std::array::from_fn(|k| {
+            let key = [w[k].min(w[(k + 1) % 3]), w[k].max(w[(k + 1) % 3])];
+            let ts = self
+                .edge_points
+                .get(&key)
+                .map(|e| e.1.clone())
+                .unwrap_or_default();
+            if w[k] < w[(k + 1) % 3] {
+                ts
+            } else {
+                ts.iter().rev().map(|t| 1.0 - t).collect()
+            }
+        })
+    }
+}
+
+/// Points on one edge closer than the snap distance merge; none next to a corner.
+fn merge_edge_points(edge_points: &mut BTreeMap<[u32; 2], (f64, Vec<f64>)>, snap: f64) {
     for (length, ts) in edge_points.values_mut() {
-        let gap = tol.snap / length.max(1e-300);
+        let gap = snap / length.max(1e-300);
         ts.sort_by(f64::total_cmp);
         let mut merged: Vec<f64> = Vec::new();
         for &t in ts.iter() {
@@ -678,179 +812,212 @@ fn split_instance(
         *ts = merged;
     }
     edge_points.retain(|_, (_, ts)| !ts.is_empty());
+}
 
-    // Retriangulate every triangle with a cut or an edge point.
-    let mut out = InstanceSplit {
-        triangles: Vec::with_capacity(tris.len()),
-        source_triangle: Vec::with_capacity(tris.len()),
-        split: Split::default(),
-    };
-    let mut cut_bits: Vec<[u8; 2]> = Vec::with_capacity(tris.len()); // junction, any cut
-    let mut out_patch: Vec<u32> = Vec::with_capacity(tris.len());
-    let mut blends: BTreeMap<Vec<(u32, u32)>, u32> = BTreeMap::new();
-    let source_vertices = inst.vertices.end - first;
-    let mut any_split = false;
-    for t in 0..tris.len() {
-        let w = welded(t);
-        let on_edges: [Vec<f64>; 3] = std::array::from_fn(|k| {
-            let key = [w[k].min(w[(k + 1) % 3]), w[k].max(w[(k + 1) % 3])];
-            let ts = edge_points
-                .get(&key)
-                .map(|e| e.1.clone())
-                .unwrap_or_default();
-            if w[k] < w[(k + 1) % 3] {
-                ts
-            } else {
-                ts.iter().rev().map(|t| 1.0 - t).collect()
+/// An instance retriangulated along its cuts, before its sides are known.
+struct Retriangulated {
+    out: InstanceSplit,
+    /// Per output triangle: its edges along cuts, `[junction, any cut]` as in [`cut_bits_of`].
+    cut_bits: Vec<[u8; 2]>,
+    /// Per output triangle: the patch of its source triangle.
+    patch: Vec<u32>,
+}
+
+impl Retriangulated {
+    /// Retriangulates every triangle with a cut or an edge point; `None` when none was split.
+    fn new(
+        inst: &Instance,
+        mesh: &LocalMesh,
+        patches: &Patches,
+        cuts: &InstanceCuts,
+        snap: f64,
+        report: &mut JunctionReport,
+    ) -> Option<Self> {
+        let tris = &mesh.triangles;
+        let mut r = Retriangulated {
+            out: InstanceSplit {
+                triangles: Vec::with_capacity(tris.len()),
+                source_triangle: Vec::with_capacity(tris.len()),
+                split: Split::default(),
+            },
+            cut_bits: Vec::with_capacity(tris.len()),
+            patch: Vec::with_capacity(tris.len()),
+        };
+        let mut blends: BTreeMap<Vec<(u32, u32)>, u32> = BTreeMap::new();
+        let mut any_split = false;
+        for (t, &tri) in tris.iter().enumerate() {
+            let on_edges = cuts.on_edges(mesh.welded(t));
+            let own = cuts.pieces.get(&(t as u32));
+            let id = patches.of[t];
+            let patch_cuts = cuts.of_patch(id);
+            let source = inst.source_triangle[t];
+            if own.is_none() && on_edges.iter().all(Vec::is_empty) {
+                // Untouched, but its edges may lie along a cut (a wall on a grid line).
+                let corners = tri.map(|v| {
+                    (patches.list.get(id as usize))
+                        .map_or(DVec2::ZERO, |p| p.plane.to_2d(mesh.pos(v)))
+                });
+                let bits = patch_cuts.map_or([0, 0], |c| cut_bits_of(corners, c, snap));
+                r.push(tri, source, bits, id);
+                continue;
             }
-        });
-        let own = pieces.get(&(t as u32));
-        let id = patch_of[t];
-        let cuts = patch_cuts.get(id as usize).and_then(Option::as_ref);
-        if own.is_none() && on_edges.iter().all(Vec::is_empty) {
-            // Untouched, but its edges may lie along a cut (a wall on a grid line).
-            let corners = tris[t].map(|v| {
-                patches
-                    .get(id as usize)
-                    .map_or(DVec2::ZERO, |p| p.plane.to_2d(pos(v)))
+            let frame = match patch_cuts {
+                Some(_) => &patches.list[id as usize],
+                None => &own_frame(tri.map(|v| mesh.pos(v))),
+            };
+            let corners = tri.map(|v| frame.plane.to_2d(mesh.pos(v)));
+            let pieces = own.map_or(&[][..], Vec::as_slice);
+            let faces = retriangulate(corners, &on_edges, pieces).or_else(|| {
+                report.fallback_triangles += 1;
+                // Left uncut, but with the points its neighbours share on its edges: no
+                // T-junction.
+                (!pieces.is_empty())
+                    .then(|| retriangulate(corners, &on_edges, &[]))
+                    .flatten()
             });
-            out.triangles.push(tris[t]);
-            out.source_triangle.push(inst.source_triangle[t]);
-            cut_bits.push(cuts.map_or([0, 0], |c| cut_bits_of(corners, c, tol.snap)));
-            out_patch.push(id);
-            continue;
-        }
-        let frame = match cuts {
-            Some(_) => &patches[id as usize],
-            None => &own_frame(tris[t].map(pos)),
-        };
-        let corners = tris[t].map(|v| frame.plane.to_2d(pos(v)));
-        let pieces = own.map_or(&[][..], Vec::as_slice);
-        let faces = retriangulate(corners, &on_edges, pieces).or_else(|| {
-            report.fallback_triangles += 1;
-            // Left uncut, but with the points its neighbours share on its edges: no T-junction.
-            (!pieces.is_empty())
-                .then(|| retriangulate(corners, &on_edges, &[]))
-                .flatten()
-        });
-        let Some(faces) = faces else {
-            out.triangles.push(tris[t]);
-            out.source_triangle.push(inst.source_triangle[t]);
-            cut_bits.push([0, 0]);
-            out_patch.push(id);
-            continue;
-        };
-        any_split = true;
-        report.triangles_split += usize::from(faces.len() > 1);
-        for (face, along_pieces) in faces {
-            let mut tri = [0u32; 3];
-            for (c, (p, end)) in face.iter().enumerate() {
-                tri[c] = match end {
-                    Some(End::Corner(k)) => tris[t][*k],
-                    _ => {
-                        let b = barycentric(*p, corners, *end);
-                        vertex_of(b, tris[t], source_vertices, &mut blends, &mut out.split)
-                    }
-                };
+            let Some(faces) = faces else {
+                r.push(tri, source, [0, 0], id);
+                continue;
+            };
+            any_split = true;
+            report.triangles_split += usize::from(faces.len() > 1);
+            for (face, along_pieces) in faces {
+                let mut new_tri = [0u32; 3];
+                for (c, (p, end)) in face.iter().enumerate() {
+                    new_tri[c] = match end {
+                        Some(End::Corner(k)) => tri[*k],
+                        _ => {
+                            let b = barycentric(*p, corners, *end);
+                            let split = &mut r.out.split;
+                            vertex_of(b, tri, mesh.vertex_count(), &mut blends, split)
+                        }
+                    };
+                }
+                let along_cuts =
+                    patch_cuts.map_or([0, 0], |c| cut_bits_of(face.map(|f| f.0), c, snap));
+                let bits = [0, 1].map(|k| along_cuts[k] | along_pieces[k]);
+                r.push(new_tri, source, bits, id);
             }
-            let along_cuts = cuts.map_or([0, 0], |c| cut_bits_of(face.map(|f| f.0), c, tol.snap));
-            let bits = [0, 1].map(|k| along_cuts[k] | along_pieces[k]);
-            out.triangles.push(tri);
-            out.source_triangle.push(inst.source_triangle[t]);
-            cut_bits.push(bits);
-            out_patch.push(id);
         }
+        any_split.then_some(r)
     }
-    if !any_split {
-        return None;
-    }
-    report.receivers += 1;
 
-    // Sides: connected across edges that are not cuts, nor borders of a patch with shadow cuts.
-    let shadowed = |id: u32| {
-        patch_cuts
-            .get(id as usize)
-            .and_then(Option::as_ref)
-            .is_some_and(|c| c.shadow)
-    };
-    let blend_pos = |v: u32| -> [u64; 3] {
-        let p = if v < source_vertices {
-            pos(v)
-        } else {
-            let b = out.split.blends[(v - source_vertices) as usize];
-            (0..3).fold(DVec3::ZERO, |s, k| {
-                s + pos(b.vertices[k]) * f64::from(b.weights[k])
-            })
-        };
-        p.as_vec3()
-            .to_array()
-            .map(|c| u64::from((c + 0.0).to_bits()))
-    };
-    let mut keys: Vec<([u64; 3], u32)> = (0..source_vertices + out.split.blends.len() as u32)
-        .map(|v| (blend_pos(v), v))
-        .collect();
-    keys.sort_unstable();
-    let mut new_weld = vec![0u32; keys.len()];
-    for (id, same) in keys.chunk_by(|a, b| a.0 == b.0).enumerate() {
-        for &(_, v) in same {
-            new_weld[v as usize] = id as u32;
-        }
+    /// Appends one output triangle.
+    fn push(&mut self, tri: [u32; 3], source: u32, cut_bits: [u8; 2], patch: u32) {
+        self.out.triangles.push(tri);
+        self.out.source_triangle.push(source);
+        self.cut_bits.push(cut_bits);
+        self.patch.push(patch);
     }
-    let new_welded = |t: usize| out.triangles[t].map(|v| new_weld[v as usize]);
-    let new_edges = edge_list(out.triangles.len(), new_welded);
-    let mut sides = vec![u32::MAX; out.triangles.len()];
-    let mut next_side = 0;
-    let mut stack = Vec::new();
-    let edge_index = |t: usize, a: u32, b: u32| {
-        let w = new_welded(t);
-        (0..3)
-            .find(|&k| {
-                let (x, y) = (w[k], w[(k + 1) % 3]);
-                (x, y) == (a, b) || (x, y) == (b, a)
-            })
-            .unwrap_or(0)
-    };
-    for seed in 0..out.triangles.len() {
-        if sides[seed] != u32::MAX {
-            continue;
-        }
-        sides[seed] = next_side;
-        stack.push(seed);
-        while let Some(t) = stack.pop() {
-            let w = new_welded(t);
+
+    /// The split with its sides (see [`Split::sides`]), counting junction edges whose two
+    /// sides stayed connected.
+    fn into_split(
+        mut self,
+        mesh: &LocalMesh,
+        cuts: &InstanceCuts,
+        report: &mut JunctionReport,
+    ) -> InstanceSplit {
+        let weld = self.weld(mesh);
+        let edges = edge_list(self.out.triangles.len(), |t| self.welded(&weld, t));
+        let sides = self.sides(&weld, &edges, cuts);
+        for t in 0..self.out.triangles.len() {
+            let w = self.welded(&weld, t);
             for k in 0..3 {
-                if cut_bits[t][1] & (1 << k) != 0 {
-                    continue;
+                if self.cut_bits[t][0] & (1 << k) != 0
+                    && faces_on(&edges, w[k], w[(k + 1) % 3])
+                        .iter()
+                        .any(|&(_, u, _)| u as usize != t && sides[u as usize] == sides[t])
+                {
+                    report.unseparated_edges += 1;
                 }
-                for &(_, u, _) in faces_on(&new_edges, w[k], w[(k + 1) % 3]) {
-                    let u = u as usize;
-                    let blocked = cut_bits[u][1] & (1 << edge_index(u, w[k], w[(k + 1) % 3])) != 0
-                        || (out_patch[u] != out_patch[t]
-                            && (shadowed(out_patch[u]) || shadowed(out_patch[t])));
-                    if sides[u] == u32::MAX && !blocked {
-                        sides[u] = next_side;
-                        stack.push(u);
+            }
+        }
+        self.out.split.sides = sides;
+        self.out.split.junction_edges = self.cut_bits.iter().map(|b| b[0]).collect();
+        self.out
+    }
+
+    /// The welded vertex of each output vertex, blends included: one per f32 position, as
+    /// written out.
+    fn weld(&self, mesh: &LocalMesh) -> Vec<u32> {
+        let source_vertices = mesh.vertex_count();
+        let blend_pos = |v: u32| -> [u64; 3] {
+            let p = if v < source_vertices {
+                mesh.pos(v)
+            } else {
+                let b = self.out.split.blends[(v - source_vertices) as usize];
+                (0..3).fold(DVec3::ZERO, |s, k| {
+                    s + mesh.pos(b.vertices[k]) * f64::from(b.weights[k])
+                })
+            };
+            p.as_vec3()
+                .to_array()
+                .map(|c| u64::from((c + 0.0).to_bits()))
+        };
+        let mut keys: Vec<([u64; 3], u32)> = (0..source_vertices
+            + self.out.split.blends.len() as u32)
+            .map(|v| (blend_pos(v), v))
+            .collect();
+        keys.sort_unstable();
+        let mut weld = vec![0u32; keys.len()];
+        for (id, same) in keys.chunk_by(|a, b| a.0 == b.0).enumerate() {
+            for &(_, v) in same {
+                weld[v as usize] = id as u32;
+            }
+        }
+        weld
+    }
+
+    fn welded(&self, weld: &[u32], t: usize) -> [u32; 3] {
+        self.out.triangles[t].map(|v| weld[v as usize])
+    }
+
+    /// Each output triangle's side: connected across edges that are not cuts, nor borders of
+    /// a patch with shadow cuts.
+    fn sides(&self, weld: &[u32], edges: &[([u32; 2], u32, u8)], cuts: &InstanceCuts) -> Vec<u32> {
+        let shadowed = |id: u32| cuts.of_patch(id).is_some_and(|c| c.shadow);
+        let edge_index = |t: usize, a: u32, b: u32| {
+            let w = self.welded(weld, t);
+            (0..3)
+                .find(|&k| {
+                    let (x, y) = (w[k], w[(k + 1) % 3]);
+                    (x, y) == (a, b) || (x, y) == (b, a)
+                })
+                .unwrap_or(0)
+        };
+        let (cut_bits, patch) = (&self.cut_bits, &self.patch);
+        let mut sides = vec![u32::MAX; self.out.triangles.len()];
+        let mut next_side = 0;
+        let mut stack = Vec::new();
+        for seed in 0..self.out.triangles.len() {
+            if sides[seed] != u32::MAX {
+                continue;
+            }
+            sides[seed] = next_side;
+            stack.push(seed);
+            while let Some(t) = stack.pop() {
+                let w = self.welded(weld, t);
+                for k in 0..3 {
+                    if cut_bits[t][1] & (1 << k) != 0 {
+                        continue;
+                    }
+                    for &(_, u, _) in faces_on(edges, w[k], w[(k + 1) % 3]) {
+                        let u = u as usize;
+                        let blocked = cut_bits[u][1] & (1 << edge_index(u, w[k], w[(k + 1) % 3]))
+                            != 0
+                            || (patch[u] != patch[t] && (shadowed(patch[u]) || shadowed(patch[t])));
+                        if sides[u] == u32::MAX && !blocked {
+                            sides[u] = next_side;
+                            stack.push(u);
+                        }
                     }
                 }
             }
+            next_side += 1;
         }
-        next_side += 1;
+        sides
     }
-    for t in 0..out.triangles.len() {
-        let w = new_welded(t);
-        for k in 0..3 {
-            if cut_bits[t][0] & (1 << k) != 0
-                && faces_on(&new_edges, w[k], w[(k + 1) % 3])
-                    .iter()
-                    .any(|&(_, u, _)| u as usize != t && sides[u as usize] == sides[t])
-            {
-                report.unseparated_edges += 1;
-            }
-        }
-    }
-    out.split.sides = sides;
-    out.split.junction_edges = cut_bits.iter().map(|b| b[0]).collect();
-    Some(out)
 }
 
 /// Which edges of `face` (plane coordinates) lie along cuts: `[junction, any cut]`, bit `k`
