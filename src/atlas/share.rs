@@ -242,20 +242,43 @@ pub fn unwrap(scene: &Scene, source: &Source, params: &AtlasParams) -> Result<At
     if groups.is_empty() {
         return xatlas::unwrap(scene, source, params);
     }
-    let density = |i: u32| {
-        params.texels_per_unit
-            * params
-                .instance_density
-                .get(i as usize)
-                .copied()
-                .unwrap_or(1.0)
-    };
-    let padding = params.padding as f32;
-    let max_side = params.max_page_size as f32;
+    let (mut instances, mut pages) = unwrap_unshared(scene, source, params, &groups)?;
+    let mut shared = (groups.iter())
+        .map(|(mesh, nodes)| shared_mesh(scene, source, params, *mesh, nodes))
+        .collect::<Result<Vec<_>>>()?;
+    place_rects(&mut shared, &mut pages, params);
+    for s in &shared {
+        write_node_uvs(scene, s, &mut instances);
+    }
+    Ok(Atlas {
+        pages,
+        instances,
+        texels_per_unit: params.texels_per_unit,
+        reused_input_uvs: false,
+        shared,
+    })
+}
 
-    // Unshared instances: xatlas as in duplicate mode, on the first pages.
+/// Texels per unit asked for scene instance `i`.
+fn instance_density(params: &AtlasParams, i: u32) -> f32 {
+    params.texels_per_unit
+        * params
+            .instance_density
+            .get(i as usize)
+            .copied()
+            .unwrap_or(1.0)
+}
+
+/// The instances outside every group, unwrapped by xatlas as in duplicate mode: every scene
+/// instance's UVs (those of the groups' still empty) and the pages they use, the first pages.
+fn unwrap_unshared(
+    scene: &Scene,
+    source: &Source,
+    params: &AtlasParams,
+    groups: &[(u32, Blocks)],
+) -> Result<(Vec<InstanceUv>, Vec<PageSize>)> {
     let mut in_group = vec![false; scene.instances.len()];
-    for (_, nodes) in &groups {
+    for (_, nodes) in groups {
         for (_, block) in nodes {
             block.iter().for_each(|&i| in_group[i as usize] = true);
         }
@@ -264,121 +287,154 @@ pub fn unwrap(scene: &Scene, source: &Source, params: &AtlasParams) -> Result<At
         .filter(|&i| !in_group[i as usize])
         .collect();
     let mut instances = vec![InstanceUv::default(); scene.instances.len()];
-    let mut pages = Vec::new();
     let has_triangles = |i: &u32| !scene.instances[*i as usize].triangles.is_empty();
-    if unshared.iter().any(has_triangles) {
-        let sub = sub_scene(scene, &unshared);
-        // The sub-scene holds the unshared instances' triangles in instance order.
-        let triangle_density = if params.triangle_density.is_empty() {
-            Vec::new()
-        } else {
-            unshared
-                .iter()
-                .flat_map(|&i| {
-                    let r = &scene.instances[i as usize].triangles;
-                    params.triangle_density[r.start as usize..r.end as usize].iter()
-                })
-                .copied()
-                .collect()
-        };
+    if !unshared.iter().any(has_triangles) {
+        return Ok((instances, Vec::new()));
+    }
+    let sub = sub_scene(scene, &unshared);
+    // The sub-scene holds the unshared instances' triangles in instance order.
+    let triangle_density = if params.triangle_density.is_empty() {
+        Vec::new()
+    } else {
+        unshared
+            .iter()
+            .flat_map(|&i| {
+                let r = &scene.instances[i as usize].triangles;
+                params.triangle_density[r.start as usize..r.end as usize].iter()
+            })
+            .copied()
+            .collect()
+    };
+    let sub_params = AtlasParams {
+        instance_density: unshared
+            .iter()
+            .map(|&i| instance_density(params, i) / params.texels_per_unit)
+            .collect(),
+        triangle_density,
+        ..params.clone()
+    };
+    let atlas = xatlas::unwrap(&sub, source, &sub_params)?;
+    for (uv, &i) in atlas.instances.into_iter().zip(&unshared) {
+        instances[i as usize] = uv;
+    }
+    Ok((instances, atlas.pages))
+}
+
+/// One group's base layout and each node's rect, sized in texels (placed on a page later).
+fn shared_mesh(
+    scene: &Scene,
+    source: &Source,
+    params: &AtlasParams,
+    mesh: u32,
+    nodes: &[(u32, Vec<u32>)],
+) -> Result<SharedMesh> {
+    let first = &nodes[0].1;
+    let effective = effective_densities(scene, params, nodes);
+    let lowest = effective.iter().copied().fold(f32::INFINITY, f32::min);
+    let (base, base_size, tpu, lowered) =
+        fitting_base_layout(scene, source, params, mesh, first, lowest)?;
+    // Every copy at least as dense as the base layout (so padding holds), at most a page
+    // (a texel less, so rounding the rect up to whole texels still fits).
+    let (padding, max_side) = (params.padding as f32, params.max_page_size as f32);
+    let fit = (max_side - padding - 1.0) / base_size.max_element();
+    let node_rects = nodes
+        .iter()
+        .zip(&effective)
+        .map(|((node, block), &e)| {
+            let wanted = (e / tpu).max(1.0);
+            NodeRect {
+                node: *node,
+                page: 0,
+                scale: Vec2::splat(wanted.min(fit)),
+                offset: Vec2::ZERO,
+                instances: block.clone(),
+                capped: wanted > fit,
+            }
+        })
+        .collect();
+    Ok(SharedMesh {
+        mesh,
+        base: first.iter().copied().zip(base).collect(),
+        base_size,
+        texels_per_unit: tpu,
+        lowered,
+        nodes: node_rects,
+    })
+}
+
+/// Each node's effective density: its densest instance's texels per unit times its size
+/// relative to the first node (the square root of the blocks' world-area ratio).
+fn effective_densities(scene: &Scene, params: &AtlasParams, nodes: &[(u32, Vec<u32>)]) -> Vec<f32> {
+    let first_area: f64 = nodes[0].1.iter().map(|&i| instance_area(scene, i)).sum();
+    nodes
+        .iter()
+        .map(|(_, block)| {
+            let area: f64 = block.iter().map(|&i| instance_area(scene, i)).sum();
+            let size = if first_area > 0.0 {
+                (area / first_area).sqrt() as f32
+            } else {
+                1.0
+            };
+            let densest = (block.iter())
+                .map(|&i| instance_density(params, i))
+                .fold(0.0, f32::max);
+            size * densest
+        })
+        .collect()
+}
+
+/// The base layout of `first` (the first node's block of `mesh`) at `tpu` texels per unit,
+/// lowered a quarter at a time until it fits a page with room for padding: its UVs, its size
+/// in texels, the density it got and whether that was lowered.
+fn fitting_base_layout(
+    scene: &Scene,
+    source: &Source,
+    params: &AtlasParams,
+    mesh: u32,
+    first: &[u32],
+    mut tpu: f32,
+) -> Result<(Vec<InstanceUv>, Vec2, f32, bool)> {
+    let (padding, max_side) = (params.padding as f32, params.max_page_size as f32);
+    let sub = sub_scene(scene, first);
+    let mut lowerings = 0;
+    loop {
         let sub_params = AtlasParams {
-            instance_density: unshared
-                .iter()
-                .map(|&i| density(i) / params.texels_per_unit)
-                .collect(),
-            triangle_density,
+            texels_per_unit: tpu,
+            instance_density: Vec::new(),
+            triangle_density: Vec::new(),
             ..params.clone()
         };
-        let atlas = xatlas::unwrap(&sub, source, &sub_params)?;
-        pages = atlas.pages;
-        for (uv, &i) in atlas.instances.into_iter().zip(&unshared) {
-            instances[i as usize] = uv;
+        let layout = if sub.triangles.is_empty() {
+            None
+        } else {
+            let atlas = xatlas::unwrap(&sub, source, &sub_params)?;
+            base_layout(atlas, padding)
+        };
+        match layout {
+            Some((base, size)) if size.max_element() + padding + 1.0 <= max_side => {
+                return Ok((base, size, tpu, lowerings > 0));
+            }
+            None if sub.triangles.is_empty() => {
+                let empty = vec![InstanceUv::default(); first.len()];
+                return Ok((empty, Vec2::ONE, tpu, lowerings > 0));
+            }
+            _ if lowerings < MAX_LOWERINGS => {
+                tpu *= 0.75;
+                lowerings += 1;
+            }
+            _ => {
+                return Err(Error::Option(format!(
+                    "mesh {mesh}: its lightmap layout does not fit a {} texel page even at {tpu} texels per unit: raise --max-page-size",
+                    params.max_page_size
+                )));
+            }
         }
     }
+}
 
-    // Each group's base layout, and the size of each node's rect in texels.
-    let mut shared = Vec::with_capacity(groups.len());
-    for (mesh, nodes) in &groups {
-        let first = &nodes[0].1;
-        let first_area: f64 = first.iter().map(|&i| instance_area(scene, i)).sum();
-        let effective: Vec<f32> = nodes
-            .iter()
-            .map(|(_, block)| {
-                let area: f64 = block.iter().map(|&i| instance_area(scene, i)).sum();
-                let size = if first_area > 0.0 {
-                    (area / first_area).sqrt() as f32
-                } else {
-                    1.0
-                };
-                let densest = block.iter().map(|&i| density(i)).fold(0.0, f32::max);
-                size * densest
-            })
-            .collect();
-        let lowest = effective.iter().copied().fold(f32::INFINITY, f32::min);
-        let mut tpu = lowest;
-        let sub = sub_scene(scene, first);
-        let mut lowerings = 0;
-        let (base, base_size) = loop {
-            let sub_params = AtlasParams {
-                texels_per_unit: tpu,
-                instance_density: Vec::new(),
-                triangle_density: Vec::new(),
-                ..params.clone()
-            };
-            let layout = if sub.triangles.is_empty() {
-                None
-            } else {
-                let atlas = xatlas::unwrap(&sub, source, &sub_params)?;
-                base_layout(atlas, padding)
-            };
-            match layout {
-                Some((base, size)) if size.max_element() + padding + 1.0 <= max_side => {
-                    break (base, size);
-                }
-                None if sub.triangles.is_empty() => {
-                    break (vec![InstanceUv::default(); first.len()], Vec2::ONE);
-                }
-                _ if lowerings < MAX_LOWERINGS => {
-                    tpu *= 0.75;
-                    lowerings += 1;
-                }
-                _ => {
-                    return Err(Error::Option(format!(
-                        "mesh {mesh}: its lightmap layout does not fit a {} texel page even at {tpu} texels per unit: raise --max-page-size",
-                        params.max_page_size
-                    )));
-                }
-            }
-        };
-        // Every copy at least as dense as the base layout (so padding holds), at most a page
-        // (a texel less, so rounding the rect up to whole texels still fits).
-        let fit = (max_side - padding - 1.0) / base_size.max_element();
-        let node_rects = nodes
-            .iter()
-            .zip(&effective)
-            .map(|((node, block), &e)| {
-                let wanted = (e / tpu).max(1.0);
-                NodeRect {
-                    node: *node,
-                    page: 0,
-                    scale: Vec2::splat(wanted.min(fit)),
-                    offset: Vec2::ZERO,
-                    instances: block.clone(),
-                    capped: wanted > fit,
-                }
-            })
-            .collect();
-        shared.push(SharedMesh {
-            mesh: *mesh,
-            base: first.iter().copied().zip(base).collect(),
-            base_size,
-            texels_per_unit: tpu,
-            lowered: lowerings > 0,
-            nodes: node_rects,
-        });
-    }
-
-    // Shelf-pack the rects (texel scale, still) onto pages after xatlas' ones.
+/// Shelf-packs every node's rect (texel scale, still) onto pages after `pages` (xatlas' ones),
+/// then turns each rect's scale and offset into page units.
+fn place_rects(shared: &mut [SharedMesh], pages: &mut Vec<PageSize>, params: &AtlasParams) {
     let first_rect_page = pages.len() as u32;
     let mut items: Vec<(usize, usize, [u32; 2])> = Vec::new();
     for (g, s) in shared.iter().enumerate() {
@@ -402,6 +458,7 @@ pub fn unwrap(scene: &Scene, source: &Source, params: &AtlasParams) -> Result<At
         width: page_side(w as f32, params.max_page_size),
         height: page_side(h as f32, params.max_page_size),
     }));
+    let padding = params.padding as f32;
     for (&(g, n, _), &(page, [x, y])) in items.iter().zip(&placed) {
         let page = first_rect_page + page;
         let size = pages[page as usize];
@@ -412,37 +469,30 @@ pub fn unwrap(scene: &Scene, source: &Source, params: &AtlasParams) -> Result<At
         rect.offset = (Vec2::new(x as f32, y as f32) + padding) / page_texels;
         rect.scale = s.base_size * rect.scale / page_texels;
     }
+}
 
-    // Every node's page UVs from the base layout, as a shader computes them.
-    for s in &shared {
-        for rect in &s.nodes {
-            for ((first, base), &i) in s.base.iter().zip(&rect.instances) {
-                let (a, b) = (
-                    &scene.instances[*first as usize],
-                    &scene.instances[i as usize],
-                );
-                let triangles = (0..base.triangles.len())
-                    .map(|t| {
-                        let order = corner_order(scene, a, b, t).expect("checked by blocks_match");
-                        order.map(|c| base.triangles[t][c])
-                    })
-                    .collect();
-                instances[i as usize] = InstanceUv {
-                    xref: base.xref.clone(),
-                    uv: base.uv.iter().map(|&uv| page_uv(uv, rect)).collect(),
-                    triangles,
-                    triangle_page: vec![rect.page; base.triangles.len()],
-                };
-            }
+/// Every node's page UVs of shared mesh `s` from its base layout, as a shader computes them.
+fn write_node_uvs(scene: &Scene, s: &SharedMesh, instances: &mut [InstanceUv]) {
+    for rect in &s.nodes {
+        for ((first, base), &i) in s.base.iter().zip(&rect.instances) {
+            let (a, b) = (
+                &scene.instances[*first as usize],
+                &scene.instances[i as usize],
+            );
+            let triangles = (0..base.triangles.len())
+                .map(|t| {
+                    let order = corner_order(scene, a, b, t).expect("checked by blocks_match");
+                    order.map(|c| base.triangles[t][c])
+                })
+                .collect();
+            instances[i as usize] = InstanceUv {
+                xref: base.xref.clone(),
+                uv: base.uv.iter().map(|&uv| page_uv(uv, rect)).collect(),
+                triangles,
+                triangle_page: vec![rect.page; base.triangles.len()],
+            };
         }
     }
-    Ok(Atlas {
-        pages,
-        instances,
-        texels_per_unit: params.texels_per_unit,
-        reused_input_uvs: false,
-        shared,
-    })
 }
 
 /// A base-layout UV on `rect`'s page: `uv * scale + offset`, a multiply then an add in f32 (no
