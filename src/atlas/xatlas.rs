@@ -395,88 +395,152 @@ fn planar_regions(
     limits: Limits,
     excluded: &BTreeSet<(u32, u32)>,
 ) -> (Vec<Region>, Vec<u32>) {
-    let inst = &scene.instances[index as usize];
-    let tris = &scene.triangles[inst.triangles.start as usize..inst.triangles.end as usize];
-    let first_vertex = inst.vertices.start;
-    let local = |t: u32| tris[t as usize].map(|v| v - first_vertex);
-    // In texels of a triangle's density (regions never mix densities).
-    let at =
-        |v: u32, tpu: f32| scene.positions[(first_vertex + v) as usize].as_dvec3() * f64::from(tpu);
-
-    // Faces meet where their corners have the same position (+0.0 folds −0.0 into 0.0).
-    let key = |v: u32| (scene.positions[(first_vertex + v) as usize] + Vec3::ZERO).to_array();
-    let mut order: Vec<u32> = (0..inst.vertices.end - first_vertex).collect();
-    order.sort_unstable_by_key(|&v| (key(v).map(f32::to_bits), v));
-    let mut weld = vec![0u32; order.len()];
-    for (id, same) in order.chunk_by(|&a, &b| key(a) == key(b)).enumerate() {
-        for &v in same {
-            weld[v as usize] = id as u32;
-        }
-    }
-    let welded = |t: u32| local(t).map(|v| weld[v as usize]);
-    // Every edge as (welded end points, ascending; triangle), sorted: the faces on an edge are
-    // neighbours in the list.
-    let mut edges: Vec<([u32; 2], u32)> = Vec::with_capacity(3 * tris.len());
-    for t in 0..tris.len() as u32 {
-        let w = welded(t);
-        for k in 0..3 {
-            let (a, b) = (w[k], w[(k + 1) % 3]);
-            if a != b {
-                edges.push(([a.min(b), a.max(b)], t));
-            }
-        }
-    }
-    edges.sort_unstable();
-    let faces_on = |a: u32, b: u32| {
-        let e = [a.min(b), a.max(b)];
-        let lo = edges.partition_point(|x| x.0 < e);
-        let len = edges[lo..].partition_point(|x| x.0 == e);
-        &edges[lo..lo + len]
-    };
-
-    let mut normal = Vec::with_capacity(tris.len());
-    let mut ignored = Vec::with_capacity(tris.len());
-    for t in 0..tris.len() as u32 {
-        let [a, b, c] = local(t).map(|v| at(v, tpus[t as usize]));
-        let n = (b - a).cross(c - a);
-        normal.push(n.normalize_or_zero());
-        // xatlas leaves faces this small out of every chart; they neither join nor bound regions.
-        ignored.push(0.5 * n.length() <= f64::from(f32::EPSILON));
-    }
-
-    // Sides of a junction split and triangles of other densities never join one region.
-    let side = |t: u32| group(inst, tpus, t);
-    let mut region_of = vec![u32::MAX; tris.len()];
+    let mesh = RegionMesh::new(scene, index, tpus);
+    let mut region_of = vec![u32::MAX; mesh.tris.len()];
     let (mut regions, mut rest) = (Vec::new(), Vec::new());
+    // Buffers reused from region to region.
     let mut stack = Vec::new();
     let mut members = Vec::new();
     let mut directed = Vec::new();
-    for seed in 0..tris.len() as u32 {
+    for seed in 0..mesh.tris.len() as u32 {
         if region_of[seed as usize] != u32::MAX {
             continue;
         }
-        // Grow over edges to faces facing the same way with all corners in the seed's plane
-        // (measured against the seed, so a gentle curve never creeps in).
+        mesh.grow(seed, &mut region_of, &mut members, &mut stack);
+        let region = if members.len() < MIN_REGION_TRIANGLES || excluded.contains(&(index, seed)) {
+            None
+        } else {
+            mesh.convex_region(seed, &members, &region_of, limits, &mut directed)
+        };
+        match region {
+            Some(region) => regions.push(region),
+            None => rest.extend_from_slice(&members),
+        }
+    }
+    rest.sort_unstable();
+    (regions, rest)
+}
+
+/// An instance's triangles welded by position, with their edges and normals: what
+/// [`planar_regions`] grows regions over.
+struct RegionMesh<'a> {
+    scene: &'a Scene,
+    index: u32,
+    inst: &'a Instance,
+    /// Texels per unit of each instance-local triangle.
+    tpus: &'a [f32],
+    tris: &'a [[u32; 3]],
+    /// The welded vertex of each instance-local vertex (one per position).
+    weld: Vec<u32>,
+    /// Every edge as (welded end points, ascending; triangle), sorted: the faces on an edge
+    /// are neighbours in the list.
+    edges: Vec<([u32; 2], u32)>,
+    /// Each triangle's unit normal (zero when degenerate).
+    normal: Vec<DVec3>,
+    /// Triangles xatlas leaves out of every chart; they neither join nor bound regions.
+    ignored: Vec<bool>,
+}
+
+impl<'a> RegionMesh<'a> {
+    fn new(scene: &'a Scene, index: u32, tpus: &'a [f32]) -> Self {
+        let inst = &scene.instances[index as usize];
+        let tris = &scene.triangles[inst.triangles.start as usize..inst.triangles.end as usize];
+        let mut mesh = RegionMesh {
+            scene,
+            index,
+            inst,
+            tpus,
+            tris,
+            weld: Vec::new(),
+            edges: Vec::with_capacity(3 * tris.len()),
+            normal: Vec::with_capacity(tris.len()),
+            ignored: Vec::with_capacity(tris.len()),
+        };
+        // Faces meet where their corners have the same position (+0.0 folds −0.0 into 0.0).
+        let first_vertex = inst.vertices.start;
+        let key = |v: u32| (scene.positions[(first_vertex + v) as usize] + Vec3::ZERO).to_array();
+        let mut order: Vec<u32> = (0..inst.vertices.end - first_vertex).collect();
+        order.sort_unstable_by_key(|&v| (key(v).map(f32::to_bits), v));
+        mesh.weld = vec![0u32; order.len()];
+        for (id, same) in order.chunk_by(|&a, &b| key(a) == key(b)).enumerate() {
+            for &v in same {
+                mesh.weld[v as usize] = id as u32;
+            }
+        }
+        for t in 0..tris.len() as u32 {
+            let w = mesh.welded(t);
+            for k in 0..3 {
+                let (a, b) = (w[k], w[(k + 1) % 3]);
+                if a != b {
+                    mesh.edges.push(([a.min(b), a.max(b)], t));
+                }
+            }
+        }
+        mesh.edges.sort_unstable();
+        for t in 0..tris.len() as u32 {
+            let [a, b, c] = mesh.local(t).map(|v| mesh.at(v, tpus[t as usize]));
+            let n = (b - a).cross(c - a);
+            mesh.normal.push(n.normalize_or_zero());
+            // xatlas leaves faces this small out of every chart.
+            mesh.ignored
+                .push(0.5 * n.length() <= f64::from(f32::EPSILON));
+        }
+        mesh
+    }
+
+    /// Triangle `t` in instance-local vertices.
+    fn local(&self, t: u32) -> [u32; 3] {
+        self.tris[t as usize].map(|v| v - self.inst.vertices.start)
+    }
+
+    /// Instance-local vertex `v` in texels of a triangle's density (regions never mix
+    /// densities).
+    fn at(&self, v: u32, tpu: f32) -> DVec3 {
+        self.scene.positions[(self.inst.vertices.start + v) as usize].as_dvec3() * f64::from(tpu)
+    }
+
+    fn welded(&self, t: u32) -> [u32; 3] {
+        self.local(t).map(|v| self.weld[v as usize])
+    }
+
+    /// The triangles on the edge between welded vertices `a` and `b`.
+    fn faces_on(&self, a: u32, b: u32) -> &[([u32; 2], u32)] {
+        let e = [a.min(b), a.max(b)];
+        let lo = self.edges.partition_point(|x| x.0 < e);
+        let len = self.edges[lo..].partition_point(|x| x.0 == e);
+        &self.edges[lo..lo + len]
+    }
+
+    /// Sides of a junction split and triangles of other densities never join one region.
+    fn side(&self, t: u32) -> (u32, u32) {
+        group(self.inst, self.tpus, t)
+    }
+
+    /// Grows the region of `seed` into `members` (ascending), marking them in `region_of`:
+    /// over edges to faces facing the same way with all corners in the seed's plane (measured
+    /// against the seed, so a gentle curve never creeps in).
+    fn grow(&self, seed: u32, region_of: &mut [u32], members: &mut Vec<u32>, stack: &mut Vec<u32>) {
         region_of[seed as usize] = seed;
         members.clear();
         members.push(seed);
-        let n = normal[seed as usize];
-        let tpu = tpus[seed as usize];
-        let d = n.dot(at(local(seed)[0], tpu));
-        if !ignored[seed as usize] {
+        let n = self.normal[seed as usize];
+        let tpu = self.tpus[seed as usize];
+        let d = n.dot(self.at(self.local(seed)[0], tpu));
+        if !self.ignored[seed as usize] {
             stack.push(seed);
         }
         while let Some(t) = stack.pop() {
-            let w = welded(t);
+            let w = self.welded(t);
             for k in 0..3 {
-                for &(_, u) in faces_on(w[k], w[(k + 1) % 3]) {
+                for &(_, u) in self.faces_on(w[k], w[(k + 1) % 3]) {
                     let joins = region_of[u as usize] == u32::MAX
-                        && side(u) == side(seed)
-                        && !ignored[u as usize]
-                        && normal[u as usize].dot(n) > 0.0
-                        && local(u)
+                        && self.side(u) == self.side(seed)
+                        && !self.ignored[u as usize]
+                        && self.normal[u as usize].dot(n) > 0.0
+                        && self
+                            .local(u)
                             .iter()
-                            .all(|&v| (n.dot(at(v, tpu)) - d).abs() <= PLANE_TOLERANCE);
+                            .all(|&v| (n.dot(self.at(v, tpu)) - d).abs() <= PLANE_TOLERANCE);
                     if joins {
                         region_of[u as usize] = seed;
                         members.push(u);
@@ -486,83 +550,88 @@ fn planar_regions(
             }
         }
         members.sort_unstable();
+    }
 
-        let region = (|| {
-            if members.len() < MIN_REGION_TRIANGLES || excluded.contains(&(index, seed)) {
-                return None;
-            }
-            // Bounded by open edges and creases, so xatlas would not chart it with others.
-            directed.clear();
-            for &t in &members {
-                let w = welded(t);
-                for k in 0..3 {
-                    directed.push([w[k], w[(k + 1) % 3]]);
-                    let crossed = faces_on(w[k], w[(k + 1) % 3]).iter().any(|&(_, u)| {
-                        region_of[u as usize] != seed
-                            && side(u) == side(seed)
-                            && !ignored[u as usize]
-                            && normal[u as usize].dot(n) >= CREASE_DOT
-                    });
-                    if crossed {
-                        return None;
-                    }
-                }
-            }
-            // Manifold: no edge traversed twice the same way (no folds or duplicate faces).
-            directed.sort_unstable();
-            if directed.windows(2).any(|e| e[0] == e[1]) {
-                return None;
-            }
-            // Plane coordinates, (u, v, n) right-handed: every member has positive area.
-            let u_axis = n.any_orthonormal_vector();
-            let v_axis = n.cross(u_axis);
-            let mut vertices: Vec<u32> = members.iter().flat_map(|&t| local(t)).collect();
-            vertices.sort_unstable();
-            vertices.dedup();
-            let mut plane: Vec<DVec2> = vertices
-                .iter()
-                .map(|&v| {
-                    let p = at(v, tpu);
-                    DVec2::new(p.dot(u_axis), p.dot(v_axis))
-                })
-                .collect();
-            let mut area = 0.0;
-            for &t in &members {
-                let [a, b, c] = local(t).map(|v| plane[vertices.binary_search(&v).unwrap_or(0)]);
-                let twice = (b - a).perp_dot(c - a);
-                if twice <= 0.0 {
+    /// The grown region of `seed` (`members`) as a [`Region`], when xatlas would chart it on its
+    /// own as one planar chart: bounded by open edges and creases, manifold, convex without
+    /// holes and within the chart `limits`. `directed` is a reused buffer.
+    fn convex_region(
+        &self,
+        seed: u32,
+        members: &[u32],
+        region_of: &[u32],
+        limits: Limits,
+        directed: &mut Vec<[u32; 2]>,
+    ) -> Option<Region> {
+        let n = self.normal[seed as usize];
+        let tpu = self.tpus[seed as usize];
+        // Bounded by open edges and creases, so xatlas would not chart it with others.
+        directed.clear();
+        for &t in members {
+            let w = self.welded(t);
+            for k in 0..3 {
+                directed.push([w[k], w[(k + 1) % 3]]);
+                let crossed = self.faces_on(w[k], w[(k + 1) % 3]).iter().any(|&(_, u)| {
+                    region_of[u as usize] != seed
+                        && self.side(u) == self.side(seed)
+                        && !self.ignored[u as usize]
+                        && self.normal[u as usize].dot(n) >= CREASE_DOT
+                });
+                if crossed {
                     return None;
                 }
-                area += 0.5 * twice;
             }
-            // Convex without holes: the triangles cover their hull exactly.
-            let mut outline = convex_hull(&plane);
-            let hull_area = polygon_area(&outline);
-            if outline.len() < 3 || (area - hull_area).abs() > 1e-6 * hull_area {
-                return None;
-            }
-            let lo = outline.iter().fold(DVec2::INFINITY, |m, p| m.min(*p));
-            let hi = outline.iter().fold(DVec2::NEG_INFINITY, |m, p| m.max(*p));
-            if hull_area > limits.max_chart_area || (hi - lo).length() > limits.max_chart_size {
-                return None;
-            }
-            plane.iter_mut().for_each(|p| *p -= lo);
-            outline.iter_mut().for_each(|p| *p -= lo);
-            Some(Region {
-                instance: index,
-                triangles: members.clone(),
-                vertices,
-                plane,
-                outline,
-            })
-        })();
-        match region {
-            Some(region) => regions.push(region),
-            None => rest.extend_from_slice(&members),
         }
+        // Manifold: no edge traversed twice the same way (no folds or duplicate faces).
+        directed.sort_unstable();
+        if directed.windows(2).any(|e| e[0] == e[1]) {
+            return None;
+        }
+        // Plane coordinates, (u, v, n) right-handed: every member has positive area.
+        let u_axis = n.any_orthonormal_vector();
+        let v_axis = n.cross(u_axis);
+        let mut vertices: Vec<u32> = members.iter().flat_map(|&t| self.local(t)).collect();
+        vertices.sort_unstable();
+        vertices.dedup();
+        let mut plane: Vec<DVec2> = vertices
+            .iter()
+            .map(|&v| {
+                let p = self.at(v, tpu);
+                DVec2::new(p.dot(u_axis), p.dot(v_axis))
+            })
+            .collect();
+        let mut area = 0.0;
+        for &t in members {
+            let [a, b, c] = self
+                .local(t)
+                .map(|v| plane[vertices.binary_search(&v).unwrap_or(0)]);
+            let twice = (b - a).perp_dot(c - a);
+            if twice <= 0.0 {
+                return None;
+            }
+            area += 0.5 * twice;
+        }
+        // Convex without holes: the triangles cover their hull exactly.
+        let mut outline = convex_hull(&plane);
+        let hull_area = polygon_area(&outline);
+        if outline.len() < 3 || (area - hull_area).abs() > 1e-6 * hull_area {
+            return None;
+        }
+        let lo = outline.iter().fold(DVec2::INFINITY, |m, p| m.min(*p));
+        let hi = outline.iter().fold(DVec2::NEG_INFINITY, |m, p| m.max(*p));
+        if hull_area > limits.max_chart_area || (hi - lo).length() > limits.max_chart_size {
+            return None;
+        }
+        plane.iter_mut().for_each(|p| *p -= lo);
+        outline.iter_mut().for_each(|p| *p -= lo);
+        Some(Region {
+            instance: self.index,
+            triangles: members.to_vec(),
+            vertices,
+            plane,
+            outline,
+        })
     }
-    rest.sort_unstable();
-    (regions, rest)
 }
 
 /// Convex hull, counter-clockwise, without corners on straight runs (Andrew's monotone chain).
@@ -675,10 +744,40 @@ fn run_xatlas(
         max_chart_area: f64::from(chart_options.max_chart_area),
         max_chart_size: f64::from(pack_options.max_chart_size),
     };
+    let found = find_regions(scene, tpus, limits, excluded, charting, progress);
 
-    // Each instance's regions, in parallel and collected in instance order: smooth patches of
-    // dense instances ([`dense`]), planar regions of the others.
-    let found: Vec<(Vec<Region>, Vec<u32>)> = (0..scene.instances.len())
+    let atlas = ffi::Handle::create();
+    let (given, regions) = add_blocks(&atlas, scene, tpus, found);
+    add_region_outlines(&atlas, &regions);
+    atlas.generate(chart_options, pack_options);
+
+    // Reassemble each instance's blocks and regions into one mesh in the instance's triangle
+    // order, with `xref` local to the instance. xatlas returns the meshes as given: every
+    // block, then the region outlines.
+    let raw = atlas.output();
+    let (block_meshes, outline_meshes) = raw.meshes.split_at(given.iter().map(Vec::len).sum());
+    let mut meshes = block_outputs(scene, &given, block_meshes);
+    let failed = place_regions(scene, &regions, outline_meshes, &mut meshes);
+    if !failed.is_empty() {
+        return Err(failed);
+    }
+    Ok(XatlasOutput {
+        page_count: raw.page_count,
+        meshes,
+    })
+}
+
+/// Each instance's regions and remaining triangles, found in parallel and collected in instance
+/// order: smooth patches of dense instances ([`dense`]), planar regions of the others.
+fn find_regions(
+    scene: &Scene,
+    tpus: &[f32],
+    limits: Limits,
+    excluded: &BTreeSet<(u32, u32)>,
+    charting: Charting,
+    progress: &dyn Progress,
+) -> Vec<(Vec<Region>, Vec<u32>)> {
+    (0..scene.instances.len())
         .into_par_iter()
         .map(|index| {
             let count = scene.instances[index].triangles.len();
@@ -710,9 +809,17 @@ fn run_xatlas(
             progress.advance(count as u64);
             found
         })
-        .collect();
+        .collect()
+}
 
-    let atlas = ffi::Handle::create();
+/// Gives `atlas` every instance's triangles outside its regions, in blocks (one xatlas mesh
+/// each); returns each instance's blocks and all the regions, in instance order.
+fn add_blocks(
+    atlas: &ffi::Handle,
+    scene: &Scene,
+    tpus: &[f32],
+    found: Vec<(Vec<Region>, Vec<u32>)>,
+) -> (Vec<Vec<Block>>, Vec<Region>) {
     let mut given: Vec<Vec<Block>> = Vec::with_capacity(scene.instances.len());
     let mut regions = Vec::new();
     for (inst, (inst_regions, rest)) in scene.instances.iter().zip(found) {
@@ -731,12 +838,16 @@ fn run_xatlas(
                 .iter()
                 .map(|&t| is_needle(scene, (inst.triangles.start + t) as usize, tpu))
                 .collect();
-            add_mesh(&atlas, &positions, &normals, &indices, Some(&needles));
+            add_mesh(atlas, &positions, &normals, &indices, Some(&needles));
         }
         given.push(inst_blocks);
     }
-    // Region outlines after all blocks, several to an xatlas mesh: plane coordinates at a
-    // z of their own, facing +z.
+    (given, regions)
+}
+
+/// Gives `atlas` the regions' outlines, after all blocks and several to an xatlas mesh: plane
+/// coordinates at a z of their own, facing +z.
+fn add_region_outlines(atlas: &ffi::Handle, regions: &[Region]) {
     for chunk in regions.chunks(PROXIES_PER_MESH) {
         let (mut positions, mut indices) = (Vec::new(), Vec::new());
         for (k, region) in chunk.iter().enumerate() {
@@ -748,19 +859,23 @@ fn run_xatlas(
             }
         }
         add_mesh(
-            &atlas,
+            atlas,
             &positions,
             &vec![[0.0, 0.0, 1.0]; positions.len()],
             &indices,
             None,
         );
     }
-    atlas.generate(chart_options, pack_options);
+}
 
-    // Reassemble each instance's blocks and regions into one mesh in the instance's triangle
-    // order, with `xref` local to the instance.
-    let raw = atlas.output();
-    let mut meshes: Vec<Option<MeshOutput>> = scene
+/// Each instance's output mesh with its blocks' triangles filled in from xatlas' `meshes` (one
+/// per block, in order); `None` for instances without triangles.
+fn block_outputs(
+    scene: &Scene,
+    given: &[Vec<Block>],
+    meshes: &[ffi::MeshView<'_>],
+) -> Vec<Option<MeshOutput>> {
+    let mut outputs: Vec<Option<MeshOutput>> = scene
         .instances
         .iter()
         .map(|inst| {
@@ -771,10 +886,10 @@ fn run_xatlas(
         })
         .collect();
     let mut next = 0;
-    for (inst_blocks, out) in given.iter().zip(&mut meshes) {
+    for (inst_blocks, out) in given.iter().zip(&mut outputs) {
         let Some(out) = out else { continue };
         for block in inst_blocks {
-            let mesh = &raw.meshes[next];
+            let mesh = &meshes[next];
             next += 1;
             let base = out.vertices.len() as u32;
             out.vertices.extend(mesh.vertices.iter().map(|v| {
@@ -795,10 +910,21 @@ fn run_xatlas(
             }
         }
     }
+    outputs
+}
+
+/// Places each region's triangles by the map xatlas gave its outline (`meshes`: one per chunk
+/// of [`PROXIES_PER_MESH`] outlines), adding them to their instance's output mesh; returns the
+/// regions (instance, seed) whose outline was not placed as one planar chart.
+fn place_regions(
+    scene: &Scene,
+    regions: &[Region],
+    meshes: &[ffi::MeshView<'_>],
+    outputs: &mut [Option<MeshOutput>],
+) -> Vec<(u32, u32)> {
     let mut failed = Vec::new();
-    for chunk in regions.chunks(PROXIES_PER_MESH) {
-        let mesh = &raw.meshes[next];
-        next += 1;
+    for (k, chunk) in regions.chunks(PROXIES_PER_MESH).enumerate() {
+        let mesh = &meshes[k];
         let mut first_face = 0;
         for region in chunk {
             let placed = placement(region, mesh, first_face);
@@ -808,7 +934,7 @@ fn run_xatlas(
                 continue;
             };
             let inst = &scene.instances[region.instance as usize];
-            let Some(out) = &mut meshes[region.instance as usize] else {
+            let Some(out) = &mut outputs[region.instance as usize] else {
                 continue;
             };
             let base = out.vertices.len() as u32;
@@ -830,13 +956,7 @@ fn run_xatlas(
             }
         }
     }
-    if !failed.is_empty() {
-        return Err(failed);
-    }
-    Ok(XatlasOutput {
-        page_count: raw.page_count,
-        meshes,
-    })
+    failed
 }
 
 /// Adds one mesh (positions in texels, unit normals, triangles, triangles to leave out) to
