@@ -132,12 +132,6 @@ impl GatheredSample {
         runs: &Runs,
         punctual: Option<&PunctualSample>,
     ) -> Option<GatheredSample> {
-        let Runs {
-            target,
-            budget_rays,
-            seed,
-            ..
-        } = *runs;
         if texels.is_empty() || scene.triangles.is_empty() {
             return None;
         }
@@ -147,115 +141,16 @@ impl GatheredSample {
         } else {
             LIGHT_SAMPLES
         };
-        let valid = texels.valid_mask();
-        let mut cdf = Vec::with_capacity(scene.triangles.len());
-        let mut area = 0.0f64;
-        for t in &scene.triangles {
-            let [a, b, c] = t.map(|v| scene.positions[v as usize].as_dvec3());
-            area += 0.5 * (b - a).cross(c - a).length();
-            cdf.push(area as f32);
-        }
-        if area <= 0.0 || !area.is_finite() {
-            return None;
-        }
-        let (kf, lf) = (GATHER_RAYS as f32, light_samples as f32);
-        // The non-punctual light at a point, as transport estimates it at a texel, through
-        // run `h`'s solved irradiance.
-        let gather = |origin: Vec3, n: Vec3, h: &[Vec3], rng: &mut Rng| -> Vec3 {
-            let (tx, ty) = frame(n);
-            let shift = rng.next_vec2();
-            let (mut emitted, mut reflected, mut escaped) = (Vec3::ZERO, Vec3::ZERO, 0u32);
-            for s in 0..GATHER_RAYS {
-                let local = cosine_hemisphere(hammersley(s, GATHER_RAYS, shift));
-                let dir = tx * local.x + ty * local.y + n * local.z;
-                match texels.ray_end(tracer, origin, dir) {
-                    RayEnd::Escaped => escaped += 1,
-                    RayEnd::Absorbed => {}
-                    RayEnd::Texel(hit, j) => {
-                        let j = j as usize;
-                        reflected += texels.albedo[j] * h[j];
-                        let le = texels.emission[j];
-                        if le.max_element() > 0.0 {
-                            let (_, n_l) =
-                                crate::lights::triangle_point(scene, hit.triangle, hit.bary);
-                            let p_light = emitters.pdf_toward(hit.triangle, n_l, dir, hit.t);
-                            emitted +=
-                                le * (local.z * power_weight(kf * local.z / PI, lf * p_light));
-                        }
-                    }
-                }
-            }
-            let light_shift = rng.next_vec2();
-            for s in 0..light_samples {
-                let u = hammersley(s, light_samples, light_shift);
-                let Some(x) = emitters.sample_from((scene, texels, tracer), origin, n, u) else {
-                    continue;
-                };
-                let p_gather = x.cos_i / PI;
-                emitted += x.le * (x.cos_i * power_weight(lf * x.pdf_solid_angle(), kf * p_gather));
-            }
-            emitted + reflected / kf + runs.sky * (PI * escaped as f32 / kf)
-        };
-        let point = |k: usize| -> Drawn {
-            let mut rng = Rng::new(seed ^ SALT, k as u64, 0);
-            let t = sampling::sample_cdf(&cdf, rng.next_f32()) as u32;
-            let b = sampling::triangle_point(rng.next_vec2());
-            let sp = scene.surface_point(t, b);
-            if sp.n_geo == Vec3::ZERO {
-                return Drawn::Skipped;
-            }
-            // Points nobody sees (faces looking into geometry: a floor under a cabinet, the
-            // bottom of a box on the floor) are left out, as the point yardstick leaves them.
-            let shift = rng.next_vec2();
-            let back =
-                validity::back_hits(tracer, sp.p, sp.n_geo, PROBE_RAYS, shift, f32::INFINITY);
-            if back > (MAX_BACK * PROBE_RAYS as f32) as u32 {
-                return Drawn::Unseen(t);
-            }
-            let [ua, ub, uc] = texels.triangle_uv[t as usize];
-            let uv = ua * (1.0 - b.x - b.y) + ub * b.x + uc * b.y;
-            let page = texels.triangle_page[t as usize] as usize;
-            let Some((lookup, _)) = bilinear(texels, &valid, page, uv) else {
-                return Drawn::Unseen(t);
-            };
-            let read =
-                |v: &[Vec3]| -> Vec3 { lookup.iter().map(|&(j, w)| v[j as usize] * w).sum() };
-            let origin = sp.p + sp.n_geo * tracer.epsilon;
-            // Punctual light: the sample's texel values against the exact light about the
-            // shading normal (noise-free: no product needed).
-            let (punctual_texels, exact) = match punctual {
-                Some(p) => (
-                    read(&p.texel),
-                    scene
-                        .lights
-                        .iter()
-                        .map(|l| punctual_irradiance(l, origin, sp.n, tracer))
-                        .sum(),
-                ),
-                None => (Vec3::ZERO, Vec3::ZERO),
-            };
-            let [da, db] = [0usize, 1].map(|r| {
-                let mut rng = Rng::new(seed ^ SALT, k as u64, 1 + r as u64);
-                let h = runs.irradiance[r];
-                read(h) - punctual_texels - gather(origin, sp.n, h, &mut rng)
-            });
-            let dp = punctual_texels - exact;
-            let total = (read(runs.irradiance[0]) + read(runs.irradiance[1])) * 0.5;
-            let point = GatheredPoint {
-                instance: scene.triangle_instance[t as usize],
-                triangle: t,
-                rest_square: (da * db).element_sum() / 3.0,
-                punctual_square: (dp * dp).element_sum() / 3.0,
-                total: total.element_sum() / 3.0,
-            };
-            if point.rest_square.is_finite()
-                && point.punctual_square.is_finite()
-                && point.total.is_finite()
-            {
-                Drawn::Kept(point)
-            } else {
-                Drawn::Skipped
-            }
+        let drawer = PointDrawer {
+            scene,
+            texels,
+            tracer,
+            runs: *runs,
+            punctual,
+            emitters,
+            light_samples,
+            valid: texels.valid_mask(),
+            cdf: area_cdf(scene)?,
         };
         let per_point =
             (PROBE_RAYS + 2 * (GATHER_RAYS + light_samples)) as u64 + scene.lights.len() as u64;
@@ -264,7 +159,10 @@ impl GatheredSample {
         let mut sample = GatheredSample::default();
         let mut drawn = 0;
         while drawn < MAX_POINTS {
-            let batch: Vec<Drawn> = (drawn..drawn + BATCH).into_par_iter().map(point).collect();
+            let batch: Vec<Drawn> = (drawn..drawn + BATCH)
+                .into_par_iter()
+                .map(|k| drawer.draw(k))
+                .collect();
             drawn += BATCH;
             for d in batch {
                 match d {
@@ -277,9 +175,9 @@ impl GatheredSample {
             let (rest, stderr) = sample.mean_square(|p| p.rest_square);
             let mean_square = rest.max(0.0) + sample.mean_square(|p| p.punctual_square).0;
             let rays = per_point * sample.points.len() as u64;
-            if hi < SMALL * target
+            if hi < SMALL * runs.target
                 || (mean_square > 0.0 && 2.0 * stderr <= PRECISION * mean_square)
-                || rays >= budget_rays
+                || rays >= runs.budget_rays
             {
                 break;
             }
@@ -357,5 +255,140 @@ impl GatheredSample {
             return f32::NAN;
         }
         (mean_square.max(0.0).sqrt() / mean) as f32
+    }
+}
+
+/// Cumulative area over the scene's triangles, to draw points area-weighted; `None` when the
+/// scene has no (finite) area.
+fn area_cdf(scene: &Scene) -> Option<Vec<f32>> {
+    let mut cdf = Vec::with_capacity(scene.triangles.len());
+    let mut area = 0.0f64;
+    for t in &scene.triangles {
+        let [a, b, c] = t.map(|v| scene.positions[v as usize].as_dvec3());
+        area += 0.5 * (b - a).cross(c - a).length();
+        cdf.push(area as f32);
+    }
+    (area > 0.0 && area.is_finite()).then_some(cdf)
+}
+
+/// What drawing a point and estimating its light need, shared by all the sample's points.
+struct PointDrawer<'a> {
+    scene: &'a Scene,
+    texels: &'a Texels,
+    tracer: &'a Tracer,
+    runs: Runs<'a>,
+    punctual: Option<&'a PunctualSample>,
+    emitters: Emitters,
+    /// Emitter light samples per point and run ([`LIGHT_SAMPLES`], none without emitters).
+    light_samples: u32,
+    /// Texels a lookup may read.
+    valid: Vec<bool>,
+    /// [`area_cdf`] of the scene.
+    cdf: Vec<f32>,
+}
+
+impl PointDrawer<'_> {
+    /// Point `k` of the sample, from its own stream: its squared lookup errors, or why it is
+    /// left out.
+    fn draw(&self, k: usize) -> Drawn {
+        let (scene, texels, tracer, runs) = (self.scene, self.texels, self.tracer, &self.runs);
+        let seed = runs.seed;
+        let mut rng = Rng::new(seed ^ SALT, k as u64, 0);
+        let t = sampling::sample_cdf(&self.cdf, rng.next_f32()) as u32;
+        let b = sampling::triangle_point(rng.next_vec2());
+        let sp = scene.surface_point(t, b);
+        if sp.n_geo == Vec3::ZERO {
+            return Drawn::Skipped;
+        }
+        // Points nobody sees (faces looking into geometry: a floor under a cabinet, the
+        // bottom of a box on the floor) are left out, as the point yardstick leaves them.
+        let shift = rng.next_vec2();
+        let back = validity::back_hits(tracer, sp.p, sp.n_geo, PROBE_RAYS, shift, f32::INFINITY);
+        if back > (MAX_BACK * PROBE_RAYS as f32) as u32 {
+            return Drawn::Unseen(t);
+        }
+        let [ua, ub, uc] = texels.triangle_uv[t as usize];
+        let uv = ua * (1.0 - b.x - b.y) + ub * b.x + uc * b.y;
+        let page = texels.triangle_page[t as usize] as usize;
+        let Some((lookup, _)) = bilinear(texels, &self.valid, page, uv) else {
+            return Drawn::Unseen(t);
+        };
+        let read = |v: &[Vec3]| -> Vec3 { lookup.iter().map(|&(j, w)| v[j as usize] * w).sum() };
+        let origin = sp.p + sp.n_geo * tracer.epsilon;
+        // Punctual light: the sample's texel values against the exact light about the
+        // shading normal (noise-free: no product needed).
+        let (punctual_texels, exact) = match self.punctual {
+            Some(p) => (
+                read(&p.texel),
+                scene
+                    .lights
+                    .iter()
+                    .map(|l| punctual_irradiance(l, origin, sp.n, tracer))
+                    .sum(),
+            ),
+            None => (Vec3::ZERO, Vec3::ZERO),
+        };
+        let [da, db] = [0usize, 1].map(|r| {
+            let mut rng = Rng::new(seed ^ SALT, k as u64, 1 + r as u64);
+            let h = runs.irradiance[r];
+            read(h) - punctual_texels - self.gather(origin, sp.n, h, &mut rng)
+        });
+        let dp = punctual_texels - exact;
+        let total = (read(runs.irradiance[0]) + read(runs.irradiance[1])) * 0.5;
+        let point = GatheredPoint {
+            instance: scene.triangle_instance[t as usize],
+            triangle: t,
+            rest_square: (da * db).element_sum() / 3.0,
+            punctual_square: (dp * dp).element_sum() / 3.0,
+            total: total.element_sum() / 3.0,
+        };
+        if point.rest_square.is_finite()
+            && point.punctual_square.is_finite()
+            && point.total.is_finite()
+        {
+            Drawn::Kept(point)
+        } else {
+            Drawn::Skipped
+        }
+    }
+
+    /// The non-punctual light at a point, as transport estimates it at a texel, through a
+    /// run's solved irradiance `h`.
+    fn gather(&self, origin: Vec3, n: Vec3, h: &[Vec3], rng: &mut Rng) -> Vec3 {
+        let (scene, texels, tracer, emitters) =
+            (self.scene, self.texels, self.tracer, &self.emitters);
+        let light_samples = self.light_samples;
+        let (kf, lf) = (GATHER_RAYS as f32, light_samples as f32);
+        let (tx, ty) = frame(n);
+        let shift = rng.next_vec2();
+        let (mut emitted, mut reflected, mut escaped) = (Vec3::ZERO, Vec3::ZERO, 0u32);
+        for s in 0..GATHER_RAYS {
+            let local = cosine_hemisphere(hammersley(s, GATHER_RAYS, shift));
+            let dir = tx * local.x + ty * local.y + n * local.z;
+            match texels.ray_end(tracer, origin, dir) {
+                RayEnd::Escaped => escaped += 1,
+                RayEnd::Absorbed => {}
+                RayEnd::Texel(hit, j) => {
+                    let j = j as usize;
+                    reflected += texels.albedo[j] * h[j];
+                    let le = texels.emission[j];
+                    if le.max_element() > 0.0 {
+                        let (_, n_l) = crate::lights::triangle_point(scene, hit.triangle, hit.bary);
+                        let p_light = emitters.pdf_toward(hit.triangle, n_l, dir, hit.t);
+                        emitted += le * (local.z * power_weight(kf * local.z / PI, lf * p_light));
+                    }
+                }
+            }
+        }
+        let light_shift = rng.next_vec2();
+        for s in 0..light_samples {
+            let u = hammersley(s, light_samples, light_shift);
+            let Some(x) = emitters.sample_from((scene, texels, tracer), origin, n, u) else {
+                continue;
+            };
+            let p_gather = x.cos_i / PI;
+            emitted += x.le * (x.cos_i * power_weight(lf * x.pdf_solid_angle(), kf * p_gather));
+        }
+        emitted + reflected / kf + self.runs.sky * (PI * escaped as f32 / kf)
     }
 }
