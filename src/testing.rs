@@ -1884,36 +1884,62 @@ pub fn lamp_room() -> GltfBuilder {
 /// texels at a uniform density; the walls' outer faces are seen by nothing.
 pub fn furnished_interior() -> GltfBuilder {
     let mut gltf = GltfBuilder::new("furnished_interior");
-    let plaster = gltf.add_material(Material::diffuse("plaster", [0.78, 0.76, 0.72]));
-    let boards = gltf.add_material(Material::diffuse("boards", [0.5, 0.38, 0.26]));
-    let wood = gltf.add_material(Material::diffuse("wood", [0.55, 0.36, 0.22]));
-    let fabric = gltf.add_material(Material::diffuse("fabric", [0.25, 0.35, 0.6]));
-    let rug_m = gltf.add_material(Material::diffuse("rug", [0.6, 0.15, 0.12]));
-    let paper = gltf.add_material(Material::diffuse("paper", [0.8, 0.78, 0.7]));
-    let glaze = gltf.add_material(Material::diffuse("glaze", [0.85, 0.85, 0.9]));
-    let glass = gltf.add_material(Material::diffuse("bottle", [0.2, 0.45, 0.25]));
-    let panel_m = gltf.add_material(Material::grey("panel", 0.8).emitting([1.0, 0.97, 0.9], 12.0));
-    let (half_x, half_z, height, wall) = (4.0f32, 3.0f32, 3.0f32, 0.2f32);
-    // Slabs and walls are closed boxes: their inner faces tessellated every 8 cm, the others
-    // (outside, and ends buried in the neighbouring solids) one quad per face.
-    let slab = |min: Vec3, max: Vec3, inner: Face| {
-        let size = max - min;
-        let mut g = Geometry::default();
-        for face in Face::ALL {
-            let (nu, nv) = if face == inner {
-                let [u, v] = match face {
-                    Face::PosY | Face::NegY => [size.x, size.z],
-                    Face::PosX | Face::NegX => [size.z, size.y],
-                    Face::PosZ | Face::NegZ => [size.x, size.y],
-                };
-                ((u * 12.5).round() as u32, (v * 12.5).round() as u32)
-            } else {
-                (1, 1)
-            };
-            g.append(&Geometry::box_face(min, max, face, nu.max(1), nv.max(1)));
+    let materials = InteriorMaterials::add(&mut gltf);
+    add_interior_shell(&mut gltf, &materials);
+    add_dining_tables(&mut gltf, &materials);
+    add_bookcase(&mut gltf, &materials);
+    add_rug_sofa_and_frames(&mut gltf, &materials);
+    add_lamp_and_panels(&mut gltf, &materials);
+    let camera = Camera::perspective("camera", 1.2, Some(1.5));
+    gltf.add_camera_node(camera, Vec3::new(3.6, 2.2, 2.7), Vec3::new(-1.0, 0.7, -0.8));
+    gltf
+}
+
+/// [`furnished_interior`]'s room (metres): half its inner width (x) and depth (z), its inner
+/// height, and the thickness of its walls, floor and ceiling.
+const INTERIOR_HALF_X: f32 = 4.0;
+const INTERIOR_HALF_Z: f32 = 3.0;
+const INTERIOR_HEIGHT: f32 = 3.0;
+const INTERIOR_WALL: f32 = 0.2;
+
+/// [`furnished_interior`]'s materials, added first (their order is the file's).
+struct InteriorMaterials {
+    plaster: usize,
+    boards: usize,
+    wood: usize,
+    fabric: usize,
+    rug: usize,
+    paper: usize,
+    glaze: usize,
+    glass: usize,
+    panel: usize,
+}
+
+impl InteriorMaterials {
+    fn add(gltf: &mut GltfBuilder) -> Self {
+        InteriorMaterials {
+            plaster: gltf.add_material(Material::diffuse("plaster", [0.78, 0.76, 0.72])),
+            boards: gltf.add_material(Material::diffuse("boards", [0.5, 0.38, 0.26])),
+            wood: gltf.add_material(Material::diffuse("wood", [0.55, 0.36, 0.22])),
+            fabric: gltf.add_material(Material::diffuse("fabric", [0.25, 0.35, 0.6])),
+            rug: gltf.add_material(Material::diffuse("rug", [0.6, 0.15, 0.12])),
+            paper: gltf.add_material(Material::diffuse("paper", [0.8, 0.78, 0.7])),
+            glaze: gltf.add_material(Material::diffuse("glaze", [0.85, 0.85, 0.9])),
+            glass: gltf.add_material(Material::diffuse("bottle", [0.2, 0.45, 0.25])),
+            panel: gltf.add_material(Material::grey("panel", 0.8).emitting([1.0, 0.97, 0.9], 12.0)),
         }
-        g.without_uv0().without_normals()
-    };
+    }
+}
+
+/// The room's floor, ceiling and four walls: closed solids, each its own mesh and node.
+fn add_interior_shell(gltf: &mut GltfBuilder, materials: &InteriorMaterials) {
+    let (half_x, half_z, height, wall) = (
+        INTERIOR_HALF_X,
+        INTERIOR_HALF_Z,
+        INTERIOR_HEIGHT,
+        INTERIOR_WALL,
+    );
+    let (boards, plaster) = (materials.boards, materials.plaster);
     let solids = [
         (
             "floor",
@@ -1962,14 +1988,46 @@ pub fn furnished_interior() -> GltfBuilder {
         let mesh = gltf.add_mesh(name, slab(min, max, inner), material);
         gltf.add_mesh_node(name, mesh);
     }
-    let cuboid = |min: Vec3, max: Vec3| Geometry::box_faces(min, max, &Face::ALL, 1).without_uv0();
-    let place = |gltf: &mut GltfBuilder, name: &str, mesh: usize, at: Vec3, turn: f32| {
-        gltf.add_node(
-            Node::new(name)
-                .trs(at, Quat::from_rotation_y(turn), Vec3::ONE)
-                .with_mesh(mesh),
-        );
-    };
+}
+
+/// A closed box whose `inner` face is tessellated every 8 cm (what a scanned or sculpted asset
+/// gives); its other faces (outside, and ends buried in the neighbouring solids) are one quad
+/// each.
+fn slab(min: Vec3, max: Vec3, inner: Face) -> Geometry {
+    let size = max - min;
+    let mut g = Geometry::default();
+    for face in Face::ALL {
+        let (nu, nv) = if face == inner {
+            let [u, v] = match face {
+                Face::PosY | Face::NegY => [size.x, size.z],
+                Face::PosX | Face::NegX => [size.z, size.y],
+                Face::PosZ | Face::NegZ => [size.x, size.y],
+            };
+            ((u * 12.5).round() as u32, (v * 12.5).round() as u32)
+        } else {
+            (1, 1)
+        };
+        g.append(&Geometry::box_face(min, max, face, nu.max(1), nv.max(1)));
+    }
+    g.without_uv0().without_normals()
+}
+
+/// A box of one quad per face, without base UVs: the furniture's building block.
+fn cuboid(min: Vec3, max: Vec3) -> Geometry {
+    Geometry::box_faces(min, max, &Face::ALL, 1).without_uv0()
+}
+
+/// A node placing `mesh` at `at`, turned by `turn` about +Y.
+fn place(gltf: &mut GltfBuilder, name: &str, mesh: usize, at: Vec3, turn: f32) {
+    gltf.add_node(
+        Node::new(name)
+            .trs(at, Quat::from_rotation_y(turn), Vec3::ONE)
+            .with_mesh(mesh),
+    );
+}
+
+/// Two tables, four chairs around each, and cups and bottles on them.
+fn add_dining_tables(gltf: &mut GltfBuilder, materials: &InteriorMaterials) {
     // Tables: a 4 cm top, four 4 cm legs.
     let mut table = cuboid(Vec3::new(-0.8, 0.72, -0.45), Vec3::new(0.8, 0.76, 0.45));
     for (x, z) in [(-0.75, -0.4), (0.71, -0.4), (-0.75, 0.36), (0.71, 0.36)] {
@@ -1978,7 +2036,7 @@ pub fn furnished_interior() -> GltfBuilder {
             Vec3::new(x + 0.04, 0.72, z + 0.04),
         ));
     }
-    let table = gltf.add_mesh("table", table, wood);
+    let table = gltf.add_mesh("table", table, materials.wood);
     // Chairs: seat, 3 cm legs, a back of five 2 cm slats.
     let mut chair = cuboid(Vec3::new(-0.22, 0.44, -0.22), Vec3::new(0.22, 0.47, 0.22));
     for (x, z) in [(-0.21, -0.21), (0.18, -0.21), (-0.21, 0.18), (0.18, 0.18)] {
@@ -1994,12 +2052,12 @@ pub fn furnished_interior() -> GltfBuilder {
             Vec3::new(x + 0.02, 0.9, 0.22),
         ));
     }
-    let chair = gltf.add_mesh("chair", chair, fabric);
+    let chair = gltf.add_mesh("chair", chair, materials.fabric);
     for (t, centre) in [Vec3::new(-1.6, 0.0, 0.2), Vec3::new(1.6, 0.0, -0.4)]
         .into_iter()
         .enumerate()
     {
-        place(&mut gltf, &format!("table_{t}"), table, centre, 0.0);
+        place(gltf, &format!("table_{t}"), table, centre, 0.0);
         for (c, (dx, dz, turn)) in [
             (-0.45, 0.6, 0.0),
             (0.45, 0.6, 0.0),
@@ -2011,7 +2069,7 @@ pub fn furnished_interior() -> GltfBuilder {
         {
             let at = centre + Vec3::new(dx, 0.0, dz);
             place(
-                &mut gltf,
+                gltf,
                 &format!("chair_{t}_{c}"),
                 chair,
                 at,
@@ -2023,12 +2081,12 @@ pub fn furnished_interior() -> GltfBuilder {
     let cup = gltf.add_mesh(
         "cup",
         Geometry::cylinder(Vec3::ZERO, 0.04, 0.1, 24).without_uv0(),
-        glaze,
+        materials.glaze,
     );
     let bottle = gltf.add_mesh(
         "bottle",
         Geometry::cylinder(Vec3::ZERO, 0.035, 0.3, 24).without_uv0(),
-        glass,
+        materials.glass,
     );
     for (k, (x, z)) in [
         (-1.9, 0.0),
@@ -2040,24 +2098,21 @@ pub fn furnished_interior() -> GltfBuilder {
     .into_iter()
     .enumerate()
     {
-        place(
-            &mut gltf,
-            &format!("cup_{k}"),
-            cup,
-            Vec3::new(x, 0.76, z),
-            0.0,
-        );
+        place(gltf, &format!("cup_{k}"), cup, Vec3::new(x, 0.76, z), 0.0);
     }
     for (k, (x, z)) in [(-1.6, 0.15), (1.7, -0.5)].into_iter().enumerate() {
         place(
-            &mut gltf,
+            gltf,
             &format!("bottle_{k}"),
             bottle,
             Vec3::new(x, 0.76, z),
             0.0,
         );
     }
-    // A bookcase against the west wall: a carcass of 2 cm boards, four shelves of books.
+}
+
+/// A bookcase against the west wall: a carcass of 2 cm boards, four shelves of books.
+fn add_bookcase(gltf: &mut GltfBuilder, materials: &InteriorMaterials) {
     let mut case = Geometry::default();
     for (min, max) in [
         (Vec3::new(0.0, 0.0, -0.6), Vec3::new(0.3, 2.0, -0.58)),
@@ -2073,14 +2128,9 @@ pub fn furnished_interior() -> GltfBuilder {
             Vec3::new(0.3, y, 0.58),
         ));
     }
-    let case = gltf.add_mesh("bookcase", case, wood);
-    place(
-        &mut gltf,
-        "bookcase",
-        case,
-        Vec3::new(-half_x, 0.0, -1.2),
-        0.0,
-    );
+    let at = Vec3::new(-INTERIOR_HALF_X, 0.0, -1.2);
+    let case = gltf.add_mesh("bookcase", case, materials.wood);
+    place(gltf, "bookcase", case, at, 0.0);
     let mut books = Geometry::default();
     for s in 0..4 {
         let y = 0.02 + 0.48 * s as f32;
@@ -2097,21 +2147,18 @@ pub fn furnished_interior() -> GltfBuilder {
             k += 1;
         }
     }
-    let books = gltf.add_mesh("books", books, paper);
-    place(
-        &mut gltf,
-        "books",
-        books,
-        Vec3::new(-half_x, 0.0, -1.2),
-        0.0,
-    );
-    // A 1 cm rug, a sofa of boxes, picture frames 2 cm off the walls.
+    let books = gltf.add_mesh("books", books, materials.paper);
+    place(gltf, "books", books, at, 0.0);
+}
+
+/// A 1 cm rug, a sofa of boxes, picture frames 2 cm off the north wall.
+fn add_rug_sofa_and_frames(gltf: &mut GltfBuilder, materials: &InteriorMaterials) {
     let rug = gltf.add_mesh(
         "rug",
         cuboid(Vec3::new(-1.2, 0.0, -0.9), Vec3::new(1.2, 0.01, 0.9)),
-        rug_m,
+        materials.rug,
     );
-    place(&mut gltf, "rug", rug, Vec3::new(0.0, 0.0, 1.6), 0.0);
+    place(gltf, "rug", rug, Vec3::new(0.0, 0.0, 1.6), 0.0);
     let mut sofa = cuboid(Vec3::new(-1.0, 0.0, -0.4), Vec3::new(1.0, 0.42, 0.4));
     sofa.append(&cuboid(
         Vec3::new(-1.0, 0.42, 0.25),
@@ -2125,23 +2172,22 @@ pub fn furnished_interior() -> GltfBuilder {
         Vec3::new(0.85, 0.42, -0.4),
         Vec3::new(1.0, 0.62, 0.25),
     ));
-    let sofa = gltf.add_mesh("sofa", sofa, fabric);
-    place(&mut gltf, "sofa", sofa, Vec3::new(0.2, 0.0, 2.5), 0.0);
+    let sofa = gltf.add_mesh("sofa", sofa, materials.fabric);
+    place(gltf, "sofa", sofa, Vec3::new(0.2, 0.0, 2.5), 0.0);
     let frame = gltf.add_mesh(
         "frame",
         cuboid(Vec3::new(-0.4, -0.3, 0.0), Vec3::new(0.4, 0.3, 0.02)),
-        paper,
+        materials.paper,
     );
     for (k, x) in [-2.0f32, 0.5, 2.6].into_iter().enumerate() {
-        place(
-            &mut gltf,
-            &format!("frame_{k}"),
-            frame,
-            Vec3::new(x, 1.7, -half_z),
-            0.0,
-        );
+        let at = Vec3::new(x, 1.7, -INTERIOR_HALF_Z);
+        place(gltf, &format!("frame_{k}"), frame, at, 0.0);
     }
-    // A floor lamp: a thin stand and a point light under a shade.
+}
+
+/// The lights: a floor lamp (a thin stand, a point light under a shade) and two emissive
+/// ceiling panels.
+fn add_lamp_and_panels(gltf: &mut GltfBuilder, materials: &InteriorMaterials) {
     let mut lamp = Geometry::cylinder(Vec3::ZERO, 0.015, 1.5, 12);
     lamp.append(&Geometry::cylinder(
         Vec3::new(0.0, 1.5, 0.0),
@@ -2149,33 +2195,30 @@ pub fn furnished_interior() -> GltfBuilder {
         0.22,
         32,
     ));
-    let lamp = gltf.add_mesh("lamp", lamp.without_uv0(), paper);
-    place(&mut gltf, "lamp", lamp, Vec3::new(3.3, 0.0, 2.3), 0.0);
+    let lamp = gltf.add_mesh("lamp", lamp.without_uv0(), materials.paper);
+    place(gltf, "lamp", lamp, Vec3::new(3.3, 0.0, 2.3), 0.0);
     gltf.add_light_node(
         Light::point("lamp_bulb", [1.0, 0.85, 0.65], 4.0),
         Vec3::new(3.3, 1.4, 2.3),
         Vec3::NEG_Y,
     );
     let panel = Geometry::grid(
-        Vec3::new(-0.6, height - 0.01, -0.3),
+        Vec3::new(-0.6, INTERIOR_HEIGHT - 0.01, -0.3),
         Vec3::X * 1.2,
         Vec3::Z * 0.6,
         1,
         1,
     );
-    let panel = gltf.add_mesh("panel", panel.without_uv0(), panel_m);
+    let panel = gltf.add_mesh("panel", panel.without_uv0(), materials.panel);
     for (k, x) in [-1.6f32, 1.6].into_iter().enumerate() {
         place(
-            &mut gltf,
+            gltf,
             &format!("panel_{k}"),
             panel,
             Vec3::new(x, 0.0, 0.0),
             0.0,
         );
     }
-    let camera = Camera::perspective("camera", 1.2, Some(1.5));
-    gltf.add_camera_node(camera, Vec3::new(3.6, 2.2, 2.7), Vec3::new(-1.0, 0.7, -0.8));
-    gltf
 }
 
 /// Narrow faces of [`narrow_faces`]: a name, a world box (min, max) around the face and its
