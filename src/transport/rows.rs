@@ -52,6 +52,12 @@ impl ChunkRows {
     }
 }
 
+/// Chunks built in parallel before they are appended and dropped: the rows are never held twice
+/// (the furnished interior at `high` peaked ~480 MB, one run's rows, above its steady state
+/// while all chunks were kept until the end), and a wave is large enough that waiting for its
+/// slowest chunk costs little.
+const WAVE: usize = 256;
+
 /// Builds the rows of `n` receivers: `rows(range, out)` appends one row per receiver of
 /// `range`, in order, to `out`. `stage` names the progress stage.
 pub(crate) fn build(
@@ -63,63 +69,85 @@ pub(crate) fn build(
 ) -> Result<Transport> {
     let aborted = AtomicBool::new(false);
     progress.begin(stage, n as u64);
-    let chunks: Vec<ChunkRows> = (0..n.div_ceil(chunk))
-        .into_par_iter()
-        .map(|c| {
-            let mut out = ChunkRows::default();
-            if aborted.load(Ordering::Relaxed) || progress.aborted() {
-                aborted.store(true, Ordering::Relaxed);
-                return out;
-            }
-            let range = c * chunk..((c + 1) * chunk).min(n);
-            rows(range.clone(), &mut out);
-            progress.advance(range.len() as u64);
-            out
-        })
-        .collect();
+    let mut assembled = Assembled::new(n);
+    let chunks = n.div_ceil(chunk);
+    for wave in (0..chunks).step_by(WAVE) {
+        let built: Vec<ChunkRows> = (wave..(wave + WAVE).min(chunks))
+            .into_par_iter()
+            .map(|c| {
+                let mut out = ChunkRows::default();
+                if aborted.load(Ordering::Relaxed) || progress.aborted() {
+                    aborted.store(true, Ordering::Relaxed);
+                    return out;
+                }
+                let range = c * chunk..((c + 1) * chunk).min(n);
+                rows(range.clone(), &mut out);
+                progress.advance(range.len() as u64);
+                out
+            })
+            .collect();
+        if aborted.load(Ordering::Relaxed) {
+            progress.end();
+            return Err(Error::Aborted);
+        }
+        built.into_iter().for_each(|c| assembled.append(c));
+    }
     progress.end();
-    if aborted.load(Ordering::Relaxed) {
-        return Err(Error::Aborted);
+    Ok(assembled.finish())
+}
+
+/// The rows so far, in receiver order.
+struct Assembled {
+    weights: WeightRows,
+    counts: CountRows,
+    counted: bool,
+    t: Transport,
+}
+
+impl Assembled {
+    fn new(n: usize) -> Assembled {
+        let mut weights = WeightRows {
+            row_start: Vec::with_capacity(n + 1),
+            col: Vec::new(),
+            f: Vec::new(),
+        };
+        weights.row_start.push(0);
+        Assembled {
+            weights,
+            counts: CountRows::default(),
+            counted: false,
+            t: Transport {
+                escape: Vec::with_capacity(n),
+                direct: Vec::with_capacity(n),
+                ..Transport::default()
+            },
+        }
     }
 
-    let counted = chunks.iter().any(|c| !c.counts.is_empty());
-    let entries: usize = chunks.iter().map(|c| c.col.len()).sum();
-    let mut weights = WeightRows {
-        row_start: Vec::with_capacity(n + 1),
-        col: Vec::with_capacity(entries),
-        f: Vec::with_capacity(entries),
-    };
-    weights.row_start.push(0);
-    let mut counts = CountRows::default();
-    if counted {
-        let rows = chunks.iter().map(|c| c.counts.len()).sum();
-        counts.reserve(rows, chunks.iter().map(|c| c.counts.byte_len()).sum());
-    }
-    let mut t = Transport {
-        escape: Vec::with_capacity(n),
-        direct: Vec::with_capacity(n),
-        ..Transport::default()
-    };
-    for c in chunks {
-        if counted {
-            counts.append(c.counts);
-        } else {
-            let mut start = *weights.row_start.last().unwrap();
+    fn append(&mut self, c: ChunkRows) {
+        if !c.counts.is_empty() {
+            self.counted = true;
+            self.counts.append(c.counts);
+        } else if !self.counted {
+            let mut start = *self.weights.row_start.last().unwrap();
             for len in c.row_len {
                 start += len;
-                weights.row_start.push(start);
+                self.weights.row_start.push(start);
             }
-            weights.col.extend(c.col);
-            weights.f.extend(c.f);
+            self.weights.col.extend(c.col);
+            self.weights.f.extend(c.f);
         }
-        t.escape.extend(c.escape);
-        t.direct.extend(c.direct);
-        t.direct_terms.extend(c.terms);
-        t.rays += c.rays;
+        self.t.escape.extend(c.escape);
+        self.t.direct.extend(c.direct);
+        self.t.direct_terms.extend(c.terms);
+        self.t.rays += c.rays;
     }
-    t.rows = match counted {
-        true => Rows::Counts(counts),
-        false => Rows::Weights(weights),
-    };
-    Ok(t)
+
+    fn finish(mut self) -> Transport {
+        self.t.rows = match self.counted {
+            true => Rows::Counts(self.counts),
+            false => Rows::Weights(self.weights),
+        };
+        self.t
+    }
 }
