@@ -179,29 +179,6 @@ impl Regions {
     }
 }
 
-/// What the sample and the pilot say of one region.
-#[derive(Clone, Copy, Debug, Default)]
-struct Evidence {
-    points: Moments,
-    unseen: u32,
-    /// Σ area and Σ area·light over the region's valid texels; all its texels' area.
-    valid_area: f64,
-    light: f64,
-    texel_area: f64,
-}
-
-impl Evidence {
-    /// The share of the points drawn on the region that were seen (1 when none was drawn).
-    fn seen_share(&self) -> f64 {
-        let drawn = self.points.n + f64::from(self.unseen);
-        if drawn > 0.0 {
-            self.points.n / drawn
-        } else {
-            1.0
-        }
-    }
-}
-
 /// The density factor of every scene triangle (`AtlasParams::triangle_density`) from the
 /// density pilot's pair (`pilot`, stored values at `texels`) and its lookup-error `sample`;
 /// `None` when every factor is 1. Reasons go to `plan`. `tpu` is the preset's density the
@@ -223,205 +200,387 @@ pub fn choose_region_density(
         ));
         return None;
     }
-    let n = regions.len();
-    let mut evidence = vec![Evidence::default(); n];
-    let valid = texels.valid_mask();
-    for i in 0..texels.len() {
-        let e = &mut evidence[regions.of_triangle[texels.triangle[i] as usize] as usize];
-        let w = f64::from(texels.area[i]);
-        e.texel_area += w;
-        if valid[i] {
-            e.valid_area += w;
-            e.light += w * f64::from((pilot[0][i] + pilot[1][i]).element_sum()) / 6.0;
-        }
-    }
-    for p in &sample.points {
-        let e = &mut evidence[regions.of_triangle[p.triangle as usize] as usize];
-        e.points.add(f64::from(p.rest_square + p.punctual_square));
-    }
-    for &t in &sample.unseen {
-        evidence[regions.of_triangle[t as usize] as usize].unseen += 1;
-    }
-    let (scene_square, _) = sample.mean_square_total();
-    let mean_light = sample.mean_light();
-    let scene_light = evidence.iter().map(|e| e.light).sum::<f64>()
-        / evidence
-            .iter()
-            .map(|e| e.valid_area)
-            .sum::<f64>()
-            .max(f64::MIN_POSITIVE);
-    if !(scene_square.is_finite() && scene_square > 0.0 && mean_light > 0.0 && scene_light > 0.0) {
+    let evidence = Evidence::of_regions(&regions, texels, pilot, sample);
+    let Some(levels) = SceneLevels::of(&evidence, sample) else {
         plan.reasons.push(
             "texel density uniform: the density pilot's sample measured no lookup error".into(),
         );
         return None;
-    }
-    let scene_square = scene_square.max(0.0);
-
-    // Shrunk means: region → instance → scene (normal–normal, with the between-region
-    // variance of the true means τ² by the method of moments, at least (m̄/10)²).
-    let all = sample.points.iter().fold(Moments::default(), |mut m, p| {
-        m.add(f64::from(p.rest_square + p.punctual_square));
-        m
-    });
-    let point_variance = all.variance().max(f64::MIN_POSITIVE);
-    let measured: Vec<&Moments> = evidence
-        .iter()
-        .map(|e| &e.points)
-        .filter(|m| m.n > 0.0)
-        .collect();
-    let spread = measured
-        .iter()
-        .map(|m| (m.mean() - all.mean()).powi(2))
-        .sum::<f64>()
-        / measured.len().max(1) as f64;
-    let sampling =
-        measured.iter().map(|m| point_variance / m.n).sum::<f64>() / measured.len().max(1) as f64;
-    let tau2 = (spread - sampling)
-        .max((0.1 * scene_square).powi(2))
-        .max(f64::MIN_POSITIVE);
-    let instances = scene.instances.len();
-    let mut inst_points = vec![Moments::default(); instances];
-    for (r, e) in evidence.iter().enumerate() {
-        inst_points[regions.instance[r] as usize].merge(&e.points);
-    }
-    let inst_mean: Vec<f64> = inst_points
-        .iter()
-        .map(|m| shrink(m, point_variance, all.mean(), tau2).0)
-        .collect();
-    let (lo, hi) = DENSITY_RANGE;
-    let tpu2 = f64::from(tpu).powi(2);
-    let mut hidden = vec![false; n];
-    let (mut m, mut m_high) = (vec![0.0f64; n], vec![0.0f64; n]);
-    let mut floor = vec![0.0f32; n];
-    for (r, e) in evidence.iter().enumerate() {
-        let buried = e.texel_area > 0.0 && e.valid_area <= 0.0;
-        let unseen = e.points.n == 0.0 && e.unseen >= HIDDEN_POINTS;
-        let dark = e.valid_area > 0.0 && e.light / e.valid_area <= 1e-3 * scene_light;
-        if buried || unseen || dark || regions.area[r] <= 0.0 {
-            hidden[r] = true;
-            continue;
-        }
-        let prior = inst_mean[regions.instance[r] as usize];
-        let (mean, variance) = shrink(&e.points, point_variance, prior, tau2);
-        // The error a viewer sees is the region's mean square over its seen part only, while
-        // texels cost over all of it: weigh by the seen share of the points drawn there.
-        let seen = e.seen_share();
-        m[r] = mean.max(0.0) * seen;
-        m_high[r] = (mean + 2.0 * variance.sqrt()).max(0.0) * seen;
-        let texels_now = regions.area[r] * tpu2;
-        floor[r] = ((MIN_REGION_TEXELS / texels_now).sqrt() as f32).min(hi);
-    }
-    let seen_area: f64 = (0..n)
-        .filter(|&r| !hidden[r])
-        .map(|r| regions.area[r])
-        .sum();
-    if seen_area <= 0.0 {
+    };
+    let prior = Prior::of(
+        scene.instances.len(),
+        &regions,
+        &evidence,
+        sample,
+        levels.square,
+    );
+    let Some(model) = Model::new(&regions, &evidence, &prior, &levels, (tpu, pilot_tpu)) else {
         plan.reasons
             .push("texel density uniform: no region is seen and lit".into());
         return None;
-    }
-    // Relative weights w_r = (m_r / m̄)^{1/(Q+2)}, the factor at scale c is c·w_r, clamped. A
-    // region is made sparser than the rest only as far as the upper end of its estimate allows:
-    // a noisy sample never thins a surface on a guess.
-    let root = |m: f64| {
-        (m / scene_square)
-            .max(1e-12)
-            .powf(1.0 / (ERROR_EXPONENT + 2.0))
     };
-    let weight: Vec<f64> = (0..n)
-        .map(|r| root(m[r]).max(root(m_high[r]).min(1.0)))
-        .collect();
-    let factors = |c: f64| -> Vec<f32> {
-        (0..n)
+    let (scale, total_why) = model.total_raise(sample, plan);
+    let chosen = model.factors(scale);
+    if chosen.iter().all(|&f| f == 1.0) {
+        plan.reasons.push(format!(
+            "texel density uniform: every region's lookup error is near the scene's ({total_why})"
+        ));
+        return None;
+    }
+    model.explain(scene, &evidence, sample, (&chosen, &total_why), plan);
+    Some(
+        regions
+            .of_triangle
+            .iter()
+            .map(|&r| chosen[r as usize])
+            .collect(),
+    )
+}
+
+/// What the sample and the pilot say of one region.
+#[derive(Clone, Copy, Debug, Default)]
+struct Evidence {
+    points: Moments,
+    unseen: u32,
+    /// Σ area and Σ area·light over the region's valid texels; all its texels' area.
+    valid_area: f64,
+    light: f64,
+    texel_area: f64,
+}
+
+impl Evidence {
+    /// Each region's: its texels' area and pilot light, its sampled points' squared lookup
+    /// errors and its points left out as unseen.
+    fn of_regions(
+        regions: &Regions,
+        texels: &Texels,
+        pilot: [&[Vec3]; 2],
+        sample: &GatheredSample,
+    ) -> Vec<Evidence> {
+        let mut evidence = vec![Evidence::default(); regions.len()];
+        let valid = texels.valid_mask();
+        for i in 0..texels.len() {
+            let e = &mut evidence[regions.of_triangle[texels.triangle[i] as usize] as usize];
+            let w = f64::from(texels.area[i]);
+            e.texel_area += w;
+            if valid[i] {
+                e.valid_area += w;
+                e.light += w * f64::from((pilot[0][i] + pilot[1][i]).element_sum()) / 6.0;
+            }
+        }
+        for p in &sample.points {
+            let e = &mut evidence[regions.of_triangle[p.triangle as usize] as usize];
+            e.points.add(f64::from(p.rest_square + p.punctual_square));
+        }
+        for &t in &sample.unseen {
+            evidence[regions.of_triangle[t as usize] as usize].unseen += 1;
+        }
+        evidence
+    }
+
+    /// The share of the points drawn on the region that were seen (1 when none was drawn).
+    fn seen_share(&self) -> f64 {
+        let drawn = self.points.n + f64::from(self.unseen);
+        if drawn > 0.0 {
+            self.points.n / drawn
+        } else {
+            1.0
+        }
+    }
+
+    /// Nobody sees the region or no light reaches it: the validity pass buried all its
+    /// texels, every point drawn there was unseen, or it is lit at under 1/1000 of the scene.
+    fn hidden(&self, area: f64, scene_light: f64) -> bool {
+        let buried = self.texel_area > 0.0 && self.valid_area <= 0.0;
+        let unseen = self.points.n == 0.0 && self.unseen >= HIDDEN_POINTS;
+        let dark = self.valid_area > 0.0 && self.light / self.valid_area <= 1e-3 * scene_light;
+        buried || unseen || dark || area <= 0.0
+    }
+}
+
+/// The scene's own levels, which the regions' are measured against.
+struct SceneLevels {
+    /// The sample's mean square lookup error (m̄).
+    square: f64,
+    /// The sample's mean light: relative errors are of it.
+    light: f64,
+    /// The pilot's light over the valid texels (area-weighted): a region far below is unlit.
+    texel_light: f64,
+}
+
+impl SceneLevels {
+    /// `None` when the sample measured no lookup error or no light (nothing to weigh by).
+    fn of(evidence: &[Evidence], sample: &GatheredSample) -> Option<SceneLevels> {
+        let (square, _) = sample.mean_square_total();
+        let light = sample.mean_light();
+        let texel_light = evidence.iter().map(|e| e.light).sum::<f64>()
+            / evidence
+                .iter()
+                .map(|e| e.valid_area)
+                .sum::<f64>()
+                .max(f64::MIN_POSITIVE);
+        let measured = square.is_finite() && square > 0.0 && light > 0.0 && texel_light > 0.0;
+        measured.then_some(SceneLevels {
+            square,
+            light,
+            texel_light,
+        })
+    }
+}
+
+/// What a region's mean square is shrunk towards: its instance's mean, itself shrunk towards
+/// the scene's, so that small regions with few points borrow from their object
+/// (normal–normal, with the between-region variance of the true means τ² by the method of
+/// moments, at least (m̄/10)²).
+struct Prior {
+    /// The variance of one point's squared lookup error, over the whole sample.
+    point_variance: f64,
+    tau2: f64,
+    instance_mean: Vec<f64>,
+}
+
+impl Prior {
+    fn of(
+        instances: usize,
+        regions: &Regions,
+        evidence: &[Evidence],
+        sample: &GatheredSample,
+        scene_square: f64,
+    ) -> Prior {
+        let all = sample.points.iter().fold(Moments::default(), |mut m, p| {
+            m.add(f64::from(p.rest_square + p.punctual_square));
+            m
+        });
+        let point_variance = all.variance().max(f64::MIN_POSITIVE);
+        let measured: Vec<&Moments> = evidence
+            .iter()
+            .map(|e| &e.points)
+            .filter(|m| m.n > 0.0)
+            .collect();
+        let spread = measured
+            .iter()
+            .map(|m| (m.mean() - all.mean()).powi(2))
+            .sum::<f64>()
+            / measured.len().max(1) as f64;
+        let sampling = measured.iter().map(|m| point_variance / m.n).sum::<f64>()
+            / measured.len().max(1) as f64;
+        let tau2 = (spread - sampling)
+            .max((0.1 * scene_square).powi(2))
+            .max(f64::MIN_POSITIVE);
+        let mut inst_points = vec![Moments::default(); instances];
+        for (r, e) in evidence.iter().enumerate() {
+            inst_points[regions.instance[r] as usize].merge(&e.points);
+        }
+        let instance_mean = inst_points
+            .iter()
+            .map(|m| shrink(m, point_variance, all.mean(), tau2).0)
+            .collect();
+        Prior {
+            point_variance,
+            tau2,
+            instance_mean,
+        }
+    }
+
+    /// The posterior mean and variance of the mean square of a region of `instance`.
+    fn shrink(&self, points: &Moments, instance: u32) -> (f64, f64) {
+        let prior = self.instance_mean[instance as usize];
+        shrink(points, self.point_variance, prior, self.tau2)
+    }
+}
+
+/// Per region what its factor is built from, and the factors, texels and predicted error at a
+/// scale `c` of the relative weights (see the module docs).
+struct Model<'a> {
+    regions: &'a Regions,
+    /// Buried, unseen or unlit: [`HIDDEN_FACTOR`].
+    hidden: Vec<bool>,
+    /// `m_r`: the region's shrunk mean square, weighed by its seen share.
+    square: Vec<f64>,
+    /// `(m_r / m̄)^{1/(Q+2)}`, or the upper end of the estimate's where that is higher.
+    weight: Vec<f64>,
+    /// The factor that gives the region [`MIN_REGION_TEXELS`].
+    floor: Vec<f32>,
+    seen_area: f64,
+    /// The preset's and the pilot's densities (/m).
+    tpu: f32,
+    pilot_tpu: f32,
+    /// Texels per m² at factor 1.
+    tpu2: f64,
+    /// The sample's mean square carried from the pilot's density to the preset's.
+    to_preset: f64,
+    mean_light: f64,
+}
+
+impl<'a> Model<'a> {
+    /// `None` when no region is seen and lit.
+    fn new(
+        regions: &'a Regions,
+        evidence: &[Evidence],
+        prior: &Prior,
+        levels: &SceneLevels,
+        (tpu, pilot_tpu): (f32, f32),
+    ) -> Option<Model<'a>> {
+        let n = regions.len();
+        let tpu2 = f64::from(tpu).powi(2);
+        let mut hidden = vec![false; n];
+        let (mut square, mut square_high) = (vec![0.0f64; n], vec![0.0f64; n]);
+        let mut floor = vec![0.0f32; n];
+        for (r, e) in evidence.iter().enumerate() {
+            if e.hidden(regions.area[r], levels.texel_light) {
+                hidden[r] = true;
+                continue;
+            }
+            let (mean, variance) = prior.shrink(&e.points, regions.instance[r]);
+            // The error a viewer sees is the region's mean square over its seen part only,
+            // while texels cost over all of it: weigh by the seen share of the points drawn.
+            let seen = e.seen_share();
+            square[r] = mean.max(0.0) * seen;
+            square_high[r] = (mean + 2.0 * variance.sqrt()).max(0.0) * seen;
+            let texels_now = regions.area[r] * tpu2;
+            floor[r] = ((MIN_REGION_TEXELS / texels_now).sqrt() as f32).min(DENSITY_RANGE.1);
+        }
+        let seen_area: f64 = (0..n)
+            .filter(|&r| !hidden[r])
+            .map(|r| regions.area[r])
+            .sum();
+        if seen_area <= 0.0 {
+            return None;
+        }
+        // A region is made sparser than the rest only as far as the upper end of its estimate
+        // allows: a noisy sample never thins a surface on a guess.
+        let root = |m: f64| {
+            (m / levels.square)
+                .max(1e-12)
+                .powf(1.0 / (ERROR_EXPONENT + 2.0))
+        };
+        let weight = (0..n)
+            .map(|r| root(square[r]).max(root(square_high[r]).min(1.0)))
+            .collect();
+        Some(Model {
+            regions,
+            hidden,
+            square,
+            weight,
+            floor,
+            seen_area,
+            tpu,
+            pilot_tpu,
+            tpu2,
+            to_preset: f64::from(pilot_tpu / tpu).powf(PILOT_EXPONENT),
+            mean_light: levels.light,
+        })
+    }
+
+    /// The factors at scale `c`: `c·w_r`, clamped to [`DENSITY_RANGE`], at least the region's
+    /// floor and 1, on quarter-octave steps; [`HIDDEN_FACTOR`] where hidden.
+    fn factors(&self, c: f64) -> Vec<f32> {
+        let (lo, hi) = DENSITY_RANGE;
+        (0..self.regions.len())
             .map(|r| {
-                if hidden[r] {
+                if self.hidden[r] {
                     HIDDEN_FACTOR
                 } else {
                     // Never below the preset's density: thinning on the pilot's noisy products
                     // cost the furnished interior 2.2% → 4.9% at high.
                     quantise(
-                        ((c * weight[r]) as f32)
+                        ((c * self.weight[r]) as f32)
                             .clamp(lo, hi)
-                            .max(floor[r])
+                            .max(self.floor[r])
                             .max(1.0),
                     )
                 }
             })
             .collect()
-    };
-    let texels_at = |f: &[f32]| -> f64 {
+    }
+
+    /// The texels of the uniform atlas: every region at the preset's density.
+    fn uniform_texels(&self) -> f64 {
+        self.regions.area.iter().sum::<f64>() * self.tpu2
+    }
+
+    /// The texels of the regions at factors `f`.
+    fn texels_at(&self, f: &[f32]) -> f64 {
         f.iter()
-            .zip(&regions.area)
+            .zip(&self.regions.area)
             .map(|(f, a)| a * f64::from(*f).powi(2))
             .sum::<f64>()
-            * tpu2
-    };
-    // The relative RMS lookup error predicted at these factors of the preset's density: the
-    // sample's mean square, scaled by `scale` (its bounds), carried from the pilot's density
-    // to the preset's by [`PILOT_EXPONENT`] and from there by [`ERROR_EXPONENT`].
-    let to_preset = f64::from(pilot_tpu / tpu).powf(PILOT_EXPONENT);
-    let predicted = |f: &[f32], scale: f64| -> f64 {
-        let square: f64 = (0..n)
-            .filter(|&r| !hidden[r])
+            * self.tpu2
+    }
+
+    /// The relative RMS lookup error predicted at factors `f` of the preset's density: the
+    /// sample's mean square, scaled by `scale` (its bounds), carried from the pilot's density
+    /// to the preset's by [`PILOT_EXPONENT`] and from there by [`ERROR_EXPONENT`].
+    fn predicted(&self, f: &[f32], scale: f64) -> f64 {
+        let square: f64 = (0..self.regions.len())
+            .filter(|&r| !self.hidden[r])
             .map(|r| {
                 let f = f64::from(f[r]).powf(-ERROR_EXPONENT);
-                regions.area[r] * m[r] * scale * to_preset * f
+                self.regions.area[r] * self.square[r] * scale * self.to_preset * f
             })
             .sum::<f64>()
-            / seen_area;
-        square.max(0.0).sqrt() / mean_light
-    };
-    // The scale at which `more_is_better(factors)` turns false, by bisection on log c.
-    let solve = |over: &dyn Fn(&[f32]) -> bool| -> f64 {
+            / self.seen_area;
+        square.max(0.0).sqrt() / self.mean_light
+    }
+
+    /// The scale at which `over(factors)` turns false, by bisection on log c.
+    fn solve(&self, over: &dyn Fn(&[f32]) -> bool) -> f64 {
         let (mut a, mut b) = (1e-3f64, 1e3f64);
         for _ in 0..50 {
             let c = (a * b).sqrt();
-            if over(&factors(c)) {
+            if over(&self.factors(c)) {
                 a = c;
             } else {
                 b = c;
             }
         }
         b
-    };
-    let uniform_texels = regions.area.iter().sum::<f64>() * tpu2;
-    // Every seen region at least at the preset's density, those that measured more error
-    // denser (`c = 1`: a region at the scene's mean square keeps the preset's density).
-    let same = 1.0;
-    let room = f64::from(plan.target_error) * (1.0 - f64::from(NOISE_SHARE).powi(2)).sqrt();
-    // Surely: the lower end of the sample's own range (its gathered part's noise; the punctual
-    // part is exact at each point), as the sample reports it.
-    let (r, r_lo, _) = sample.relative_error_bounds();
-    let lower = if r > 0.0 {
-        f64::from(r_lo / r).powi(2)
-    } else {
-        0.0
-    };
-    let at_same = factors(same);
-    let (error_same, error_lower) = (predicted(&at_same, 1.0), predicted(&at_same, lower));
-    let cap = plan
-        .texel_budget
-        .map_or(f64::INFINITY, |(_, hi)| hi)
-        .min(MAX_TEXEL_RAISE * uniform_texels);
-    let mut scale = same;
-    let mut total_why = format!(
-        "the preset's density on every seen region, more where a region's error is above the \
-         scene's: the predicted lookup error {:.2}% (lower end {:.2}%) is not surely above the {:.2}% the {:.1}% target leaves beside the noise",
-        error_same * 100.0,
-        error_lower * 100.0,
-        room * 100.0,
-        plan.target_error * 100.0
-    );
-    if error_lower > room && cap > uniform_texels {
-        let wanted = solve(&|f| predicted(f, 1.0) > room);
-        let capped = solve(&|f| texels_at(f) < cap);
-        scale = wanted.min(capped).max(same);
-        let reached = predicted(&factors(scale), 1.0);
-        total_why = format!(
+    }
+
+    /// The scale of the factors, and why: 1 (every seen region at least at the preset's
+    /// density, those that measured more error denser) unless even the lower end of the
+    /// sample's range predicts an error above the target's room beside the noise; then as
+    /// far as the central prediction meets it, within the cap on texels.
+    fn total_raise(&self, sample: &GatheredSample, plan: &Plan) -> (f64, String) {
+        let uniform_texels = self.uniform_texels();
+        let same = 1.0;
+        let room = f64::from(plan.target_error) * (1.0 - f64::from(NOISE_SHARE).powi(2)).sqrt();
+        // Surely: the lower end of the sample's own range (its gathered part's noise; the
+        // punctual part is exact at each point), as the sample reports it.
+        let (r, r_lo, _) = sample.relative_error_bounds();
+        let lower = if r > 0.0 {
+            f64::from(r_lo / r).powi(2)
+        } else {
+            0.0
+        };
+        let at_same = self.factors(same);
+        let (error_same, error_lower) = (
+            self.predicted(&at_same, 1.0),
+            self.predicted(&at_same, lower),
+        );
+        let cap = plan
+            .texel_budget
+            .map_or(f64::INFINITY, |(_, hi)| hi)
+            .min(MAX_TEXEL_RAISE * uniform_texels);
+        if !(error_lower > room && cap > uniform_texels) {
+            let why = format!(
+                "the preset's density on every seen region, more where a region's error is above the \
+                 scene's: the predicted lookup error {:.2}% (lower end {:.2}%) is not surely above the {:.2}% the {:.1}% target leaves beside the noise",
+                error_same * 100.0,
+                error_lower * 100.0,
+                room * 100.0,
+                plan.target_error * 100.0
+            );
+            return (same, why);
+        }
+        let wanted = self.solve(&|f| self.predicted(f, 1.0) > room);
+        let capped = self.solve(&|f| self.texels_at(f) < cap);
+        let scale = wanted.min(capped).max(same);
+        let reached = self.predicted(&self.factors(scale), 1.0);
+        let why = format!(
             "×{:.2} the uniform atlas's texels: its predicted lookup error {:.2}% (lower end \
              {:.2}%) is above the {:.2}% the {:.1}% target leaves beside the noise; {}",
-            texels_at(&factors(scale)) / uniform_texels,
+            self.texels_at(&self.factors(scale)) / uniform_texels,
             error_same * 100.0,
             error_lower * 100.0,
             room * 100.0,
@@ -437,70 +596,74 @@ pub fn choose_region_density(
                 format!("predicted {:.2}%", reached * 100.0)
             }
         );
+        (scale, why)
     }
-    let chosen = factors(scale);
-    if chosen.iter().all(|&f| f == 1.0) {
+
+    /// The `--explain` reasons of the `chosen` factors (`total_why`: their scale's): the
+    /// totals, and the regions that got most and least. Only regions the sample measured are
+    /// named: a tiny region at its floor of texels says nothing.
+    fn explain(
+        &self,
+        scene: &Scene,
+        evidence: &[Evidence],
+        sample: &GatheredSample,
+        (chosen, total_why): (&[f32], &str),
+        plan: &mut Plan,
+    ) {
+        let (regions, n, tpu, pilot_tpu) =
+            (self.regions, self.regions.len(), self.tpu, self.pilot_tpu);
+        let hidden_count = self.hidden.iter().filter(|&&h| h).count();
+        let hidden_area: f64 = (0..n)
+            .filter(|&r| self.hidden[r])
+            .map(|r| regions.area[r])
+            .sum();
+        let texels = self.texels_at(chosen);
+        let uniform_texels = self.uniform_texels();
         plan.reasons.push(format!(
-            "texel density uniform: every region's lookup error is near the scene's ({total_why})"
+            "texel density per region ({n} regions, about {texels:.0} texels against {uniform_texels:.0} \
+             uniform, factors ×{:.2}…×{:.2} of {tpu} /m, ∝ the fourth root of each region's lookup \
+             error at the density pilot's {} points, on an atlas at {pilot_tpu} /m): {total_why}; {hidden_count} regions \
+             ({hidden_area:.2} m²) buried, unseen or unlit get ×{HIDDEN_FACTOR}",
+            chosen.iter().copied().fold(f32::INFINITY, f32::min),
+            chosen.iter().copied().fold(0.0, f32::max),
+            sample.points.len(),
         ));
-        return None;
+        let measured: Vec<usize> = (0..n)
+            .filter(|&r| !self.hidden[r] && evidence[r].points.n > 0.0)
+            .collect();
+        let added = |r: usize| regions.area[r] * (f64::from(chosen[r]).powi(2) - 1.0) * self.tpu2;
+        let describe = |r: usize| {
+            let inst = &scene.instances[regions.instance[r] as usize];
+            let e = &evidence[r];
+            format!(
+                "node {} mesh {} ({:.3} m², {} points, {:.0}% of those drawn there seen, RMS lookup \
+                 error {:.1}% of the mean light at the pilot's density) ×{:.2}, {:+.0} texels",
+                inst.node,
+                inst.mesh,
+                regions.area[r],
+                e.points.n,
+                100.0 * e.seen_share(),
+                (self.square[r] / e.seen_share().max(1e-12)).sqrt() / self.mean_light * 100.0,
+                chosen[r],
+                added(r)
+            )
+        };
+        let shown = 3.min(measured.len());
+        let mut most = measured.clone();
+        most.sort_by(|&a, &b| added(b).total_cmp(&added(a)));
+        let mut least = measured;
+        least.sort_by(|&a, &b| {
+            chosen[a]
+                .total_cmp(&chosen[b])
+                .then(regions.area[b].total_cmp(&regions.area[a]))
+        });
+        let most: Vec<String> = most[..shown].iter().map(|&r| describe(r)).collect();
+        let least: Vec<String> = least[..shown].iter().map(|&r| describe(r)).collect();
+        plan.reasons
+            .push(format!("regions given most texels: {}", most.join("; ")));
+        plan.reasons
+            .push(format!("sparsest measured regions: {}", least.join("; ")));
     }
-    let hidden_count = hidden.iter().filter(|&&h| h).count();
-    let hidden_area: f64 = (0..n).filter(|&r| hidden[r]).map(|r| regions.area[r]).sum();
-    let texels = texels_at(&chosen);
-    plan.reasons.push(format!(
-        "texel density per region ({n} regions, about {texels:.0} texels against {uniform_texels:.0} \
-         uniform, factors ×{:.2}…×{:.2} of {tpu} /m, ∝ the fourth root of each region's lookup \
-         error at the density pilot's {} points, on an atlas at {pilot_tpu} /m): {total_why}; {hidden_count} regions \
-         ({hidden_area:.2} m²) buried, unseen or unlit get ×{HIDDEN_FACTOR}",
-        chosen.iter().copied().fold(f32::INFINITY, f32::min),
-        chosen.iter().copied().fold(0.0, f32::max),
-        sample.points.len(),
-    ));
-    // The regions that got most and least, and why: among those the sample measured (a tiny
-    // region at its floor of texels says nothing), the most texels added, and the lowest factors.
-    let measured: Vec<usize> = (0..n)
-        .filter(|&r| !hidden[r] && evidence[r].points.n > 0.0)
-        .collect();
-    let added = |r: usize| regions.area[r] * (f64::from(chosen[r]).powi(2) - 1.0) * tpu2;
-    let describe = |r: usize| {
-        let inst = &scene.instances[regions.instance[r] as usize];
-        let e = &evidence[r];
-        format!(
-            "node {} mesh {} ({:.3} m², {} points, {:.0}% of those drawn there seen, RMS lookup \
-             error {:.1}% of the mean light at the pilot's density) ×{:.2}, {:+.0} texels",
-            inst.node,
-            inst.mesh,
-            regions.area[r],
-            e.points.n,
-            100.0 * e.seen_share(),
-            (m[r] / e.seen_share().max(1e-12)).sqrt() / mean_light * 100.0,
-            chosen[r],
-            added(r)
-        )
-    };
-    let shown = 3.min(measured.len());
-    let mut most = measured.clone();
-    most.sort_by(|&a, &b| added(b).total_cmp(&added(a)));
-    let mut least = measured;
-    least.sort_by(|&a, &b| {
-        chosen[a]
-            .total_cmp(&chosen[b])
-            .then(regions.area[b].total_cmp(&regions.area[a]))
-    });
-    let most: Vec<String> = most[..shown].iter().map(|&r| describe(r)).collect();
-    let least: Vec<String> = least[..shown].iter().map(|&r| describe(r)).collect();
-    plan.reasons
-        .push(format!("regions given most texels: {}", most.join("; ")));
-    plan.reasons
-        .push(format!("sparsest measured regions: {}", least.join("; ")));
-    Some(
-        regions
-            .of_triangle
-            .iter()
-            .map(|&r| chosen[r as usize])
-            .collect(),
-    )
 }
 
 /// Count, sum and sum of squares of a region's per-point squared lookup errors.
