@@ -78,11 +78,16 @@
 pub mod density;
 pub mod error_map;
 pub mod gathered;
+pub mod memory;
 pub mod punctual;
 
 use glam::Vec3;
 
 pub use gathered::GatheredSample;
+pub use memory::{
+    COUNT_BYTES_PER_RAY, MemoryEstimate, MemoryInputs, ROW_ENTRY_BYTES, entries_per_texel,
+    format_bytes, memory_estimate, row_entry_bytes,
+};
 pub use punctual::PunctualSample;
 
 use crate::config::{BakeConfig, FormFactors, Keep, RowSolver, RowStorage, Technique};
@@ -831,184 +836,6 @@ fn texel_rays(texels: &Texels, pilot: &[&[Vec3]], k: u32) -> (Vec<u32>, (usize, 
         })
         .collect();
     (rays, reduced)
-}
-
-/// The sizes a bake's peak memory depends on ([`memory_estimate`]).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct MemoryInputs {
-    /// Bytes of the input files (the JSON and buffers stay loaded until the output is written).
-    pub input_bytes: f64,
-    pub vertices: f64,
-    pub triangles: f64,
-    pub texels: f64,
-    /// Texels of all pages, covered or not (width × height summed).
-    pub page_texels: f64,
-    /// Row entries held while the last rows are built (the pilot runs a final bake reuses).
-    pub held_entries: f64,
-    /// Row entries of the rows being built at the peak.
-    pub built_entries: f64,
-    /// Finished transports held besides the one being built (pilot runs): their per-texel
-    /// vectors count too.
-    pub held_runs: f64,
-    /// Which solver iterates the rows: Southwell keeps a transposed copy of them.
-    pub technique: Technique,
-    /// Monte Carlo rows built as ray counts ([`crate::config::TransportParams::count_rows`]).
-    pub count_rows: bool,
-}
-
-/// Estimated peak memory of a bake by part, in bytes ([`memory_estimate`]).
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct MemoryEstimate {
-    /// The process, the input files and the loaded scene.
-    pub scene: f64,
-    /// The tracer's BVH and triangles.
-    pub bvh: f64,
-    /// The atlas stage's working set (xatlas' charting and packing), kept by the allocator.
-    pub atlas: f64,
-    /// Texels, their lightmap values and per-texel vectors of transport and solver.
-    pub texels: f64,
-    /// Lightmap pages (index, values, encoded files).
-    pub pages: f64,
-    /// Stored form-factor rows.
-    pub rows: f64,
-}
-
-impl MemoryEstimate {
-    pub fn total(&self) -> f64 {
-        self.scene + self.bvh + self.atlas + self.texels + self.pages + self.rows
-    }
-
-    /// "1.2 GiB (rows 1.0 GiB, texels …)", for messages.
-    pub fn describe(&self) -> String {
-        format!(
-            "{} (rows {}, texels {}, pages {}, BVH {}, atlas {}, scene {})",
-            format_bytes(self.total()),
-            format_bytes(self.rows),
-            format_bytes(self.texels),
-            format_bytes(self.pages),
-            format_bytes(self.bvh),
-            format_bytes(self.atlas),
-            format_bytes(self.scene)
-        )
-    }
-}
-
-/// Bytes in binary units, three significant digits ("512 MiB", "1.25 GiB").
-pub fn format_bytes(bytes: f64) -> String {
-    let units = ["B", "KiB", "MiB", "GiB", "TiB"];
-    let mut value = bytes;
-    let mut unit = 0;
-    while value >= 1024.0 && unit + 1 < units.len() {
-        value /= 1024.0;
-        unit += 1;
-    }
-    let digits = if value >= 100.0 || unit == 0 {
-        0
-    } else if value >= 10.0 {
-        1
-    } else {
-        2
-    };
-    format!("{value:.digits$} {}", units[unit])
-}
-
-/// Bytes of one stored f32 row entry: the source texel (u32) and its form factor (f32).
-pub const ROW_ENTRY_BYTES: f64 = 8.0;
-/// Bytes per gathering ray of Monte Carlo rows stored as ray counts ([`crate::transport::Rows`]),
-/// their headers included, besides `TEXEL_BYTES`' per-row part (a row's start, 2.25 bytes):
-/// measured 0.67 (Cornell box, K = 1024), 0.71 and 0.82 (64k-triangle furnished interior,
-/// K = 256 and 64), 1.12 (two rooms, K = 1024, whose rays land farther apart;
-/// `examples/dev/row_storage.rs`).
-pub const COUNT_BYTES_PER_RAY: f64 = 1.0;
-/// Rows are built in chunks and then concatenated: both copies exist for a moment, and a
-/// chunk's vectors grow by doubling.
-const ROW_BUILD_FACTOR: f64 = 2.5;
-/// Per texel: `Texels` (96 bytes of positions, normals, area, albedo, emission, page, xy,
-/// triangle, footprint, jitter), a transport's escape, direct light and row start (20; rows as
-/// ray counts keep `K` in their bytes, with a 2.25-byte start),
-/// the solver's iterates and solution (4 RGB vectors, 48), the lightmap and the denoiser's
-/// copies (36): 200, rounded up.
-const TEXEL_BYTES: f64 = 210.0;
-/// Per texel of a finished transport and solution that is kept (a pilot run).
-const HELD_RUN_TEXEL_BYTES: f64 = 32.0;
-/// Per page texel: the texel index (4), the page's values and validity (13), dilation's copy
-/// (12), the EXR and PNG encodings (up to 16).
-const PAGE_TEXEL_BYTES: f64 = 48.0;
-/// Per vertex: position, normal, two UV sets, and the atlas's copy with its remap.
-const VERTEX_BYTES: f64 = 64.0;
-/// Per triangle: indices and instance (the scene), per-triangle texel lookups (32), the
-/// atlas's charts.
-const TRIANGLE_BYTES: f64 = 96.0;
-/// Per triangle of the tracer: the CWBVH nodes and the precomputed triangles in BVH order.
-const BVH_TRIANGLE_BYTES: f64 = 128.0;
-/// Per triangle of the atlas stage: xatlas' charting and packing working set. Measured (RSS
-/// sampled every 50 ms, `furnished_interior.glb`, 71 624 triangles): +104 MiB at draft (48k
-/// texels) and +112 MiB at medium (155k texels) in the stage's last seconds, whatever the
-/// texels, from ~90 MiB; the resident memory stays up afterwards (glibc keeps the freed heap,
-/// one arena or many alike) and later stages reuse only part of it. With this figure the
-/// estimate ÷ measured peak is 0.94 and 0.99 there, 0.81 and 0.77 on the Cornell box and two
-/// rooms at high (the guide, `src/guide/performance.md`, "Memory").
-const ATLAS_TRIANGLE_BYTES: f64 = 2560.0;
-/// The input as read and as decoded (JSON tree, buffers).
-const INPUT_FACTOR: f64 = 2.0;
-/// The process itself: code, thread stacks, allocator.
-const PROCESS_BYTES: f64 = 8.0 * 1024.0 * 1024.0;
-
-/// Peak memory of a bake of `m`, before light transport starts: every part a bake holds at
-/// once when its last rows are built (stages before are smaller: the atlas's and validity's
-/// working sets are per chart and per texel). Checked against measured peaks in the guide
-/// ("Memory").
-pub fn memory_estimate(m: &MemoryInputs) -> MemoryEstimate {
-    let transposed = matches!(
-        m.technique,
-        Technique::Stored {
-            solver: RowSolver::Southwell,
-            ..
-        }
-    );
-    // Southwell's transpose holds f32 entries whatever the rows are stored as.
-    let built = m.built_entries
-        * (ROW_BUILD_FACTOR * row_entry_bytes(m.technique, m.count_rows)
-            + if transposed { ROW_ENTRY_BYTES } else { 0.0 });
-    MemoryEstimate {
-        scene: PROCESS_BYTES
-            + INPUT_FACTOR * m.input_bytes
-            + VERTEX_BYTES * m.vertices
-            + TRIANGLE_BYTES * m.triangles,
-        bvh: BVH_TRIANGLE_BYTES * m.triangles,
-        atlas: ATLAS_TRIANGLE_BYTES * m.triangles,
-        texels: TEXEL_BYTES * m.texels + HELD_RUN_TEXEL_BYTES * m.held_runs * m.texels,
-        pages: PAGE_TEXEL_BYTES * m.page_texels,
-        // Held entries are pilot runs: Monte Carlo rows, built before the storage is chosen (f32).
-        rows: ROW_ENTRY_BYTES * m.held_entries + built,
-    }
-}
-
-/// Bytes per entry of [`entries_per_texel`]: Monte Carlo rows stored as ray counts
-/// (`count_rows`; entries counted as rays), otherwise f32 form factors (the hierarchy's links
-/// counted alike).
-pub fn row_entry_bytes(technique: Technique, count_rows: bool) -> f64 {
-    match technique {
-        Technique::Stored {
-            form_factors: FormFactors::MonteCarlo,
-            ..
-        } if count_rows => COUNT_BYTES_PER_RAY,
-        _ => ROW_ENTRY_BYTES,
-    }
-}
-
-/// Row entries per texel that `technique` stores at `gather_rays` (all pairs store up to one per
-/// other texel; the hierarchy's links are counted like Monte Carlo rows; gather stores none).
-pub fn entries_per_texel(technique: Technique, texels: f64, gather_rays: f64) -> f64 {
-    match technique {
-        Technique::Stored {
-            form_factors: FormFactors::MonteCarlo,
-            ..
-        }
-        | Technique::Hierarchical => gather_rays,
-        Technique::Stored { .. } => (texels - 1.0).max(0.0),
-        Technique::Gather => 0.0,
-    }
 }
 
 /// A large bake (its f32 rows' estimated peak above [`LARGE_BAKE_BYTES`]) stores its Monte

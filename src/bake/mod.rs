@@ -355,7 +355,7 @@ fn prepare_loaded(
     config.max_memory = Some(memory::limit(&config));
     memory::check(
         input,
-        &memory::Sizes::predicted(&scene, &source, &config).per_process(processes),
+        &plan::memory::Sizes::predicted(&scene, &source, &config).per_process(processes),
         &config,
         config.max_memory.unwrap_or(u64::MAX),
     )?;
@@ -513,7 +513,7 @@ pub(crate) fn light(
     );
 
     let sizes_of = |p: &Prepared| {
-        memory::Sizes::counted(&p.scene, &p.source, &p.texels).per_process(p.processes)
+        plan::memory::Sizes::counted(&p.scene, &p.source, &p.texels).per_process(p.processes)
     };
     let sizes = sizes_of(prepared);
     let limit = config.max_memory.unwrap_or(u64::MAX);
