@@ -893,7 +893,7 @@ fn keep_with_gltf(
     let settings = kept::Settings::new(&baked.scene, config, &name);
     if !layer_files.is_empty() {
         let gltf = staging.read(&name)?;
-        let edited = relight::edit_gltf(&gltf, input, |json| {
+        let edited = output::gltf_edit::edit_gltf(&gltf, input, |json| {
             relight::add_layer_extras(json, &settings, layer_files)
         })?;
         staging.replace(&name, &edited)?;

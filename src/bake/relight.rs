@@ -43,7 +43,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use glam::Vec3;
-use serde_json::{Value, json};
+use serde_json::Value;
 
 use super::kept::{self, Kept, Settings};
 use super::{StageTime, check_aborted, commit, output_stem, pages_of, stored_values, timed};
@@ -51,6 +51,7 @@ use crate::config::{BakeConfig, LayerGroup, RowSolver, Technique};
 use crate::lightmap::LightmapPages;
 use crate::lightmap::denoise::{self, DenoiseParams};
 use crate::lightmap::seams::{self, Seams};
+use crate::output::gltf_edit::{self, LayerExtras};
 use crate::output::{self, Staging};
 use crate::scene::MAX_ALBEDO;
 use crate::solve::{self, Solution};
@@ -220,8 +221,8 @@ pub fn relight(
     let mut staging = Staging::new(out_dir, &[gltf.to_path_buf()])?;
     stage_pages(&mut staging, &stem, &pages, &config, gltf)?;
     let layer_files = stage_layers(&mut staging, &stem, &layer_pages, &config, gltf)?;
-    let main = edit_gltf(&source_files[0], gltf, |json| {
-        write_edits(json, &settings, edits)?;
+    let main = gltf_edit::edit_gltf(&source_files[0], gltf, |json| {
+        write_edits(json, &settings, edits);
         add_layer_extras(json, &settings, &layer_files)
     })?;
     let name = gltf
@@ -229,7 +230,8 @@ pub fn relight(
         .and_then(|n| n.to_str())
         .unwrap_or("scene.gltf");
     staging.write(name, &main)?;
-    copy_referenced(&mut staging, gltf, &json_of(&source_files[0], gltf)?)?;
+    let json = gltf_edit::json_of(&source_files[0], gltf)?;
+    gltf_edit::copy_referenced(&mut staging, gltf, &json)?;
     check_aborted(progress)?;
     let files = commit(staging)?;
     timed(&mut stages, "write", t);
@@ -619,21 +621,15 @@ pub(crate) fn stage_layers(
         .collect()
 }
 
-/// The glTF root's `extras.lightmap_layers`: per layer its name, the lights and emissive
-/// materials (by name) and whether the sky it holds, and its pages, which line up with the
-/// lightmap's (page k of a primitive's `extras.lightmap.page`, or of the node's for a mesh
-/// written once under `--instancing share`, is page k of every layer). An engine
-/// mixes them as `lightmap = Σ weight_layer × layer page`.
+/// Names the `layers` in the glTF's root `extras.lightmap_layers` (their lights and emissive
+/// materials by the names `settings` gives them) for an engine to mix.
 pub(crate) fn add_layer_extras(
     json: &mut Value,
     settings: &Settings,
     layers: &[(Layer, Vec<output::PageFiles>)],
 ) -> Result<()> {
-    if layers.is_empty() {
-        return Ok(());
-    }
     let lights = settings.lights.len();
-    let entries: Vec<Value> = (layers.iter())
+    let extras: Vec<LayerExtras> = (layers.iter())
         .map(|(layer, files)| {
             let (mut light_names, mut materials) = (Vec::new(), Vec::new());
             for &s in &layer.sources {
@@ -647,36 +643,22 @@ pub(crate) fn add_layer_extras(
                 }
             }
             light_names.dedup();
-            let pages: Vec<Value> = (files.iter())
-                .map(|f| json!({"exr": f.exr, "png": f.png}))
-                .collect();
-            json!({
-                "name": layer.name,
-                "lights": light_names,
-                "emissiveMaterials": materials,
-                "sky": layer.sky,
-                "pages": pages,
-            })
+            LayerExtras {
+                name: &layer.name,
+                lights: light_names,
+                emissive_materials: materials,
+                sky: layer.sky,
+                pages: files,
+            }
         })
         .collect();
-    let root = json
-        .as_object_mut()
-        .ok_or_else(|| Error::Internal("the glTF is not a JSON object".to_string()))?;
-    let extras = root.entry("extras").or_insert_with(|| json!({}));
-    let extras = extras.as_object_mut().ok_or_else(|| {
-        Error::Option(
-            "the glTF's root extras is not an object: the layers cannot be named in it".to_string(),
-        )
-    })?;
-    extras.insert("lightmap_layers".to_string(), Value::Array(entries));
-    Ok(())
+    gltf_edit::set_layer_extras(json, &extras)
 }
 
-/// Writes the edited values into the glTF: a light's colour and intensity (the colour kept
-/// within [0, 1], the intensity taking the rest), a material's emissive strength
-/// (`KHR_materials_emissive_strength`) and base colour factor. The lightmap copies of a
-/// material (`<name> (lightmap k)`) are edited with it.
-fn write_edits(json: &mut Value, settings: &Settings, edits: &Edits) -> Result<()> {
+/// Writes the edited values into the glTF, by the names `settings` gives its lights and
+/// materials: a light's colour and intensity, a material's emissive strength and base colour
+/// factor. The lightmap copies of a material (`<name> (lightmap k)`) are edited with it.
+fn write_edits(json: &mut Value, settings: &Settings, edits: &Edits) {
     let mut done = Vec::new();
     for (name, factor) in &edits.lights {
         for entry in settings.lights.iter().filter(|l| &l.label == name) {
@@ -684,132 +666,26 @@ fn write_edits(json: &mut Value, settings: &Settings, edits: &Edits) -> Result<(
                 continue;
             };
             done.push((k, name));
-            let light = &mut json["extensions"]["KHR_lights_punctual"]["lights"][k as usize];
-            let color = light.get("color").and_then(rgb).unwrap_or(Vec3::ONE);
-            let intensity = light
-                .get("intensity")
-                .and_then(Value::as_f64)
-                .unwrap_or(1.0) as f32;
-            let v = color * *factor;
-            let peak = v.max_element();
-            if peak > 0.0 {
-                light["color"] = json!((v / peak).to_array());
-                light["intensity"] = json!(intensity * peak);
-            } else {
-                light["intensity"] = json!(0.0);
-            }
+            gltf_edit::scale_light(json, k as usize, *factor);
         }
     }
-    let mut used_strength = false;
     for (name, factor) in &edits.emission {
         for m in material_copies(json, settings, name) {
-            let material = &mut json["materials"][m];
-            let ext = &mut material["extensions"]["KHR_materials_emissive_strength"];
-            let strength = ext
-                .get("emissiveStrength")
-                .and_then(Value::as_f64)
-                .unwrap_or(1.0);
-            ext["emissiveStrength"] = json!(strength as f32 * factor);
-            used_strength = true;
-        }
-    }
-    if used_strength {
-        let used = json["extensionsUsed"].as_array_mut();
-        match used {
-            Some(used) if used.iter().any(|e| e == "KHR_materials_emissive_strength") => {}
-            Some(used) => used.push(json!("KHR_materials_emissive_strength")),
-            None => json["extensionsUsed"] = json!(["KHR_materials_emissive_strength"]),
+            gltf_edit::scale_emission(json, m, *factor);
         }
     }
     for (name, color) in &edits.albedo {
         for m in material_copies(json, settings, name) {
-            let material = &mut json["materials"][m]["pbrMetallicRoughness"];
-            let alpha = material["baseColorFactor"][3].as_f64().unwrap_or(1.0) as f32;
-            material["baseColorFactor"] = json!([color.x, color.y, color.z, alpha]);
+            gltf_edit::set_base_color(json, m, *color);
         }
     }
-    Ok(())
 }
 
-/// The glTF materials that are `name` or its lightmap copies (`<name> (lightmap k)`).
+/// The glTF materials that are `name` or its lightmap copies.
 fn material_copies(json: &Value, settings: &Settings, name: &str) -> Vec<usize> {
     let sources: Vec<u32> = (settings.materials.iter())
         .filter(|m| m.label == name)
         .filter_map(|m| m.source)
         .collect();
-    let copy = |n: &str| {
-        n.strip_prefix(name)
-            .and_then(|rest| rest.strip_prefix(" (lightmap "))
-            .and_then(|rest| rest.strip_suffix(')'))
-            .is_some_and(|k| k.parse::<u32>().is_ok())
-    };
-    let materials = json["materials"].as_array().map_or(&[][..], Vec::as_slice);
-    (materials.iter().enumerate())
-        .filter(|(k, m)| sources.contains(&(*k as u32)) || m["name"].as_str().is_some_and(copy))
-        .map(|(k, _)| k)
-        .collect()
-}
-
-fn rgb(v: &Value) -> Option<Vec3> {
-    let a = v.as_array()?;
-    let c = |k: usize| a.get(k).and_then(Value::as_f64).map(|x| x as f32);
-    Some(Vec3::new(c(0)?, c(1)?, c(2)?))
-}
-
-/// The JSON of `bytes`, a `.gltf` file or a `.glb`.
-fn json_of(bytes: &[u8], path: &Path) -> Result<Value> {
-    let json = match bytes.starts_with(b"glTF") {
-        true => {
-            gltf::binary::Glb::from_slice(bytes)
-                .map_err(|e| Error::invalid(path, format!("not a GLB: {e}")))?
-                .json
-        }
-        false => bytes.into(),
-    };
-    serde_json::from_slice(&json).map_err(|e| Error::invalid(path, format!("not glTF JSON: {e}")))
-}
-
-/// `bytes` (a `.gltf` or `.glb`) with its JSON changed by `edit`.
-pub(crate) fn edit_gltf(
-    bytes: &[u8],
-    path: &Path,
-    edit: impl FnOnce(&mut Value) -> Result<()>,
-) -> Result<Vec<u8>> {
-    let mut json = json_of(bytes, path)?;
-    edit(&mut json)?;
-    let invalid = |e: serde_json::Error| {
-        Error::Internal(format!("{}: cannot write the glTF: {e}", path.display()))
-    };
-    if bytes.starts_with(b"glTF") {
-        let glb = gltf::binary::Glb::from_slice(bytes)
-            .map_err(|e| Error::invalid(path, format!("not a GLB: {e}")))?;
-        let bin = glb.bin.map(|b| b.into_owned()).unwrap_or_default();
-        Ok(output::glb::container(
-            serde_json::to_vec(&json).map_err(invalid)?,
-            bin,
-        ))
-    } else {
-        serde_json::to_vec_pretty(&json).map_err(invalid)
-    }
-}
-
-/// Stages a copy of every external buffer and image `json` (the glTF at `gltf`) references
-/// that is not staged yet (the pages are).
-fn copy_referenced(staging: &mut Staging, gltf: &Path, json: &Value) -> Result<()> {
-    let dir = gltf.parent().unwrap_or(Path::new("."));
-    for key in ["buffers", "images"] {
-        for item in json[key].as_array().map_or(&[][..], Vec::as_slice) {
-            let Some(uri) = item["uri"].as_str().filter(|u| !u.starts_with("data:")) else {
-                continue;
-            };
-            let name = output::decode_uri(uri).unwrap_or_else(|| uri.to_string());
-            if staging.contains(&name) {
-                continue;
-            }
-            let path = dir.join(&name);
-            let bytes = std::fs::read(&path).map_err(|e| Error::io(&path, e))?;
-            staging.write(&name, &bytes)?;
-        }
-    }
-    Ok(())
+    gltf_edit::material_copies(json, &sources, name)
 }

@@ -1,11 +1,13 @@
 //! Stage 8 — output files, every file format lightbake writes in one place: EXR pages and
 //! rendered images (`exr.rs`), PNG previews, rendered images and RGBM pages (`png.rs`, with the
-//! RGBM encoding in `rgbm.rs`), the GLB container (`glb.rs`) and the updated glTF
-//! (`gltf_out.rs`). Everything a bake writes goes under a temporary name in the output directory
-//! and is renamed into place only when all files are complete ([`Staging`]).
+//! RGBM encoding in `rgbm.rs`), the GLB container (`glb.rs`), the updated glTF
+//! (`gltf_out.rs`) and later edits to it (`gltf_edit.rs`: relit values, layers). Everything a
+//! bake writes goes under a temporary name in the output directory and is renamed into place
+//! only when all files are complete ([`Staging`]).
 
 mod exr;
 pub mod glb;
+pub(crate) mod gltf_edit;
 mod gltf_out;
 mod gltf_out_accessor;
 pub mod png;
