@@ -444,17 +444,27 @@ fn lay_out(
     check_aborted(progress)?;
 
     let t = Instant::now();
-    let validity = if config.transport.validity {
-        let params = texels::validity::ValidityParams {
-            seed: config.transport.seed,
-            ..Default::default()
-        };
-        texels::validity::fix(&mut texels, scene, tracer, &params, progress)?
-    } else {
-        Default::default()
-    };
+    let validity = fix_validity(&mut texels, scene, tracer, config, progress)?;
     timed(stages, "validity", t);
     Ok((atlas, texels, validity))
+}
+
+/// The validity pass over `texels` when `config` asks for it.
+fn fix_validity(
+    texels: &mut texels::Texels,
+    scene: &scene::Scene,
+    tracer: &Tracer,
+    config: &BakeConfig,
+    progress: &dyn Progress,
+) -> Result<texels::validity::ValidityReport> {
+    if !config.transport.validity {
+        return Ok(Default::default());
+    }
+    let params = texels::validity::ValidityParams {
+        seed: config.transport.seed,
+        ..Default::default()
+    };
+    texels::validity::fix(texels, scene, tracer, &params, progress)
 }
 
 /// The density pilot's texels: a quickly charted atlas (`atlas::build_quick`) and its validity
@@ -469,13 +479,7 @@ fn pilot_layout(
     let atlas = atlas::build_quick(scene, source, &config.atlas, progress)?;
     check_aborted(progress)?;
     let mut texels = texels::build(scene, &atlas)?;
-    if config.transport.validity {
-        let params = texels::validity::ValidityParams {
-            seed: config.transport.seed,
-            ..Default::default()
-        };
-        texels::validity::fix(&mut texels, scene, tracer, &params, progress)?;
-    }
+    fix_validity(&mut texels, scene, tracer, config, progress)?;
     Ok(texels)
 }
 
