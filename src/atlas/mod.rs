@@ -6,6 +6,7 @@
 //! placed by several nodes is unwrapped once and each node gets a rect of a page (`share.rs`).
 
 mod existing;
+mod pack;
 pub mod share;
 pub(crate) mod xatlas;
 

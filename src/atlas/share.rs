@@ -28,6 +28,7 @@ use std::collections::BTreeMap;
 
 use glam::Vec2;
 
+use super::pack::shelf_pack;
 use super::{Atlas, InstanceUv, PageSize, page_side, xatlas};
 use crate::config::AtlasParams;
 use crate::scene::{Scene, Source};
@@ -444,10 +445,8 @@ fn place_rects(shared: &mut [SharedMesh], pages: &mut Vec<PageSize>, params: &At
         }
     }
     items.sort_by_key(|&(g, n, [w, h])| (std::cmp::Reverse(h), std::cmp::Reverse(w), g, n));
-    let placed = shelf_pack(
-        &items.iter().map(|i| i.2).collect::<Vec<_>>(),
-        params.max_page_size,
-    );
+    let side = params.max_page_size;
+    let placed = shelf_pack(&items.iter().map(|i| i.2).collect::<Vec<_>>(), [side, side]);
     let rect_pages = placed.iter().map(|p| p.0 + 1).max().unwrap_or(0);
     let mut extent = vec![[0u32; 2]; rect_pages as usize];
     for (&(_, _, [w, h]), &(page, [x, y])) in items.iter().zip(&placed) {
@@ -523,48 +522,6 @@ fn base_layout(atlas: Atlas, padding: f32) -> Option<(Vec<InstanceUv>, Vec2)> {
         })
         .collect();
     Some((instances, size))
-}
-
-/// Places rects (`[w, h]` texels, tallest first) on shelves of pages `side` texels square:
-/// each into the first shelf (any page) with room, else a new shelf, else a new page.
-/// Returns (page, [x, y]) per rect.
-fn shelf_pack(sizes: &[[u32; 2]], side: u32) -> Vec<(u32, [u32; 2])> {
-    struct Shelf {
-        page: u32,
-        y: u32,
-        height: u32,
-        used: u32,
-    }
-    let mut shelves: Vec<Shelf> = Vec::new();
-    let mut page_height: Vec<u32> = Vec::new();
-    sizes
-        .iter()
-        .map(|&[w, h]| {
-            debug_assert!(w <= side && h <= side, "a {w}×{h} rect on a {side}² page");
-            if let Some(shelf) = (shelves.iter_mut()).find(|s| s.height >= h && s.used + w <= side)
-            {
-                let at = (shelf.page, [shelf.used, shelf.y]);
-                shelf.used += w;
-                return at;
-            }
-            let page = match page_height.iter().position(|&used| used + h <= side) {
-                Some(page) => page,
-                None => {
-                    page_height.push(0);
-                    page_height.len() - 1
-                }
-            };
-            let y = page_height[page];
-            page_height[page] += h;
-            shelves.push(Shelf {
-                page: page as u32,
-                y,
-                height: h,
-                used: w,
-            });
-            (page as u32, [0, y])
-        })
-        .collect()
 }
 
 #[cfg(test)]
@@ -785,26 +742,6 @@ mod tests {
         let first = build_ok(&scene, &shared_params(16.0, 256, 2)).layout_bits();
         for _ in 0..3 {
             assert!(build_ok(&scene, &shared_params(16.0, 256, 2)).layout_bits() == first);
-        }
-    }
-
-    #[test]
-    fn shelf_packing_never_overlaps_and_opens_pages() {
-        let sizes: Vec<[u32; 2]> = (0..40u32).map(|k| [10 + 7 * (k % 5), 30 - k / 2]).collect();
-        let placed = shelf_pack(&sizes, 64);
-        assert!(placed.iter().map(|p| p.0).max().unwrap() >= 1);
-        for (a, (pa, [xa, ya])) in placed.iter().enumerate() {
-            let [wa, ha] = sizes[a];
-            assert!(xa + wa <= 64 && ya + ha <= 64);
-            for (b, (pb, [xb, yb])) in placed.iter().enumerate().skip(a + 1) {
-                let [wb, hb] = sizes[b];
-                let apart = pa != pb
-                    || xa + wa <= *xb
-                    || xb + wb <= *xa
-                    || ya + ha <= *yb
-                    || yb + hb <= *ya;
-                assert!(apart, "rects {a} and {b} overlap");
-            }
         }
     }
 

@@ -745,6 +745,11 @@ fn run_xatlas(
         max_chart_size: f64::from(pack_options.max_chart_size),
     };
     let found = find_regions(scene, tpus, limits, excluded, charting, progress);
+    if charting == Charting::Quick
+        && let Some(output) = pack_quick(scene, &found, resolution, padding)
+    {
+        return Ok(output);
+    }
 
     let atlas = ffi::Handle::create();
     let (given, regions) = add_blocks(&atlas, scene, tpus, found);
@@ -757,7 +762,18 @@ fn run_xatlas(
     let raw = atlas.output();
     let (block_meshes, outline_meshes) = raw.meshes.split_at(given.iter().map(Vec::len).sum());
     let mut meshes = block_outputs(scene, &given, block_meshes);
-    let failed = place_regions(scene, &regions, outline_meshes, &mut meshes);
+    let placements = regions
+        .chunks(PROXIES_PER_MESH)
+        .zip(outline_meshes)
+        .flat_map(|(chunk, mesh)| {
+            let mut first_face = 0;
+            chunk.iter().map(move |region| {
+                let placed = placement(region, mesh, first_face);
+                first_face += region.outline.len() - 2;
+                placed
+            })
+        });
+    let failed = place_regions(scene, &regions, placements, &mut meshes);
     if !failed.is_empty() {
         return Err(failed);
     }
@@ -913,46 +929,64 @@ fn block_outputs(
     outputs
 }
 
-/// Places each region's triangles by the map xatlas gave its outline (`meshes`: one per chunk
-/// of [`PROXIES_PER_MESH`] outlines), adding them to their instance's output mesh; returns the
-/// regions (instance, seed) whose outline was not placed as one planar chart.
-fn place_regions(
+/// The density pilot's atlas when it is all region outlines (no block left for xatlas):
+/// their own shelf packing ([`super::pack`]), without xatlas' per-chart memory. `None` when
+/// xatlas has to chart something, or an outline does not fit a page.
+fn pack_quick(
     scene: &Scene,
-    regions: &[Region],
-    meshes: &[ffi::MeshView<'_>],
+    found: &[(Vec<Region>, Vec<u32>)],
+    resolution: u32,
+    padding: u32,
+) -> Option<XatlasOutput> {
+    if found.iter().any(|(_, rest)| !rest.is_empty()) {
+        return None;
+    }
+    let regions: Vec<&Region> = found.iter().flat_map(|(r, _)| r).collect();
+    let outlines: Vec<&[DVec2]> = regions.iter().map(|r| r.outline.as_slice()).collect();
+    let placed = super::pack::pack_outlines(&outlines, resolution, padding)?;
+    let page_count = placed.iter().map(|p| p.0 + 1).max().unwrap_or(0) as u32;
+    let no_blocks: Vec<Vec<Block>> = scene.instances.iter().map(|_| Vec::new()).collect();
+    let mut meshes = block_outputs(scene, &no_blocks, &[]);
+    let failed = place_regions(scene, regions, placed.into_iter().map(Some), &mut meshes);
+    debug_assert!(failed.is_empty());
+    Some(XatlasOutput { page_count, meshes })
+}
+
+/// Places each region's triangles by its outline's map (`placements`, one per region in
+/// order: page, linear part, offset; `None` where xatlas did not place the outline as one
+/// planar chart), adding them to their instance's output mesh; returns the regions
+/// (instance, seed) left unplaced.
+fn place_regions<'r>(
+    scene: &Scene,
+    regions: impl IntoIterator<Item = &'r Region>,
+    placements: impl Iterator<Item = Option<(i32, DMat2, DVec2)>>,
     outputs: &mut [Option<MeshOutput>],
 ) -> Vec<(u32, u32)> {
     let mut failed = Vec::new();
-    for (k, chunk) in regions.chunks(PROXIES_PER_MESH).enumerate() {
-        let mesh = &meshes[k];
-        let mut first_face = 0;
-        for region in chunk {
-            let placed = placement(region, mesh, first_face);
-            first_face += region.outline.len() - 2;
-            let Some((page, linear, offset)) = placed else {
-                failed.push((region.instance, region.triangles[0]));
-                continue;
-            };
-            let inst = &scene.instances[region.instance as usize];
-            let Some(out) = &mut outputs[region.instance as usize] else {
-                continue;
-            };
-            let base = out.vertices.len() as u32;
-            out.vertices
-                .extend(region.vertices.iter().zip(&region.plane).map(|(&v, &p)| {
-                    let uv = (linear * p + offset).max(DVec2::ZERO).as_vec2();
-                    ffi::Vertex {
-                        atlas_index: page,
-                        uv: uv.to_array(),
-                        xref: v,
-                    }
-                }));
-            for &t in &region.triangles {
-                let tri = scene.triangles[(inst.triangles.start + t) as usize];
-                for (c, &v) in tri.iter().enumerate() {
-                    let at = region.vertices.binary_search(&(v - inst.vertices.start));
-                    out.indices[3 * t as usize + c] = at.map_or(u32::MAX, |i| base + i as u32);
+    for (region, placed) in regions.into_iter().zip(placements) {
+        let Some((page, linear, offset)) = placed else {
+            failed.push((region.instance, region.triangles[0]));
+            continue;
+        };
+        let inst = &scene.instances[region.instance as usize];
+        let Some(out) = &mut outputs[region.instance as usize] else {
+            continue;
+        };
+        let base = out.vertices.len() as u32;
+        out.vertices
+            .extend(region.vertices.iter().zip(&region.plane).map(|(&v, &p)| {
+                let uv = (linear * p + offset).max(DVec2::ZERO).as_vec2();
+                ffi::Vertex {
+                    atlas_index: page,
+                    uv: uv.to_array(),
+                    xref: v,
                 }
+            }));
+        for &t in &region.triangles {
+            let tri = scene.triangles[(inst.triangles.start + t) as usize];
+            for (c, &v) in tri.iter().enumerate() {
+                let at = region.vertices.binary_search(&(v - inst.vertices.start));
+                out.indices[3 * t as usize + c] = at.map_or(u32::MAX, |i| base + i as u32);
             }
         }
     }
