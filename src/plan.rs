@@ -343,7 +343,6 @@ pub fn choose_rays(
     }
     plan.pilot_noise = Some(noise);
     let k = round_up_quarter_octave(wanted).clamp(RAYS_RANGE.0, RAYS_RANGE.1);
-    let predicted = noise * (k_pilot / k as f32).powf(alpha);
     // The last pilot's two runs are reused: only the rays they lack are cast again.
     let last_pilot = if second.is_some() {
         4 * PILOT_RAYS
@@ -357,12 +356,16 @@ pub fn choose_rays(
     } else {
         round_up_quarter_octave((k - reused) as f32).max(RAYS_RANGE.0)
     };
-    plan.predicted_noise = Some(predicted);
-    plan.total_rays = Some(if enough {
+    let total = if enough {
         reused
     } else {
         reused + config.transport.gather_rays
-    });
+    };
+    // The noise of the rays actually cast: the reused pair alone, or the pair and the last
+    // bake rounded up, is at least `k`.
+    let predicted = noise * (k_pilot / total as f32).powf(alpha);
+    plan.predicted_noise = Some(predicted);
+    plan.total_rays = Some(total);
     let measured = if second.is_some() {
         format!(
             "{:.2}% noise at K={PILOT_RAYS} and {:.2}% at K={}, falling as K^−{alpha:.2}",
@@ -970,6 +973,26 @@ mod tests {
             .map(round_up_quarter_octave)
             .collect();
         assert_eq!(r, [1, 8, 8, 10, 80, 112, 128, 160]);
+    }
+
+    #[test]
+    fn the_predicted_noise_is_that_of_the_rays_cast() {
+        let mut plan = Plan {
+            target_error: 0.04,
+            ..Plan::default()
+        };
+        // 4% at K=16 wants K ≥ 28.4 → 32: the pilot pair (2 × 16) is the bake; its noise is
+        // that of 32 rays.
+        let mut config = BakeConfig::default();
+        assert!(choose_rays(&mut config, &mut plan, 0.04, None));
+        assert_eq!(plan.total_rays, Some(32));
+        let at_32 = 0.04 * (16.0f32 / 32.0).sqrt();
+        assert!((plan.predicted_noise.unwrap() - at_32).abs() < 1e-6);
+        // 6% at K=16 wants K ≥ 64: the pair and one more bake of 32 rays.
+        assert!(!choose_rays(&mut config, &mut plan, 0.06, None));
+        assert_eq!(plan.total_rays, Some(64));
+        let at_64 = 0.06 * (16.0f32 / 64.0).sqrt();
+        assert!((plan.predicted_noise.unwrap() - at_64).abs() < 1e-6);
     }
 
     /// A `w × h` page fully covered by texels facing +z, of unit area, lit by `f(x, y)` at the

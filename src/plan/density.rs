@@ -758,6 +758,7 @@ mod tests {
                     rest_square: square(t, k),
                     punctual_square: 0.0,
                     total: 1.0,
+                    noise_square: 0.0,
                 });
             }
         }

@@ -81,6 +81,9 @@ pub struct GatheredPoint {
     pub punctual_square: f32,
     /// The bilinear lookup of the two runs' mean (what a relative error divides by).
     pub total: f32,
+    /// Half the squared difference of the two runs' lookups: an unbiased estimate of one run's
+    /// noise as a renderer reads it (four texels blended, each point weighed by area).
+    pub noise_square: f32,
 }
 
 /// What became of one drawn point.
@@ -202,6 +205,13 @@ impl GatheredSample {
     /// square clamped at 0).
     pub fn rest_error(&self) -> f32 {
         self.relative(self.mean_square(|p| p.rest_square).0)
+    }
+
+    /// Relative RMS noise of one run as a renderer reads it at these points (its bilinear
+    /// lookup, area-weighted): below the texels' own relative noise, which weighs every texel
+    /// alike and reads each alone. NaN without points or light.
+    pub fn lookup_noise(&self) -> f32 {
+        self.relative(self.mean_square(|p| p.noise_square).0)
     }
 
     /// Relative RMS lookup error of the punctual direct light at these points.
@@ -334,17 +344,21 @@ impl PointDrawer<'_> {
             read(h) - punctual_texels - self.gather(origin, sp.n, h, &mut rng)
         });
         let dp = punctual_texels - exact;
-        let total = (read(runs.irradiance[0]) + read(runs.irradiance[1])) * 0.5;
+        let [ha, hb] = runs.irradiance.map(read);
+        let total = (ha + hb) * 0.5;
+        let spread = ha - hb;
         let point = GatheredPoint {
             instance: scene.triangle_instance[t as usize],
             triangle: t,
             rest_square: (da * db).element_sum() / 3.0,
             punctual_square: (dp * dp).element_sum() / 3.0,
             total: total.element_sum() / 3.0,
+            noise_square: (spread * spread).element_sum() / 6.0,
         };
         if point.rest_square.is_finite()
             && point.punctual_square.is_finite()
             && point.total.is_finite()
+            && point.noise_square.is_finite()
         {
             Drawn::Kept(point)
         } else {
