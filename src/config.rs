@@ -36,7 +36,7 @@ pub struct AtlasParams {
     /// A factor on `texels_per_unit` per scene instance (parallel to `Scene::instances`).
     /// Empty: one density everywhere. Unwrapped atlases only (reused `TEXCOORD_1` keeps its
     /// layout).
-    pub instance_density: Vec<f32>,
+    pub(crate) instance_density: Vec<f32>,
     /// Adaptive density: a further factor per scene triangle (parallel to `Scene::triangles`),
     /// chosen by the automatic plan per density region from where the pilot's lookup error
     /// sits ([`crate::plan::density`]). Empty: 1 everywhere. Shared meshes
@@ -227,7 +227,7 @@ pub struct TransportParams {
     /// Keep direct light split by light source as well (`Transport::direct_terms`; Monte Carlo
     /// rows only): what relighting and per-light layers scale. Costs 12 bytes per texel and
     /// source; set by the bake when `output.keep_transport` or `output.layers` asks.
-    pub split_direct: bool,
+    pub(crate) split_direct: bool,
     /// Store Monte Carlo rows as their exact ray counts (`transport::Rows::Counts`): the same
     /// output from 4.1–6.5× fewer row bytes, sweeps somewhat slower ([`crate::guide::baking`], "Memory"). Set
     /// by `row_storage` when forced, else by the memory check (`bake::memory::fit`) when f32
@@ -253,10 +253,10 @@ pub enum RowStorage {
 
 impl RowStorage {
     /// The names `--rows` takes, in the order of the variants.
-    pub const NAMES: [&'static str; 3] = ["auto", "f32", "counts"];
+    pub(crate) const NAMES: [&'static str; 3] = ["auto", "f32", "counts"];
 
     /// The storage named `name` (one of [`RowStorage::NAMES`]).
-    pub fn from_name(name: &str) -> Option<RowStorage> {
+    pub(crate) fn from_name(name: &str) -> Option<RowStorage> {
         match name {
             "auto" => Some(RowStorage::Auto),
             "f32" => Some(RowStorage::F32),
@@ -266,7 +266,7 @@ impl RowStorage {
     }
 
     /// Whether Monte Carlo rows may be stored as counts: forced, or the planner's to choose.
-    pub fn may_count(self) -> bool {
+    pub(crate) fn may_count(self) -> bool {
         self != RowStorage::F32
     }
 }
@@ -287,7 +287,7 @@ pub struct OutputParams {
     /// 32-bit float EXR pages instead of half floats.
     pub float: bool,
     /// Exposure (in stops) of the tone-mapped PNG previews.
-    pub preview_exposure: f32,
+    pub(crate) preview_exposure: f32,
     /// Also write each page as an 8-bit RGBM PNG (`output::rgbm`, range 8).
     pub rgbm: bool,
     /// Stitch UV seams after dilation (`lightmap::seams`): least squares on the texels along

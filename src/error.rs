@@ -55,13 +55,13 @@ pub enum Error {
 }
 
 impl Error {
-    pub fn invalid(path: impl Into<PathBuf>, message: impl Into<String>) -> Self {
+    pub(crate) fn invalid(path: impl Into<PathBuf>, message: impl Into<String>) -> Self {
         Error::Invalid {
             path: path.into(),
             message: message.into(),
         }
     }
-    pub fn unsupported(path: impl Into<PathBuf>, message: impl Into<String>) -> Self {
+    pub(crate) fn unsupported(path: impl Into<PathBuf>, message: impl Into<String>) -> Self {
         Error::Unsupported {
             path: path.into(),
             message: message.into(),

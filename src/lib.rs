@@ -114,10 +114,10 @@
 pub mod atlas;
 pub mod build;
 pub mod config;
-pub mod error;
+pub(crate) mod error;
 pub mod guide;
 pub mod lightmap;
-pub mod lights;
+pub(crate) mod lights;
 pub mod metrics;
 pub mod output;
 pub mod plan;

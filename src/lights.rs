@@ -11,7 +11,7 @@ use crate::trace::Tracer;
 
 /// Irradiance (W/m²) at `p` (normal `n`, origin already offset) from one punctual light.
 #[inline]
-pub fn punctual_irradiance(light: &Light, p: Vec3, n: Vec3, tracer: &Tracer) -> Vec3 {
+pub(crate) fn punctual_irradiance(light: &Light, p: Vec3, n: Vec3, tracer: &Tracer) -> Vec3 {
     match light.kind {
         LightKind::Directional => {
             let l = -light.direction;
@@ -62,21 +62,21 @@ pub fn punctual_irradiance(light: &Light, p: Vec3, n: Vec3, tracer: &Tracer) -> 
 /// little noise, while area sampling of a large emitter is noisy (1/r² near corners). Measured
 /// on the furnace (every face emits): sampling them too raised the worst texel error from 0.01%
 /// to 3.3% at K = L = 256. Small emitters (the Cornell light, 0.8% of its scene) are sampled.
-pub const LARGE_EMITTER_FRACTION: f32 = 0.25;
+pub(crate) const LARGE_EMITTER_FRACTION: f32 = 0.25;
 
 /// Small emissive triangles, sampled in proportion to their emitted power.
-pub struct Emitters {
+pub(crate) struct Emitters {
     /// Scene triangles that emit.
-    pub triangles: Vec<u32>,
+    pub(crate) triangles: Vec<u32>,
     /// Cumulative power over `triangles`.
-    pub cdf: Vec<f32>,
+    pub(crate) cdf: Vec<f32>,
     /// Per scene triangle: probability of picking it divided by its area (area density of a
     /// light sample landing at a point on it), 0 for non-emitters.
-    pub pdf_area: Vec<f32>,
+    pub(crate) pdf_area: Vec<f32>,
 }
 
 impl Emitters {
-    pub fn new(scene: &Scene, texels: &Texels) -> Emitters {
+    pub(crate) fn new(scene: &Scene, texels: &Texels) -> Emitters {
         // Surface area per material, to leave large emitters to the gathering rays.
         let mut material_area = vec![0.0f64; scene.materials.len()];
         let mut total_area = 0.0f64;
@@ -125,7 +125,7 @@ impl Emitters {
         }
     }
 
-    pub fn is_empty(&self) -> bool {
+    pub(crate) fn is_empty(&self) -> bool {
         self.triangles.is_empty()
     }
 
@@ -133,7 +133,7 @@ impl Emitters {
     /// picked triangle's share of the distribution, so one stratified 2D sample stratifies both
     /// the pick and the point on the triangle.
     #[inline]
-    pub fn pick_stratified(&self, u: f32) -> (u32, f32) {
+    pub(crate) fn pick_stratified(&self, u: f32) -> (u32, f32) {
         let k = sample_cdf(&self.cdf, u);
         let lo = if k == 0 { 0.0 } else { self.cdf[k - 1] };
         let hi = self.cdf[k];
@@ -147,7 +147,7 @@ impl Emitters {
 
     /// Picks an emissive triangle for `u ∈ [0,1)`.
     #[inline]
-    pub fn pick(&self, u: f32) -> u32 {
+    pub(crate) fn pick(&self, u: f32) -> u32 {
         self.triangles[sample_cdf(&self.cdf, u)]
     }
 
@@ -155,7 +155,7 @@ impl Emitters {
     /// with normal `n`: `None` when [`Emitters::sample_at`] finds none or the shadow ray is
     /// blocked.
     #[inline]
-    pub fn sample_from(
+    pub(crate) fn sample_from(
         &self,
         (scene, texels, tracer): (&Scene, &Texels, &Tracer),
         x: Vec3,
@@ -172,7 +172,7 @@ impl Emitters {
     /// `x` with normal `n`, visibility not tested (the caller traces the shadow ray to
     /// [`LightSample::point`]): `None` when either side faces away or the point has no texel.
     #[inline]
-    pub fn sample_at(
+    pub(crate) fn sample_at(
         &self,
         (scene, texels): (&Scene, &Texels),
         x: Vec3,
@@ -210,7 +210,7 @@ impl Emitters {
     /// (geometric normal `n_l`) that a ray along unit `dir` hits at `distance`: the light half
     /// of the MIS weight of a gathered hit. 0 when the ray sees the triangle's back.
     #[inline]
-    pub fn pdf_toward(&self, tri: u32, n_l: Vec3, dir: Vec3, distance: f32) -> f32 {
+    pub(crate) fn pdf_toward(&self, tri: u32, n_l: Vec3, dir: Vec3, distance: f32) -> f32 {
         let cos_l = -n_l.dot(dir);
         if cos_l > 0.0 {
             self.pdf_area[tri as usize] * distance * distance / cos_l
@@ -222,38 +222,38 @@ impl Emitters {
 
 /// A light sample ([`Emitters::sample_at`], unoccluded if from [`Emitters::sample_from`]).
 #[derive(Clone, Copy, Debug)]
-pub struct LightSample {
+pub(crate) struct LightSample {
     /// The point on the emitter.
-    pub point: Vec3,
+    pub(crate) point: Vec3,
     /// The texel sampled.
-    pub texel: u32,
+    pub(crate) texel: u32,
     /// Emitted radiance of the texel sampled.
-    pub le: Vec3,
+    pub(crate) le: Vec3,
     /// Cosines at the receiver and at the emitter.
-    pub cos_i: f32,
-    pub cos_l: f32,
+    pub(crate) cos_i: f32,
+    pub(crate) cos_l: f32,
     /// Squared distance.
-    pub r2: f32,
+    pub(crate) r2: f32,
     /// Area density of the sample on its triangle.
-    pub pdf_area: f32,
+    pub(crate) pdf_area: f32,
 }
 
 impl LightSample {
     /// Solid-angle density of the sample, seen from the receiver.
     #[inline]
-    pub fn pdf_solid_angle(&self) -> f32 {
+    pub(crate) fn pdf_solid_angle(&self) -> f32 {
         self.pdf_area * self.r2 / self.cos_l
     }
 }
 
-pub fn triangle_area(scene: &Scene, tri: &[u32; 3]) -> f32 {
+pub(crate) fn triangle_area(scene: &Scene, tri: &[u32; 3]) -> f32 {
     let p = |i: usize| scene.positions[tri[i] as usize];
     0.5 * (p(1) - p(0)).cross(p(2) - p(0)).length()
 }
 
 /// World position and geometric unit normal at barycentrics `b` of scene triangle `t`.
 #[inline]
-pub fn triangle_point(scene: &Scene, t: u32, b: Vec2) -> (Vec3, Vec3) {
+pub(crate) fn triangle_point(scene: &Scene, t: u32, b: Vec2) -> (Vec3, Vec3) {
     let [i0, i1, i2] = scene.triangles[t as usize];
     let (p0, p1, p2) = (
         scene.positions[i0 as usize],

@@ -144,7 +144,7 @@ pub fn without_noise(error: f32, noise: f32) -> f32 {
 /// [`rmse_over_mean`]. `m` may come from an unbiased estimator that is negative where the
 /// error is small; a negative total reads as 0. NaN when nothing is kept or `r`'s mean is
 /// not positive.
-pub fn weighted_rms_over_mean(m: &[Vec3], r: &[Vec3], w: &[f32], skip: &[u32]) -> f32 {
+pub(crate) fn weighted_rms_over_mean(m: &[Vec3], r: &[Vec3], w: &[f32], skip: &[u32]) -> f32 {
     assert!(
         m.len() == r.len() && w.len() == r.len(),
         "values must share texels"
@@ -228,7 +228,7 @@ pub fn median(values: &[f32]) -> f32 {
 /// `rms(a − b) / √2 / mean((a + b)/2)` over all channels of the texels not listed in `skip`:
 /// the relative RMS noise of one of two independent estimates (normalised as
 /// [`rmse_over_mean`]); 0 for black maps.
-pub fn relative_noise(a: &[Vec3], b: &[Vec3], skip: &[u32]) -> f32 {
+pub(crate) fn relative_noise(a: &[Vec3], b: &[Vec3], skip: &[u32]) -> f32 {
     let (mut sq, mut sum, mut count) = (0.0f64, 0.0f64, 0usize);
     for ((x, y), k) in a.iter().zip(b).zip(kept(a.len(), skip)) {
         if !k {

@@ -76,19 +76,17 @@
 //! at low K and leaves it at high K), so the choice errs towards more rays.
 
 pub mod density;
-pub mod error_map;
-pub mod gathered;
-pub mod memory;
-pub mod punctual;
+pub(crate) mod error_map;
+pub(crate) mod gathered;
+pub(crate) mod memory;
+pub(crate) mod punctual;
 
 use glam::Vec3;
 
-pub use gathered::GatheredSample;
-pub use memory::{
-    COUNT_BYTES_PER_RAY, MemoryEstimate, MemoryInputs, ROW_ENTRY_BYTES, entries_per_texel,
-    format_bytes, memory_estimate, row_entry_bytes,
-};
-pub use punctual::PunctualSample;
+pub(crate) use gathered::GatheredSample;
+pub use memory::{COUNT_BYTES_PER_RAY, MemoryEstimate, MemoryInputs, memory_estimate};
+pub(crate) use memory::{entries_per_texel, format_bytes, row_entry_bytes};
+pub(crate) use punctual::PunctualSample;
 
 use crate::config::{BakeConfig, FormFactors, Keep, RowSolver, RowStorage, Technique};
 use crate::metrics;
@@ -96,17 +94,17 @@ use crate::scene::Scene;
 use crate::texels::{NO_TEXEL, Texels};
 
 /// Gathering rays per texel of the pilot bakes.
-pub const PILOT_RAYS: u32 = 16;
+pub(crate) const PILOT_RAYS: u32 = 16;
 /// When the first pilot asks for more rays than this, a second pilot at 4× [`PILOT_RAYS`]
 /// measures how fast the noise falls.
-pub const SECOND_PILOT_ABOVE: u32 = 256;
+pub(crate) const SECOND_PILOT_ABOVE: u32 = 256;
 /// Fastest noise fall the fit believes: stratified light samples and Hammersley gathering fall
 /// faster than 1/√K at low K (Cornell box 16 → 64 rays: K^−0.78), then flatten towards 1/√K.
-pub const MAX_EXPONENT: f32 = 0.75;
+pub(crate) const MAX_EXPONENT: f32 = 0.75;
 /// Bounds of the chosen gathering rays.
-pub const RAYS_RANGE: (u32, u32) = (16, 4096);
+pub(crate) const RAYS_RANGE: (u32, u32) = (16, 4096);
 /// Stored rows beyond this many bytes switch to the matrix-free gather solver.
-pub const ROW_MEMORY_LIMIT: f64 = 4.0 * (1u64 << 30) as f64;
+pub(crate) const ROW_MEMORY_LIMIT: f64 = 4.0 * (1u64 << 30) as f64;
 
 /// Per-texel gathering rays (indexed like `Texels`); light samples scale with them.
 #[derive(Clone, PartialEq, Eq)]
@@ -195,7 +193,7 @@ impl Plan {
     }
 
     /// The choice in a few words (sets [`Plan::brief`]), once every decision is made.
-    pub fn finish(&mut self, config: &BakeConfig) {
+    pub(crate) fn finish(&mut self, config: &BakeConfig) {
         let mut s = format!(
             "auto for {:.1}%: {} K={}",
             self.target_error * 100.0,
@@ -285,7 +283,7 @@ fn round_significant(x: f32, digits: i32) -> f32 {
 
 /// Step 2, once texels exist: the method. Monte Carlo unless the user fixed it; the solver is
 /// kept (a hierarchical technique's Jacobi sweeps become Monte Carlo rows with Jacobi).
-pub fn choose_method(config: &mut BakeConfig, plan: &mut Plan, keep: &Keep) {
+pub(crate) fn choose_method(config: &mut BakeConfig, plan: &mut Plan, keep: &Keep) {
     if keep.method {
         return;
     }
@@ -304,7 +302,7 @@ pub fn choose_method(config: &mut BakeConfig, plan: &mut Plan, keep: &Keep) {
 
 /// Share of the target `e` the rays bring the noise to ([`choose_rays`]); the resolution error
 /// gets what is left in quadrature, `√(1 − 0.75²) ≈ 0.66·e`.
-pub const NOISE_SHARE: f32 = 0.75;
+pub(crate) const NOISE_SHARE: f32 = 0.75;
 
 /// Gathering rays that bring `noise`, measured at `k` rays and falling as `K^−alpha`, to
 /// [`NOISE_SHARE`] of the target `e`.
@@ -313,7 +311,7 @@ fn rays_for_target(k: f32, noise: f32, alpha: f32, e: f32) -> f32 {
 }
 
 /// Whether the noise `first` measured at [`PILOT_RAYS`] asks for a second pilot at 4× the rays.
-pub fn needs_second_pilot(first: f32, e: f32) -> bool {
+pub(crate) fn needs_second_pilot(first: f32, e: f32) -> bool {
     rays_for_target(PILOT_RAYS as f32, first, 0.5, e) > SECOND_PILOT_ABOVE as f32 && first > 0.0
 }
 
@@ -321,7 +319,7 @@ pub fn needs_second_pilot(first: f32, e: f32) -> bool {
 /// when [`needs_second_pilot`]): the gathering rays of the bake that completes the last pilot
 /// pair. Returns true when that pair alone reaches the target (no further bake). Expects
 /// `plan.pilot_seconds` to be set.
-pub fn choose_rays(
+pub(crate) fn choose_rays(
     config: &mut BakeConfig,
     plan: &mut Plan,
     first: f32,
@@ -411,7 +409,7 @@ pub fn choose_rays(
 }
 
 /// Step 3 when no pilot can measure anything (no light reaches the texels).
-pub fn keep_rays_unmeasured(config: &BakeConfig, plan: &mut Plan) {
+pub(crate) fn keep_rays_unmeasured(config: &BakeConfig, plan: &mut Plan) {
     plan.reasons.push(format!(
         "gathering rays K={}: nothing to measure (no light reaches the texels)",
         config.transport.gather_rays
@@ -419,7 +417,12 @@ pub fn keep_rays_unmeasured(config: &BakeConfig, plan: &mut Plan) {
 }
 
 /// Step 4: light samples, a quarter of the rays (none without emissive surfaces).
-pub fn choose_light_samples(config: &mut BakeConfig, plan: &mut Plan, keep: &Keep, emitters: bool) {
+pub(crate) fn choose_light_samples(
+    config: &mut BakeConfig,
+    plan: &mut Plan,
+    keep: &Keep,
+    emitters: bool,
+) {
     if keep.light_samples || !config.technique.is_monte_carlo() {
         return;
     }
@@ -439,7 +442,7 @@ pub fn choose_light_samples(config: &mut BakeConfig, plan: &mut Plan, keep: &Kee
 /// Step 5: the solver, from the memory the stored rows of `texels` would take — Jacobi over
 /// f32 rows, over Monte Carlo rows stored as ray counts when only those stay within
 /// [`ROW_MEMORY_LIMIT`] (slower sweeps), or the matrix-free gatherer beyond it.
-pub fn choose_solver(texels: usize, config: &mut BakeConfig, plan: &mut Plan, keep: &Keep) {
+pub(crate) fn choose_solver(texels: usize, config: &mut BakeConfig, plan: &mut Plan, keep: &Keep) {
     if keep.solver {
         return;
     }
@@ -497,7 +500,7 @@ pub fn choose_solver(texels: usize, config: &mut BakeConfig, plan: &mut Plan, ke
 }
 
 /// Step 6: the tolerance, a tenth of the target.
-pub fn choose_tolerance(config: &mut BakeConfig, plan: &mut Plan, keep: &Keep) {
+pub(crate) fn choose_tolerance(config: &mut BakeConfig, plan: &mut Plan, keep: &Keep) {
     if keep.tolerance {
         return;
     }
@@ -510,7 +513,7 @@ pub fn choose_tolerance(config: &mut BakeConfig, plan: &mut Plan, keep: &Keep) {
 
 /// Step 7, when one more bake follows the pilot: fewer rays per texel where the lightmap
 /// matters less (see `texel_rays`), from the irradiance of each pilot run.
-pub fn choose_texel_rays(texels: &Texels, pilot: &[&[Vec3]], k: u32, plan: &mut Plan) {
+pub(crate) fn choose_texel_rays(texels: &Texels, pilot: &[&[Vec3]], k: u32, plan: &mut Plan) {
     let n = texels.len();
     let (rays, reduced) = texel_rays(texels, pilot, k);
     let full = k as u64 * n as u64;
@@ -531,7 +534,7 @@ pub fn choose_texel_rays(texels: &Texels, pilot: &[&[Vec3]], k: u32, plan: &mut 
 /// (`gathered`, [`GatheredSample`]) when there is one; otherwise the sampled punctual part
 /// ([`PunctualSample`]) and the rest from the pilot's second differences ([`resolution_error`],
 /// a lower bound) in quadrature. `pilot` is the last pilot pair's lightmap values.
-pub fn predict_resolution(
+pub(crate) fn predict_resolution(
     texels: &Texels,
     pilot: [&[Vec3]; 2],
     punctual: Option<&PunctualSample>,
@@ -738,7 +741,8 @@ const G_MEAN_SQUARE: f32 = 49.0 / 2880.0;
 /// read dilated gutters: the figure covers the chart interiors. Aggregated with
 /// [`metrics::weighted_rms_over_mean`] over texel areas against the mean of the two bakes.
 /// NaN when no texel has a second difference or the light is black.
-pub fn resolution_error(texels: &Texels, pilot: [&[Vec3]; 2]) -> f32 {
+#[cfg(test)]
+pub(crate) fn resolution_error(texels: &Texels, pilot: [&[Vec3]; 2]) -> f32 {
     let (square, skip) = resolution_squares(texels, pilot);
     let n = texels.len();
     let mean: Vec<Vec3> = (0..n).map(|i| (pilot[0][i] + pilot[1][i]) * 0.5).collect();
@@ -803,7 +807,7 @@ fn round_up_quarter_octave(x: f32) -> u32 {
 }
 
 /// Fewest gathering rays a texel gets.
-pub const MIN_TEXEL_RAYS: u32 = 16;
+pub(crate) const MIN_TEXEL_RAYS: u32 = 16;
 
 /// Gathering rays per texel for the final bake, from the pilot's mean irradiance: a texel's
 /// lightmap noise reaches the rendered image as `ρH/π` next to its emission `Le`, so its relative
@@ -843,9 +847,9 @@ fn texel_rays(texels: &Texels, pilot: &[&[Vec3]], k: u32) -> (Vec<u32>, (usize, 
 
 /// A large bake (its f32 rows' estimated peak above [`LARGE_BAKE_BYTES`]) stores its Monte
 /// Carlo rows as ray counts when f32 rows would take it above this many bytes per texel.
-pub const MAX_BYTES_PER_TEXEL: f64 = 2048.0;
+pub(crate) const MAX_BYTES_PER_TEXEL: f64 = 2048.0;
 /// See [`MAX_BYTES_PER_TEXEL`]: below this, a bake's peak is mostly what every bake holds.
-pub const LARGE_BAKE_BYTES: f64 = 512.0 * 1024.0 * 1024.0;
+pub(crate) const LARGE_BAKE_BYTES: f64 = 512.0 * 1024.0 * 1024.0;
 
 /// Step 5b, once the rays are chosen: how stored Monte Carlo rows are held (forced by
 /// `config.transport.row_storage`, `--rows`, or chosen here) — f32 weights

@@ -29,7 +29,7 @@ pub struct NoProgress;
 impl Progress for NoProgress {}
 
 /// Shows nothing of a sub-run (a pilot bake) but stops it when `0` is aborted.
-pub struct CancelOnly<'a>(pub &'a dyn Progress);
+pub(crate) struct CancelOnly<'a>(pub(crate) &'a dyn Progress);
 impl Progress for CancelOnly<'_> {
     fn aborted(&self) -> bool {
         self.0.aborted()

@@ -75,7 +75,7 @@ pub use camera::{View, trace_view};
 /// Texels per parallel work item (one progress tick each).
 const CHUNK: usize = 64;
 /// Bounces before Russian roulette may end a path.
-pub const ROULETTE_DEPTH: u32 = 4;
+pub(crate) const ROULETTE_DEPTH: u32 = 4;
 /// Paths per texel before the standard error is trusted for the stopping test.
 pub const MIN_SAMPLES_FOR_TARGET: u32 = 32;
 /// Mixed into the seed so the reference's random streams never coincide with a bake's.
@@ -121,7 +121,7 @@ impl ReferenceParams {
         }
     }
 
-    pub fn validate(&self) -> Result<()> {
+    pub(crate) fn validate(&self) -> Result<()> {
         let bad = |m: String| Err(Error::Option(m));
         if self.samples_per_pass < 2 {
             return bad(format!(
@@ -260,7 +260,7 @@ impl Sums {
 /// between a bake and the reference. A mean of per-texel ratios `σ_i/μ_i` was tried first and
 /// is useless as a stopping rule: texels buried under the Cornell box's blocks or above its
 /// light (μ ≈ 1e-4 of the room's) had ratios near 1 and set the RMS alone. 0 for a black scene.
-pub fn rms_rel_error(mean: &[Vec3], std_error: &[Vec3]) -> f32 {
+pub(crate) fn rms_rel_error(mean: &[Vec3], std_error: &[Vec3]) -> f32 {
     crate::metrics::noise_over_rms(std_error, mean, &[])
 }
 
@@ -425,11 +425,11 @@ pub fn compute(
 }
 
 pub(crate) struct Paths<'a> {
-    pub scene: &'a scene::Scene,
-    pub texels: &'a Texels,
-    pub tracer: &'a Tracer,
-    pub emitters: &'a Emitters,
-    pub params: &'a ReferenceParams,
+    pub(crate) scene: &'a scene::Scene,
+    pub(crate) texels: &'a Texels,
+    pub(crate) tracer: &'a Tracer,
+    pub(crate) emitters: &'a Emitters,
+    pub(crate) params: &'a ReferenceParams,
 }
 
 impl Paths<'_> {

@@ -61,7 +61,7 @@ fn splitmix(mut x: u64) -> u64 {
 /// Point `k` of an `n`-point Hammersley set, Cranley–Patterson rotated by `shift`
 /// (a low-discrepancy, stratified pattern; the shift decorrelates neighbouring texels).
 #[inline]
-pub fn hammersley(k: u32, n: u32, shift: Vec2) -> Vec2 {
+pub(crate) fn hammersley(k: u32, n: u32, shift: Vec2) -> Vec2 {
     let u = (k as f32 + 0.5) / n as f32;
     let v = k.reverse_bits() as f32 * (1.0 / 4_294_967_296.0);
     let p = Vec2::new(u, v) + shift;
@@ -80,7 +80,7 @@ pub fn cosine_hemisphere(u: Vec2) -> Vec3 {
 /// Uniformly distributed direction over the hemisphere around +Z (pdf `1/2π`) from a point in
 /// the unit square: `z = u.x`, azimuth `2π·u.y`.
 #[inline]
-pub fn uniform_hemisphere(u: Vec2) -> Vec3 {
+pub(crate) fn uniform_hemisphere(u: Vec2) -> Vec3 {
     let r = (1.0 - u.x * u.x).max(0.0).sqrt();
     let phi = 2.0 * PI * u.y;
     Vec3::new(r * phi.cos(), r * phi.sin(), u.x)
@@ -121,7 +121,7 @@ pub fn frame(n: Vec3) -> (Vec3, Vec3) {
 
 /// Searches a cumulative distribution (last entry = total) for `u ∈ [0,1)`.
 #[inline]
-pub fn sample_cdf(cdf: &[f32], u: f32) -> usize {
+pub(crate) fn sample_cdf(cdf: &[f32], u: f32) -> usize {
     let total = *cdf.last().unwrap_or(&0.0);
     let target = u * total;
     cdf.partition_point(|&c| c <= target)
@@ -133,7 +133,7 @@ pub fn sample_cdf(cdf: &[f32], u: f32) -> usize {
 /// the balance heuristic; in a furnace (every surface an emitter) light samples have high
 /// variance near corners and the balance heuristic left 3.7% per-texel noise at K=128, L=16.
 #[inline]
-pub fn power_weight(this: f32, other: f32) -> f32 {
+pub(crate) fn power_weight(this: f32, other: f32) -> f32 {
     let d = this * this + other * other;
     if d > 0.0 { this / d } else { 0.0 }
 }

@@ -24,17 +24,18 @@ pub const CORNELL_LIGHT_SIZE: Vec2 = Vec2::new(0.25, 0.2);
 /// Cornell box light: height of the emitting quad (1 cm below the 1 m ceiling), facing down.
 pub const CORNELL_LIGHT_HEIGHT: f32 = 0.99;
 /// Cornell box light: emitted power per channel, `π · Le · area` (W).
-pub const CORNELL_LIGHT_POWER: f32 =
+#[cfg(test)]
+const CORNELL_LIGHT_POWER: f32 =
     PI * CORNELL_LIGHT_RADIANCE * CORNELL_LIGHT_SIZE.x * CORNELL_LIGHT_SIZE.y;
 
 /// Triangle mesh data of one primitive; every attribute has one entry per vertex.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Geometry {
-    pub positions: Vec<Vec3>,
-    pub normals: Option<Vec<Vec3>>,
-    pub uv0: Option<Vec<Vec2>>,
+    pub(crate) positions: Vec<Vec3>,
+    pub(crate) normals: Option<Vec<Vec3>>,
+    pub(crate) uv0: Option<Vec<Vec2>>,
     /// Triangle list, counter-clockwise seen from the front.
-    pub indices: Vec<u32>,
+    pub(crate) indices: Vec<u32>,
 }
 
 impl Geometry {
@@ -108,7 +109,7 @@ impl Geometry {
 
     /// A UV sphere with smooth normals: `nu` segments around +Y, `nv` rings, `uv0 = (s, t)`
     /// (one column of vertices repeated where `s` wraps, as exporters write it).
-    pub fn uv_sphere(center: Vec3, radius: f32, nu: u32, nv: u32) -> Self {
+    pub(crate) fn uv_sphere(center: Vec3, radius: f32, nu: u32, nv: u32) -> Self {
         assert!(
             nu >= 3 && nv >= 2,
             "a sphere needs at least 3 segments and 2 rings"
@@ -151,7 +152,7 @@ impl Geometry {
 
     /// A closed cylinder along +Y standing on `base`: `segments` sides with smooth normals,
     /// flat top and bottom caps.
-    pub fn cylinder(base: Vec3, radius: f32, height: f32, segments: u32) -> Self {
+    pub(crate) fn cylinder(base: Vec3, radius: f32, height: f32, segments: u32) -> Self {
         assert!(segments >= 3, "a cylinder needs at least 3 sides");
         let mut g = Geometry {
             normals: Some(Vec::new()),
@@ -236,7 +237,7 @@ impl Geometry {
     }
 
     /// Drops the normals, so a loader has to generate flat ones (as glTF requires).
-    pub fn without_normals(mut self) -> Self {
+    pub(crate) fn without_normals(mut self) -> Self {
         self.normals = None;
         self
     }
@@ -247,7 +248,7 @@ impl Geometry {
         self
     }
 
-    pub fn triangle_count(&self) -> usize {
+    pub(crate) fn triangle_count(&self) -> usize {
         self.indices.len() / 3
     }
 }
@@ -279,17 +280,17 @@ impl Face {
 /// A metal-free, fully rough glTF material.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Material {
-    pub name: String,
+    pub(crate) name: String,
     /// Linear `baseColorFactor`.
-    pub base_color: [f32; 4],
-    pub emissive: [f32; 3],
+    pub(crate) base_color: [f32; 4],
+    pub(crate) emissive: [f32; 3],
     /// Written as `KHR_materials_emissive_strength` only when it is not 1.
-    pub emissive_strength: f32,
-    pub double_sided: bool,
+    pub(crate) emissive_strength: f32,
+    pub(crate) double_sided: bool,
     /// Image index (each image is its own texture).
-    pub base_color_texture: Option<usize>,
+    pub(crate) base_color_texture: Option<usize>,
     /// Image index of the `normalTexture` (tangent space, linear).
-    pub normal_texture: Option<usize>,
+    pub(crate) normal_texture: Option<usize>,
 }
 
 impl Material {
@@ -316,17 +317,17 @@ impl Material {
         self
     }
 
-    pub fn double_sided(mut self) -> Self {
+    pub(crate) fn double_sided(mut self) -> Self {
         self.double_sided = true;
         self
     }
 
-    pub fn with_texture(mut self, image: usize) -> Self {
+    pub(crate) fn with_texture(mut self, image: usize) -> Self {
         self.base_color_texture = Some(image);
         self
     }
 
-    pub fn with_normal_texture(mut self, image: usize) -> Self {
+    pub(crate) fn with_normal_texture(mut self, image: usize) -> Self {
         self.normal_texture = Some(image);
         self
     }
@@ -334,10 +335,11 @@ impl Material {
 
 /// Where an image's PNG bytes go.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum ImageStorage {
+pub(crate) enum ImageStorage {
     /// In the binary buffer, referenced through a bufferView.
     BufferView,
     /// As a `data:image/png;base64,` URI.
+    #[cfg(test)]
     DataUri,
 }
 
@@ -356,7 +358,7 @@ struct Mesh {
 
 /// A node's local transform.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub enum Transform {
+pub(crate) enum Transform {
     Trs {
         translation: Vec3,
         rotation: Quat,
@@ -368,12 +370,12 @@ pub enum Transform {
 
 #[derive(Clone, Debug, PartialEq)]
 pub struct Node {
-    pub name: String,
-    pub transform: Transform,
-    pub mesh: Option<usize>,
-    pub light: Option<usize>,
-    pub camera: Option<usize>,
-    pub children: Vec<usize>,
+    pub(crate) name: String,
+    pub(crate) transform: Transform,
+    pub(crate) mesh: Option<usize>,
+    pub(crate) light: Option<usize>,
+    pub(crate) camera: Option<usize>,
+    pub(crate) children: Vec<usize>,
 }
 
 impl Node {
@@ -401,22 +403,22 @@ impl Node {
         self
     }
 
-    pub fn at(self, translation: Vec3) -> Self {
+    pub(crate) fn at(self, translation: Vec3) -> Self {
         self.trs(translation, Quat::IDENTITY, Vec3::ONE)
     }
 
-    pub fn matrix(mut self, matrix: Mat4) -> Self {
+    pub(crate) fn matrix(mut self, matrix: Mat4) -> Self {
         self.transform = Transform::Matrix(matrix);
         self
     }
 
     /// Placed at `eye` with its -Z axis (where cameras look and lights shine) towards `target`.
-    pub fn looking_at(self, eye: Vec3, target: Vec3) -> Self {
+    pub(crate) fn looking_at(self, eye: Vec3, target: Vec3) -> Self {
         self.trs(eye, rotation_towards(target - eye), Vec3::ONE)
     }
 
     /// Placed at `position` with its -Z axis along `direction`.
-    pub fn pointing(self, position: Vec3, direction: Vec3) -> Self {
+    pub(crate) fn pointing(self, position: Vec3, direction: Vec3) -> Self {
         self.trs(position, rotation_towards(direction), Vec3::ONE)
     }
 
@@ -425,17 +427,17 @@ impl Node {
         self
     }
 
-    pub fn with_light(mut self, light: usize) -> Self {
+    pub(crate) fn with_light(mut self, light: usize) -> Self {
         self.light = Some(light);
         self
     }
 
-    pub fn with_camera(mut self, camera: usize) -> Self {
+    pub(crate) fn with_camera(mut self, camera: usize) -> Self {
         self.camera = Some(camera);
         self
     }
 
-    pub fn with_children(mut self, children: &[usize]) -> Self {
+    pub(crate) fn with_children(mut self, children: &[usize]) -> Self {
         self.children = children.to_vec();
         self
     }
@@ -456,7 +458,7 @@ fn rotation_towards(direction: Vec3) -> Quat {
 
 /// A KHR_lights_punctual light type.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub enum LightKind {
+pub(crate) enum LightKind {
     Point,
     Spot {
         inner_cone_angle: f32,
@@ -468,12 +470,12 @@ pub enum LightKind {
 /// A KHR_lights_punctual light: point/spot `intensity` in W/sr, directional in W/m².
 #[derive(Clone, Debug, PartialEq)]
 pub struct Light {
-    pub name: String,
-    pub kind: LightKind,
-    pub color: [f32; 3],
-    pub intensity: f32,
+    pub(crate) name: String,
+    pub(crate) kind: LightKind,
+    pub(crate) color: [f32; 3],
+    pub(crate) intensity: f32,
     /// Not allowed on directional lights.
-    pub range: Option<f32>,
+    pub(crate) range: Option<f32>,
 }
 
 impl Light {
@@ -487,7 +489,13 @@ impl Light {
         }
     }
 
-    pub fn spot(name: &str, color: [f32; 3], intensity: f32, inner: f32, outer: f32) -> Self {
+    pub(crate) fn spot(
+        name: &str,
+        color: [f32; 3],
+        intensity: f32,
+        inner: f32,
+        outer: f32,
+    ) -> Self {
         let kind = LightKind::Spot {
             inner_cone_angle: inner,
             outer_cone_angle: outer,
@@ -512,7 +520,7 @@ impl Light {
         }
     }
 
-    pub fn with_range(mut self, range: f32) -> Self {
+    pub(crate) fn with_range(mut self, range: f32) -> Self {
         self.range = Some(range);
         self
     }
@@ -521,12 +529,12 @@ impl Light {
 /// A perspective camera.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Camera {
-    pub name: String,
+    pub(crate) name: String,
     /// Vertical field of view (radians).
     pub yfov: f32,
     pub aspect_ratio: Option<f32>,
-    pub znear: f32,
-    pub zfar: Option<f32>,
+    pub(crate) znear: f32,
+    pub(crate) zfar: Option<f32>,
 }
 
 impl Camera {
@@ -585,7 +593,7 @@ impl GltfBuilder {
     }
 
     /// Encodes `image` as PNG (deterministic for a given `image` crate version).
-    pub fn add_image(
+    pub(crate) fn add_image(
         &mut self,
         name: &str,
         image: &image::DynamicImage,
@@ -640,12 +648,12 @@ impl GltfBuilder {
         self.meshes[mesh].primitives.push((geometry, material));
     }
 
-    pub fn add_light(&mut self, light: Light) -> usize {
+    pub(crate) fn add_light(&mut self, light: Light) -> usize {
         self.lights.push(light);
         self.lights.len() - 1
     }
 
-    pub fn add_camera(&mut self, camera: Camera) -> usize {
+    pub(crate) fn add_camera(&mut self, camera: Camera) -> usize {
         self.cameras.push(camera);
         self.cameras.len() - 1
     }
@@ -882,6 +890,7 @@ fn image_json(image: &Image, packer: &mut Packer) -> Value {
             let view = packer.view(&image.png, None);
             json!({ "name": image.name, "bufferView": view, "mimeType": "image/png" })
         }
+        #[cfg(test)]
         ImageStorage::DataUri => {
             let base64 = base64::engine::general_purpose::STANDARD.encode(&image.png);
             json!({ "name": image.name, "uri": format!("data:image/png;base64,{base64}") })
@@ -1179,19 +1188,19 @@ pub fn point_light_floor(intensity: f32, height: f32) -> GltfBuilder {
 }
 
 /// Spot light: position, direction, intensity (W/sr), colour, cone angles and range.
-pub const SPOT_POSITION: Vec3 = Vec3::new(-0.8, 2.0, 0.2);
-pub const SPOT_INTENSITY: f32 = 15.0;
-pub const SPOT_COLOR: [f32; 3] = [1.0, 0.85, 0.6];
-pub const SPOT_CONE: (f32, f32) = (0.3, 0.6);
-pub const SPOT_RANGE: f32 = 6.0;
+pub(crate) const SPOT_POSITION: Vec3 = Vec3::new(-0.8, 2.0, 0.2);
+pub(crate) const SPOT_INTENSITY: f32 = 15.0;
+pub(crate) const SPOT_COLOR: [f32; 3] = [1.0, 0.85, 0.6];
+pub(crate) const SPOT_CONE: (f32, f32) = (0.3, 0.6);
+pub(crate) const SPOT_RANGE: f32 = 6.0;
 /// Directional light: travel direction (not normalised), irradiance (W/m²) and colour.
-pub const SUN_DIRECTION: Vec3 = Vec3::new(0.5, -1.0, -0.6);
-pub const SUN_IRRADIANCE: f32 = 1.5;
-pub const SUN_COLOR: [f32; 3] = [0.9, 0.95, 1.0];
+pub(crate) const SUN_DIRECTION: Vec3 = Vec3::new(0.5, -1.0, -0.6);
+pub(crate) const SUN_IRRADIANCE: f32 = 1.5;
+pub(crate) const SUN_COLOR: [f32; 3] = [0.9, 0.95, 1.0];
 
 /// A grey 4 × 4 m floor, a back wall at z = −2 facing +z and a small blue box, lit by a spot
 /// light pointing straight down (cone angles 0.3/0.6 rad, range 6 m) and a directional light.
-pub fn spot_and_directional() -> GltfBuilder {
+pub(crate) fn spot_and_directional() -> GltfBuilder {
     let mut gltf = GltfBuilder::new("spot_and_directional");
     let grey = gltf.add_material(Material::grey("floor", 0.5));
     let wall_material = gltf.add_material(Material::grey("wall", 0.6));
@@ -1231,7 +1240,7 @@ pub fn spot_and_directional() -> GltfBuilder {
 /// One 0.5 m box mesh (no bottom, no normals: the loader must make flat ones) placed twice —
 /// through a parent node with a `matrix` and two children, one rotated and stretched — on a
 /// grey floor, lit by a 10 W/sr point light.
-pub fn instanced() -> GltfBuilder {
+pub(crate) fn instanced() -> GltfBuilder {
     let mut gltf = GltfBuilder::new("instanced");
     let grey = gltf.add_material(Material::grey("floor", 0.5));
     let white = gltf.add_material(Material::grey("box", 0.8));
@@ -1268,7 +1277,7 @@ pub fn instanced() -> GltfBuilder {
 }
 
 /// The two colours of the `textured` checker (sRGB bytes).
-pub const CHECKER_COLORS: [[u8; 3]; 2] = [[220, 220, 220], [200, 60, 40]];
+pub(crate) const CHECKER_COLORS: [[u8; 3]; 2] = [[220, 220, 220], [200, 60, 40]];
 
 /// A 2 × 2 m floor whose base colour is a 4 × 4 checker texture (a 64 × 64 PNG in the buffer,
 /// one square per grid quad), lit by a 5 W/sr point light 1.5 m above its centre. A lone plane
@@ -1333,7 +1342,7 @@ pub fn normal_mapped_wall() -> GltfBuilder {
 /// A `width × height` tangent-space normal map (glTF convention: +x right, +y up the image,
 /// `rgb = (n + 1)/2`) of `across × down` hemispherical domes filling 90% of their cells, flat
 /// between them.
-pub fn dome_normal_map(width: u32, height: u32, across: u32, down: u32) -> image::RgbImage {
+pub(crate) fn dome_normal_map(width: u32, height: u32, across: u32, down: u32) -> image::RgbImage {
     let (cw, ch) = (width as f32 / across as f32, height as f32 / down as f32);
     let radius = 0.45 * cw.min(ch);
     image::RgbImage::from_fn(width, height, |x, y| {
@@ -1451,7 +1460,7 @@ fn add_partition_panel_camera(
 /// inner corner) and the shell has six walls. Same materials, panel and doorway (z ∈ [−0.4,
 /// 0.4] along the wall, 1.6 m high) as `two_rooms`; the camera looks from room B at the
 /// wall's foot. Junctions that are not axis-aligned, cutting a non-convex receiver.
-pub fn two_rooms_angled() -> GltfBuilder {
+pub(crate) fn two_rooms_angled() -> GltfBuilder {
     let mut gltf = GltfBuilder::new("two_rooms_angled");
     let shell = gltf.add_material(Material::grey("shell", 0.7));
     let floor_material = gltf.add_material(Material::grey("floor", 0.5));
@@ -1625,7 +1634,7 @@ fn wave(x: f32, z: f32) -> (f32, Vec2) {
 /// A wavy 1 × 1 m height field of `quads × quads` squares cut into two triangles each (smooth
 /// normals, connected), centred at `center`, facing +y; waves of ±2.6 cm, slopes up to about
 /// 15°. 708 quads give 1 002 528 triangles of 1.4 mm: a scanned or sculpted surface.
-pub fn wavy_field(center: Vec3, quads: u32) -> Geometry {
+pub(crate) fn wavy_field(center: Vec3, quads: u32) -> Geometry {
     let mut field = Geometry::grid(
         center + Vec3::new(-0.5, 0.0, 0.5),
         Vec3::X,
@@ -1760,7 +1769,7 @@ pub fn t_junction_floor() -> GltfBuilder {
 /// several heights (1.2, 2, 3 and 4 m, closed 0.3 m solids standing on it), and a pillar whose
 /// node is rotated about two axes and scaled non-uniformly. Every shadow is a hard edge cast
 /// by one parallel light: the case texel density matters most for.
-pub fn courtyard() -> GltfBuilder {
+pub(crate) fn courtyard() -> GltfBuilder {
     let mut gltf = GltfBuilder::new("courtyard");
     let ground_m = gltf.add_material(Material::grey("ground", 0.4));
     let wall_m = gltf.add_material(Material::diffuse("wall", [0.75, 0.68, 0.55]));
@@ -1806,7 +1815,7 @@ pub fn courtyard() -> GltfBuilder {
 /// ceiling and a spot light aimed at a table; a table (thin top, four thin legs) and a cabinet
 /// (a closed box against a wall). Punctual lights only: hard shadows, a spot-cone edge, and
 /// all the rest is interreflection.
-pub fn lamp_room() -> GltfBuilder {
+pub(crate) fn lamp_room() -> GltfBuilder {
     let mut gltf = GltfBuilder::new("lamp_room");
     let walls_m = gltf.add_material(Material::diffuse("walls", [0.75, 0.72, 0.66]));
     let floor_m = gltf.add_material(Material::diffuse("floor", [0.45, 0.35, 0.25]));
@@ -1882,7 +1891,7 @@ pub fn lamp_room() -> GltfBuilder {
 /// bookcase of small books, cups and bottles (smooth cylinders), a rug (1 cm thick), picture
 /// frames, two emissive ceiling panels and a point-lit lamp. Thin and small objects get few
 /// texels at a uniform density; the walls' outer faces are seen by nothing.
-pub fn furnished_interior() -> GltfBuilder {
+pub(crate) fn furnished_interior() -> GltfBuilder {
     let mut gltf = GltfBuilder::new("furnished_interior");
     let materials = InteriorMaterials::add(&mut gltf);
     add_interior_shell(&mut gltf, &materials);
@@ -2225,7 +2234,7 @@ fn add_lamp_and_panels(gltf: &mut GltfBuilder, materials: &InteriorMaterials) {
 /// outward normal (zero: any horizontal normal). Faces narrower than two texels at every
 /// preset, in slots or beside bright surfaces, where a texel that reads light from beyond the
 /// face's edge shows (issue 27).
-pub const NARROW_FACES: [(&str, Vec3, Vec3, Vec3); 9] = [
+pub(crate) const NARROW_FACES: [(&str, Vec3, Vec3, Vec3); 9] = [
     // The door's top: 4 cm deep, 4 mm under the head of its lining.
     (
         "door top",
@@ -2341,7 +2350,7 @@ pub fn narrow_face_points(
 /// ([`NARROW_FACES`]) are narrower than two texels at every preset: the door's top, bottom and
 /// edge in their slots (dark), the shelf's front edge, the panel's border and sides (next to
 /// the light).
-pub fn narrow_faces() -> GltfBuilder {
+pub(crate) fn narrow_faces() -> GltfBuilder {
     let mut gltf = GltfBuilder::new("narrow_faces");
     let plaster = gltf.add_material(Material::diffuse("plaster", [0.78, 0.76, 0.72]));
     let boards = gltf.add_material(Material::diffuse("boards", [0.5, 0.38, 0.26]));

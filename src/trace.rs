@@ -151,12 +151,12 @@ pub struct Hit {
     /// Scene triangle of the face that was hit (the back-face copy when a double-sided
     /// surface was hit from behind).
     pub triangle: u32,
-    pub t: f32,
+    pub(crate) t: f32,
     /// Barycentrics (u, v) on `triangle`: `p = (1−u−v)·p0 + u·p1 + v·p2`.
     pub bary: Vec2,
     /// The ray hit the side the triangle's normal points to. False only for single-sided
     /// surfaces seen from behind (inside closed geometry, under a floor).
-    pub front: bool,
+    pub(crate) front: bool,
 }
 
 /// Ray queries against the scene.
@@ -278,7 +278,7 @@ impl Tracer {
     /// back faces. Triangles with a back-face copy are never culled (a hit from behind lands on
     /// the copy, seen from its front).
     #[inline]
-    pub fn closest_culling(
+    pub(crate) fn closest_culling(
         &self,
         origin: Vec3,
         dir: Vec3,
@@ -407,7 +407,7 @@ impl Tracer {
 
     /// True when the ray from `origin` along unit `dir` hits nothing (escapes to the sky).
     #[inline]
-    pub fn escapes(&self, origin: Vec3, dir: Vec3, tmax: f32) -> bool {
+    pub(crate) fn escapes(&self, origin: Vec3, dir: Vec3, tmax: f32) -> bool {
         if self.triangles.is_empty() {
             return true;
         }

@@ -20,7 +20,7 @@ const UV_SLACK: f32 = 1e-4;
 const OVERLAP_TOLERANCE: f64 = 1e-3;
 
 /// Builds the atlas from the input's `TEXCOORD_1`.
-pub fn reuse(scene: &Scene, source: &Source, params: &AtlasParams) -> Result<Atlas> {
+pub(crate) fn reuse(scene: &Scene, source: &Source, params: &AtlasParams) -> Result<Atlas> {
     let mut world_area = 0.0;
     let mut uv_area = 0.0;
     for inst in &scene.instances {
@@ -215,11 +215,11 @@ fn instance_uv(scene: &Scene, inst: &Instance) -> InstanceUv {
 #[derive(Clone, Copy, Debug, Default)]
 pub struct Overlaps {
     /// Texel centres strictly inside at least one triangle.
-    pub covered: u64,
+    pub(crate) covered: u64,
     /// Texel centres strictly inside a second (third, …) triangle, counted once per extra claim.
     pub overlapping: u64,
     /// The first overlapping texel (in triangle order).
-    pub first: Option<[u32; 2]>,
+    pub(crate) first: Option<[u32; 2]>,
 }
 
 impl Overlaps {

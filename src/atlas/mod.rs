@@ -7,7 +7,7 @@
 
 mod existing;
 mod pack;
-pub mod share;
+pub(crate) mod share;
 pub(crate) mod xatlas;
 
 pub use existing::Overlaps;
@@ -35,7 +35,7 @@ pub struct Atlas {
     /// Texel density actually used (texels per world unit).
     pub texels_per_unit: f32,
     /// True when the input's `TEXCOORD_1` was reused.
-    pub reused_input_uvs: bool,
+    pub(crate) reused_input_uvs: bool,
     /// Meshes written once, with a page rect per node (`--instancing share`; empty otherwise).
     /// `instances` holds every node's page UVs all the same.
     pub shared: Vec<SharedMesh>,
@@ -74,7 +74,8 @@ impl Atlas {
     }
 
     /// Debug-build consistency check.
-    pub fn validate(&self, scene: &Scene) {
+    #[cfg(any(debug_assertions, test))]
+    pub(crate) fn validate(&self, scene: &Scene) {
         assert_eq!(self.instances.len(), scene.instances.len());
         for (inst, si) in self.instances.iter().zip(&scene.instances) {
             assert_eq!(inst.xref.len(), inst.uv.len());
@@ -155,7 +156,7 @@ pub(crate) fn page_side(texels: f32, max: u32) -> u32 {
 
 /// Per scene instance: [`build`] will share its mesh's UVs with other nodes (`--instancing
 /// share` and unwrapping), so the junction split must leave it whole.
-pub fn shared_instances(scene: &Scene, source: &Source, params: &AtlasParams) -> Vec<bool> {
+pub(crate) fn shared_instances(scene: &Scene, source: &Source, params: &AtlasParams) -> Vec<bool> {
     if params.instancing == Instancing::Share && !reuses_input_uvs(scene, source, params) {
         share::shared_instances(scene)
     } else {
@@ -164,7 +165,7 @@ pub fn shared_instances(scene: &Scene, source: &Source, params: &AtlasParams) ->
 }
 
 /// [`build`] will reuse the input's `TEXCOORD_1` (so the charts cannot change).
-pub fn reuses_input_uvs(scene: &Scene, source: &Source, params: &AtlasParams) -> bool {
+pub(crate) fn reuses_input_uvs(scene: &Scene, source: &Source, params: &AtlasParams) -> bool {
     match params.uv {
         UvMode::Unwrap => false,
         UvMode::Existing => true,
@@ -176,7 +177,7 @@ pub fn reuses_input_uvs(scene: &Scene, source: &Source, params: &AtlasParams) ->
 /// is charted by smooth patches ([`xatlas`]'s dense path) whatever its triangles' size, which
 /// costs a fraction of xatlas' chart growing on curved meshes and gives more, smaller charts.
 /// Shared instancing and reused `TEXCOORD_1` are laid out as [`build_with`] does.
-pub fn build_quick(
+pub(crate) fn build_quick(
     scene: &Scene,
     source: &Source,
     params: &AtlasParams,
@@ -194,7 +195,7 @@ pub fn build(scene: &Scene, source: &Source, params: &AtlasParams) -> Result<Atl
 }
 
 /// [`build`], telling `progress` how the unwrapping goes (stage "atlas").
-pub fn build_with(
+pub(crate) fn build_with(
     scene: &Scene,
     source: &Source,
     params: &AtlasParams,

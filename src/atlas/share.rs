@@ -38,16 +38,16 @@ use crate::{Error, Result};
 #[derive(Clone, Debug)]
 pub struct SharedMesh {
     /// glTF mesh index.
-    pub mesh: u32,
+    pub(crate) mesh: u32,
     /// The scene instances of the first node, in scene order, and their base layout: UVs in
     /// \[0,1\] of the base layout, `triangle_page` all 0. This is the written `TEXCOORD_1`.
-    pub base: Vec<(u32, InstanceUv)>,
+    pub(crate) base: Vec<(u32, InstanceUv)>,
     /// Base layout size in texels (the charts plus `padding` right of and below them).
-    pub base_size: Vec2,
+    pub(crate) base_size: Vec2,
     /// Texels per world unit of the base layout (on the first node's geometry).
     pub texels_per_unit: f32,
     /// The density was lowered from the group's lowest effective density to fit a page.
-    pub lowered: bool,
+    pub(crate) lowered: bool,
     /// Each node placing the mesh, in node order.
     pub nodes: Vec<NodeRect>,
 }
@@ -55,29 +55,29 @@ pub struct SharedMesh {
 /// One node's rectangle: `uv_page = uv_base * scale + offset`, on `page`.
 #[derive(Clone, Debug, PartialEq)]
 pub struct NodeRect {
-    pub node: u32,
-    pub page: u32,
-    pub scale: Vec2,
-    pub offset: Vec2,
+    pub(crate) node: u32,
+    pub(crate) page: u32,
+    pub(crate) scale: Vec2,
+    pub(crate) offset: Vec2,
     /// Its scene instances, parallel to [`SharedMesh::base`].
-    pub instances: Vec<u32>,
+    pub(crate) instances: Vec<u32>,
     /// Its scale was capped so the rect fits a page (its density is lower than asked).
-    pub capped: bool,
+    pub(crate) capped: bool,
 }
 
 /// What shared instancing did, for the bake's summary.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct ShareReport {
     /// Meshes written once, and the nodes placing them.
-    pub meshes: usize,
-    pub nodes: usize,
+    pub(crate) meshes: usize,
+    pub(crate) nodes: usize,
     /// Base layouts whose density was lowered to fit a page, and copies capped to fit one.
-    pub lowered: usize,
-    pub capped: usize,
+    pub(crate) lowered: usize,
+    pub(crate) capped: usize,
 }
 
 impl ShareReport {
-    pub fn of(atlas: &Atlas) -> Option<ShareReport> {
+    pub(crate) fn of(atlas: &Atlas) -> Option<ShareReport> {
         (!atlas.shared.is_empty()).then(|| ShareReport {
             meshes: atlas.shared.len(),
             nodes: atlas.shared.iter().map(|s| s.nodes.len()).sum(),
@@ -138,7 +138,7 @@ pub(crate) fn shared_groups(scene: &Scene) -> Vec<(u32, Blocks)> {
 
 /// Instances of meshes [`unwrap`] shares: the junction split leaves them whole (a shared mesh
 /// cannot carry one node's cuts).
-pub fn shared_instances(scene: &Scene) -> Vec<bool> {
+pub(crate) fn shared_instances(scene: &Scene) -> Vec<bool> {
     let mut shared = vec![false; scene.instances.len()];
     for (_, nodes) in shared_groups(scene) {
         for (_, block) in nodes {
@@ -238,7 +238,7 @@ fn instance_area(scene: &Scene, i: u32) -> f64 {
 const MAX_LOWERINGS: u32 = 48;
 
 /// Unwraps `scene` with shared meshes (see the module docs); without any, as duplicate mode does.
-pub fn unwrap(scene: &Scene, source: &Source, params: &AtlasParams) -> Result<Atlas> {
+pub(crate) fn unwrap(scene: &Scene, source: &Source, params: &AtlasParams) -> Result<Atlas> {
     let groups = shared_groups(scene);
     if groups.is_empty() {
         return xatlas::unwrap(scene, source, params);
@@ -496,7 +496,7 @@ fn write_node_uvs(scene: &Scene, s: &SharedMesh, instances: &mut [InstanceUv]) {
 
 /// A base-layout UV on `rect`'s page: `uv * scale + offset`, a multiply then an add in f32 (no
 /// fused multiply-add), as a shader writes it.
-pub fn page_uv(uv: Vec2, rect: &NodeRect) -> Vec2 {
+pub(crate) fn page_uv(uv: Vec2, rect: &NodeRect) -> Vec2 {
     let scaled = uv * rect.scale;
     scaled + rect.offset
 }

@@ -92,12 +92,12 @@ const NEGLIGIBLE_TEXEL_AREA: f64 = 1e-3;
 const NEEDLE_EDGE_TEXELS: f64 = 1e-3;
 
 /// Unwraps every instance with xatlas at `params.texels_per_unit` and packs the charts.
-pub fn unwrap(scene: &Scene, source: &Source, params: &AtlasParams) -> Result<Atlas> {
+pub(crate) fn unwrap(scene: &Scene, source: &Source, params: &AtlasParams) -> Result<Atlas> {
     unwrap_with(scene, source, params, &NoProgress)
 }
 
 /// [`unwrap`], telling `progress` of the triangles charted (stage "atlas").
-pub fn unwrap_with(
+pub(crate) fn unwrap_with(
     scene: &Scene,
     source: &Source,
     params: &AtlasParams,
@@ -1161,75 +1161,75 @@ mod ffi {
 
     #[repr(C)]
     #[allow(dead_code, reason = "C layout: not every field is read")]
-    pub struct Atlas {
-        pub width: u32,
-        pub height: u32,
-        pub atlas_count: u32,
-        pub chart_count: u32,
-        pub mesh_count: u32,
-        pub meshes: *const Mesh,
-        pub utilization: *const f32,
+    pub(crate) struct Atlas {
+        pub(crate) width: u32,
+        pub(crate) height: u32,
+        pub(crate) atlas_count: u32,
+        pub(crate) chart_count: u32,
+        pub(crate) mesh_count: u32,
+        pub(crate) meshes: *const Mesh,
+        pub(crate) utilization: *const f32,
         pub texels_per_unit: f32,
     }
 
     #[repr(C)]
     #[allow(dead_code, reason = "C layout: not every field is read")]
-    pub struct Chart {
-        pub atlas_index: u32,
-        pub index_array: *const u32,
-        pub index_count: u32,
+    pub(crate) struct Chart {
+        pub(crate) atlas_index: u32,
+        pub(crate) index_array: *const u32,
+        pub(crate) index_count: u32,
     }
 
     #[repr(C)]
     #[allow(dead_code, reason = "C layout: not every field is read")]
-    pub struct Mesh {
-        pub chart_array: *const Chart,
-        pub chart_count: u32,
-        pub index_array: *const u32,
-        pub index_count: u32,
-        pub vertex_array: *const Vertex,
-        pub vertex_count: u32,
+    pub(crate) struct Mesh {
+        pub(crate) chart_array: *const Chart,
+        pub(crate) chart_count: u32,
+        pub(crate) index_array: *const u32,
+        pub(crate) index_count: u32,
+        pub(crate) vertex_array: *const Vertex,
+        pub(crate) vertex_count: u32,
     }
 
     /// Output vertex: `uv` in texels of the page, `atlas_index` −1 when in no chart.
     #[repr(C)]
     #[derive(Clone, Copy, Debug, PartialEq)]
-    pub struct Vertex {
-        pub atlas_index: i32,
-        pub uv: [f32; 2],
-        pub xref: u32,
+    pub(crate) struct Vertex {
+        pub(crate) atlas_index: i32,
+        pub(crate) uv: [f32; 2],
+        pub(crate) xref: u32,
     }
 
-    pub const INDEX_FORMAT_U32: c_int = 1;
+    pub(crate) const INDEX_FORMAT_U32: c_int = 1;
 
     #[repr(C)]
-    pub struct MeshDecl {
-        pub vertex_count: u32,
-        pub vertex_position_data: *const c_void,
-        pub vertex_position_stride: u32,
-        pub vertex_normal_data: *const c_void,
-        pub vertex_normal_stride: u32,
-        pub vertex_uv_data: *const c_void,
-        pub vertex_uv_stride: u32,
-        pub index_count: u32,
-        pub index_data: *const c_void,
-        pub index_offset: i32,
-        pub index_format: c_int,
-        pub face_ignore_data: *const bool,
+    pub(crate) struct MeshDecl {
+        pub(crate) vertex_count: u32,
+        pub(crate) vertex_position_data: *const c_void,
+        pub(crate) vertex_position_stride: u32,
+        pub(crate) vertex_normal_data: *const c_void,
+        pub(crate) vertex_normal_stride: u32,
+        pub(crate) vertex_uv_data: *const c_void,
+        pub(crate) vertex_uv_stride: u32,
+        pub(crate) index_count: u32,
+        pub(crate) index_data: *const c_void,
+        pub(crate) index_offset: i32,
+        pub(crate) index_format: c_int,
+        pub(crate) face_ignore_data: *const bool,
     }
 
     #[repr(C)]
-    pub struct ChartOptions {
-        pub max_chart_area: f32,
-        pub max_boundary_length: f32,
-        pub proxy_fit_metric_weight: f32,
-        pub roundness_metric_weight: f32,
-        pub straightness_metric_weight: f32,
-        pub normal_seam_metric_weight: f32,
-        pub texture_seam_metric_weight: f32,
-        pub max_threshold: f32,
-        pub grow_face_count: u32,
-        pub max_iterations: u32,
+    pub(crate) struct ChartOptions {
+        pub(crate) max_chart_area: f32,
+        pub(crate) max_boundary_length: f32,
+        pub(crate) proxy_fit_metric_weight: f32,
+        pub(crate) roundness_metric_weight: f32,
+        pub(crate) straightness_metric_weight: f32,
+        pub(crate) normal_seam_metric_weight: f32,
+        pub(crate) texture_seam_metric_weight: f32,
+        pub(crate) max_threshold: f32,
+        pub(crate) grow_face_count: u32,
+        pub(crate) max_iterations: u32,
     }
 
     impl Default for ChartOptions {
@@ -1251,14 +1251,14 @@ mod ffi {
     }
 
     #[repr(C)]
-    pub struct PackOptions {
-        pub attempts: c_int,
-        pub texels_per_unit: f32,
-        pub resolution: u32,
-        pub max_chart_size: u32,
-        pub block_align: bool,
-        pub conservative: bool,
-        pub padding: u32,
+    pub(crate) struct PackOptions {
+        pub(crate) attempts: c_int,
+        pub(crate) texels_per_unit: f32,
+        pub(crate) resolution: u32,
+        pub(crate) max_chart_size: u32,
+        pub(crate) block_align: bool,
+        pub(crate) conservative: bool,
+        pub(crate) padding: u32,
     }
 
     type ParameterizeFunc = unsafe extern "C" fn(*const f32, *mut f32, u32, *const u32, u32, bool);
@@ -1316,21 +1316,21 @@ mod ffi {
     }
 
     /// One xatlas atlas, destroyed on drop.
-    pub struct Handle(*mut Atlas);
+    pub(crate) struct Handle(*mut Atlas);
 
     /// Borrowed views of the output, valid while the handle lives and is not regenerated.
-    pub struct Output<'a> {
-        pub page_count: u32,
-        pub meshes: Vec<MeshView<'a>>,
+    pub(crate) struct Output<'a> {
+        pub(crate) page_count: u32,
+        pub(crate) meshes: Vec<MeshView<'a>>,
     }
 
-    pub struct MeshView<'a> {
-        pub indices: &'a [u32],
-        pub vertices: &'a [Vertex],
+    pub(crate) struct MeshView<'a> {
+        pub(crate) indices: &'a [u32],
+        pub(crate) vertices: &'a [Vertex],
     }
 
     impl Handle {
-        pub fn create() -> Self {
+        pub(crate) fn create() -> Self {
             // SAFETY: plain calls without preconditions; a null print function silences xatlas.
             unsafe {
                 xatlas_set_print(None, false);
@@ -1339,12 +1339,12 @@ mod ffi {
         }
 
         /// Returns xatlas' `AddMeshError` (0 = success). The data is copied by xatlas.
-        pub fn add_mesh(&self, decl: &MeshDecl) -> c_int {
+        pub(crate) fn add_mesh(&self, decl: &MeshDecl) -> c_int {
             // SAFETY: `decl` points at live buffers of the declared sizes for this call.
             unsafe { xatlas_add_mesh(self.0, decl) }
         }
 
-        pub fn generate(&self, chart_options: ChartOptions, pack_options: PackOptions) {
+        pub(crate) fn generate(&self, chart_options: ChartOptions, pack_options: PackOptions) {
             // SAFETY: a live atlas; no callbacks are passed.
             unsafe {
                 xatlas_generate(
@@ -1358,7 +1358,7 @@ mod ffi {
             }
         }
 
-        pub fn output(&self) -> Output<'_> {
+        pub(crate) fn output(&self) -> Output<'_> {
             // SAFETY: after `generate`, `meshes` holds `mesh_count` meshes whose arrays have the
             // stated lengths; they live until the atlas is destroyed, which `&self` prevents.
             unsafe {
@@ -1407,27 +1407,27 @@ pub(crate) mod tests {
 
     /// One instance to put in a test scene.
     #[derive(Clone, Default)]
-    pub struct Part {
-        pub positions: Vec<Vec3>,
-        pub triangles: Vec<[u32; 3]>,
-        pub uv1: Option<Vec<Vec2>>,
-        pub mesh: u32,
-        pub node: u32,
+    pub(crate) struct Part {
+        pub(crate) positions: Vec<Vec3>,
+        pub(crate) triangles: Vec<[u32; 3]>,
+        pub(crate) uv1: Option<Vec<Vec2>>,
+        pub(crate) mesh: u32,
+        pub(crate) node: u32,
     }
 
     impl Part {
-        pub fn new(positions: Vec<Vec3>, triangles: Vec<[u32; 3]>) -> Part {
+        pub(crate) fn new(positions: Vec<Vec3>, triangles: Vec<[u32; 3]>) -> Part {
             Part {
                 positions,
                 triangles,
                 ..Part::default()
             }
         }
-        pub fn with_uv1(mut self, uv1: Vec<Vec2>) -> Part {
+        pub(crate) fn with_uv1(mut self, uv1: Vec<Vec2>) -> Part {
             self.uv1 = Some(uv1);
             self
         }
-        pub fn moved(mut self, offset: Vec3, node: u32) -> Part {
+        pub(crate) fn moved(mut self, offset: Vec3, node: u32) -> Part {
             self.positions.iter_mut().for_each(|p| *p += offset);
             self.node = node;
             self
@@ -1435,7 +1435,7 @@ pub(crate) mod tests {
     }
 
     /// A `w × h` quad in the z = 0 plane facing +z, its corner at `origin`; TEXCOORD_1 = [0,1]².
-    pub fn quad(origin: Vec3, w: f32, h: f32) -> Part {
+    pub(crate) fn quad(origin: Vec3, w: f32, h: f32) -> Part {
         let positions = vec![
             origin,
             origin + Vec3::new(w, 0.0, 0.0),
@@ -1451,7 +1451,7 @@ pub(crate) mod tests {
     }
 
     /// An axis-aligned cube of side `size`, each face an `n × n` grid with its own vertices.
-    pub fn cube(size: f32, n: u32) -> Part {
+    pub(crate) fn cube(size: f32, n: u32) -> Part {
         let mut part = Part::default();
         let axes = [Vec3::X, Vec3::Y, Vec3::Z];
         for (k, &normal) in axes.iter().chain(&axes.map(|a| -a)).enumerate() {
@@ -1476,7 +1476,7 @@ pub(crate) mod tests {
     }
 
     /// A latitude-longitude sphere (shared vertices, poles split per segment).
-    pub fn sphere(center: Vec3, radius: f32, rings: u32, segments: u32) -> Part {
+    pub(crate) fn sphere(center: Vec3, radius: f32, rings: u32, segments: u32) -> Part {
         let mut part = Part::default();
         for r in 0..=rings {
             let theta = std::f32::consts::PI * r as f32 / rings as f32;
@@ -1507,7 +1507,7 @@ pub(crate) mod tests {
 
     /// A scene with one instance per part (default material, face-averaged normals); `backs`
     /// lists parts that get a flipped back-face copy, appended after all parts.
-    pub fn scene_of(parts: &[Part], backs: &[usize]) -> Scene {
+    pub(crate) fn scene_of(parts: &[Part], backs: &[usize]) -> Scene {
         let mut scene = Scene {
             materials: vec![Material::default()],
             ..Scene::default()
@@ -1566,7 +1566,7 @@ pub(crate) mod tests {
         scene
     }
 
-    pub fn source() -> Source {
+    pub(crate) fn source() -> Source {
         Source {
             path: "test.gltf".into(),
             is_glb: false,
@@ -1575,7 +1575,7 @@ pub(crate) mod tests {
         }
     }
 
-    pub fn params(texels_per_unit: f32, max_page_size: u32) -> AtlasParams {
+    pub(crate) fn params(texels_per_unit: f32, max_page_size: u32) -> AtlasParams {
         AtlasParams {
             uv: UvMode::Unwrap,
             texels_per_unit,

@@ -57,46 +57,46 @@ use crate::{Error, Result};
 
 const MAGIC: &[u8; 20] = b"LIGHTBAKE-TRANSPORT\n";
 /// The format version this lightbake writes and reads.
-pub const VERSION: u32 = 1;
+pub(crate) const VERSION: u32 = 1;
 
 /// The settings block: how the bake ran, and the lights and materials it was baked with.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 pub struct Settings {
     /// The lightbake that wrote the file.
-    pub lightbake: String,
+    pub(crate) lightbake: String,
     /// The baked glTF (`.gltf` or `.glb`) beside the file, by name.
-    pub gltf: String,
-    pub method: String,
-    pub solver: String,
-    pub texels_per_unit: f32,
-    pub instance_density: Vec<f32>,
+    pub(crate) gltf: String,
+    pub(crate) method: String,
+    pub(crate) solver: String,
+    pub(crate) texels_per_unit: f32,
+    pub(crate) instance_density: Vec<f32>,
     /// Per scene triangle (`AtlasParams::triangle_density`); empty in files that predate it.
     #[serde(default)]
-    pub triangle_density: Vec<f32>,
-    pub max_page_size: u32,
-    pub padding: u32,
-    pub uv: String,
-    pub split_junctions: bool,
-    pub shadow_cuts: bool,
+    pub(crate) triangle_density: Vec<f32>,
+    pub(crate) max_page_size: u32,
+    pub(crate) padding: u32,
+    pub(crate) uv: String,
+    pub(crate) split_junctions: bool,
+    pub(crate) shadow_cuts: bool,
     /// `--instancing share`: shared meshes with a page rect per node (left out when false, so
     /// files of duplicate-mode bakes are as before).
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
-    pub share_instances: bool,
-    pub gather_rays: u32,
-    pub light_samples: u32,
-    pub sky: [f32; 3],
-    pub indirect_only: bool,
-    pub seed: u64,
-    pub validity: bool,
-    pub denoise: bool,
+    pub(crate) share_instances: bool,
+    pub(crate) gather_rays: u32,
+    pub(crate) light_samples: u32,
+    pub(crate) sky: [f32; 3],
+    pub(crate) indirect_only: bool,
+    pub(crate) seed: u64,
+    pub(crate) validity: bool,
+    pub(crate) denoise: bool,
     pub tolerance: f32,
-    pub max_iterations: u32,
-    pub float: bool,
-    pub preview_exposure: f32,
-    pub rgbm: bool,
-    pub seams: bool,
+    pub(crate) max_iterations: u32,
+    pub(crate) float: bool,
+    pub(crate) preview_exposure: f32,
+    pub(crate) rgbm: bool,
+    pub(crate) seams: bool,
     /// The scene's punctual lights, in scene order (sources `0..lights.len()`).
-    pub lights: Vec<LightEntry>,
+    pub(crate) lights: Vec<LightEntry>,
     /// The scene's materials, in scene order.
     pub materials: Vec<MaterialEntry>,
     /// The emissive materials (indices into `materials`): sources `lights.len()..`.
@@ -105,13 +105,13 @@ pub struct Settings {
 
 /// A punctual light as baked.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
-pub struct LightEntry {
+pub(crate) struct LightEntry {
     /// Its glTF name, or `light <k>` (k its index in `KHR_lights_punctual.lights`).
-    pub label: String,
+    pub(crate) label: String,
     /// Its index in `KHR_lights_punctual.lights`.
-    pub source: Option<u32>,
+    pub(crate) source: Option<u32>,
     /// `color × intensity`.
-    pub intensity: [f32; 3],
+    pub(crate) intensity: [f32; 3],
 }
 
 /// A material as baked.
@@ -120,17 +120,17 @@ pub struct MaterialEntry {
     /// Its glTF name, or `material <k>` (k its glTF index), or `default`.
     pub label: String,
     /// Its glTF material index.
-    pub source: Option<u32>,
-    pub base_color: [f32; 3],
+    pub(crate) source: Option<u32>,
+    pub(crate) base_color: [f32; 3],
     /// Whether a texture multiplies `base_color`.
-    pub textured: bool,
+    pub(crate) textured: bool,
     /// `emissiveFactor × emissiveStrength`.
-    pub emission: [f32; 3],
+    pub(crate) emission: [f32; 3],
 }
 
 impl Settings {
     /// The settings of a bake of `scene` with `config` (the automatic choices applied).
-    pub fn new(scene: &Scene, config: &BakeConfig, gltf: &str) -> Self {
+    pub(crate) fn new(scene: &Scene, config: &BakeConfig, gltf: &str) -> Self {
         let (t, a, o) = (&config.transport, &config.atlas, &config.output);
         let lights = (scene.lights.iter().enumerate())
             .map(|(k, l)| LightEntry {
@@ -239,17 +239,17 @@ pub struct Kept {
     pub settings: Settings,
     /// The fields the solver, denoiser, fill and pages read (see the module docs); the others
     /// are empty.
-    pub texels: Texels,
+    pub(crate) texels: Texels,
     /// Per texel: its material (an index into `settings.materials`).
-    pub material: Vec<u32>,
+    pub(crate) material: Vec<u32>,
     /// Rows, escape fractions, direct light by source (`direct` is empty: relight makes it).
-    pub transport: Transport,
+    pub(crate) transport: Transport,
     /// Seam samples only (`edges` is empty).
-    pub seams: Seams,
+    pub(crate) seams: Seams,
 }
 
 /// Per texel: the material of its main triangle.
-pub fn texel_materials(scene: &Scene, texels: &Texels) -> Vec<u32> {
+pub(crate) fn texel_materials(scene: &Scene, texels: &Texels) -> Vec<u32> {
     (texels.triangle.iter())
         .map(|&t| scene.instances[scene.triangle_instance[t as usize] as usize].material)
         .collect()
@@ -268,7 +268,7 @@ fn scene_hash(gltf_files: &[&[u8]], settings: &[u8]) -> [u8; 32] {
 
 /// The file's bytes. `gltf_files` are the baked glTF's files as written (`.gltf` then `.bin`,
 /// or the `.glb`); `transport` holds direct light by source.
-pub fn encode(
+pub(crate) fn encode(
     settings: &Settings,
     gltf_files: &[&[u8]],
     texels: &Texels,
@@ -340,7 +340,7 @@ pub fn encode(
 
 /// The files of the baked glTF `gltf` (`.gltf` then its `.bin`, or the `.glb`), as the scene
 /// hash reads them.
-pub fn gltf_files(gltf: &Path) -> Result<Vec<Vec<u8>>> {
+pub(crate) fn gltf_files(gltf: &Path) -> Result<Vec<Vec<u8>>> {
     let main = std::fs::read(gltf).map_err(|e| Error::io(gltf, e))?;
     let mut files = vec![main];
     if gltf.extension().and_then(|e| e.to_str()) == Some("gltf") {

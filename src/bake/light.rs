@@ -10,19 +10,19 @@ use crate::{Progress, Result};
 
 /// The transport of one bake and its solution.
 #[derive(Clone, Debug)]
-pub struct Lit {
-    pub transport: Transport,
-    pub solution: Solution,
+pub(crate) struct Lit {
+    pub(crate) transport: Transport,
+    pub(crate) solution: Solution,
 }
 
 /// What makes the final bake's transport and solution from the planned settings and the
 /// per-texel rays: [`by_technique`] on this machine, or a distributed solve
 /// ([`super::distributed`]).
-pub type LightFn<'a> =
+pub(crate) type LightFn<'a> =
     &'a dyn Fn(Surfaces, &BakeConfig, Option<&[u32]>, &dyn Progress) -> Result<Lit>;
 
 /// [`transport_and_solve`] with `config`'s technique and parameters.
-pub fn by_technique(
+pub(crate) fn by_technique(
     surfaces: Surfaces,
     config: &BakeConfig,
     texel_rays: Option<&[u32]>,
@@ -39,7 +39,7 @@ pub fn by_technique(
 }
 
 /// Light transport and its solution with `technique`; `texel_rays` as in [`transport::build`].
-pub fn transport_and_solve(
+pub(crate) fn transport_and_solve(
     surfaces: Surfaces,
     technique: Technique,
     params: &TransportParams,

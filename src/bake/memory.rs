@@ -15,7 +15,7 @@ use crate::{Error, Progress, Result, scene};
 
 /// The memory a bake may use: `config.max_memory`, or what the machine has available now
 /// (sysinfo; unlimited where it cannot tell).
-pub fn limit(config: &BakeConfig) -> u64 {
+pub(crate) fn limit(config: &BakeConfig) -> u64 {
     config.max_memory.unwrap_or_else(|| {
         let available = sysinfo::System::new().ok().map(|mut system| {
             system.refresh_memory();
@@ -33,7 +33,7 @@ pub fn limit(config: &BakeConfig) -> u64 {
 /// pilot pair held while the final rows are built at the configured rays (the automatic choice
 /// may choose others), the gather solver's peak where those rows would not fit the bake's limit
 /// and it may switch; never above that limit (a bake that would exceed it is refused).
-pub fn expected_peak(input: &Path, config: &BakeConfig) -> Result<u64> {
+pub(crate) fn expected_peak(input: &Path, config: &BakeConfig) -> Result<u64> {
     let (scene, source) = scene::load(input)?;
     let mut config = config.clone();
     if let Some(auto) = config.auto {
@@ -46,7 +46,7 @@ pub fn expected_peak(input: &Path, config: &BakeConfig) -> Result<u64> {
 }
 
 /// Refuses a bake of `sizes` that cannot fit in `limit` whatever the automatic choice does.
-pub fn check(input: &Path, sizes: &Sizes, config: &BakeConfig, limit: u64) -> Result<()> {
+pub(crate) fn check(input: &Path, sizes: &Sizes, config: &BakeConfig, limit: u64) -> Result<()> {
     let least = sizes.least(config);
     refuse_above(input, sizes, &least, limit, config)
 }
@@ -54,7 +54,7 @@ pub fn check(input: &Path, sizes: &Sizes, config: &BakeConfig, limit: u64) -> Re
 /// Once the rays are chosen (`pilot`: gathering rays of each reused pilot run, and whether
 /// no further bake follows; the plan's per-texel rays count when it has them): switches the automatic choice to the gather solver when the stored
 /// rows do not fit and it does (with a warning), and refuses what still does not fit.
-pub fn fit(
+pub(crate) fn fit(
     input: &Path,
     sizes: &Sizes,
     config: &mut BakeConfig,

@@ -6,9 +6,9 @@
 
 pub mod distributed;
 pub mod kept;
-pub mod light;
-pub mod memory;
-pub mod pilot;
+pub(crate) mod light;
+pub(crate) mod memory;
+pub(crate) mod pilot;
 pub mod relight;
 
 use std::path::{Path, PathBuf};
@@ -34,16 +34,16 @@ pub struct StageTime {
 /// What a bake did, for the one-line summary and for build tools.
 #[derive(Clone, Debug)]
 pub struct BakeReport {
-    pub triangles: usize,
+    pub(crate) triangles: usize,
     pub texels: usize,
     pub pages: usize,
-    pub rays: u64,
-    pub iterations: usize,
-    pub residual: f32,
+    pub(crate) rays: u64,
+    pub(crate) iterations: usize,
+    pub(crate) residual: f32,
     /// False when the solver stopped on the iteration cap.
-    pub converged: bool,
+    pub(crate) converged: bool,
     /// Texel sample points moved out of geometry, and texels with none outside it.
-    pub validity: texels::validity::ValidityReport,
+    pub(crate) validity: texels::validity::ValidityReport,
     /// The automatic choice of settings and its reasons (`config.auto`).
     pub plan: Option<Plan>,
     /// Seam discontinuity before and after stitching (`None` when stitching is off).
@@ -54,7 +54,7 @@ pub struct BakeReport {
     pub sharing: Option<atlas::ShareReport>,
     /// How the directional pages' reconstruction at the texel normals agrees with the lightmap
     /// (`None` without `config.output.directional`).
-    pub directional: Option<lightmap::directional::Agreement>,
+    pub(crate) directional: Option<lightmap::directional::Agreement>,
     pub stages: Vec<StageTime>,
     /// The files written, the glTF first.
     pub files: Vec<PathBuf>,
@@ -131,7 +131,7 @@ impl BakeReport {
 #[derive(Clone, Debug)]
 pub struct Baked {
     pub scene: scene::Scene,
-    pub source: scene::Source,
+    pub(crate) source: scene::Source,
     pub atlas: atlas::Atlas,
     pub texels: texels::Texels,
     pub transport: transport::Transport,
@@ -151,7 +151,7 @@ pub struct Baked {
     pub config: BakeConfig,
     pub plan: Option<Plan>,
     pub seams: Option<lightmap::seams::SeamReport>,
-    pub junctions: Option<scene::junctions::JunctionReport>,
+    pub(crate) junctions: Option<scene::junctions::JunctionReport>,
     /// Per-light layers (`config.output.layers`; [`relight`]).
     pub layers: Vec<relight::LayerPages>,
     pub stages: Vec<StageTime>,
@@ -233,29 +233,29 @@ fn pass_through(
 /// cannot drift apart).
 pub struct Prepared {
     pub scene: scene::Scene,
-    pub source: scene::Source,
+    pub(crate) source: scene::Source,
     pub tracer: Tracer,
     pub atlas: atlas::Atlas,
     pub texels: texels::Texels,
     /// Texel sample points moved out of geometry, and texels with none outside it.
-    pub validity: texels::validity::ValidityReport,
+    pub(crate) validity: texels::validity::ValidityReport,
     /// `config` with the automatic texel density applied.
-    pub config: BakeConfig,
+    pub(crate) config: BakeConfig,
     /// The automatic choice so far (the density), when `config.auto` asks for one.
-    pub plan: Option<Plan>,
+    pub(crate) plan: Option<Plan>,
     /// The density pilot's relative noise at `plan::PILOT_RAYS`, which the transport choice
     /// starts from.
-    pub density_noise: Option<f32>,
+    pub(crate) density_noise: Option<f32>,
     /// What the junction split cut (`None` when it did not run).
-    pub junctions: Option<scene::junctions::JunctionReport>,
-    pub stages: Vec<StageTime>,
+    pub(crate) junctions: Option<scene::junctions::JunctionReport>,
+    pub(crate) stages: Vec<StageTime>,
     /// Processes sharing the final bake's rows (1 on one machine): memory is checked per process.
-    pub processes: usize,
+    pub(crate) processes: usize,
 }
 
 impl Prepared {
     /// What light transport reads.
-    pub fn surfaces(&self) -> Surfaces<'_> {
+    pub(crate) fn surfaces(&self) -> Surfaces<'_> {
         Surfaces {
             scene: &self.scene,
             texels: &self.texels,

@@ -24,7 +24,7 @@ use crate::{Progress, Result, metrics};
 /// noise at [`PILOT_RAYS`] on its own atlas: when it asks for a second pilot, that pilot is the
 /// first cast here (noise at a given K hardly depends on the texel density: 10.9%, 10.2% and
 /// 11.9% on the furnished interior's uniform atlases at 32, 16 and 8 /m).
-pub fn choose_transport(
+pub(crate) fn choose_transport(
     surfaces: Surfaces,
     config: &mut BakeConfig,
     plan: &mut Plan,
@@ -148,13 +148,13 @@ fn lit(surfaces: Surfaces, transport: &TransportParams) -> bool {
 /// What the density pilot found: a density factor per scene triangle when the measurement asks
 /// for one, and the pair's relative noise at [`PILOT_RAYS`], which the transport plan starts
 /// from instead of casting a pair to measure it again.
-pub struct Density {
-    pub triangle_factors: Option<Vec<f32>>,
-    pub noise: Option<f32>,
+pub(crate) struct Density {
+    pub(crate) triangle_factors: Option<Vec<f32>>,
+    pub(crate) noise: Option<f32>,
 }
 
 /// Whether the density pilot can measure anything: Monte Carlo transport and some light.
-pub fn density_measurable(scene: &crate::scene::Scene, config: &BakeConfig) -> bool {
+pub(crate) fn density_measurable(scene: &crate::scene::Scene, config: &BakeConfig) -> bool {
     config.technique.is_monte_carlo()
         && (scene.has_light_sources() || config.transport.sky.max_element() > 0.0)
 }
@@ -164,7 +164,7 @@ pub fn density_measurable(scene: &crate::scene::Scene, config: &BakeConfig) -> b
 /// error at random surface points, and the density per region that asks for
 /// ([`plan::density`]) at `tpu`, the preset's density. Its rays and time go to the plan's
 /// overhead: none of it is in the result.
-pub fn measure_density(
+pub(crate) fn measure_density(
     surfaces: Surfaces,
     config: &BakeConfig,
     tpu: f32,
@@ -279,13 +279,13 @@ fn gathered_sample(
 
 /// Two Monte Carlo bakes of the same texels with independent seeds: their difference measures
 /// the noise, and their mean is kept for the final bake ([`final_bake`]).
-pub struct PilotRuns {
+pub(crate) struct PilotRuns {
     /// Gathering rays (and light samples) of each run.
-    pub gather_rays: u32,
-    pub light_samples: u32,
-    pub runs: Vec<Lit>,
+    pub(crate) gather_rays: u32,
+    pub(crate) light_samples: u32,
+    pub(crate) runs: Vec<Lit>,
     /// True when the runs alone reach the target: no further bake is needed.
-    pub enough: bool,
+    pub(crate) enough: bool,
 }
 
 /// The lookup-error samples of a pilot pair ([`PunctualSample`], [`GatheredSample`]) and the
@@ -402,24 +402,24 @@ impl PilotRuns {
 }
 
 /// The result of [`final_bake`].
-pub struct FinalBake {
+pub(crate) struct FinalBake {
     /// The last run's rows, with the combined direct light and every run's rays.
-    pub transport: Transport,
+    pub(crate) transport: Transport,
     /// The combined solution.
-    pub solution: Solution,
+    pub(crate) solution: Solution,
     /// Effective gathering rays and light samples per texel (all runs together), for the
     /// denoiser's noise model.
-    pub gather_rays: u32,
-    pub light_samples: u32,
+    pub(crate) gather_rays: u32,
+    pub(crate) light_samples: u32,
     /// Gathering rays per texel, all runs together (fewer where the plan's `texel_rays` cut
     /// them): what each texel's noise falls with.
-    pub texel_gather_rays: Vec<f32>,
+    pub(crate) texel_gather_rays: Vec<f32>,
 }
 
 /// The final bake of `config`, reusing the pilot: the result is the mean of the pilot runs and
 /// (unless they are enough) one more bake at `config`'s rays, weighted by gathering rays — each
 /// run's variance falls as 1/K, so this is the least-variance combination.
-pub fn final_bake(
+pub(crate) fn final_bake(
     surfaces: Surfaces,
     config: &BakeConfig,
     plan: Option<&Plan>,

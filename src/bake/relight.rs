@@ -73,31 +73,31 @@ pub struct Edits {
 /// One layer: the sources whose light it holds (indices into the transport's sources) and
 /// whether the sky's.
 #[derive(Clone, Debug, PartialEq)]
-pub struct Layer {
+pub(crate) struct Layer {
     /// The layer's name, also in its pages' file names (`<stem>_<name>_lightmap<k>.exr`).
-    pub name: String,
-    pub sources: Vec<usize>,
-    pub sky: bool,
+    pub(crate) name: String,
+    pub(crate) sources: Vec<usize>,
+    pub(crate) sky: bool,
 }
 
 /// A layer's pages.
 #[derive(Clone, Debug)]
 pub struct LayerPages {
-    pub layer: Layer,
+    pub(crate) layer: Layer,
     /// `H/π` per texel (denoised, invalid texels filled): what the pages hold before dilation.
     pub lightmap: Vec<Vec3>,
-    pub pages: LightmapPages,
+    pub(crate) pages: LightmapPages,
 }
 
 /// What a relight did.
 #[derive(Clone, Debug)]
 pub struct RelightReport {
-    pub texels: usize,
+    pub(crate) texels: usize,
     pub layers: usize,
-    pub iterations: usize,
-    pub residual: f32,
+    pub(crate) iterations: usize,
+    pub(crate) residual: f32,
     pub converged: bool,
-    pub stages: Vec<StageTime>,
+    pub(crate) stages: Vec<StageTime>,
     /// The files written, the glTF first.
     pub files: Vec<PathBuf>,
 }
@@ -341,7 +341,7 @@ fn matches<'a>(
 
 /// Direct light of `sources` (each scaled by `scale`), plus the sky's when `sky` is not zero:
 /// `Σ_s scale_s ⊙ term_s + π · sky · escape`, per texel.
-pub fn direct_light(
+pub(crate) fn direct_light(
     transport: &Transport,
     scale: &[Vec3],
     sources: &[usize],
@@ -363,7 +363,7 @@ pub fn direct_light(
 /// the emissive materials (`emissive`) and one for the sky (`sky`, when the bake has one) for
 /// the sources no group took. Members are light names, emissive material names, `emissive`
 /// or `sky`; an unknown or twice-grouped member is an error.
-pub fn plan_layers(settings: &Settings, groups: &[LayerGroup]) -> Result<Vec<Layer>> {
+pub(crate) fn plan_layers(settings: &Settings, groups: &[LayerGroup]) -> Result<Vec<Layer>> {
     let lights = settings.lights.len();
     let has_sky = Vec3::from(settings.sky).max_element() > 0.0;
     let emissive: Vec<usize> = (lights..lights + settings.emissive.len()).collect();
@@ -485,7 +485,7 @@ fn file_safe(name: &str) -> String {
 /// `scale`) solved on `transport`'s rows with the solver of `config` — for Jacobi and
 /// Gauss–Seidel exactly `full`'s number of sweeps, so the layers sum to `full` within float
 /// rounding. `transport.direct` is restored afterwards.
-pub fn solve_layers(
+pub(crate) fn solve_layers(
     (texels, transport): (&Texels, &mut Transport),
     config: &BakeConfig,
     full: &Solution,

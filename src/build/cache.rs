@@ -16,15 +16,15 @@ use super::SceneResult;
 use crate::{BakeConfig, Error, Result, scene};
 
 /// File name of the record in a scene's output directory.
-pub const RECORD: &str = "lightbake-build.json";
+pub(crate) const RECORD: &str = "lightbake-build.json";
 
 /// What a successful bake leaves beside its outputs.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub(super) struct Record {
-    pub key: String,
+    pub(crate) key: String,
     /// Output files relative to the output directory, with their BLAKE3 hashes.
-    pub files: Vec<(PathBuf, String)>,
-    pub result: SceneResult,
+    pub(crate) files: Vec<(PathBuf, String)>,
+    pub(crate) result: SceneResult,
 }
 
 /// The cache key of baking `input` with `config`.

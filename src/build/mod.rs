@@ -11,7 +11,7 @@
 //! scene is reported and the others still run. A scene is skipped when the hash of its input files, its effective options
 //! and lightbake's version matches the record beside its outputs and the outputs are intact.
 
-pub mod cache;
+pub(crate) mod cache;
 mod manifest;
 pub mod options;
 
@@ -62,8 +62,8 @@ pub enum Status {
 pub struct EstimatedError {
     /// Noise and resolution error in quadrature ([`crate::plan::Plan::predicted_error`]).
     pub total: Option<f32>,
-    pub noise: Option<f32>,
-    pub resolution: Option<f32>,
+    pub(crate) noise: Option<f32>,
+    pub(crate) resolution: Option<f32>,
 }
 
 /// The figures of a finished bake, recorded with its outputs and reported again on a skip.
@@ -93,7 +93,7 @@ pub struct SceneReport {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct BuildReport {
     /// lightbake's version.
-    pub lightbake: String,
+    pub(crate) lightbake: String,
     pub scenes: Vec<SceneReport>,
 }
 

@@ -61,12 +61,12 @@ use crate::{Error, Progress, Result};
 /// Filter settings (see the table in the module docs).
 #[derive(Clone, Debug)]
 pub struct DenoiseParams {
-    pub radius: u32,
-    pub sigma_s: f32,
-    pub range_scale: f32,
-    pub min_cos: f32,
-    pub gate: f32,
-    pub linear: bool,
+    pub(crate) radius: u32,
+    pub(crate) sigma_s: f32,
+    pub(crate) range_scale: f32,
+    pub(crate) min_cos: f32,
+    pub(crate) gate: f32,
+    pub(crate) linear: bool,
 }
 
 /// Minimum determinant of the normalised moment matrix (≈ variance of dx times variance of dy,
@@ -88,7 +88,12 @@ impl Default for DenoiseParams {
 
 /// Expected standard deviation of a texel's channel mean: `σ² = indirect²/K + (direct/L)²`
 /// (`L` = 0: exact direct light, punctual lights only).
-pub fn expected_noise(indirect: Vec3, direct: Vec3, gather_rays: u32, light_samples: u32) -> f32 {
+pub(crate) fn expected_noise(
+    indirect: Vec3,
+    direct: Vec3,
+    gather_rays: u32,
+    light_samples: u32,
+) -> f32 {
     let mean = |v: Vec3| v.max(Vec3::ZERO).element_sum() / 3.0;
     let var_indirect = mean(indirect).powi(2) / gather_rays.max(1) as f32;
     let var_direct = if light_samples == 0 {
@@ -103,7 +108,7 @@ pub fn expected_noise(indirect: Vec3, direct: Vec3, gather_rays: u32, light_samp
 /// The bake's denoising step: `lightmap` holds `H/π` per texel (indirect only when
 /// `params.indirect_only`); the noise model takes direct light from `transport.direct` and the
 /// ray counts from `params`.
-pub fn denoise_bake(
+pub(crate) fn denoise_bake(
     texels: &Texels,
     transport: &Transport,
     lightmap: &mut [Vec3],
@@ -122,7 +127,7 @@ pub fn denoise_bake(
 
 /// [`expected_noise`] of every texel of a bake's `lightmap` (`H/π`, indirect only when
 /// `params.indirect_only`), with direct light `direct` (W/m²) and the ray counts of `params`.
-pub fn bake_noise(
+pub(crate) fn bake_noise(
     texels: &Texels,
     direct: &[Vec3],
     lightmap: &[Vec3],
@@ -169,7 +174,7 @@ pub fn denoise(
 /// for a fixed guide the filter is linear in `values` (up to the clamp of a negative plane fit
 /// at zero), so parts of a lightmap filtered with the whole as guide sum to the filtered
 /// whole. Per-light layers are denoised this way.
-pub fn denoise_guided(
+pub(crate) fn denoise_guided(
     texels: &Texels,
     guide: &[Vec3],
     values: &mut [Vec3],

@@ -78,9 +78,9 @@ use crate::transport::Surfaces;
 use crate::{Error, Progress, Result, metrics};
 
 /// The names of the four coefficient pages, in storage order.
-pub const NAMES: [&str; 4] = crate::scene::DIRECTIONAL_PAGES;
+pub(crate) const NAMES: [&str; 4] = crate::scene::DIRECTIONAL_PAGES;
 /// How the pages are read, as the glTF extras state it.
-pub const CONVENTION: &str =
+pub(crate) const CONVENTION: &str =
     "E(n)/pi = max(0, L0 + L1x*n.x + L1y*n.y + L1z*n.z), n world-space unit normal";
 /// Default hemisphere rays per texel.
 pub const DEFAULT_RAYS: u32 = 256;
@@ -104,7 +104,7 @@ pub fn irradiance_over_pi(c: &Sh1, n: Vec3) -> Vec3 {
 /// Adds radiance `l` (W/(sr·m²) per unit solid-angle weight, i.e. the integrand's value over
 /// its sampling density) arriving from unit direction `dir` to `c`.
 #[inline]
-pub fn project(c: &mut Sh1, dir: Vec3, l: Vec3) {
+pub(crate) fn project(c: &mut Sh1, dir: Vec3, l: Vec3) {
     c[0] += l * (1.0 / (4.0 * PI));
     let l1 = l * (1.0 / (2.0 * PI));
     c[1] += l1 * dir.x;
@@ -125,16 +125,16 @@ pub struct DirectionalParams {
 
 /// What the final gather found, per texel (indexed like the texels).
 #[derive(Clone, Debug, Default)]
-pub struct Gathered {
-    pub sh: Vec<Sh1>,
+pub(crate) struct Gathered {
+    pub(crate) sh: Vec<Sh1>,
     /// `E/π` about the texel's own normal from the same samples (the clamped-cosine integral,
     /// no truncation): the lightmap's quantity, to check the gather against it.
-    pub at_normal: Vec<Vec3>,
-    pub rays: u64,
+    pub(crate) at_normal: Vec<Vec3>,
+    pub(crate) rays: u64,
 }
 
 /// The final gather over the solved irradiance `h` (`H`, W/m², per texel).
-pub fn gather(
+pub(crate) fn gather(
     surfaces: Surfaces,
     h: &[Vec3],
     params: &DirectionalParams,
@@ -265,7 +265,7 @@ impl<'a> Gatherer<'a> {
 }
 
 /// The four coefficient pages ([`NAMES`]) laid out like the lightmap (signed values kept).
-pub fn pages(texels: &Texels, sh: &[Sh1]) -> [LightmapPages; 4] {
+pub(crate) fn pages(texels: &Texels, sh: &[Sh1]) -> [LightmapPages; 4] {
     std::array::from_fn(|c| {
         let values: Vec<Vec3> = sh.iter().map(|s| s[c]).collect();
         LightmapPages::from_texels_signed(texels, &values)
@@ -274,7 +274,7 @@ pub fn pages(texels: &Texels, sh: &[Sh1]) -> [LightmapPages; 4] {
 
 /// How the gather agrees with the lightmap `H/π` at each texel's own normal, over the valid
 /// texels ([`metrics::rmse_over_mean`], [`metrics::relative_bias`]).
-pub fn agreement(texels: &Texels, gathered: &Gathered, lightmap: &[Vec3]) -> Agreement {
+pub(crate) fn agreement(texels: &Texels, gathered: &Gathered, lightmap: &[Vec3]) -> Agreement {
     let recon: Vec<Vec3> = (gathered.sh.iter().zip(&texels.normal))
         .map(|(c, &n)| irradiance_over_pi(c, n))
         .collect();
@@ -292,12 +292,12 @@ pub fn agreement(texels: &Texels, gathered: &Gathered, lightmap: &[Vec3]) -> Agr
 pub struct Agreement {
     /// The gathered irradiance (no truncation) against the lightmap: the gather's noise and
     /// the lightmap's own error.
-    pub gathered_rmse: f32,
-    pub gathered_bias: f32,
+    pub(crate) gathered_rmse: f32,
+    pub(crate) gathered_bias: f32,
     /// The L1 reconstruction against the lightmap: the above plus the truncation at the
     /// surface normal.
-    pub l1_rmse: f32,
-    pub l1_bias: f32,
+    pub(crate) l1_rmse: f32,
+    pub(crate) l1_bias: f32,
 }
 
 #[cfg(test)]

@@ -32,7 +32,7 @@ impl Page {
     /// grows downward, row 0 at the top; texel (x, y) covers u ∈ [x/W, (x+1)/W],
     /// v ∈ [y/H, (y+1)/H] and its value sits at the centre), clamped to the edge (dilation
     /// filled the gutters).
-    pub fn bilinear(&self, uv: Vec2) -> Vec3 {
+    pub(crate) fn bilinear(&self, uv: Vec2) -> Vec3 {
         let [a, b, c, d] = self.footprint(uv).map(|(k, _)| self.rgb[k]);
         let (fx, fy) = self.fractions(uv);
         a.lerp(b, fx).lerp(c.lerp(d, fx), fy)
@@ -87,7 +87,7 @@ impl LightmapPages {
 
     /// [`LightmapPages::from_texels`] keeping negative values (signed coefficients such as
     /// [`directional`]'s L1).
-    pub fn from_texels_signed(texels: &Texels, values: &[Vec3]) -> LightmapPages {
+    pub(crate) fn from_texels_signed(texels: &Texels, values: &[Vec3]) -> LightmapPages {
         Self::lay_out(texels, values, |v| v)
     }
 

@@ -199,12 +199,12 @@ impl Default for SeamParams {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SeamEdge {
     /// Scene triangles of side A and side B.
-    pub triangles: [u32; 2],
+    pub(crate) triangles: [u32; 2],
     /// Page of each side.
-    pub page: [u32; 2],
+    pub(crate) page: [u32; 2],
     /// End points P and Q of the edge on each side, in texel units of its page
     /// (`uv[side][0]` is P on both sides).
-    pub uv: [[Vec2; 2]; 2],
+    pub(crate) uv: [[Vec2; 2]; 2],
 }
 
 /// The seam edges of a scene and their sample points.
@@ -245,7 +245,7 @@ pub struct SeamReport {
     /// Texels that are unknowns of the least-squares problem.
     pub texels: usize,
     /// Conjugate-gradient iterations run.
-    pub iterations: u32,
+    pub(crate) iterations: u32,
     pub seconds: f64,
 }
 

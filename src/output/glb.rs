@@ -3,7 +3,7 @@
 
 /// A GLB file of `json` (padded with spaces) and `bin` (padded with zeros) to 4-byte chunk
 /// lengths. An empty `bin` writes no BIN chunk, as the spec allows.
-pub fn container(mut json: Vec<u8>, mut bin: Vec<u8>) -> Vec<u8> {
+pub(crate) fn container(mut json: Vec<u8>, mut bin: Vec<u8>) -> Vec<u8> {
     json.resize(json.len().next_multiple_of(4), b' ');
     bin.resize(bin.len().next_multiple_of(4), 0);
     let bin_chunk = if bin.is_empty() { 0 } else { 8 + bin.len() };

@@ -114,12 +114,12 @@ fn rgb(v: &Value) -> Option<Vec3> {
 
 /// One lightmap layer as the glTF names it (`extras.lightmap_layers`).
 pub(crate) struct LayerExtras<'a> {
-    pub name: &'a str,
+    pub(crate) name: &'a str,
     /// The lights and emissive materials whose light it holds, by name.
-    pub lights: Vec<String>,
-    pub emissive_materials: Vec<String>,
-    pub sky: bool,
-    pub pages: &'a [PageFiles],
+    pub(crate) lights: Vec<String>,
+    pub(crate) emissive_materials: Vec<String>,
+    pub(crate) sky: bool,
+    pub(crate) pages: &'a [PageFiles],
 }
 
 /// Sets the glTF root's `extras.lightmap_layers` to `layers` (nothing when there are none): per

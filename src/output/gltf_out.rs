@@ -67,16 +67,16 @@ const CLAMP_TO_EDGE: u64 = 33071;
 
 /// File names (relative to the output glTF) of one lightmap page.
 #[derive(Clone, Debug)]
-pub struct PageFiles {
-    pub exr: String,
-    pub png: String,
+pub(crate) struct PageFiles {
+    pub(crate) exr: String,
+    pub(crate) png: String,
     /// The directional pages (`lightmap::directional::NAMES` order), when baked.
-    pub directional: Option<[String; 4]>,
+    pub(crate) directional: Option<[String; 4]>,
 }
 
 /// Writes `<stem>.gltf` + `<stem>.bin` (or `<stem>.glb` for .glb input) into `staging`, plus
 /// copies of the input's external images.
-pub fn write_gltf(
+pub(crate) fn write_gltf(
     scene: &Scene,
     source: &Source,
     atlas: &Atlas,

@@ -18,7 +18,7 @@ const SHORT: u64 = 5122;
 /// Component type and shape of one accessor element.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(super) struct Layout {
-    pub component_type: u64,
+    pub(crate) component_type: u64,
     /// Rows of a column (the component count of a scalar or vector).
     rows: usize,
     /// 1 for scalars and vectors, n for MATn.
@@ -26,7 +26,7 @@ pub(super) struct Layout {
 }
 
 impl Layout {
-    pub fn new(component_type: u64, type_name: &str) -> Result<Layout, String> {
+    pub(crate) fn new(component_type: u64, type_name: &str) -> Result<Layout, String> {
         let (rows, columns) = match type_name {
             "SCALAR" => (1, 1),
             "VEC2" => (2, 1),
@@ -48,7 +48,7 @@ impl Layout {
         Ok(layout)
     }
 
-    pub fn of(accessor: &Value) -> Result<Layout, String> {
+    pub(crate) fn of(accessor: &Value) -> Result<Layout, String> {
         let component_type = accessor
             .get("componentType")
             .and_then(Value::as_u64)
@@ -60,7 +60,7 @@ impl Layout {
         Layout::new(component_type, type_name)
     }
 
-    pub fn component_size(&self) -> usize {
+    pub(crate) fn component_size(&self) -> usize {
         match self.component_type {
             BYTE | UNSIGNED_BYTE => 1,
             SHORT | UNSIGNED_SHORT => 2,
@@ -80,11 +80,11 @@ impl Layout {
     }
 
     /// Bytes of one element, column padding included.
-    pub fn element_size(&self) -> usize {
+    pub(crate) fn element_size(&self) -> usize {
         self.column_stride() * self.columns
     }
 
-    pub fn component_count(&self) -> usize {
+    pub(crate) fn component_count(&self) -> usize {
         self.rows * self.columns
     }
 
@@ -94,7 +94,7 @@ impl Layout {
     }
 
     /// Component `c` of the element starting at `element[0]`.
-    pub fn component(&self, element: &[u8], c: usize) -> f64 {
+    pub(crate) fn component(&self, element: &[u8], c: usize) -> f64 {
         let o = self.component_offset(c);
         let b = |n: usize| -> [u8; 4] {
             let mut a = [0; 4];
@@ -124,7 +124,7 @@ impl Layout {
     }
 
     /// Writes `value` into component `c`, rounded and clamped for integer types.
-    pub fn set_component(&self, element: &mut [u8], c: usize, value: f64) {
+    pub(crate) fn set_component(&self, element: &mut [u8], c: usize, value: f64) {
         let o = self.component_offset(c);
         let clamp = |lo: f64, hi: f64| value.round().clamp(lo, hi);
         match self.component_type {
@@ -144,7 +144,7 @@ impl Layout {
 
     /// Negates component `c` in place (signed types only; `-i8::MIN` saturates, which is the
     /// same normalized value).
-    pub fn negate_component(&self, element: &mut [u8], c: usize) {
+    pub(crate) fn negate_component(&self, element: &mut [u8], c: usize) {
         let o = self.component_offset(c);
         match self.component_type {
             BYTE => element[o] = (element[o] as i8).saturating_neg() as u8,
@@ -179,7 +179,7 @@ pub(super) enum BlendKind {
 }
 
 impl BlendKind {
-    pub fn of(attribute: &str) -> BlendKind {
+    pub(crate) fn of(attribute: &str) -> BlendKind {
         match attribute {
             "NORMAL" | "TANGENT" => BlendKind::Direction(3),
             name if name.starts_with("JOINTS_") => BlendKind::Index,
@@ -191,22 +191,22 @@ impl BlendKind {
 /// The elements of an accessor, densely packed (`layout.element_size()` bytes each).
 #[derive(Clone, Debug)]
 pub(super) struct Elements {
-    pub layout: Layout,
-    pub bytes: Vec<u8>,
+    pub(crate) layout: Layout,
+    pub(crate) bytes: Vec<u8>,
 }
 
 impl Elements {
-    pub fn len(&self) -> usize {
+    pub(crate) fn len(&self) -> usize {
         self.bytes.len() / self.layout.element_size()
     }
 
-    pub fn element(&self, i: usize) -> &[u8] {
+    pub(crate) fn element(&self, i: usize) -> &[u8] {
         let size = self.layout.element_size();
         &self.bytes[i * size..(i + 1) * size]
     }
 
     /// `new[a] = self[map[a]]`; every entry of `map` must be in range.
-    pub fn gather(&self, map: &[u32]) -> Elements {
+    pub(crate) fn gather(&self, map: &[u32]) -> Elements {
         let mut bytes = Vec::with_capacity(map.len() * self.layout.element_size());
         for &i in map {
             bytes.extend_from_slice(self.element(i as usize));
@@ -221,7 +221,7 @@ impl Elements {
     /// `blends[k]`), in the accessor's own component type. Components are interpolated;
     /// `kind` says which are unit vectors (renormalised) and which are indices (`JOINTS_n`,
     /// tangent handedness: taken from the vertex of largest weight).
-    pub fn with_blends(&self, blends: &[Blend], kind: BlendKind) -> Elements {
+    pub(crate) fn with_blends(&self, blends: &[Blend], kind: BlendKind) -> Elements {
         let size = self.layout.element_size();
         let n = self.layout.component_count();
         let mut bytes = Vec::with_capacity(self.bytes.len() + blends.len() * size);
@@ -271,7 +271,7 @@ impl Elements {
     }
 
     /// Negates components `components` of every element.
-    pub fn negate(&mut self, components: std::ops::Range<usize>) {
+    pub(crate) fn negate(&mut self, components: std::ops::Range<usize>) {
         let size = self.layout.element_size();
         for element in self.bytes.chunks_exact_mut(size) {
             for c in components.clone() {
@@ -282,7 +282,7 @@ impl Elements {
 
     /// Per-component minimum and maximum as glTF JSON numbers (integers for integer types,
     /// the exact single-precision value for floats; non-finite floats count as 0).
-    pub fn bounds(&self) -> (Vec<Value>, Vec<Value>) {
+    pub(crate) fn bounds(&self) -> (Vec<Value>, Vec<Value>) {
         let n = self.layout.component_count();
         let mut min = vec![f64::INFINITY; n];
         let mut max = vec![f64::NEG_INFINITY; n];
@@ -311,7 +311,7 @@ impl Elements {
 
     /// The elements laid out for a vertex buffer view: each element padded to a multiple of
     /// 4 bytes (glTF's vertex attribute alignment). Returns the bytes and the stride.
-    pub fn vertex_bytes(&self) -> (Vec<u8>, usize) {
+    pub(crate) fn vertex_bytes(&self) -> (Vec<u8>, usize) {
         let size = self.layout.element_size();
         let stride = size.next_multiple_of(4);
         if stride == size {

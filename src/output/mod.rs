@@ -6,7 +6,7 @@
 //! only when all files are complete ([`Staging`]).
 
 mod exr;
-pub mod glb;
+pub(crate) mod glb;
 pub(crate) mod gltf_edit;
 mod gltf_out;
 mod gltf_out_accessor;
@@ -16,8 +16,8 @@ mod staging;
 
 pub use exr::{read_exr, write_exr, write_exr_image};
 pub(crate) use gltf_out::decode_uri;
-pub use gltf_out::{PageFiles, write_gltf};
-pub use png::{write_png_image, write_png_preview, write_rgbm_png};
+pub(crate) use gltf_out::{PageFiles, write_gltf};
+pub(crate) use png::{write_png_image, write_png_preview, write_rgbm_png};
 pub use staging::Staging;
 
 /// A 3 × 2 page whose texels are all different (one above the RGBM range), with one invalid

@@ -23,7 +23,7 @@ use crate::{Error, Result};
 /// transfer function. Unlike Reinhard `x/(1+x)` it keeps mid-tones true (a lightmap value of
 /// 0.5 looks like 0.5), at the cost of clipping highlights — lower the exposure to see them.
 /// Invalid texels (never solved nor dilated) are black.
-pub fn write_png_preview(page: &Page, exposure: f32) -> Result<Vec<u8>> {
+pub(crate) fn write_png_preview(page: &Page, exposure: f32) -> Result<Vec<u8>> {
     let scale = exposure.exp2();
     let mut srgb = Vec::with_capacity(page.rgb.len() * 3);
     for (v, &valid) in page.rgb.iter().zip(&page.valid) {
@@ -41,7 +41,12 @@ pub fn write_png_preview(page: &Page, exposure: f32) -> Result<Vec<u8>> {
 
 /// Encodes a rendered image (linear RGB radiance, row-major, row 0 at the top) as an 8-bit sRGB
 /// PNG: scale by `2^exposure`, [`tone_map`], then the sRGB transfer function.
-pub fn write_png_image(rgb: &[Vec3], width: u32, height: u32, exposure: f32) -> Result<Vec<u8>> {
+pub(crate) fn write_png_image(
+    rgb: &[Vec3],
+    width: u32,
+    height: u32,
+    exposure: f32,
+) -> Result<Vec<u8>> {
     let scale = exposure.exp2();
     let bytes: Vec<u8> = rgb
         .iter()
@@ -51,7 +56,7 @@ pub fn write_png_image(rgb: &[Vec3], width: u32, height: u32, exposure: f32) -> 
 }
 
 /// Encodes a page as an RGBM PNG (8-bit RGBA, linear, see [`super::rgbm`]).
-pub fn write_rgbm_png(page: &Page, range: f32) -> Result<Vec<u8>> {
+pub(crate) fn write_rgbm_png(page: &Page, range: f32) -> Result<Vec<u8>> {
     let rgba = rgbm::encode(page, range);
     encode(
         &rgba,
@@ -63,7 +68,7 @@ pub fn write_rgbm_png(page: &Page, range: f32) -> Result<Vec<u8>> {
 }
 
 /// Where the tone curve of rendered images leaves the identity.
-pub const SHOULDER: f32 = 0.8;
+pub(crate) const SHOULDER: f32 = 0.8;
 
 /// Identity up to [`SHOULDER`], then `k + (1−k)(1 − e^{−(x−k)/(1−k)})` → 1 (C¹ at `k`):
 /// mid-tones stay true and highlights keep some detail instead of clipping. NaN → 0.

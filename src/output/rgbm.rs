@@ -41,7 +41,7 @@ pub const DEFAULT_RANGE: f32 = 8.0;
 
 /// One texel as RGBM bytes `[R, G, B, M]` (see the module docs).
 #[inline]
-pub fn encode_texel(v: Vec3, range: f32) -> [u8; 4] {
+pub(crate) fn encode_texel(v: Vec3, range: f32) -> [u8; 4] {
     let v = if v.is_finite() {
         v.max(Vec3::ZERO)
     } else {
@@ -59,13 +59,13 @@ pub fn encode_texel(v: Vec3, range: f32) -> [u8; 4] {
 
 /// The value RGBM bytes stand for: `rgb/255 · a/255 · range`.
 #[inline]
-pub fn decode_texel(rgbm: [u8; 4], range: f32) -> Vec3 {
+pub(crate) fn decode_texel(rgbm: [u8; 4], range: f32) -> Vec3 {
     let [r, g, b, a] = rgbm.map(|c| c as f32 / 255.0);
     Vec3::new(r, g, b) * (a * range)
 }
 
 /// A page as RGBA8 bytes, row 0 at the top.
-pub fn encode(page: &Page, range: f32) -> Vec<u8> {
+pub(crate) fn encode(page: &Page, range: f32) -> Vec<u8> {
     page.rgb
         .iter()
         .zip(&page.valid)

@@ -41,11 +41,6 @@ impl Staging {
         })
     }
 
-    /// The final directory.
-    pub fn dir(&self) -> &Path {
-        &self.dir
-    }
-
     /// Stages `bytes` as `name` (a relative path with `/` separators, no `..`).
     pub fn write(&mut self, name: &str, bytes: &[u8]) -> Result<()> {
         let final_path = self.final_path(name)?;
@@ -70,21 +65,21 @@ impl Staging {
     }
 
     /// The bytes staged as `name`.
-    pub fn read(&self, name: &str) -> Result<Vec<u8>> {
+    pub(crate) fn read(&self, name: &str) -> Result<Vec<u8>> {
         self.staged(name)?;
         let path = self.tmp.join(name);
         fs::read(&path).map_err(|e| Error::io(&path, e))
     }
 
     /// Stages `bytes` as `name` in place of what [`Staging::write`] staged under that name.
-    pub fn replace(&mut self, name: &str, bytes: &[u8]) -> Result<()> {
+    pub(crate) fn replace(&mut self, name: &str, bytes: &[u8]) -> Result<()> {
         self.staged(name)?;
         let path = self.tmp.join(name);
         fs::write(&path, bytes).map_err(|e| Error::io(&path, e))
     }
 
     /// Whether `name` is staged.
-    pub fn contains(&self, name: &str) -> bool {
+    pub(crate) fn contains(&self, name: &str) -> bool {
         self.names.iter().any(|n| n == name)
     }
 

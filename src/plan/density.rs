@@ -56,24 +56,24 @@ use crate::scene::Scene;
 use crate::texels::Texels;
 
 /// Light-driven factors stay within this range of the preset's density.
-pub const DENSITY_RANGE: (f32, f32) = (0.25, 4.0);
+pub(crate) const DENSITY_RANGE: (f32, f32) = (0.25, 4.0);
 /// Factor of regions nobody sees or no light reaches (1/64 of the texels).
 pub const HIDDEN_FACTOR: f32 = 0.125;
 /// Every seen, lit region gets at least this many texels (up to the top of [`DENSITY_RANGE`]).
-pub const MIN_REGION_TEXELS: f64 = 16.0;
+pub(crate) const MIN_REGION_TEXELS: f64 = 16.0;
 /// The mean square lookup error is taken to fall as `s^−ERROR_EXPONENT` with the density `s`.
-pub const ERROR_EXPONENT: f64 = 2.0;
+pub(crate) const ERROR_EXPONENT: f64 = 2.0;
 /// Most texels a raise may ask for, as a multiple of the uniform atlas's.
-pub const MAX_TEXEL_RAISE: f64 = 4.0;
+pub(crate) const MAX_TEXEL_RAISE: f64 = 4.0;
 /// The density pilot's atlas holds at most about this many texels: below the preset's density
 /// when the preset's atlas is larger (its mean squares are carried to the preset's density by
 /// [`ERROR_EXPONENT`]), so that the pilot costs a bounded share of a large bake.
-pub const PILOT_TEXELS: f64 = 131_072.0;
+pub(crate) const PILOT_TEXELS: f64 = 131_072.0;
 /// The mean square lookup error of a pilot coarser than the preset is carried to the preset's
 /// density as `s^−PILOT_EXPONENT`: the `√h` of edges narrower than a texel, the slowest fall
 /// (from the furnished interior's pilot at 16.5 /m to its atlas at 32 /m the error fell as
 /// `h^0.66`; `ERROR_EXPONENT` predicted 1.79% where the bake's own pilot measured 2.28%).
-pub const PILOT_EXPONENT: f64 = 1.0;
+pub(crate) const PILOT_EXPONENT: f64 = 1.0;
 /// A region whose drawn points were all unseen, with at least this many drawn, is hidden.
 const HIDDEN_POINTS: u32 = 3;
 /// Two regions meet over an edge when their faces turn less than 60° (xatlas' own limit).
@@ -83,19 +83,19 @@ const STEPS_PER_OCTAVE: f32 = 4.0;
 
 /// The scene's density regions (see the module docs).
 #[derive(Clone, Debug, Default)]
-pub struct Regions {
+pub(crate) struct Regions {
     /// Region of each scene triangle.
-    pub of_triangle: Vec<u32>,
+    pub(crate) of_triangle: Vec<u32>,
     /// World area of each region (m²).
-    pub area: Vec<f64>,
+    pub(crate) area: Vec<f64>,
     /// Instance of each region.
-    pub instance: Vec<u32>,
+    pub(crate) instance: Vec<u32>,
 }
 
 impl Regions {
     /// Connected surfaces of each instance: triangles sharing an edge (corners at the same
     /// positions) on the same side of a junction split, facing within 60° of each other.
-    pub fn of(scene: &Scene) -> Regions {
+    pub(crate) fn of(scene: &Scene) -> Regions {
         let mut regions = Regions {
             of_triangle: vec![u32::MAX; scene.triangles.len()],
             ..Default::default()
@@ -171,12 +171,8 @@ impl Regions {
         regions
     }
 
-    pub fn len(&self) -> usize {
+    pub(crate) fn len(&self) -> usize {
         self.area.len()
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.area.is_empty()
     }
 }
 
@@ -184,7 +180,7 @@ impl Regions {
 /// density pilot's pair (`pilot`, stored values at `texels`) and its lookup-error `sample`;
 /// `None` when every factor is 1. Reasons go to `plan`. `tpu` is the preset's density the
 /// factors multiply; the pilot's atlas had `pilot_tpu`.
-pub fn choose_region_density(
+pub(crate) fn choose_region_density(
     scene: &Scene,
     texels: &Texels,
     pilot: [&[Vec3]; 2],
@@ -753,7 +749,6 @@ mod tests {
         for t in 0..scene.triangles.len() as u32 {
             for k in 0..(per_m2 * scene.triangle_area(t as usize)).round() as usize {
                 points.push(GatheredPoint {
-                    instance: scene.triangle_instance[t as usize],
                     triangle: t,
                     rest_square: square(t, k),
                     punctual_square: 0.0,

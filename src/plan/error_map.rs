@@ -38,11 +38,11 @@ const FLOOR: f32 = 0.05;
 
 /// How many samples made each texel's estimate.
 #[derive(Clone, Debug)]
-pub struct Samples<'a> {
+pub(crate) struct Samples<'a> {
     /// Gathering rays per texel, all combined runs together.
-    pub rays: &'a [f32],
+    pub(crate) rays: &'a [f32],
     /// Emitter light samples per gathering ray (0 without emitters).
-    pub light_per_ray: f32,
+    pub(crate) light_per_ray: f32,
 }
 
 /// Per texel and channel, the standard deviation of the irradiance `H` (W/m²) that stored
@@ -50,7 +50,7 @@ pub struct Samples<'a> {
 /// `(E[X²] − E[X]²) / K` for the value `X` a gathering ray returns (`ρ_j·H_j` of the texel it
 /// hits, `π·sky` when it escapes; `F_ij` is the share of the rays that hit `j`), plus the
 /// emitter light samples' noise of the direct light, the denoiser's `(direct/L)²`.
-pub fn gathering_noise(
+pub(crate) fn gathering_noise(
     transport: &Transport,
     texels: &Texels,
     h: &[Vec3],
@@ -88,7 +88,7 @@ pub fn gathering_noise(
 
 /// The denoiser's noise model per texel ([`expected_noise`]), for a bake that kept no rows:
 /// `H` the solved irradiance, `direct` its direct part, `k` and `l` the rays and light samples.
-pub fn modelled_noise(h: &[Vec3], direct: &[Vec3], k: u32, l: u32) -> Vec<Vec3> {
+pub(crate) fn modelled_noise(h: &[Vec3], direct: &[Vec3], k: u32, l: u32) -> Vec<Vec3> {
     h.iter()
         .zip(direct)
         .map(|(&h, &d)| Vec3::splat(expected_noise(h - d, d, k, l)))
@@ -99,7 +99,7 @@ pub fn modelled_noise(h: &[Vec3], direct: &[Vec3], k: u32, l: u32) -> Vec<Vec3> 
 /// values `stored` (what the pages hold, `H/π`), whose noise before denoising is `sigma`
 /// (standard deviations in the units of `stored`); `denoised` says the denoiser ran,
 /// `noise_level` is the plan's predicted relative noise when a pilot measured it.
-pub fn error_map(
+pub(crate) fn error_map(
     texels: &Texels,
     stored: &[Vec3],
     sigma: &[Vec3],

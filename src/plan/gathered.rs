@@ -49,41 +49,40 @@ use crate::texels::{RayEnd, Texels};
 use crate::trace::Tracer;
 
 /// Random surface points are drawn in batches of this many ...
-pub const BATCH: usize = 4096;
+pub(crate) const BATCH: usize = 4096;
 /// ... until the mean square's two standard errors are within this share of it ...
-pub const PRECISION: f64 = 0.4;
+pub(crate) const PRECISION: f64 = 0.4;
 /// ... or the error is clearly small next to the target (its upper bound below this share of
 /// it), or the sample's rays exceed its budget (the bake passes half the pilot's; the first
 /// batch is cast whatever the budget), or this many points have been drawn.
-pub const SMALL: f32 = 0.25;
-pub const MAX_POINTS: usize = 65_536;
+pub(crate) const SMALL: f32 = 0.25;
+pub(crate) const MAX_POINTS: usize = 65_536;
 /// Gathering rays per point and run (the pilot's own [`super::PILOT_RAYS`] twice over: the
 /// point's noise then weighs less than the pilot texels' in the products' variance).
-pub const GATHER_RAYS: u32 = 32;
+pub(crate) const GATHER_RAYS: u32 = 32;
 /// Emitter light samples per point and run (a quarter of the rays, as the bake).
-pub const LIGHT_SAMPLES: u32 = 8;
+pub(crate) const LIGHT_SAMPLES: u32 = 8;
 /// Mixed into the seed: these streams differ from transport's, the punctual sample's and the
 /// point yardstick's.
 const SALT: u64 = 0x6A7E_5EED_0F90_1275;
 
 /// One sampled point's squared lookup errors (means over channels).
 #[derive(Clone, Copy, Debug)]
-pub struct GatheredPoint {
-    pub instance: u32,
+pub(crate) struct GatheredPoint {
     /// The scene triangle the point lies on.
-    pub triangle: u32,
+    pub(crate) triangle: u32,
     /// `d_a·d_b` of the light other than punctual direct light (emitters, sky,
     /// interreflection): the lookup of each run's values less the punctual sample's texels,
     /// against the gather through that run. An unbiased estimate of its squared lookup error.
-    pub rest_square: f32,
+    pub(crate) rest_square: f32,
     /// The squared lookup error of the punctual direct light: the punctual sample's texels
     /// against the exact light about the shading normal (no noise on either side).
-    pub punctual_square: f32,
+    pub(crate) punctual_square: f32,
     /// The bilinear lookup of the two runs' mean (what a relative error divides by).
-    pub total: f32,
+    pub(crate) total: f32,
     /// Half the squared difference of the two runs' lookups: an unbiased estimate of one run's
     /// noise as a renderer reads it (four texels blended, each point weighed by area).
-    pub noise_square: f32,
+    pub(crate) noise_square: f32,
 }
 
 /// What became of one drawn point.
@@ -97,30 +96,30 @@ enum Drawn {
 
 /// The lookup error of the pilot's lightmap at random surface points against a gather there.
 #[derive(Clone, Debug, Default)]
-pub struct GatheredSample {
+pub(crate) struct GatheredSample {
     /// One per visible sampled point (points on buried or unrasterised texels are left out).
-    pub points: Vec<GatheredPoint>,
+    pub(crate) points: Vec<GatheredPoint>,
     /// The triangles of drawn points left out as nobody's to see: facing into geometry (the
     /// probe test) or on a buried texel.
-    pub unseen: Vec<u32>,
+    pub(crate) unseen: Vec<u32>,
     /// Rays cast at the kept points (probes, gathering, light samples and punctual shadow rays).
-    pub rays: u64,
+    pub(crate) rays: u64,
     /// Points drawn, the left-out ones included.
-    pub drawn: usize,
+    pub(crate) drawn: usize,
 }
 
 /// What the two runs give the sample: per texel, the irradiance `H` each run solved (what the
 /// lightmap stores; not for `--indirect-only` bakes).
 #[derive(Clone, Copy)]
-pub struct Runs<'a> {
-    pub irradiance: [&'a [Vec3]; 2],
+pub(crate) struct Runs<'a> {
+    pub(crate) irradiance: [&'a [Vec3]; 2],
     /// Uniform sky radiance the bake uses.
-    pub sky: Vec3,
+    pub(crate) sky: Vec3,
     /// The relative error the bake aims at, the rays the sample may cast past its first batch,
     /// and the seed of its streams.
-    pub target: f32,
-    pub budget_rays: u64,
-    pub seed: u64,
+    pub(crate) target: f32,
+    pub(crate) budget_rays: u64,
+    pub(crate) seed: u64,
 }
 
 impl GatheredSample {
@@ -128,7 +127,7 @@ impl GatheredSample {
     /// until the estimate is within [`PRECISION`], clearly below the relative error
     /// `runs.target` ([`SMALL`]), past `runs.budget_rays`, or [`MAX_POINTS`]; `punctual` (the
     /// punctual lights' texel values) splits off the rest. `None` without texels.
-    pub fn measure(
+    pub(crate) fn measure(
         scene: &Scene,
         texels: &Texels,
         tracer: &Tracer,
@@ -194,34 +193,27 @@ impl GatheredSample {
         Some(sample)
     }
 
-    /// Relative RMS lookup error of all the light (over the points' mean light): the punctual
-    /// and the other light's mean squares added (independent errors, as noise and resolution
-    /// error are). NaN without points or light.
-    pub fn relative_error(&self) -> f32 {
-        self.relative_error_bounds().0
-    }
-
     /// Relative RMS lookup error of the light other than punctual direct light (its mean
     /// square clamped at 0).
-    pub fn rest_error(&self) -> f32 {
+    pub(crate) fn rest_error(&self) -> f32 {
         self.relative(self.mean_square(|p| p.rest_square).0)
     }
 
     /// Relative RMS noise of one run as a renderer reads it at these points (its bilinear
     /// lookup, area-weighted): below the texels' own relative noise, which weighs every texel
     /// alike and reads each alone. NaN without points or light.
-    pub fn lookup_noise(&self) -> f32 {
+    pub(crate) fn lookup_noise(&self) -> f32 {
         self.relative(self.mean_square(|p| p.noise_square).0)
     }
 
     /// Relative RMS lookup error of the punctual direct light at these points.
-    pub fn punctual_error(&self) -> f32 {
+    pub(crate) fn punctual_error(&self) -> f32 {
         self.relative(self.mean_square(|p| p.punctual_square).0)
     }
 
     /// [`GatheredSample::relative_error`] and the relative errors with the rest's mean square
     /// ∓ two standard errors (how far the sample's own noise could move it).
-    pub fn relative_error_bounds(&self) -> (f32, f32, f32) {
+    pub(crate) fn relative_error_bounds(&self) -> (f32, f32, f32) {
         let (rest, stderr) = self.mean_square(|p| p.rest_square);
         let punctual = self.mean_square(|p| p.punctual_square).0;
         let at = |r: f64| self.relative(r.max(0.0) + punctual);
@@ -231,12 +223,12 @@ impl GatheredSample {
     /// The mean square lookup error of all the light (the rest's and the punctual light's
     /// squares added per point) and its standard error, in absolute units (NaN below two
     /// points).
-    pub fn mean_square_total(&self) -> (f64, f64) {
+    pub(crate) fn mean_square_total(&self) -> (f64, f64) {
         self.mean_square(|p| p.rest_square + p.punctual_square)
     }
 
     /// The points' mean light (what relative errors divide by).
-    pub fn mean_light(&self) -> f64 {
+    pub(crate) fn mean_light(&self) -> f64 {
         let n = self.points.len() as f64;
         self.points.iter().map(|p| p.total as f64).sum::<f64>() / n
     }
@@ -348,7 +340,6 @@ impl PointDrawer<'_> {
         let total = (ha + hb) * 0.5;
         let spread = ha - hb;
         let point = GatheredPoint {
-            instance: scene.triangle_instance[t as usize],
             triangle: t,
             rest_square: (da * db).element_sum() / 3.0,
             punctual_square: (dp * dp).element_sum() / 3.0,

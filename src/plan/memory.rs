@@ -56,7 +56,7 @@ impl MemoryEstimate {
     }
 
     /// "1.2 GiB (rows 1.0 GiB, texels …)", for messages.
-    pub fn describe(&self) -> String {
+    pub(crate) fn describe(&self) -> String {
         format!(
             "{} (rows {}, texels {}, pages {}, BVH {}, atlas {}, scene {})",
             format_bytes(self.total()),
@@ -71,7 +71,7 @@ impl MemoryEstimate {
 }
 
 /// Bytes in binary units, three significant digits ("512 MiB", "1.25 GiB").
-pub fn format_bytes(bytes: f64) -> String {
+pub(crate) fn format_bytes(bytes: f64) -> String {
     let units = ["B", "KiB", "MiB", "GiB", "TiB"];
     let mut value = bytes;
     let mut unit = 0;
@@ -90,7 +90,7 @@ pub fn format_bytes(bytes: f64) -> String {
 }
 
 /// Bytes of one stored f32 row entry: the source texel (u32) and its form factor (f32).
-pub const ROW_ENTRY_BYTES: f64 = 8.0;
+pub(crate) const ROW_ENTRY_BYTES: f64 = 8.0;
 /// Bytes per gathering ray of Monte Carlo rows stored as ray counts ([`crate::transport::Rows`]),
 /// their headers included, besides `TEXEL_BYTES`' per-row part (a row's start, 2.25 bytes):
 /// measured 0.67 (Cornell box, K = 1024), 0.71 and 0.82 (64k-triangle furnished interior,
@@ -164,7 +164,7 @@ pub fn memory_estimate(m: &MemoryInputs) -> MemoryEstimate {
 /// Bytes per entry of [`entries_per_texel`]: Monte Carlo rows stored as ray counts
 /// (`count_rows`; entries counted as rays), otherwise f32 form factors (the hierarchy's links
 /// counted alike).
-pub fn row_entry_bytes(technique: Technique, count_rows: bool) -> f64 {
+pub(crate) fn row_entry_bytes(technique: Technique, count_rows: bool) -> f64 {
     match technique {
         Technique::Stored {
             form_factors: FormFactors::MonteCarlo,
@@ -176,7 +176,7 @@ pub fn row_entry_bytes(technique: Technique, count_rows: bool) -> f64 {
 
 /// Row entries per texel that `technique` stores at `gather_rays` (all pairs store up to one per
 /// other texel; the hierarchy's links are counted like Monte Carlo rows; gather stores none).
-pub fn entries_per_texel(technique: Technique, texels: f64, gather_rays: f64) -> f64 {
+pub(crate) fn entries_per_texel(technique: Technique, texels: f64, gather_rays: f64) -> f64 {
     match technique {
         Technique::Stored {
             form_factors: FormFactors::MonteCarlo,

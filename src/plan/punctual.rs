@@ -22,41 +22,40 @@ use crate::texels::{NO_TEXEL, Texels};
 use crate::trace::Tracer;
 
 /// Random surface points the error is measured at.
-pub const POINTS: usize = 16_384;
+pub(crate) const POINTS: usize = 16_384;
 /// Jittered footprint points per texel side. Transport samples punctual lights at 2×2 points
 /// per run, and the automatic bake averages at least three runs (the pilot pair and the final
 /// bake): 4×4 stands for that mean (on the courtyard at medium it gave 8.63% where 2×2 gave
 /// 8.73%: the footprint sampling noise is a small part of the error).
-pub const GRID: u32 = 4;
+pub(crate) const GRID: u32 = 4;
 /// Mixed into the seed: these streams differ from transport's and the point yardstick's.
 const SALT: u64 = 0x05EE_D0FD_1EC7;
 
 /// The error of one sampled point.
 #[derive(Clone, Copy, Debug)]
-pub struct PointError {
-    pub instance: u32,
+pub(crate) struct PointError {
     /// Squared error (mean over channels) of the bilinear lookup against the exact irradiance.
-    pub square: f32,
+    pub(crate) square: f32,
     /// The lookup left out a gutter or buried neighbour.
-    pub border: bool,
+    pub(crate) border: bool,
     /// The bilinear lookup of the total light (what the mean of a relative error divides by).
-    pub total: f32,
+    pub(crate) total: f32,
 }
 
 /// Direct punctual light at the texels and its lookup error at random surface points.
 #[derive(Clone, Debug, Default)]
-pub struct PunctualSample {
+pub(crate) struct PunctualSample {
     /// Irradiance (W/m²) from punctual lights per texel, as transport computes it.
-    pub texel: Vec<Vec3>,
+    pub(crate) texel: Vec<Vec3>,
     /// One per visible sampled point (points on buried or unrasterised texels are left out).
-    pub points: Vec<PointError>,
+    pub(crate) points: Vec<PointError>,
 }
 
 impl PunctualSample {
     /// Samples the scene's punctual lights at the texels and at [`POINTS`] surface points;
     /// `total` is the lightmap (any scale) each point's lookup is normalised by. `None`
     /// without punctual lights.
-    pub fn measure(
+    pub(crate) fn measure(
         scene: &Scene,
         texels: &Texels,
         tracer: &Tracer,
@@ -111,7 +110,6 @@ impl PunctualSample {
                     |v: &[Vec3]| -> Vec3 { lookup.0.iter().map(|&(j, w)| v[j as usize] * w).sum() };
                 let d = read(&texel) - exact(p, n);
                 Some(PointError {
-                    instance: scene.triangle_instance[t as usize],
                     square: (d * d).element_sum() / 3.0,
                     border: lookup.1,
                     total: read(total).element_sum() / 3.0,
@@ -122,7 +120,7 @@ impl PunctualSample {
     }
 
     /// Relative RMS error of the lookups (over the points' mean total light).
-    pub fn relative_error(&self) -> f32 {
+    pub(crate) fn relative_error(&self) -> f32 {
         let n = self.points.len().max(1) as f64;
         let square: f64 = self.points.iter().map(|p| p.square as f64).sum::<f64>() / n;
         let mean: f64 = self.points.iter().map(|p| p.total as f64).sum::<f64>() / n;
@@ -134,7 +132,7 @@ impl PunctualSample {
     }
 
     /// Share of the lookups that left out a gutter or buried neighbour.
-    pub fn border_share(&self) -> f32 {
+    pub(crate) fn border_share(&self) -> f32 {
         let border = self.points.iter().filter(|p| p.border).count();
         border as f32 / self.points.len().max(1) as f32
     }

@@ -84,7 +84,7 @@ use crate::trace::Tracer;
 use crate::{Error, Progress, Result, metrics};
 
 /// Probe rays per candidate point (the texel validity pass's default).
-pub const PROBE_RAYS: u32 = 16;
+pub(crate) const PROBE_RAYS: u32 = 16;
 /// Mixed into the seed: point streams differ from texel and pixel streams of the same index.
 const POINTS_SALT: u64 = 0x504f_494e_5453; // "POINTS"
 /// Random-stream purposes of a candidate: where it lies, how its probes turn.
@@ -124,7 +124,7 @@ pub fn draw(scene: &Scene, tracer: &Tracer, n: usize, seed: u64) -> Result<Point
 /// ([`Tracer::epsilon`], 0.4 mm on a room) of the strip's plane are left out: paths from
 /// there may start behind the wall (measured on `two_rooms_angled`: 52 of 2036 points of a
 /// 3 cm strip lay that close, and some read room A's light through the wall).
-pub fn draw_in(
+pub(crate) fn draw_in(
     scene: &Scene,
     tracer: &Tracer,
     n: usize,
@@ -221,10 +221,10 @@ enum Candidate {
 /// `x,y,z,nx,ny,nz,width`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Strip {
-    pub origin: Vec3,
+    pub(crate) origin: Vec3,
     /// Unit normal of the plane, towards the strip.
-    pub normal: Vec3,
-    pub width: f32,
+    pub(crate) normal: Vec3,
+    pub(crate) width: f32,
 }
 
 impl Strip {
@@ -238,7 +238,7 @@ impl Strip {
     }
 
     /// Signed distance of `position` from the plane, positive on the strip's side.
-    pub fn distance(&self, position: Vec3) -> f32 {
+    pub(crate) fn distance(&self, position: Vec3) -> f32 {
         (position - self.origin).dot(self.normal)
     }
 
@@ -401,7 +401,7 @@ pub struct PointReference {
     /// Candidates left out as hidden.
     pub hidden: usize,
     /// Paths per point.
-    pub samples: u32,
+    pub(crate) samples: u32,
 }
 
 impl PointReference {
@@ -620,7 +620,7 @@ pub struct PointComparison {
     /// Fraction of lookups whose footprint touches a black texel where the reference is not black.
     pub black_touch: f32,
     /// `Σx/Σr − 1`: how much brighter the bake is on the whole.
-    pub bias: f32,
+    pub(crate) bias: f32,
 }
 
 impl PointComparison {

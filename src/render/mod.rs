@@ -52,7 +52,6 @@ use rayon::prelude::*;
 /// The loader resolves the document's cameras into [`Scene::cameras`]; the renderer's callers
 /// choose among them with these.
 pub use crate::scene::{Camera, GltfCamera, select};
-pub use shade::{GLOSSY_MAX_ROUGHNESS, MIRROR_ROUGHNESS};
 
 use crate::lightmap::Page;
 use crate::sampling::Rng;
@@ -104,12 +103,12 @@ pub struct RenderScene {
     /// Directional pages (L0, L1x, L1y, L1z, indices into `pages`) of each instance whose bake
     /// has them: diffuse light is then reconstructed for the shading normal (the material's
     /// `normalTexture` applied), see `lightmap::directional`.
-    pub instance_directional: Vec<Option<[u32; 4]>>,
+    pub(crate) instance_directional: Vec<Option<[u32; 4]>>,
     /// Per scene triangle: its back face is culled (glTF's `"doubleSided": false`; a baked
     /// double-sided wall is two such primitives, back to back, which would z-fight otherwise).
     /// Transmissive surfaces are kept: a single-sided one bounds a volume, and its back face
     /// is where rays leave the glass.
-    pub cull_back: Vec<bool>,
+    pub(crate) cull_back: Vec<bool>,
 }
 
 /// A rendered image: linear RGB radiance, row 0 at the top.
@@ -192,12 +191,12 @@ impl RenderScene {
     }
 
     /// The directional pages (L0, L1x, L1y, L1z) of scene instance `instance`, if it has them.
-    pub fn directional(&self, instance: u32) -> Option<[&Page; 4]> {
+    pub(crate) fn directional(&self, instance: u32) -> Option<[&Page; 4]> {
         self.instance_directional[instance as usize].map(|ks| ks.map(|k| &self.pages[k as usize]))
     }
 
     /// The lightmap page of scene instance `instance`, if it has one.
-    pub fn page(&self, instance: u32) -> Option<&Page> {
+    pub(crate) fn page(&self, instance: u32) -> Option<&Page> {
         self.instance_page[instance as usize].map(|k| &self.pages[k as usize])
     }
 
@@ -401,7 +400,7 @@ impl Image {
 
     /// 8-bit sRGB PNG, tone-mapped as [`output::png`] describes (scale by `2^exposure`, then a
     /// soft shoulder that keeps mid-tones true and highlights some detail).
-    pub fn to_png(&self, exposure: f32) -> Result<Vec<u8>> {
+    pub(crate) fn to_png(&self, exposure: f32) -> Result<Vec<u8>> {
         output::write_png_image(&self.rgb, self.width, self.height, exposure)
     }
 

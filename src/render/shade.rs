@@ -44,9 +44,9 @@ use crate::scene::{Surface, SurfacePoint};
 use crate::trace::Hit;
 
 /// Roughness at or below which reflection is one perfect mirror ray.
-pub const MIRROR_ROUGHNESS: f32 = 0.02;
+pub(crate) const MIRROR_ROUGHNESS: f32 = 0.02;
 /// Roughness above which a surface has no specular layer: it is shaded from the lightmap alone.
-pub const GLOSSY_MAX_ROUGHNESS: f32 = 0.5;
+pub(crate) const GLOSSY_MAX_ROUGHNESS: f32 = 0.5;
 
 /// Has a specular layer worth tracing.
 fn is_specular(surface: &Surface) -> bool {

@@ -12,12 +12,12 @@ use crate::{Error, Result};
 /// A pinhole camera in world space.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Camera {
-    pub eye: Vec3,
+    pub(crate) eye: Vec3,
     /// Unit viewing direction (the camera's −Z).
-    pub forward: Vec3,
+    pub(crate) forward: Vec3,
     /// Unit image-right and image-up directions, orthogonal to `forward`.
-    pub right: Vec3,
-    pub up: Vec3,
+    pub(crate) right: Vec3,
+    pub(crate) up: Vec3,
     /// Vertical field of view (radians).
     pub yfov: f32,
     /// The glTF camera's `aspectRatio` (width / height) when it has one.
@@ -45,7 +45,7 @@ impl Camera {
     }
 
     /// From a node's world matrix (scale is ignored: only position and orientation count).
-    pub fn from_world(world: Mat4, yfov: f32, aspect_ratio: Option<f32>) -> Camera {
+    pub(crate) fn from_world(world: Mat4, yfov: f32, aspect_ratio: Option<f32>) -> Camera {
         let (_, rotation, eye) = world.to_scale_rotation_translation();
         Camera {
             eye,
@@ -72,7 +72,7 @@ impl Camera {
     /// Unit direction through the image point `ndc` ∈ [−1, 1]² (x right, y up) for an image of
     /// `aspect` = width / height.
     #[inline]
-    pub fn direction(&self, ndc: Vec2, aspect: f32) -> Vec3 {
+    pub(crate) fn direction(&self, ndc: Vec2, aspect: f32) -> Vec3 {
         let tan_y = (0.5 * self.yfov).tan();
         (self.forward + self.right * (ndc.x * tan_y * aspect) + self.up * (ndc.y * tan_y))
             .normalize()
@@ -84,9 +84,9 @@ impl Camera {
 #[derive(Clone, Debug)]
 pub struct GltfCamera {
     /// The camera's name, else its node's name.
-    pub name: Option<String>,
+    pub(crate) name: Option<String>,
     /// Index into the document's `cameras`.
-    pub index: usize,
+    pub(crate) index: usize,
     pub camera: Camera,
 }
 

@@ -56,11 +56,11 @@ use super::{Blend, Instance, Scene, Split};
 
 /// Cut end points closer than this merge, and move onto a patch vertex or edge this close
 /// (texels).
-pub const SNAP_TEXELS: f64 = 0.25;
+pub(crate) const SNAP_TEXELS: f64 = 0.25;
 
 /// A corner this close to a patch's plane lies in it (texels): a wall standing on a floor. A
 /// cut point this close to a vertex or edge of the patch lies on it, likewise.
-pub const TOUCH_TEXELS: f64 = 1.0 / 16.0;
+pub(crate) const TOUCH_TEXELS: f64 = 1.0 / 16.0;
 
 /// A patch is a receiver only when no neighbour of the same mesh continues it more gently than
 /// this (cosine of 30°): gentler folds belong to curved surfaces, which are left alone.
@@ -83,26 +83,26 @@ pub struct JunctionReport {
     /// Instances that were cut.
     pub receivers: usize,
     /// Junction segments inserted (after merging), and cuts extending free segment ends.
-    pub segments: usize,
-    pub extensions: usize,
+    pub(crate) segments: usize,
+    pub(crate) extensions: usize,
     /// Triangles replaced by their pieces, and how many triangles the scene gained.
-    pub triangles_split: usize,
-    pub triangles_added: usize,
+    pub(crate) triangles_split: usize,
+    pub(crate) triangles_added: usize,
     /// Triangles left uncut because their pieces did not add up to their area (robustness
     /// fallback: they keep the points their neighbours share on their edges, so no T-junction;
     /// the cell map of divided texels covers them).
-    pub fallback_triangles: usize,
+    pub(crate) fallback_triangles: usize,
     /// Junction edges whose two sides stayed connected around the junction (the cell map of
     /// divided texels covers them).
-    pub unseparated_edges: usize,
+    pub(crate) unseparated_edges: usize,
     /// Shadow outline cuts inserted ([`super::shadow_cuts`]; counted among `segments` too),
     /// the boundary samples that chose them, and outline stretches left out (work bounds).
-    pub shadow_segments: usize,
-    pub shadow_samples: usize,
-    pub shadow_skipped: usize,
+    pub(crate) shadow_segments: usize,
+    pub(crate) shadow_samples: usize,
+    pub(crate) shadow_skipped: usize,
     /// Instances left uncut because their mesh is shared by several nodes (`--instancing
     /// share`; the cell map of divided texels covers them).
-    pub left_whole: usize,
+    pub(crate) left_whole: usize,
 }
 
 impl JunctionReport {
@@ -157,7 +157,7 @@ pub fn split(scene: Scene, texel: f32) -> (Scene, JunctionReport) {
 
 /// [`split`], cutting along the shadow outlines `shadows` finds too (see
 /// [`super::shadow_cuts`]).
-pub fn split_with(
+pub(crate) fn split_with(
     scene: Scene,
     texel: f32,
     shadows: Option<&ShadowCutter>,
@@ -168,7 +168,7 @@ pub fn split_with(
 /// [`split_with`], leaving the instances marked in `whole` (parallel to `Scene::instances`;
 /// shorter means unmarked) uncut: the instances of a mesh shared by several nodes
 /// (`--instancing share`), which cannot carry one node's cuts. They still cut the others.
-pub fn split_except(
+pub(crate) fn split_except(
     scene: Scene,
     texel: f32,
     shadows: Option<&ShadowCutter>,

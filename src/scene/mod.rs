@@ -18,7 +18,7 @@ mod camera;
 mod geometry;
 mod gltf_in;
 pub mod junctions;
-pub mod shadow_cuts;
+pub(crate) mod shadow_cuts;
 
 use std::ops::Range;
 use std::path::PathBuf;
@@ -34,11 +34,11 @@ pub const MAX_ALBEDO: f32 = 0.99;
 
 /// Largest world coordinate magnitude the loader accepts (units). Real scenes stay far below
 /// it; beyond it lies damaged data (a flipped exponent bit), which the BVH cannot take.
-pub const MAX_COORDINATE: f32 = 1e7;
+pub(crate) const MAX_COORDINATE: f32 = 1e7;
 
 /// The keys of a baked primitive's `extras.lightmap.directional`: its directional pages'
 /// coefficients (`lightmap::directional`), in storage order.
-pub const DIRECTIONAL_PAGES: [&str; 4] = ["L0", "L1x", "L1y", "L1z"];
+pub(crate) const DIRECTIONAL_PAGES: [&str; 4] = ["L0", "L1x", "L1y", "L1z"];
 
 /// World-space geometry, materials and lights of the default scene.
 #[derive(Clone, Debug, Default)]
@@ -46,9 +46,9 @@ pub struct Scene {
     /// World-space vertex positions of all instances, concatenated.
     pub positions: Vec<Vec3>,
     /// World-space unit normals, per vertex (generated from faces when the input has none).
-    pub normals: Vec<Vec3>,
+    pub(crate) normals: Vec<Vec3>,
     /// `TEXCOORD_0` per vertex (zero when the primitive has none).
-    pub uv0: Vec<Vec2>,
+    pub(crate) uv0: Vec<Vec2>,
     /// The input's `TEXCOORD_1` per vertex (zero when the primitive has none).
     pub uv1: Vec<Vec2>,
     /// Triangles as global vertex indices, counter-clockwise seen from the front face.
@@ -58,7 +58,7 @@ pub struct Scene {
     /// One per baked (node, primitive) pair, plus one per back face of a double-sided primitive.
     pub instances: Vec<Instance>,
     pub materials: Vec<Material>,
-    pub textures: Vec<Texture>,
+    pub(crate) textures: Vec<Texture>,
     pub lights: Vec<Light>,
     /// Every perspective camera placed by a node of the scene, in node traversal order.
     pub cameras: Vec<GltfCamera>,
@@ -71,31 +71,31 @@ pub struct Scene {
 pub struct Instance {
     /// glTF node, mesh and primitive (within the mesh) indices.
     pub node: u32,
-    pub mesh: u32,
+    pub(crate) mesh: u32,
     pub primitive: u32,
     /// Index into [`Scene::materials`].
-    pub material: u32,
+    pub(crate) material: u32,
     /// Global vertex range; local vertex `k` (= element `k` of the primitive's attribute
     /// accessors) is global vertex `vertices.start + k`.
-    pub vertices: Range<u32>,
+    pub(crate) vertices: Range<u32>,
     /// Global triangle range of this instance.
     pub triangles: Range<u32>,
     /// For each triangle of the instance, its index in the primitive's own triangle list (after
     /// converting strips and fans); degenerate triangles are skipped, so this may have gaps.
-    pub source_triangle: Vec<u32>,
+    pub(crate) source_triangle: Vec<u32>,
     /// Set on the flipped back-face copy of a double-sided primitive: the front instance.
-    pub back_of: Option<u32>,
+    pub(crate) back_of: Option<u32>,
     /// Set on the front instance of a double-sided primitive: its back-face copy.
-    pub back: Option<u32>,
+    pub(crate) back: Option<u32>,
     /// The primitive has a `TEXCOORD_1` of its own.
-    pub has_uv1: bool,
+    pub(crate) has_uv1: bool,
     /// The EXR page named by the primitive's `extras.lightmap.exr`, or the node's when it has
     /// one (a shared mesh; `uv1` then holds the node's page UVs), resolved against the glTF
     /// file's folder, for the renderer.
     pub lightmap: Option<PathBuf>,
     /// The directional pages named by `extras.lightmap.directional` (L0, L1x, L1y, L1z:
     /// `lightmap::directional`), resolved like `lightmap`.
-    pub directional: Option<[PathBuf; 4]>,
+    pub(crate) directional: Option<[PathBuf; 4]>,
     /// What [`junctions::split`] changed (empty for the input as loaded).
     pub split: Split,
 }
@@ -109,43 +109,43 @@ pub struct Split {
     pub blends: Vec<Blend>,
     /// Per triangle (empty when unsplit): triangles of different sides never share a chart,
     /// so the lightmap charts end where another surface meets this one.
-    pub sides: Vec<u32>,
+    pub(crate) sides: Vec<u32>,
     /// Per triangle (empty when unsplit): bit `k` is set when edge `k` (corner `k` to `k + 1`)
     /// lies on a junction. The two sides of a junction see different light, so such an edge is
     /// never stitched as a seam.
-    pub junction_edges: Vec<u8>,
+    pub(crate) junction_edges: Vec<u8>,
 }
 
 /// A vertex blended from up to three source vertices (accessor elements) of its primitive:
 /// `Σ weights[i] · element[vertices[i]]` (unused slots have weight 0).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Blend {
-    pub vertices: [u32; 3],
-    pub weights: [f32; 3],
+    pub(crate) vertices: [u32; 3],
+    pub(crate) weights: [f32; 3],
 }
 
 /// A material as the light transport sees it (linear RGB).
 #[derive(Clone, Debug)]
 pub struct Material {
-    pub name: Option<String>,
+    pub(crate) name: Option<String>,
     /// glTF material index (`None` for the default material).
-    pub source: Option<u32>,
+    pub(crate) source: Option<u32>,
     /// `baseColorFactor.rgb` (linear); multiplied by the texture where there is one.
-    pub base_color: Vec3,
+    pub(crate) base_color: Vec3,
     /// Index into [`Scene::textures`], sampled through `TEXCOORD_0`.
-    pub base_color_texture: Option<u32>,
+    pub(crate) base_color_texture: Option<u32>,
     /// Emitted radiance `Le = emissiveFactor × emissiveStrength` (W/(sr·m²)).
     pub emission: Vec3,
     /// Index into [`Scene::textures`], sampled through `TEXCOORD_0`.
-    pub emissive_texture: Option<u32>,
+    pub(crate) emissive_texture: Option<u32>,
     /// `normalTexture`: index into [`Scene::textures`] (decoded linear, not sRGB), sampled
     /// through `TEXCOORD_0`; only the renderer reads it.
-    pub normal_texture: Option<u32>,
+    pub(crate) normal_texture: Option<u32>,
     /// `normalTexture.scale`: scales the tangent-space x and y.
-    pub normal_scale: f32,
-    pub double_sided: bool,
+    pub(crate) normal_scale: f32,
+    pub(crate) double_sided: bool,
     /// What the renderer's specular layer needs; the bake treats every surface as Lambertian.
-    pub surface: Surface,
+    pub(crate) surface: Surface,
 }
 
 impl Default for Material {
@@ -169,18 +169,18 @@ impl Default for Material {
 /// The specular parameters of a material (glTF metallic-roughness and extensions). Textures of
 /// these factors (metallicRoughnessTexture, …) are not sampled.
 #[derive(Clone, Debug, PartialEq)]
-pub struct Surface {
-    pub metallic: f32,
-    pub roughness: f32,
+pub(crate) struct Surface {
+    pub(crate) metallic: f32,
+    pub(crate) roughness: f32,
     /// KHR_materials_transmission `transmissionFactor`.
-    pub transmission: f32,
+    pub(crate) transmission: f32,
     /// KHR_materials_ior (1.5 by default).
-    pub ior: f32,
+    pub(crate) ior: f32,
     /// KHR_materials_specular `specularFactor` and `specularColorFactor`.
-    pub specular: f32,
-    pub specular_color: Vec3,
+    pub(crate) specular: f32,
+    pub(crate) specular_color: Vec3,
     /// Absorption coefficient σ per world unit (KHR_materials_volume), zero when clear.
-    pub attenuation: Vec3,
+    pub(crate) attenuation: Vec3,
 }
 
 impl Default for Surface {
@@ -200,7 +200,7 @@ impl Default for Surface {
 
 /// Texture addressing outside \[0,1\].
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Wrap {
+pub(crate) enum Wrap {
     Repeat,
     MirroredRepeat,
     ClampToEdge,
@@ -209,18 +209,18 @@ pub enum Wrap {
 /// A decoded texture in linear RGB (sRGB-decoded: both base colour and emissive textures are
 /// sRGB in glTF).
 #[derive(Clone, Debug)]
-pub struct Texture {
-    pub width: u32,
-    pub height: u32,
+pub(crate) struct Texture {
+    pub(crate) width: u32,
+    pub(crate) height: u32,
     /// Row-major, row 0 at the top (v = 0).
-    pub texels: Vec<Vec3>,
-    pub wrap_s: Wrap,
-    pub wrap_t: Wrap,
+    pub(crate) texels: Vec<Vec3>,
+    pub(crate) wrap_s: Wrap,
+    pub(crate) wrap_t: Wrap,
 }
 
 impl Texture {
     /// Bilinear lookup at `uv` (glTF convention: v grows downward).
-    pub fn sample(&self, uv: Vec2) -> Vec3 {
+    pub(crate) fn sample(&self, uv: Vec2) -> Vec3 {
         let (w, h) = (self.width as i64, self.height as i64);
         let x = uv.x * w as f32 - 0.5;
         let y = uv.y * h as f32 - 0.5;
@@ -252,23 +252,23 @@ fn wrap(i: i64, n: i64, mode: Wrap) -> i64 {
 /// A KHR_lights_punctual light in world space.
 #[derive(Clone, Debug)]
 pub struct Light {
-    pub name: Option<String>,
+    pub(crate) name: Option<String>,
     /// Index in the glTF's `KHR_lights_punctual.lights` (`None` for a light made in code).
-    pub source: Option<u32>,
-    pub kind: LightKind,
+    pub(crate) source: Option<u32>,
+    pub(crate) kind: LightKind,
     /// World position (unused for directional lights).
-    pub position: Vec3,
+    pub(crate) position: Vec3,
     /// Unit direction the light travels (the node's −Z; unused for point lights).
     pub direction: Vec3,
     /// `color × intensity`: radiant intensity (W/sr) for point and spot lights, irradiance
     /// (W/m²) on a surface facing the light for directional lights.
-    pub intensity: Vec3,
+    pub(crate) intensity: Vec3,
     /// Distance beyond which the light has no effect (`None` = infinite).
-    pub range: Option<f32>,
+    pub(crate) range: Option<f32>,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub enum LightKind {
+pub(crate) enum LightKind {
     Point,
     /// Cone angles in radians, as in KHR_lights_punctual.
     Spot {
@@ -281,9 +281,9 @@ pub enum LightKind {
 /// What the loader skipped or changed.
 #[derive(Clone, Debug, Default)]
 pub struct LoadStats {
-    pub degenerate_triangles: u32,
-    pub skipped_primitives: u32,
-    pub generated_normals: u32,
+    pub(crate) degenerate_triangles: u32,
+    pub(crate) skipped_primitives: u32,
+    pub(crate) generated_normals: u32,
     /// Human-readable warnings (points and lines skipped, skinned meshes passed through, …).
     pub warnings: Vec<String>,
 }
@@ -291,32 +291,32 @@ pub struct LoadStats {
 /// The input document as read, for the output writer (which keeps everything it does not change).
 #[derive(Clone, Debug)]
 pub struct Source {
-    pub path: PathBuf,
-    pub is_glb: bool,
+    pub(crate) path: PathBuf,
+    pub(crate) is_glb: bool,
     /// The glTF JSON exactly as parsed (unknown extensions and extras included).
-    pub json: serde_json::Value,
+    pub(crate) json: serde_json::Value,
     /// The bytes of every buffer, in document order.
-    pub buffers: Vec<Vec<u8>>,
+    pub(crate) buffers: Vec<Vec<u8>>,
 }
 
 /// A point of a scene triangle, interpolated at a hit's barycentrics.
 #[derive(Clone, Copy, Debug)]
 pub struct SurfacePoint {
-    pub p: Vec3,
+    pub(crate) p: Vec3,
     /// Unit geometric normal of the face (its front side); zero for a degenerate triangle.
-    pub n_geo: Vec3,
+    pub(crate) n_geo: Vec3,
     /// Unit interpolated vertex normal, turned to the side of `n_geo`.
-    pub n: Vec3,
-    pub uv0: Vec2,
-    pub uv1: Vec2,
-    pub instance: u32,
-    pub material: u32,
+    pub(crate) n: Vec3,
+    pub(crate) uv0: Vec2,
+    pub(crate) uv1: Vec2,
+    pub(crate) instance: u32,
+    pub(crate) material: u32,
 }
 
 impl Scene {
     /// The point of triangle `t` at barycentrics `b` (`p = (1−u−v)·p0 + u·p1 + v·p2`).
     /// World-space area of triangle `t` (in f64: sums over many small triangles stay exact).
-    pub fn triangle_area(&self, t: usize) -> f64 {
+    pub(crate) fn triangle_area(&self, t: usize) -> f64 {
         let [a, b, c] = self.triangles[t].map(|v| self.positions[v as usize].as_dvec3());
         0.5 * (b - a).cross(c - a).length()
     }
@@ -380,13 +380,13 @@ impl Scene {
     }
 
     /// Reflectance `baseColorFactor × baseColorTexture(uv0)` of material `m`.
-    pub fn base_color(&self, m: u32, uv0: Vec2) -> Vec3 {
+    pub(crate) fn base_color(&self, m: u32, uv0: Vec2) -> Vec3 {
         let m = &self.materials[m as usize];
         self.textured(m.base_color, m.base_color_texture, uv0)
     }
 
     /// Emitted radiance `emission × emissiveTexture(uv0)` of material `m`.
-    pub fn emission(&self, m: u32, uv0: Vec2) -> Vec3 {
+    pub(crate) fn emission(&self, m: u32, uv0: Vec2) -> Vec3 {
         let m = &self.materials[m as usize];
         self.textured(m.emission, m.emissive_texture, uv0)
     }
@@ -408,7 +408,7 @@ impl Scene {
     }
 
     /// Emission is anywhere in the scene (an emissive material or a light).
-    pub fn has_light_sources(&self) -> bool {
+    pub(crate) fn has_light_sources(&self) -> bool {
         !self.lights.is_empty()
             || self
                 .materials
@@ -417,7 +417,7 @@ impl Scene {
     }
 
     /// Edge `k` of scene triangle `t` lies on a junction (see [`Split::junction_edges`]).
-    pub fn is_junction_edge(&self, t: u32, k: usize) -> bool {
+    pub(crate) fn is_junction_edge(&self, t: u32, k: usize) -> bool {
         let inst = &self.instances[self.triangle_instance[t as usize] as usize];
         let local = (t - inst.triangles.start) as usize;
         inst.split
@@ -427,7 +427,8 @@ impl Scene {
     }
 
     /// Debug-build consistency check, run at the end of the loader.
-    pub fn validate(&self) {
+    #[cfg(any(debug_assertions, test))]
+    pub(crate) fn validate(&self) {
         let n = self.positions.len();
         assert_eq!(self.normals.len(), n);
         assert_eq!(self.uv0.len(), n);

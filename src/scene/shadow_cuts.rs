@@ -39,23 +39,23 @@ use super::{LightKind, Scene};
 /// ramp whose error averages `j/4` over one texel on each side; below 10% that strip's error
 /// is under the 2% of `--quality high` even where it is all a renderer shows, while a cut
 /// costs a chart border (texels and seams), so fainter steps are left to the texels.
-pub const MIN_JUMP: f32 = 0.1;
+pub(crate) const MIN_JUMP: f32 = 0.1;
 
 /// Boundary samples (each two or more shadow rays) per scene at most: keeps the split's time
 /// bounded on big scenes (patches after the budget is spent get no shadow cuts).
-pub const MAX_SAMPLES: usize = 1 << 19;
+pub(crate) const MAX_SAMPLES: usize = 1 << 19;
 
 /// Shadow cut pieces per receiver patch at most (the junction split's cut graph is quadratic
 /// in its segments).
-pub const MAX_PATCH_CUTS: usize = 256;
+pub(crate) const MAX_PATCH_CUTS: usize = 256;
 
 /// Irradiance (any one measure, e.g. the channel mean) at surface point `p` with normal `n`
 /// from punctual light `l` (index into [`Scene::lights`]), shadow rays included; `p` lies on
 /// the surface (the caller offsets the ray origin).
-pub type LightAt<'a> = dyn Fn(usize, Vec3, Vec3) -> f32 + 'a;
+pub(crate) type LightAt<'a> = dyn Fn(usize, Vec3, Vec3) -> f32 + 'a;
 
 /// The scene's punctual lights and their silhouette edges, ready to cut receiver patches.
-pub struct ShadowCutter<'a> {
+pub(crate) struct ShadowCutter<'a> {
     lights: Vec<Source>,
     /// The scene's bounding box.
     bounds: (DVec3, DVec3),
@@ -81,7 +81,7 @@ enum Toward {
 
 impl<'a> ShadowCutter<'a> {
     /// Finds every light's silhouette edges in `scene`; `light_at` answers the shadow rays.
-    pub fn new(scene: &Scene, light_at: &'a LightAt<'a>) -> ShadowCutter<'a> {
+    pub(crate) fn new(scene: &Scene, light_at: &'a LightAt<'a>) -> ShadowCutter<'a> {
         let edges = scene_edges(scene);
         let bounds = scene.bounds();
         let bounds = (bounds.0.as_dvec3(), bounds.1.as_dvec3());
@@ -119,7 +119,7 @@ impl<'a> ShadowCutter<'a> {
 
     /// Boundary samples taken so far, and outline stretches left untested (the budget was
     /// spent) or pieces left out (a patch had [`MAX_PATCH_CUTS`]).
-    pub fn work(&self) -> (usize, usize) {
+    pub(crate) fn work(&self) -> (usize, usize) {
         (self.samples.get(), self.skipped.get())
     }
 

@@ -50,7 +50,7 @@ use crate::{Error, Progress, Result};
 
 /// Solves without stored rows (see the module doc); the returned [`Transport`] holds
 /// `direct`, `escape` and `rays`, and empty rows.
-pub fn solve(
+pub(crate) fn solve(
     surfaces: Surfaces,
     transport_params: &TransportParams,
     params: &SolveParams,

@@ -9,7 +9,12 @@ use crate::transport::Transport;
 
 /// One sweep; returns (Σ|ΔH|, Σ|H|) over all texels and channels. `emitted` is `π·Le` per
 /// texel when the rows carry emission, else empty.
-pub fn sweep(t: &Transport, albedo: &[Vec3], emitted: &[Vec3], h: &mut [Vec3]) -> (f64, f64) {
+pub(crate) fn sweep(
+    t: &Transport,
+    albedo: &[Vec3],
+    emitted: &[Vec3],
+    h: &mut [Vec3],
+) -> (f64, f64) {
     let (mut change, mut total) = (0.0f64, 0.0f64);
     for i in 0..h.len() {
         let gathered = t.row(i).fold(Vec3::ZERO, |acc, (j, f)| {

@@ -76,7 +76,7 @@ pub struct Stats {
 
 /// Builds the link hierarchy and solves it; the returned `Transport` holds `direct` and `rays`
 /// (no texel rows).
-pub fn solve(
+pub(crate) fn solve(
     surfaces: Surfaces,
     params: &TransportParams,
     solve: &SolveParams,

@@ -12,7 +12,12 @@ use crate::transport::Transport;
 
 /// One sweep; returns (Σ|ΔH|, Σ|H|) over all texels and channels. `emitted` is `π·Le` per
 /// texel when the rows carry emission, else empty.
-pub fn sweep(t: &Transport, albedo: &[Vec3], emitted: &[Vec3], h: &mut [Vec3]) -> (f64, f64) {
+pub(crate) fn sweep(
+    t: &Transport,
+    albedo: &[Vec3],
+    emitted: &[Vec3],
+    h: &mut [Vec3],
+) -> (f64, f64) {
     let radiosity = radiosity(h, albedo, emitted);
     let changes: Vec<(f64, f64)> = h
         .par_iter_mut()

@@ -14,7 +14,7 @@
 //! [`Transport`]; [`gather`] (matrix-free Monte Carlo) and [`hierarchical`] make the light
 //! transport they iterate as they go. All of them stop by one shared rule (`Stopping`, below).
 
-pub mod gather;
+pub(crate) mod gather;
 mod gauss_seidel;
 pub mod hierarchical;
 pub(crate) mod jacobi;

@@ -119,7 +119,7 @@ struct Tally {
 }
 
 /// The state of a progressive-refinement solve: irradiance so far and unshot radiosity.
-pub struct Progressive<'a> {
+pub(crate) struct Progressive<'a> {
     albedo: &'a [Vec3],
     area: &'a [f32],
     escape: &'a [f32],
@@ -136,7 +136,7 @@ pub struct Progressive<'a> {
 }
 
 impl<'a> Progressive<'a> {
-    pub fn new(transport: &'a Transport, texels: &'a Texels) -> Progressive<'a> {
+    pub(crate) fn new(transport: &'a Transport, texels: &'a Texels) -> Progressive<'a> {
         let emitted = super::row_emission(transport, texels);
         let h: Vec<DVec3> = transport.direct.iter().map(|d| d.as_dvec3()).collect();
         let unshot = (0..transport.len())
@@ -216,7 +216,7 @@ impl<'a> Progressive<'a> {
 
     /// Up to `shots` shots, most unshot power first; returns how many were made (fewer only
     /// when nothing is left to shoot).
-    pub fn shoot(&mut self, shots: usize) -> usize {
+    pub(crate) fn shoot(&mut self, shots: usize) -> usize {
         for done in 0..shots {
             let Some(j) = self.pick() else {
                 return done;
@@ -227,12 +227,12 @@ impl<'a> Progressive<'a> {
     }
 
     /// Irradiance gathered so far.
-    pub fn irradiance(&self) -> Vec<Vec3> {
+    pub(crate) fn irradiance(&self) -> Vec<Vec3> {
         self.h.iter().map(|h| h.as_vec3()).collect()
     }
 
     /// The intermediate estimate for display: irradiance so far plus the [`ambient`] term.
-    pub fn display(&self) -> Vec<Vec3> {
+    pub(crate) fn display(&self) -> Vec<Vec3> {
         let ambient = ambient(self.area, self.albedo, self.escape, &self.unshot);
         self.h.iter().map(|h| h.as_vec3() + ambient).collect()
     }
@@ -287,7 +287,7 @@ fn ratio(a: f64, b: f64) -> f64 {
 /// assumes a closed scene (`ē = 0`); the `(1−ē)` factors let open scenes lose light to the sky at
 /// every bounce. Adding it to every texel's `H` gives the right total without knowing where the
 /// unshot light will land — the picture is neither black nor dim early on.
-pub fn ambient(area: &[f32], albedo: &[Vec3], escape: &[f32], unshot: &[DVec3]) -> Vec3 {
+pub(crate) fn ambient(area: &[f32], albedo: &[Vec3], escape: &[f32], unshot: &[DVec3]) -> Vec3 {
     let (mut total_area, mut rho, mut sky, mut b) = (0.0f64, DVec3::ZERO, 0.0f64, DVec3::ZERO);
     for j in 0..area.len() {
         let a = area[j] as f64;
@@ -310,7 +310,7 @@ pub fn ambient(area: &[f32], albedo: &[Vec3], escape: &[f32], unshot: &[DVec3]) 
 
 /// Solves the stored system by progressive refinement (see the module doc). When the cap stops
 /// it first, the [`ambient`] term is added: the best estimate of the unfinished solution.
-pub fn solve(
+pub(crate) fn solve(
     transport: &Transport,
     texels: &Texels,
     params: &SolveParams,

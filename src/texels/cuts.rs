@@ -41,10 +41,10 @@ use crate::scene::Scene;
 use crate::trace::Tracer;
 
 /// Cells per side of a divided texel's square.
-pub const CELLS: usize = 8;
+pub(crate) const CELLS: usize = 8;
 /// Sample points and cell centres are lifted by this many ray epsilons: above the surface's own
 /// triangles, below anything that stands on it.
-pub const LIFT: f32 = 4.0;
+pub(crate) const LIFT: f32 = 4.0;
 /// Hits on surfaces within 30° of the texel's plane (|cos| above this) do not divide it.
 const PARALLEL_COS: f32 = 0.866;
 /// Neighbours whose normals differ by more than 60° never take over a cell.
@@ -54,7 +54,7 @@ const MARGIN: f32 = 0.95;
 
 /// Which texel serves each cell of a divided texel ([`Texels::texel_at`] reads it).
 #[derive(Clone, Debug, Default)]
-pub struct Cuts {
+pub(crate) struct Cuts {
     /// Per texel: index into `cells`, or [`NO_TEXEL`] when no other surface divides it.
     /// Empty when no texel is divided.
     slot: Vec<u32>,
@@ -64,16 +64,12 @@ pub struct Cuts {
 
 impl Cuts {
     /// Texels with a cell map.
-    pub fn len(&self) -> usize {
+    pub(crate) fn len(&self) -> usize {
         self.cells.len()
     }
-    pub fn is_empty(&self) -> bool {
-        self.cells.is_empty()
-    }
-
     /// The texel serving position `frac ∈ [0,1)²` within texel `id`'s square.
     #[inline]
-    pub fn resolve(&self, id: u32, frac: Vec2) -> u32 {
+    pub(crate) fn resolve(&self, id: u32, frac: Vec2) -> u32 {
         match self.slot.get(id as usize) {
             Some(&slot) if slot != NO_TEXEL => {
                 let c = |f: f32| ((f * CELLS as f32) as usize).min(CELLS - 1);
@@ -86,18 +82,18 @@ impl Cuts {
 
 /// What [`divide`] changed.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct CutReport {
+pub(crate) struct CutReport {
     /// Texels with a cell map: hits on part of them are passed to a neighbour.
-    pub divided: usize,
+    pub(crate) divided: usize,
     /// Texels whose sample point moved to the larger clear side.
-    pub moved: usize,
+    pub(crate) moved: usize,
 }
 
 /// Finds texels that another surface divides, keeps their samples on one side and builds the
 /// cell maps ([`Texels::cuts`]). Run after [`super::validity::fix`] (it keeps the samples that
 /// pass moved, and narrows their jitter only where a wall crosses it). `grid` is the candidate
 /// grid per side.
-pub fn divide(texels: &mut Texels, scene: &Scene, tracer: &Tracer, grid: u32) -> CutReport {
+pub(crate) fn divide(texels: &mut Texels, scene: &Scene, tracer: &Tracer, grid: u32) -> CutReport {
     let n = texels.len();
     let mut invalid = vec![false; n];
     for &i in &texels.invalid {

@@ -11,18 +11,17 @@ pub mod validity;
 use glam::{Vec2, Vec3};
 
 use crate::atlas::PageSize;
-use crate::scene::MAX_ALBEDO;
 use crate::trace::{Hit, Tracer};
 
-pub use cuts::Cuts;
+pub(crate) use cuts::Cuts;
 pub use raster::build;
 
 /// No texel at this page position.
-pub const NO_TEXEL: u32 = u32::MAX;
+pub(crate) const NO_TEXEL: u32 = u32::MAX;
 
 /// Where a ray from a surface ends ([`Texels::ray_end`]).
 #[derive(Clone, Copy, Debug)]
-pub enum RayEnd {
+pub(crate) enum RayEnd {
     /// It left the scene: it sees the sky.
     Escaped,
     /// On the back of a single-sided surface, or on a surface without texels.
@@ -34,14 +33,15 @@ pub enum RayEnd {
 /// The radiosity patches, structure of arrays indexed by texel id.
 #[derive(Clone, Debug, Default)]
 pub struct Texels {
-    pub pages: Vec<PageSize>,
+    pub(crate) pages: Vec<PageSize>,
     /// Area-weighted centroid of the covered part of the texel (world space).
     pub position: Vec<Vec3>,
     /// Area-weighted unit normal (front side of the surface the texel lies on).
     pub normal: Vec<Vec3>,
     /// World-space area covered (m²).
     pub area: Vec<f32>,
-    /// Lambertian reflectance ρ (linear RGB, clamped to [0, [`MAX_ALBEDO`]]).
+    /// Lambertian reflectance ρ (linear RGB, clamped to
+    /// [0, [`MAX_ALBEDO`](crate::scene::MAX_ALBEDO)]).
     pub albedo: Vec<Vec3>,
     /// Emitted radiance `Le` (W/(sr·m²)); emitted radiosity is `π·Le`.
     pub emission: Vec<Vec3>,
@@ -49,7 +49,7 @@ pub struct Texels {
     pub page: Vec<u32>,
     pub xy: Vec<[u32; 2]>,
     /// The triangle covering most of the texel.
-    pub triangle: Vec<u32>,
+    pub(crate) triangle: Vec<u32>,
     /// World-space vectors spanning one texel step in x and in y on `triangle`'s plane
     /// (the texel footprint is `position + s·du + t·dv`, s,t ∈ [−½, ½]).
     pub du: Vec<Vec3>,
@@ -60,17 +60,17 @@ pub struct Texels {
     /// the texel ([`Cuts`]). Empty means 1 everywhere.
     pub jitter: Vec<f32>,
     /// Per page, row-major `width × height`: texel id or [`NO_TEXEL`].
-    pub index: Vec<Vec<u32>>,
+    pub(crate) index: Vec<Vec<u32>>,
     /// Per scene triangle: one texel it covers (fallback for hit lookups that land in a gutter).
-    pub triangle_texel: Vec<u32>,
+    pub(crate) triangle_texel: Vec<u32>,
     /// Triangle lightmap UVs in texel units of its page, per scene triangle (for hit lookups).
-    pub triangle_uv: Vec<[Vec2; 3]>,
-    pub triangle_page: Vec<u32>,
+    pub(crate) triangle_uv: Vec<[Vec2; 3]>,
+    pub(crate) triangle_page: Vec<u32>,
     /// Texels whose footprint has no point outside geometry (ascending ids; see
     /// [`validity`]): solved, but their lightmap value is filled from valid neighbours.
     pub invalid: Vec<u32>,
     /// Texels another surface divides: which texel serves each part of them ([`Cuts`]).
-    pub cuts: Cuts,
+    pub(crate) cuts: Cuts,
 }
 
 impl Texels {
@@ -113,7 +113,7 @@ impl Texels {
     /// Where the ray from `origin` along `dir` ends: the sky, an absorbing surface, or a texel.
     /// Transport, gathering and the reference follow their rays through this one function.
     #[inline]
-    pub fn ray_end(&self, tracer: &Tracer, origin: Vec3, dir: Vec3) -> RayEnd {
+    pub(crate) fn ray_end(&self, tracer: &Tracer, origin: Vec3, dir: Vec3) -> RayEnd {
         let Some(hit) = tracer.closest(origin, dir, f32::INFINITY) else {
             return RayEnd::Escaped;
         };
@@ -133,7 +133,7 @@ impl Texels {
     /// whose sample was moved out of geometry jitters within its [`Texels::jitter`] cell.
     /// Bake and reference sample texels through this one function.
     #[inline]
-    pub fn footprint_point(&self, i: usize, u: Vec2) -> Vec3 {
+    pub(crate) fn footprint_point(&self, i: usize, u: Vec2) -> Vec3 {
         let (du, dv) = (self.du[i], self.dv[i]);
         let full = du.cross(dv).length();
         let cover = if full > 0.0 {
@@ -148,7 +148,8 @@ impl Texels {
     }
 
     /// Debug-build consistency check: finite values, areas positive, index consistent.
-    pub fn validate(&self) {
+    #[cfg(debug_assertions)]
+    pub(crate) fn validate(&self) {
         let n = self.len();
         for v in [
             &self.normal,
@@ -168,7 +169,8 @@ impl Texels {
             assert!(self.position[i].is_finite() && self.normal[i].is_finite());
             assert!(self.area[i] > 0.0 && self.area[i].is_finite());
             assert!(
-                self.albedo[i].min_element() >= 0.0 && self.albedo[i].max_element() <= MAX_ALBEDO
+                self.albedo[i].min_element() >= 0.0
+                    && self.albedo[i].max_element() <= crate::scene::MAX_ALBEDO
             );
             let [x, y] = self.xy[i];
             let p = self.page[i] as usize;

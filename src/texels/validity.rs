@@ -52,18 +52,18 @@ use crate::{Error, Progress, Result};
 /// Random-stream purpose of the probe directions (distinct from the transport's streams).
 const PURPOSE: u64 = 0x7a11_d17e;
 /// More than this fraction of probe rays on back faces ⇒ the point is inside geometry.
-pub const MAX_BACK: f32 = 0.25;
+pub(crate) const MAX_BACK: f32 = 0.25;
 /// Probe length in texel sides.
-pub const REACH: f32 = 8.0;
+pub(crate) const REACH: f32 = 8.0;
 /// Neighbours whose normals differ by more than this (cosine of 60°) do not fill each other.
 const FILL_COS: f32 = 0.5;
 
 /// Probe settings (see the module docs).
 #[derive(Clone, Debug)]
 pub struct ValidityParams {
-    pub rays: u32,
-    pub grid: u32,
-    pub seed: u64,
+    pub(crate) rays: u32,
+    pub(crate) grid: u32,
+    pub(crate) seed: u64,
 }
 
 impl Default for ValidityParams {
@@ -189,7 +189,14 @@ fn probe_texel(
 /// the surface point `p` with normal `n` (lifted here by the ray epsilon) hit a back face within
 /// `reach`: the inside-geometry test of texels, and of the points of
 /// [`crate::reference::points`].
-pub fn back_hits(tracer: &Tracer, p: Vec3, n: Vec3, rays: u32, shift: Vec2, reach: f32) -> u32 {
+pub(crate) fn back_hits(
+    tracer: &Tracer,
+    p: Vec3,
+    n: Vec3,
+    rays: u32,
+    shift: Vec2,
+    reach: f32,
+) -> u32 {
     let (tx, ty) = frame(n);
     let origin = p + n * tracer.epsilon;
     (0..rays)

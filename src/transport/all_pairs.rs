@@ -27,7 +27,7 @@ use crate::texels::Texels;
 use crate::{Error, Progress, Result};
 
 /// Above this many texels the all-pairs methods refuse to run.
-pub const MAX_TEXELS: usize = 10_000;
+pub(crate) const MAX_TEXELS: usize = 10_000;
 /// Receivers per parallel work item.
 const CHUNK: usize = 32;
 /// Jittered points per side of a texel for punctual lights.
@@ -37,13 +37,13 @@ const PURPOSE_PAIRS: u64 = 1;
 const PURPOSE_PUNCTUAL: u64 = 2;
 
 /// A form-factor method: `F_ij` for one pair, and the rays it cast.
-pub trait PairKernel: Sync {
+pub(crate) trait PairKernel: Sync {
     /// `F_ij` (receiver `i`, source `j ≠ i`), visibility included; `rng` is receiver `i`'s stream.
     fn f_ij(&self, i: usize, j: usize, rng: &mut Rng, rays: &mut u64) -> f32;
 }
 
 /// Builds every row with `kernel`; `method` names it in errors.
-pub fn build(
+pub(crate) fn build(
     surfaces: Surfaces,
     params: &TransportParams,
     progress: &dyn Progress,
@@ -123,7 +123,7 @@ fn row(
 
 /// Covered fraction of texel `i`'s footprint parallelogram.
 #[inline]
-pub fn coverage(texels: &Texels, i: usize) -> f32 {
+pub(crate) fn coverage(texels: &Texels, i: usize) -> f32 {
     let full = texels.du[i].cross(texels.dv[i]).length();
     if full > 0.0 {
         (texels.area[i] / full).clamp(0.0, 1.0)
@@ -134,10 +134,10 @@ pub fn coverage(texels: &Texels, i: usize) -> f32 {
 
 /// The covered part of a texel as a parallelogram `centre + s·du + t·dv`, s, t ∈ [−½, ½].
 #[derive(Clone, Copy, Debug)]
-pub struct Footprint {
-    pub centre: Vec3,
-    pub du: Vec3,
-    pub dv: Vec3,
+pub(crate) struct Footprint {
+    pub(crate) centre: Vec3,
+    pub(crate) du: Vec3,
+    pub(crate) dv: Vec3,
 }
 
 impl Footprint {
@@ -147,7 +147,7 @@ impl Footprint {
     /// rectangle — exact for a border strip or a corner of an axis-aligned chart, the common
     /// case. (Shrinking the whole square about the centroid instead left gaps along a box's
     /// edges: rows of edge texels summed to 0.94 in the furnace, a 6% error.)
-    pub fn of(scene: &Scene, texels: &Texels, i: usize) -> Footprint {
+    pub(crate) fn of(scene: &Scene, texels: &Texels, i: usize) -> Footprint {
         let (centre, du, dv) = (texels.position[i], texels.du[i], texels.dv[i]);
         let full = Footprint { centre, du, dv };
         if coverage(texels, i) > 0.99 {
@@ -178,13 +178,13 @@ impl Footprint {
 
     /// The point at `u ∈ [0,1)²`, on the surface.
     #[inline]
-    pub fn point(&self, u: Vec2) -> Vec3 {
+    pub(crate) fn point(&self, u: Vec2) -> Vec3 {
         self.centre + self.du * (u.x - 0.5) + self.dv * (u.y - 0.5)
     }
 
     /// The same parallelogram scaled about its centre to have area `area` (a cut that is not
     /// along the axes — a diagonal chart border — gives a rectangle of the wrong area).
-    pub fn with_area(self, area: f32) -> Footprint {
+    pub(crate) fn with_area(self, area: f32) -> Footprint {
         let current = self.du.cross(self.dv).length();
         if !(current > 0.0 && area > 0.0) {
             return self;
@@ -198,7 +198,7 @@ impl Footprint {
     }
 
     /// Corners, counter-clockwise seen from the side `du × dv` points to.
-    pub fn corners(&self) -> [Vec3; 4] {
+    pub(crate) fn corners(&self) -> [Vec3; 4] {
         let (c, u, v) = (self.centre, self.du * 0.5, self.dv * 0.5);
         [c - u - v, c + u - v, c + u + v, c - u + v]
     }

@@ -65,7 +65,7 @@ pub fn point_to_disk_bound(r2: f32, a_j: f32) -> f32 {
 /// callers check that. No allocation: clipping streams the vertices (Sutherland–Hodgman).
 #[inline]
 #[must_use]
-pub fn point_to_polygon(x: Vec3, n: Vec3, vertices: &[Vec3]) -> f32 {
+pub(crate) fn point_to_polygon(x: Vec3, n: Vec3, vertices: &[Vec3]) -> f32 {
     let Some(&last) = vertices.last() else {
         return 0.0;
     };
@@ -162,8 +162,9 @@ pub fn point_to_coaxial_disk(r: f64, h: f64) -> f64 {
 
 /// Howell C-41: from a disk of radius `r1` to a parallel coaxial disk of radius `r2` at
 /// distance `h`.
+#[cfg(test)]
 #[must_use]
-pub fn coaxial_disks(r1: f64, r2: f64, h: f64) -> f64 {
+pub(crate) fn coaxial_disks(r1: f64, r2: f64, h: f64) -> f64 {
     let (a, b) = (r1 / h, r2 / h);
     let x = 1.0 + (1.0 + b * b) / (a * a);
     0.5 * (x - (x * x - 4.0 * (b / a).powi(2)).sqrt())

@@ -79,15 +79,15 @@ pub struct Transport {
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Sources {
     /// Sources `0..lights` are the scene's punctual lights.
-    pub lights: usize,
+    pub(crate) lights: usize,
     /// Source `lights + k` is the emission of material `emissive[k]`.
-    pub emissive: Vec<u32>,
+    pub(crate) emissive: Vec<u32>,
     /// Per material: its source, or `u32::MAX` when it does not emit.
-    pub material_source: Vec<u32>,
+    pub(crate) material_source: Vec<u32>,
 }
 
 impl Sources {
-    pub fn new(scene: &Scene) -> Sources {
+    pub(crate) fn new(scene: &Scene) -> Sources {
         let mut emissive = Vec::new();
         let material_source = (scene.materials.iter().enumerate())
             .map(
@@ -107,16 +107,12 @@ impl Sources {
         }
     }
 
-    pub fn len(&self) -> usize {
+    pub(crate) fn len(&self) -> usize {
         self.lights + self.emissive.len()
     }
-    pub fn is_empty(&self) -> bool {
-        self.len() == 0
-    }
-
     /// The source of emitting texel `j`: its main triangle's material.
     #[inline]
-    pub fn of_texel(&self, scene: &Scene, texels: &Texels, j: u32) -> usize {
+    pub(crate) fn of_texel(&self, scene: &Scene, texels: &Texels, j: u32) -> usize {
         let t = texels.triangle[j as usize] as usize;
         let m = scene.instances[scene.triangle_instance[t] as usize].material;
         self.material_source[m as usize] as usize
@@ -133,7 +129,7 @@ impl Transport {
     /// Rows given as (source texel, `F_ij`) per receiver, with each receiver's escape
     /// fraction; no direct light, no rays. How rows come back from outside the builders (a
     /// kept transport, `bake::kept`), so readers never touch the row storage.
-    pub fn from_rows<R>(rows: impl Iterator<Item = R>, escape: Vec<f32>) -> Transport
+    pub(crate) fn from_rows<R>(rows: impl Iterator<Item = R>, escape: Vec<f32>) -> Transport
     where
         R: Iterator<Item = (u32, f32)>,
     {
@@ -160,7 +156,8 @@ impl Transport {
     }
 
     /// Debug-build check: finite, non-negative, rows bounded.
-    pub fn validate(&self) {
+    #[cfg(debug_assertions)]
+    pub(crate) fn validate(&self) {
         assert_eq!(self.rows.len(), self.direct.len());
         if let Rows::Weights(w) = &self.rows {
             assert_eq!(w.col.len(), w.f.len());
@@ -180,7 +177,7 @@ impl Transport {
 /// Stored rows of form factors and direct light for every texel. `texel_rays` (indexed like
 /// the texels) gives a texel fewer gathering rays than `params.gather_rays` (Monte Carlo rows
 /// only; see [`crate::plan`]); `None` casts `gather_rays` everywhere.
-pub fn build(
+pub(crate) fn build(
     surfaces: Surfaces,
     form_factors: FormFactors,
     params: &TransportParams,

@@ -36,7 +36,7 @@ pub(crate) const CHUNK: usize = 128;
 const PUNCTUAL_GRID: u32 = 2;
 
 /// Monte Carlo rows for every texel; `texel_rays` as in [`super::build`].
-pub fn build(
+pub(crate) fn build(
     surfaces: Surfaces,
     params: &TransportParams,
     texel_rays: Option<&[u32]>,

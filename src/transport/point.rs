@@ -34,7 +34,7 @@ use crate::texels::Texels;
 use crate::trace::Tracer;
 use crate::{Progress, Result};
 
-pub fn build(
+pub(crate) fn build(
     surfaces: Surfaces,
     params: &TransportParams,
     progress: &dyn Progress,

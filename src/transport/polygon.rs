@@ -36,7 +36,7 @@ use crate::texels::Texels;
 use crate::trace::Tracer;
 use crate::{Progress, Result};
 
-pub fn build(
+pub(crate) fn build(
     surfaces: Surfaces,
     params: &TransportParams,
     progress: &dyn Progress,
@@ -65,7 +65,7 @@ pub fn build(
 }
 
 /// Shadow rays per side of the visibility grid for `light_samples` (S = grid²).
-pub fn visibility_grid(light_samples: u32) -> u32 {
+pub(crate) fn visibility_grid(light_samples: u32) -> u32 {
     ((light_samples as f32 / 16.0).sqrt() as u32).clamp(1, 4)
 }
 

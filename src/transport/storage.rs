@@ -144,7 +144,7 @@ fn write_escaped(out: &mut Vec<u8>, v: u32) {
 impl CountRows {
     /// Appends a row from the source texels its `rays` rays hit, sorted (a texel hit `n` times
     /// appears `n` times).
-    pub fn push_row(&mut self, sorted_hits: &[u32], rays: u32) {
+    pub(crate) fn push_row(&mut self, sorted_hits: &[u32], rays: u32) {
         // (column, hits) of each entry, and its gap from the previous column.
         let runs = || sorted_hits.chunk_by(|a, b| a == b);
         let gaps = || {
@@ -240,7 +240,7 @@ impl CountRows {
     }
 
     /// Empties the last row.
-    pub fn clear_last_row(&mut self) {
+    pub(crate) fn clear_last_row(&mut self) {
         let n = self.len();
         if n == 0 {
             return;
@@ -254,24 +254,8 @@ impl CountRows {
         self.push_start(start as u64);
     }
 
-    /// Makes room for `rows` more rows of `bytes` bytes in all, so that appending chunks
-    /// does not leave up to twice their bytes allocated.
-    pub fn reserve(&mut self, rows: usize, bytes: usize) {
-        match &mut self.start {
-            Starts::Narrow(s) => s.reserve_exact(rows),
-            Starts::Wide(s) => s.reserve_exact(rows),
-        }
-        self.base.reserve_exact(rows.div_ceil(GROUP) + 1);
-        self.bytes.reserve_exact(bytes);
-    }
-
-    /// Bytes of the rows (the padding byte left out).
-    pub fn byte_len(&self) -> usize {
-        self.bytes.len() - 1
-    }
-
     /// Appends the rows of `other` after these.
-    pub fn append(&mut self, other: CountRows) {
+    pub(crate) fn append(&mut self, other: CountRows) {
         let at = self.start(self.len()) as u64;
         for i in 1..other.start_len() {
             self.push_start(at + other.start(i) as u64);
@@ -282,17 +266,17 @@ impl CountRows {
     }
 
     /// Rows held.
-    pub fn len(&self) -> usize {
+    pub(crate) fn len(&self) -> usize {
         self.start_len() - 1
     }
-    pub fn is_empty(&self) -> bool {
+    pub(crate) fn is_empty(&self) -> bool {
         self.len() == 0
     }
 
     /// The entries of row `i` as (source texel, `hits / K_i`). Not inlined: its header's
     /// varints would keep [`Rows::row`] from being inlined into the f32 rows' sweeps.
     #[inline(never)]
-    pub fn row(&self, i: usize) -> CountRow<'_> {
+    pub(crate) fn row(&self, i: usize) -> CountRow<'_> {
         let (start, end) = (self.start(i), self.start(i + 1));
         let (entries, far_bytes, rays, steps) = match end > start {
             true => {
@@ -582,7 +566,7 @@ impl Rows {
     /// The entries of row `i` as (source texel, F_ij). Inlined into the sweeps: a call per
     /// row made f32 sweeps of short rows slower than before there were two storages.
     #[inline(always)]
-    pub fn row(&self, i: usize) -> Row<'_> {
+    pub(crate) fn row(&self, i: usize) -> Row<'_> {
         match self {
             Rows::Weights(w) => {
                 let r = w.row_start[i] as usize..w.row_start[i + 1] as usize;

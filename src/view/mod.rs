@@ -27,11 +27,11 @@ use crate::{Error, Result};
 
 /// One answer to a request.
 #[derive(Clone, Debug, PartialEq)]
-pub struct Reply {
+pub(crate) struct Reply {
     /// HTTP status: 200, or 404 for anything not served.
-    pub status: u16,
-    pub content_type: &'static str,
-    pub body: Vec<u8>,
+    pub(crate) status: u16,
+    pub(crate) content_type: &'static str,
+    pub(crate) body: Vec<u8>,
 }
 
 /// The embedded files of the page: URL path, content type, bytes.
@@ -99,7 +99,7 @@ impl Viewer {
     }
 
     /// The answer to a GET of `url` (path and query).
-    pub fn respond(&self, url: &str) -> Reply {
+    pub(crate) fn respond(&self, url: &str) -> Reply {
         let path = url.split(['?', '#']).next().unwrap_or("");
         let found = |content_type, body| Reply {
             status: 200,

@@ -27,12 +27,12 @@ use crate::trace::Tracer;
 use crate::transport::all_pairs;
 
 /// Kernel samples per link (no rays: cheap), on a 4×4 grid of a texel or area strata of a node.
-pub const KERNEL_SAMPLES: u32 = 16;
+pub(crate) const KERNEL_SAMPLES: u32 = 16;
 /// Shadow rays per accepted link.
-pub const SAMPLES: u32 = 4;
+pub(crate) const SAMPLES: u32 = 4;
 /// Pairs closer than this many times the sum of their radii are near field: split while
 /// possible (the kernel then varies little over either node, so few samples suffice).
-pub const NEAR: f32 = 2.0;
+pub(crate) const NEAR: f32 = 2.0;
 /// Height above a node's plane (in units of the pair's summed radii) below which the other
 /// node counts as in the plane: it receives at most a cosine of about this much.
 const COPLANAR: f32 = 1e-3;
@@ -48,7 +48,7 @@ pub struct Links {
     pub source: Vec<u32>,
     pub f: Vec<f32>,
     /// Visible fraction of each link's unoccluded form factor (what its shadow rays saw).
-    pub visible: Vec<f32>,
+    pub(crate) visible: Vec<f32>,
     /// Shadow rays cast.
     pub rays: u64,
 }

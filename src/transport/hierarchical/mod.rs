@@ -60,13 +60,13 @@ const SKY_RAYS: u32 = 64;
 const PURPOSE_DIRECT: u64 = 0x4852_4449;
 
 /// What links are built on: the quadtree over the texel pages and every texel's footprint.
-pub struct Hierarchy {
-    pub tree: Tree,
+pub(crate) struct Hierarchy {
+    pub(crate) tree: Tree,
     footprints: Vec<Footprint>,
 }
 
 impl Hierarchy {
-    pub fn new(surfaces: Surfaces) -> Hierarchy {
+    pub(crate) fn new(surfaces: Surfaces) -> Hierarchy {
         Hierarchy {
             tree: Tree::build(surfaces.texels),
             footprints: links::footprints(surfaces.scene, surfaces.texels),
@@ -77,7 +77,7 @@ impl Hierarchy {
     /// row scale (`Refiner::row_scale`). Pass 0 (from direct light) adds the mean radiosity
     /// as an ambient guess and refines 4× coarser: it only guesses `B` for the oracle of
     /// pass 1.
-    pub fn link(
+    pub(crate) fn link(
         &self,
         surfaces: Surfaces,
         b: &[Vec3],
@@ -130,7 +130,7 @@ impl Hierarchy {
 }
 
 /// Emission the hierarchy carries (`π·Le`): every emitter that is not light-sampled.
-pub fn carried_emission(texels: &Texels, emitters: &Emitters) -> Vec<Vec3> {
+pub(crate) fn carried_emission(texels: &Texels, emitters: &Emitters) -> Vec<Vec3> {
     (0..texels.len())
         .map(|i| {
             let sampled = emitters.pdf_area[texels.triangle[i] as usize] > 0.0;
@@ -145,7 +145,7 @@ pub fn carried_emission(texels: &Texels, emitters: &Emitters) -> Vec<Vec3> {
 
 /// `H_direct` per texel — light-sampled small emitters, punctual lights, sky — and the rays
 /// cast, as a [`Transport`] without rows.
-pub fn direct_light(
+pub(crate) fn direct_light(
     surfaces: Surfaces,
     params: &TransportParams,
     emitters: &Emitters,

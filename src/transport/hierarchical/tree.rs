@@ -11,7 +11,7 @@ use glam::{DVec3, Vec3};
 use crate::texels::Texels;
 
 /// Nodes whose normals stay within this angle (radians) of their mean are treated as planar.
-pub const PLANAR_SPREAD: f32 = 0.05;
+pub(crate) const PLANAR_SPREAD: f32 = 0.05;
 
 /// Flat node arrays indexed by node id; ids `0..texels` are the texels.
 #[derive(Default)]
@@ -19,28 +19,28 @@ pub struct Tree {
     /// Texels in Morton order, page by page.
     pub order: Vec<u32>,
     /// Cumulative area along `order` (length `order.len() + 1`), for area-weighted picks.
-    pub prefix_area: Vec<f64>,
+    pub(crate) prefix_area: Vec<f64>,
     /// Cumulative `A·position` and `A·normal` along `order` (as `prefix_area`), for the
     /// centroid and projected area of any run of a node's texels.
-    pub prefix_moment: Vec<DVec3>,
-    pub prefix_normal: Vec<DVec3>,
+    pub(crate) prefix_moment: Vec<DVec3>,
+    pub(crate) prefix_normal: Vec<DVec3>,
     /// Range of `order` covered by each node.
     pub range: Vec<[u32; 2]>,
     /// Parent node, `u32::MAX` for page roots.
-    pub parent: Vec<u32>,
+    pub(crate) parent: Vec<u32>,
     /// Children of each node: `children[child_start[k]..child_start[k + 1]]` (empty for leaves).
-    pub child_start: Vec<u32>,
-    pub children: Vec<u32>,
+    pub(crate) child_start: Vec<u32>,
+    pub(crate) children: Vec<u32>,
     /// `A`: world area (m²).
     pub area: Vec<f32>,
     /// Area-weighted centroid.
-    pub centroid: Vec<Vec3>,
+    pub(crate) centroid: Vec<Vec3>,
     /// Radius of a sphere around the centroid holding the node's texel footprints.
-    pub radius: Vec<f32>,
+    pub(crate) radius: Vec<f32>,
     /// Angle (radians) bounding the spread of the node's normals around their mean.
-    pub spread: Vec<f32>,
+    pub(crate) spread: Vec<f32>,
     /// Mean unit normal (zero when the normals cancel).
-    pub normal: Vec<Vec3>,
+    pub(crate) normal: Vec<Vec3>,
     /// Page roots: the top of the hierarchy.
     pub roots: Vec<u32>,
 }
@@ -57,18 +57,18 @@ impl Tree {
         self.child_start[k as usize] == self.child_start[k as usize + 1]
     }
 
-    pub fn children(&self, k: u32) -> &[u32] {
+    pub(crate) fn children(&self, k: u32) -> &[u32] {
         &self.children
             [self.child_start[k as usize] as usize..self.child_start[k as usize + 1] as usize]
     }
 
-    pub fn is_planar(&self, k: u32) -> bool {
+    pub(crate) fn is_planar(&self, k: u32) -> bool {
         self.spread[k as usize] < PLANAR_SPREAD
     }
 
     /// An area-weighted random texel of node `k` for `u ∈ [0,1)`.
     #[inline]
-    pub fn pick_texel(&self, k: u32, u: f32) -> u32 {
+    pub(crate) fn pick_texel(&self, k: u32, u: f32) -> u32 {
         let [lo, hi] = self.range[k as usize];
         let (a, b) = (self.prefix_area[lo as usize], self.prefix_area[hi as usize]);
         let target = a + (b - a) * u as f64;
@@ -81,7 +81,7 @@ impl Tree {
     /// full node are its quadtree sub-blocks): area, centroid and `Σ A_j n_j` (whose length is
     /// below the area where the normals differ). `None` for an empty run.
     #[inline]
-    pub fn stratum(&self, k: u32, s: u32, m: u32) -> Option<(f32, Vec3, Vec3)> {
+    pub(crate) fn stratum(&self, k: u32, s: u32, m: u32) -> Option<(f32, Vec3, Vec3)> {
         let [lo, hi] = self.range[k as usize];
         let len = (hi - lo) as u64;
         let a = lo as usize + (len * s as u64 / m as u64) as usize;
