@@ -41,10 +41,9 @@ use rayon::prelude::*;
 
 use super::punctual::{PunctualSample, bilinear};
 use crate::lights::{Emitters, punctual_irradiance};
-use crate::reference::points::PROBE_RAYS;
 use crate::sampling::{self, Rng, cosine_hemisphere, frame, hammersley, power_weight};
 use crate::scene::Scene;
-use crate::texels::validity::{self, MAX_BACK};
+use crate::texels::validity::{self, MAX_BACK, PROBE_RAYS};
 use crate::texels::{RayEnd, Texels};
 use crate::trace::Tracer;
 

@@ -79,12 +79,10 @@ use crate::render::RenderScene;
 use crate::sampling::{Rng, sample_cdf, triangle_point};
 use crate::scene::{Scene, SurfacePoint};
 use crate::texels::Texels;
-use crate::texels::validity::{self, MAX_BACK};
+use crate::texels::validity::{self, MAX_BACK, PROBE_RAYS};
 use crate::trace::Tracer;
 use crate::{Error, Progress, Result, metrics};
 
-/// Probe rays per candidate point (the texel validity pass's default).
-pub(crate) const PROBE_RAYS: u32 = 16;
 /// Mixed into the seed: point streams differ from texel and pixel streams of the same index.
 const POINTS_SALT: u64 = 0x504f_494e_5453; // "POINTS"
 /// Random-stream purposes of a candidate: where it lies, how its probes turn.

@@ -53,6 +53,9 @@ use crate::{Error, Progress, Result};
 const PURPOSE: u64 = 0x7a11_d17e;
 /// More than this fraction of probe rays on back faces ⇒ the point is inside geometry.
 pub(crate) const MAX_BACK: f32 = 0.25;
+/// Probe rays per point: the validity pass's default, and what the point samples of the planner
+/// and the point reference cast to tell a visible point from one inside geometry.
+pub(crate) const PROBE_RAYS: u32 = 16;
 /// Probe length in texel sides.
 pub(crate) const REACH: f32 = 8.0;
 /// Neighbours whose normals differ by more than this (cosine of 60°) do not fill each other.
@@ -69,7 +72,7 @@ pub struct ValidityParams {
 impl Default for ValidityParams {
     fn default() -> Self {
         ValidityParams {
-            rays: 16,
+            rays: PROBE_RAYS,
             grid: 4,
             seed: 0,
         }
