@@ -29,6 +29,7 @@ pub enum Instancing {
 /// Lightmap UV layout.
 #[derive(Clone, Debug)]
 pub struct AtlasParams {
+    /// Unwrap, reuse the input's `TEXCOORD_1`, or choose.
     pub uv: UvMode,
     /// Texel density in texels per world unit (metre). Higher = sharper shadows, quadratically
     /// more texels, rays and memory.
@@ -90,7 +91,9 @@ pub enum RowSolver {
 pub enum Technique {
     /// Rows of form factors built once and stored, then iterated.
     Stored {
+        /// How the rows' form factors are computed.
         form_factors: FormFactors,
+        /// How the rows are iterated.
         solver: RowSolver,
     },
     /// Matrix-free Monte Carlo: no stored rows; gathering rays are cast again every bounce.
@@ -108,6 +111,7 @@ impl Technique {
     /// The names [`Technique::solver`] gives, for command lines.
     pub const SOLVERS: [&'static str; 4] = ["jacobi", "gauss-seidel", "southwell", "gather"];
 
+    /// Stored rows of `form_factors`, iterated by `solver` (every pair exists).
     pub const fn stored(form_factors: FormFactors, solver: RowSolver) -> Technique {
         Technique::Stored {
             form_factors,
@@ -312,7 +316,9 @@ pub struct OutputParams {
 /// Light sources baked into one layer: light names, emissive material names or `sky`.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct LayerGroup {
+    /// The layer's name.
     pub name: String,
+    /// Light names, emissive material names or `sky`.
     pub members: Vec<String>,
 }
 
@@ -338,13 +344,17 @@ impl LayerGroup {
 /// Which settings the user fixed; the automatic choice ([`crate::plan`]) leaves those alone.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Keep {
+    /// The texel density.
     pub texels_per_unit: bool,
     /// The transport of [`Technique`] (its [`Technique::method`]).
     pub method: bool,
     /// The solver of [`Technique`] (its [`Technique::solver`]).
     pub solver: bool,
+    /// Gathering rays per texel.
     pub rays: bool,
+    /// Emitter light samples per texel.
     pub light_samples: bool,
+    /// The solver's tolerance.
     pub tolerance: bool,
 }
 
@@ -353,6 +363,7 @@ pub struct Keep {
 pub struct AutoParams {
     /// Target relative RMSE against a converged reference (0.04 = 4%).
     pub target_error: f32,
+    /// The settings the user fixed.
     pub keep: Keep,
 }
 
@@ -371,11 +382,15 @@ impl AutoParams {
 /// All options of a bake.
 #[derive(Clone, Debug)]
 pub struct BakeConfig {
+    /// Lightmap UV layout.
     pub atlas: AtlasParams,
     /// Which transport and solver: see [`Technique`].
     pub technique: Technique,
+    /// Rays, light samples, sky and the other transport settings.
     pub transport: TransportParams,
+    /// Tolerance and iteration cap of the solver.
     pub solve: SolveParams,
+    /// What is written and how.
     pub output: OutputParams,
     /// Choose density, method, rays and tolerance from the scene for a target error
     /// ([`crate::plan`]); `None` uses the settings above as they are.

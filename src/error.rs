@@ -15,11 +15,21 @@ use std::path::PathBuf;
 pub enum Error {
     /// The input file is malformed; the message says what and where (`mesh 0 primitive 1: …`).
     #[error("{}: {message}", path.display())]
-    Invalid { path: PathBuf, message: String },
+    Invalid {
+        /// The input file.
+        path: PathBuf,
+        /// What is wrong, and where in the file.
+        message: String,
+    },
 
     /// The input is valid but uses something lightbake cannot bake.
     #[error("{}: unsupported: {message}", path.display())]
-    Unsupported { path: PathBuf, message: String },
+    Unsupported {
+        /// The input file.
+        path: PathBuf,
+        /// What it uses that lightbake cannot bake.
+        message: String,
+    },
 
     /// An option is out of range or inconsistent, or names something the scene does not have
     /// (a camera, a light to relight).
@@ -30,7 +40,9 @@ pub enum Error {
     /// says why (it is not repeated in this error's own message).
     #[error("{}", path.display())]
     Io {
+        /// The file, directory or address.
         path: PathBuf,
+        /// Why it failed.
         #[source]
         source: std::io::Error,
     },
@@ -38,7 +50,12 @@ pub enum Error {
     /// The bake would need more memory than it may use (`BakeConfig::max_memory`); refused
     /// before any heavy work.
     #[error("{}: {message}", path.display())]
-    Memory { path: PathBuf, message: String },
+    Memory {
+        /// The input file.
+        path: PathBuf,
+        /// The estimate, the limit and what to change.
+        message: String,
+    },
 
     /// A distributed bake lost a process or could not reach one; the message names it.
     #[error("distributed bake: {0}")]
@@ -67,6 +84,7 @@ impl Error {
             message: message.into(),
         }
     }
+    /// An [`Error::Io`] on `path`.
     pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
         Error::Io {
             path: path.into(),
@@ -88,6 +106,7 @@ impl Error {
     }
 }
 
+/// A result whose error is lightbake's [`Error`].
 pub type Result<T, E = Error> = std::result::Result<T, E>;
 
 #[cfg(test)]

@@ -111,6 +111,8 @@
 //! Every random number comes from a stream seeded by (seed, texel, sample); parallel loops
 //! collect in order. The same input and options give the same bytes on any thread count.
 
+#![warn(missing_docs)]
+
 pub mod atlas;
 pub mod build;
 pub mod config;

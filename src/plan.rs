@@ -120,6 +120,7 @@ impl std::fmt::Debug for TexelRays {
 /// What was chosen and why, in order (density first).
 #[derive(Clone, Debug, Default)]
 pub struct Plan {
+    /// The relative RMSE aimed at.
     pub target_error: f32,
     /// The pilot's measured relative noise at [`PILOT_RAYS`], if a pilot ran.
     pub pilot_noise: Option<f32>,
@@ -132,9 +133,11 @@ pub struct Plan {
     pub resolution_parts: Option<ResolutionParts>,
     /// Gathering rays per texel in all, the reused pilot bakes included.
     pub total_rays: Option<u32>,
+    /// Wall seconds of the pilot bakes.
     pub pilot_seconds: f64,
     /// Seconds of the gathered point sample ([`GatheredSample`]) behind the resolution error.
     pub resolution_seconds: f64,
+    /// Gathering rays the pilot bakes cast.
     pub pilot_rays: u64,
     /// The texel budget of the preset's density ([`choose_density`]), when the plan chose it:
     /// the most texels the density regions ([`density`]) may ask for.
@@ -171,6 +174,7 @@ pub struct ResolutionParts {
     /// Its parts: the light other than punctual direct light (emitters, sky,
     /// interreflection), and punctual direct light at the same points about the shading normal.
     pub rest: Option<f32>,
+    /// The part from punctual direct light (see `rest`).
     pub point_punctual: Option<f32>,
     /// Relative RMS lookup error of the light other than punctual direct light, from the
     /// pilot's second differences ([`resolution_error`]'s model; a lower bound).

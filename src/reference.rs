@@ -84,13 +84,21 @@ const SEED_SALT: u64 = 0x5245_4645_5245_4e43; // "REFERENC"
 /// How long and how the reference traces.
 #[derive(Clone, Debug)]
 pub struct ReferenceParams {
+    /// Paths per item between stopping checks.
     pub samples_per_pass: u32,
+    /// Paths per item at most.
     pub max_samples: u32,
+    /// Stop when the relative RMS standard error is at most this.
     pub target_rel_error: Option<f32>,
+    /// Stop after the pass that crosses this.
     pub time_limit: Option<Duration>,
+    /// Seed of the random streams.
     pub seed: u64,
+    /// Bounces per path at most.
     pub max_depth: u32,
+    /// Uniform radiance of rays that leave the scene.
     pub sky: Vec3,
+    /// Leave out light reaching the first vertex without a bounce, like the bake.
     pub indirect_only: bool,
 }
 
@@ -156,8 +164,11 @@ impl ReferenceParams {
 /// Why tracing stopped.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Stop {
+    /// `max_samples` paths per item were traced.
     MaxSamples,
+    /// The relative RMS standard error reached `target_rel_error`.
     TargetError,
+    /// A pass ended past `time_limit`.
     TimeLimit,
 }
 
@@ -184,9 +195,11 @@ pub struct Reference {
     pub samples: u32,
     /// Rays cast (closest hits and shadow rays; primary rays too for pixels).
     pub rays: u64,
+    /// Wall seconds.
     pub seconds: f64,
     /// Relative RMS standard error over items, `√(Σσ²/Σμ²)` (see [`rms_rel_error`]).
     pub rms_rel_error: f32,
+    /// Why tracing stopped.
     pub stop: Stop,
 }
 
@@ -395,10 +408,15 @@ fn run_passes(
 /// The stages a reference needs, and the reference itself.
 #[derive(Clone, Debug)]
 pub struct Computed {
+    /// The loaded scene (after the junction split).
     pub scene: scene::Scene,
+    /// The input document as read.
     pub source: scene::Source,
+    /// The lightmap UV layout, as the bake's.
     pub atlas: atlas::Atlas,
+    /// The texels, as the bake's.
     pub texels: Texels,
+    /// The estimate per texel.
     pub reference: Reference,
 }
 

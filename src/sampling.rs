@@ -29,6 +29,7 @@ impl Rng {
         rng
     }
 
+    /// The next 32 random bits.
     #[inline]
     pub fn next_u32(&mut self) -> u32 {
         let old = self.state;
@@ -44,6 +45,7 @@ impl Rng {
         (self.next_u32() >> 8) as f32 * (1.0 / (1u32 << 24) as f32)
     }
 
+    /// Two uniforms in [0, 1).
     #[inline]
     pub fn next_vec2(&mut self) -> Vec2 {
         Vec2::new(self.next_f32(), self.next_f32())

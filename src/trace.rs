@@ -260,6 +260,7 @@ impl Tracer {
     pub fn len(&self) -> usize {
         self.triangles.len()
     }
+    /// No triangles.
     pub fn is_empty(&self) -> bool {
         self.triangles.is_empty()
     }

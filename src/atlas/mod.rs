@@ -22,13 +22,16 @@ use crate::scene::{Scene, Source};
 /// Size of one lightmap page in texels.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct PageSize {
+    /// Texels across.
     pub width: u32,
+    /// Texels down.
     pub height: u32,
 }
 
 /// Lightmap UV layout of the whole scene.
 #[derive(Clone, Debug)]
 pub struct Atlas {
+    /// Size of each page; `InstanceUv::triangle_page` indexes them.
     pub pages: Vec<PageSize>,
     /// Parallel to [`Scene::instances`].
     pub instances: Vec<InstanceUv>,

@@ -65,6 +65,7 @@ pub struct Cluster {
 pub struct DistributedReport {
     /// The bake's report on process 0 (which wrote the files); `None` on the others.
     pub bake: Option<BakeReport>,
+    /// Processes that took part.
     pub processes: usize,
     /// The texels whose rows this process built.
     pub rows: Range<usize>,
@@ -76,6 +77,7 @@ pub struct DistributedReport {
     pub bytes_sent: u64,
     /// Wall seconds this process spent building its rows, and in the sweeps.
     pub rows_seconds: f64,
+    /// Wall seconds this process spent in the sweeps (see `rows_seconds`).
     pub sweeps_seconds: f64,
     /// Of those, seconds spent in exchanges: the network, and waiting for slower processes.
     pub exchange_seconds: f64,

@@ -89,6 +89,7 @@ pub struct Settings {
     pub(crate) seed: u64,
     pub(crate) validity: bool,
     pub(crate) denoise: bool,
+    /// The solver's tolerance: the relative error at which it stops.
     pub tolerance: f32,
     pub(crate) max_iterations: u32,
     pub(crate) float: bool,
@@ -236,6 +237,7 @@ impl Settings {
 /// A kept transport, read back.
 #[derive(Clone, Debug)]
 pub struct Kept {
+    /// How the bake ran, and the lights and materials it was baked with.
     pub settings: Settings,
     /// The fields the solver, denoiser, fill and pages read (see the module docs); the others
     /// are empty.

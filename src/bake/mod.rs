@@ -27,7 +27,9 @@ use crate::{Error, Progress, Result, atlas, scene, solve, texels, transport};
 /// Wall time of one pipeline stage.
 #[derive(Clone, Debug)]
 pub struct StageTime {
+    /// The stage's name, as the summary prints it.
     pub stage: &'static str,
+    /// Wall seconds it took.
     pub seconds: f64,
 }
 
@@ -35,7 +37,9 @@ pub struct StageTime {
 #[derive(Clone, Debug)]
 pub struct BakeReport {
     pub(crate) triangles: usize,
+    /// Texels baked (radiosity patches).
     pub texels: usize,
+    /// Lightmap pages written.
     pub pages: usize,
     pub(crate) rays: u64,
     pub(crate) iterations: usize,
@@ -55,6 +59,7 @@ pub struct BakeReport {
     /// How the directional pages' reconstruction at the texel normals agrees with the lightmap
     /// (`None` without `config.output.directional`).
     pub(crate) directional: Option<lightmap::directional::Agreement>,
+    /// Wall time per stage, in pipeline order.
     pub stages: Vec<StageTime>,
     /// The files written, the glTF first.
     pub files: Vec<PathBuf>,
@@ -130,14 +135,20 @@ impl BakeReport {
 /// Everything a bake computed, stage by stage, before anything is written.
 #[derive(Clone, Debug)]
 pub struct Baked {
+    /// The scene as baked (after the junction split).
     pub scene: scene::Scene,
     pub(crate) source: scene::Source,
+    /// The lightmap UV layout.
     pub atlas: atlas::Atlas,
+    /// The radiosity patches, one per covered texel.
     pub texels: texels::Texels,
+    /// Form factors and direct light (no rows for the matrix-free and hierarchical solvers).
     pub transport: transport::Transport,
+    /// The solved irradiance per texel and the solver's history.
     pub solution: solve::Solution,
     /// `H/π` per texel (what the pages hold before dilation and seam stitching).
     pub lightmap: Vec<Vec3>,
+    /// The lightmap pages as written: dilated into the gutters, seams stitched.
     pub pages: LightmapPages,
     /// Per page, each texel's estimated relative error: resolution, noise and total in R, G, B
     /// (`config.output.error_map`; [`plan::error_map`]).
@@ -146,14 +157,18 @@ pub struct Baked {
     /// `pages`, their agreement with the lightmap and the gather's rays
     /// (`config.output.directional`).
     pub directional: Option<([LightmapPages; 4], lightmap::directional::Agreement, u64)>,
+    /// Texel sample points moved out of geometry, and texels with none outside it.
     pub validity: texels::validity::ValidityReport,
     /// The settings the bake ran with: `config` with the automatic choices applied.
     pub config: BakeConfig,
+    /// The automatic choice of settings and its reasons (`config.auto`).
     pub plan: Option<Plan>,
+    /// Seam discontinuity before and after stitching (`None` when stitching is off).
     pub seams: Option<lightmap::seams::SeamReport>,
     pub(crate) junctions: Option<scene::junctions::JunctionReport>,
     /// Per-light layers (`config.output.layers`; [`relight`]).
     pub layers: Vec<relight::LayerPages>,
+    /// Wall time per stage, in pipeline order.
     pub stages: Vec<StageTime>,
 }
 
@@ -232,10 +247,14 @@ fn pass_through(
 /// The stages before light transport, shared by a bake and the reference (so their texels
 /// cannot drift apart).
 pub struct Prepared {
+    /// The scene to bake (after the junction split).
     pub scene: scene::Scene,
     pub(crate) source: scene::Source,
+    /// The BVH over the scene.
     pub tracer: Tracer,
+    /// The lightmap UV layout.
     pub atlas: atlas::Atlas,
+    /// The radiosity patches, sample points moved out of geometry.
     pub texels: texels::Texels,
     /// Texel sample points moved out of geometry, and texels with none outside it.
     pub(crate) validity: texels::validity::ValidityReport,

@@ -93,9 +93,11 @@ pub struct LayerPages {
 #[derive(Clone, Debug)]
 pub struct RelightReport {
     pub(crate) texels: usize,
+    /// Per-light layers written (0 without layers).
     pub layers: usize,
     pub(crate) iterations: usize,
     pub(crate) residual: f32,
+    /// False when the solver stopped on the iteration cap.
     pub converged: bool,
     pub(crate) stages: Vec<StageTime>,
     /// The files written, the glTF first.

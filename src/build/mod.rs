@@ -26,6 +26,7 @@ use crate::{BakeConfig, BakeReport, Progress, Result};
 /// The scenes of a build.
 #[derive(Clone, Debug)]
 pub struct Manifest {
+    /// The scenes, in manifest order.
     pub scenes: Vec<ManifestScene>,
     /// Bake every scene even where the cache says its outputs are up to date.
     pub force: bool,
@@ -43,6 +44,7 @@ pub struct ManifestScene {
     pub input: PathBuf,
     /// Output directory.
     pub output: PathBuf,
+    /// The options it is baked with (the manifest's defaults and the scene's own).
     pub config: BakeConfig,
 }
 
@@ -50,9 +52,11 @@ pub struct ManifestScene {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Status {
+    /// The scene was baked and its outputs written.
     Baked,
     /// The cache matched: the outputs were left as they were.
     Skipped,
+    /// The bake failed (see [`SceneReport::error`]).
     Failed,
 }
 
@@ -69,9 +73,13 @@ pub struct EstimatedError {
 /// The figures of a finished bake, recorded with its outputs and reported again on a skip.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct SceneResult {
+    /// Texels baked.
     pub texels: Option<usize>,
+    /// Lightmap pages written.
     pub pages: Option<usize>,
+    /// The planner's estimate of the error a renderer will show.
     pub estimated_error: Option<EstimatedError>,
+    /// The bake's warnings.
     pub warnings: Vec<String>,
 }
 
@@ -80,9 +88,11 @@ pub struct SceneResult {
 pub struct SceneReport {
     /// The scene's path as the manifest gives it.
     pub path: PathBuf,
+    /// Baked, skipped or failed.
     pub status: Status,
     /// Wall time of this scene in this build (hashing, and baking unless skipped).
     pub seconds: f64,
+    /// The figures of the bake (a skipped scene's are its last bake's).
     #[serde(flatten)]
     pub result: SceneResult,
     /// Why the scene failed.
@@ -94,6 +104,7 @@ pub struct SceneReport {
 pub struct BuildReport {
     /// lightbake's version.
     pub(crate) lightbake: String,
+    /// One line per scene, in manifest order.
     pub scenes: Vec<SceneReport>,
 }
 
@@ -127,7 +138,9 @@ impl BuildReport {
 /// (or it has no estimate to check), or, with `deny_warnings`, when it warned.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Gate {
+    /// The largest estimated error (relative) a bake may have; `None`: no limit.
     pub max_error: Option<f32>,
+    /// A bake that warned fails.
     pub deny_warnings: bool,
 }
 

@@ -15,14 +15,21 @@ use crate::{BakeConfig, Error, Result};
 pub struct Options {
     /// `draft`, `medium` (the default) or `high`.
     pub quality: Option<String>,
+    /// Relative RMSE to aim at instead of the preset's (0.02 = 2%).
     pub target_error: Option<f32>,
+    /// Use the preset's settings as they are: no pilot, no automatic choice.
     pub no_auto: Option<bool>,
+    /// Lightmap texels per world unit (default: from the preset, fitted to the scene).
     pub texels_per_unit: Option<f32>,
+    /// Largest page side in texels.
     pub max_page_size: Option<u32>,
+    /// Empty texels between charts.
     pub padding: Option<u32>,
     /// `auto` (the default), `unwrap` or `existing`.
     pub uv: Option<String>,
+    /// Gathering rays per texel (default: chosen by the pilot for the target error).
     pub rays: Option<u32>,
+    /// Shadow rays per texel towards emissive surfaces.
     pub light_samples: Option<u32>,
     /// One value for all channels or `[r, g, b]`.
     pub sky: Option<Rgb>,
@@ -30,24 +37,37 @@ pub struct Options {
     pub method: Option<String>,
     /// One of [`Technique::SOLVERS`].
     pub solver: Option<String>,
+    /// Relative error at which the solver stops.
     pub tolerance: Option<f32>,
+    /// Iteration cap of the solver.
     pub max_iterations: Option<u32>,
+    /// Store indirect light only.
     pub indirect_only: Option<bool>,
+    /// Write 32-bit float EXR pages instead of half floats.
     pub float: Option<bool>,
+    /// Also write each page as an 8-bit RGBM PNG.
     pub rgbm: Option<bool>,
+    /// Also write each page's per-texel error estimate.
     pub error_map: Option<bool>,
     /// Also write directional (L1 SH) pages.
     pub directional: Option<bool>,
     /// Hemisphere rays per texel of the directional gather.
     pub directional_rays: Option<u32>,
+    /// Keep receivers whole where other surfaces meet them.
     pub no_split_junctions: Option<bool>,
+    /// Do not cut receivers along the hard shadow outlines of punctual lights.
     pub no_shadow_cuts: Option<bool>,
     /// `duplicate` (the default) or `share`.
     pub instancing: Option<String>,
+    /// Keep texel sample points where they are, even inside geometry.
     pub no_validity: Option<bool>,
+    /// Skip the edge-aware denoiser.
     pub no_denoise: Option<bool>,
+    /// Leave UV seams unstitched.
     pub no_seams: Option<bool>,
+    /// Exposure of the PNG previews, in stops.
     pub exposure: Option<f32>,
+    /// Seed of the random sample streams.
     pub seed: Option<u64>,
     /// Memory the bake may use, e.g. `"512M"`, `"8G"` (binary units) or bytes.
     pub max_memory: Option<String>,
@@ -64,7 +84,9 @@ pub struct Options {
 #[derive(Clone, Copy, Debug, PartialEq, Deserialize)]
 #[serde(untagged)]
 pub enum Rgb {
+    /// The same value in R, G and B.
     Grey(f32),
+    /// R, G, B.
     Rgb([f32; 3]),
 }
 

@@ -117,9 +117,11 @@ pub(crate) fn project(c: &mut Sh1, dir: Vec3, l: Vec3) {
 pub struct DirectionalParams {
     /// Hemisphere rays per texel (and emitter samples, one per ray).
     pub rays: u32,
+    /// Seed of the random streams.
     pub seed: u64,
     /// Uniform sky radiance of rays that leave the scene.
     pub sky: Vec3,
+    /// Leave out light that reaches a texel without a bounce (as the bake's option).
     pub indirect_only: bool,
 }
 
@@ -178,6 +180,7 @@ pub struct Gatherer<'a> {
 }
 
 impl<'a> Gatherer<'a> {
+    /// A gatherer of `surfaces` lit by the solved irradiance `h` (per texel).
     pub fn new(surfaces: Surfaces<'a>, h: &'a [Vec3], params: &'a DirectionalParams) -> Self {
         Gatherer {
             surfaces,

@@ -19,7 +19,9 @@ pub use dilate::dilate;
 /// One lightmap page.
 #[derive(Clone, Debug)]
 pub struct Page {
+    /// Texels across.
     pub width: u32,
+    /// Texels down.
     pub height: u32,
     /// Row-major, row 0 at the top (v = 0), linear RGB `H/π`.
     pub rgb: Vec<Vec3>,
@@ -74,6 +76,7 @@ impl Page {
 /// All pages of a bake.
 #[derive(Clone, Debug, Default)]
 pub struct LightmapPages {
+    /// The pages, in atlas page order.
     pub pages: Vec<Page>,
 }
 

@@ -165,11 +165,17 @@ use crate::scene::Scene;
 /// Seam detection and stitching settings (see the table in the module docs).
 #[derive(Clone, Debug)]
 pub struct SeamParams {
+    /// Sample points per texel along each seam edge.
     pub samples_per_texel: f32,
+    /// λ: pull towards the solved values; larger leaves seams more open.
     pub lambda: f32,
+    /// Conjugate-gradient iterations at most (fewer when the residual falls below 1e-6).
     pub iterations: u32,
+    /// Vertex normals closer than this (cosine of their angle) make a smooth edge.
     pub min_normal_dot: f32,
+    /// Faces folding further than this (cosine of the fold) meet at a crease, not a seam.
     pub min_face_dot: f32,
+    /// Position tolerance, relative to the scene's diagonal.
     pub weld: f32,
     /// Also find edges that meet only along part of their length (T-junctions).
     pub t_junctions: bool,
@@ -210,6 +216,7 @@ pub struct SeamEdge {
 /// The seam edges of a scene and their sample points.
 #[derive(Clone, Debug, Default)]
 pub struct Seams {
+    /// The seam edges.
     pub edges: Vec<SeamEdge>,
     /// Sample points along the edges: page and position (texel units) of each side.
     pub samples: Vec<SeamSample>,
@@ -222,16 +229,22 @@ pub struct Seams {
 /// One point on a seam edge, as seen from its two sides.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SeamSample {
+    /// Page of each side.
     pub page: [u32; 2],
+    /// Position on each side, in texel units of its page.
     pub uv: [Vec2; 2],
 }
 
 /// Discontinuity along the seams: over all samples, `|A − B|` averaged over RGB (`H/π` units).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct SeamStats {
+    /// Seam edges.
     pub edges: usize,
+    /// Sample points along them.
     pub samples: usize,
+    /// Mean `|A − B|`.
     pub mean_abs_diff: f32,
+    /// Largest `|A − B|`.
     pub max_abs_diff: f32,
     /// Mean of `(A + B)/2` over samples and RGB (divide by it for relative figures).
     pub mean_value: f32,
@@ -240,12 +253,15 @@ pub struct SeamStats {
 /// What stitching did: the discontinuity before and after, the texels it changed, its time.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct SeamReport {
+    /// Discontinuity before stitching.
     pub before: SeamStats,
+    /// Discontinuity after stitching.
     pub after: SeamStats,
     /// Texels that are unknowns of the least-squares problem.
     pub texels: usize,
     /// Conjugate-gradient iterations run.
     pub(crate) iterations: u32,
+    /// Wall seconds.
     pub seconds: f64,
 }
 

@@ -15,8 +15,11 @@ use crate::texels::Texels;
 pub struct MemoryInputs {
     /// Bytes of the input files (the JSON and buffers stay loaded until the output is written).
     pub input_bytes: f64,
+    /// Vertices of the loaded scene.
     pub vertices: f64,
+    /// Triangles of the loaded scene.
     pub triangles: f64,
+    /// Texels (radiosity patches).
     pub texels: f64,
     /// Texels of all pages, covered or not (width × height summed).
     pub page_texels: f64,
@@ -51,6 +54,7 @@ pub struct MemoryEstimate {
 }
 
 impl MemoryEstimate {
+    /// The whole peak: the parts summed.
     pub fn total(&self) -> f64 {
         self.scene + self.bvh + self.atlas + self.texels + self.pages + self.rows
     }

@@ -47,7 +47,9 @@ const MAX_BACK_FACE_SKIPS: u32 = 8;
 /// A path-traced camera image.
 #[derive(Clone, Debug)]
 pub struct View {
+    /// Pixels across.
     pub width: u32,
+    /// Pixels down.
     pub height: u32,
     /// Radiance per pixel (linear RGB), row 0 at the top, with its standard error and the
     /// run's samples per pixel, rays (primary, closest hits and shadow rays), time and stop.

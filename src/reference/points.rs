@@ -97,14 +97,18 @@ const LOCATE_OFFSETS: f32 = 4.0;
 /// surface's unit interpolated (shading) normal there, turned to the face's side.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Point {
+    /// World position.
     pub position: Vec3,
+    /// Unit geometric normal of the face.
     pub normal: Vec3,
+    /// Unit interpolated vertex normal, on the face's side.
     pub shading_normal: Vec3,
 }
 
 /// Visible points drawn on a scene's surfaces.
 #[derive(Clone, Debug, Default)]
 pub struct PointSet {
+    /// The visible points.
     pub points: Vec<Point>,
     /// Candidates left out as hidden (inside geometry) before the last kept point.
     pub hidden: usize,
@@ -393,8 +397,11 @@ pub fn compute_in(
 /// What a point reference file holds: points and their path-traced `H/π`.
 #[derive(Clone, Debug, Default)]
 pub struct PointReference {
+    /// The points.
     pub points: Vec<Point>,
+    /// Path-traced `H/π` per point.
     pub mean: Vec<Vec3>,
+    /// Standard error of `mean`, per channel.
     pub std_error: Vec<Vec3>,
     /// Candidates left out as hidden.
     pub hidden: usize,
@@ -403,6 +410,7 @@ pub struct PointReference {
 }
 
 impl PointReference {
+    /// The points of `set` with their estimates in `traced`.
     pub fn new(set: PointSet, traced: &Reference) -> Self {
         PointReference {
             points: set.points,
@@ -516,6 +524,7 @@ pub struct Lookup {
     pub touches_black: bool,
     /// Where it was read: the index into [`RenderScene::pages`] and the `TEXCOORD_1` there.
     pub page: u32,
+    /// The `TEXCOORD_1` it was read at, on `page`.
     pub uv: Vec2,
     /// The baked surface's interpolated vertex normal at the point.
     pub shading_normal: Vec3,
@@ -614,6 +623,7 @@ pub struct PointComparison {
     /// Median and 95th percentile of per-point, per-channel relative errors (floored at 5%
     /// of the mean).
     pub median: f32,
+    /// The 95th percentile of the same relative errors (see `median`).
     pub p95: f32,
     /// Fraction of lookups whose footprint touches a black texel where the reference is not black.
     pub black_touch: f32,

@@ -62,14 +62,23 @@ use crate::{Error, Result, output};
 /// What to render and how.
 #[derive(Clone, Debug)]
 pub struct RenderOptions {
+    /// Pixels across.
     pub width: u32,
+    /// Pixels down.
     pub height: u32,
+    /// Jittered samples per pixel (the mean over the image when adaptive).
     pub spp: u32,
+    /// Spend the samples where the image needs them.
     pub adaptive: bool,
+    /// Add the ray-traced specular layer (mirrors, glossy metals, glass).
     pub specular: bool,
+    /// Depth of the specular ray tree.
     pub max_depth: u32,
+    /// GGX rays at a glossy primary hit.
     pub glossy_samples: u32,
+    /// Radiance of rays that leave the scene.
     pub background: Vec3,
+    /// Seed of the random streams (seeded by seed and pixel).
     pub seed: u64,
 }
 
@@ -92,8 +101,11 @@ impl Default for RenderOptions {
 /// A baked scene ready to render: geometry, materials and cameras (all resolved by the loader),
 /// BVH and lightmap pages.
 pub struct RenderScene {
+    /// The baked glTF it was loaded from.
     pub path: PathBuf,
+    /// Geometry, materials, lights and cameras, as the loader resolved them.
     pub scene: Scene,
+    /// The BVH over the scene.
     pub tracer: Tracer,
     /// Decoded EXR pages (one per distinct `extras.lightmap` file).
     pub pages: Vec<Page>,
@@ -114,8 +126,11 @@ pub struct RenderScene {
 /// A rendered image: linear RGB radiance, row 0 at the top.
 #[derive(Clone, Debug)]
 pub struct Image {
+    /// Pixels across.
     pub width: u32,
+    /// Pixels down.
     pub height: u32,
+    /// Radiance per pixel, row-major.
     pub rgb: Vec<Vec3>,
     /// Samples that came out NaN or infinite and were replaced by black (should be 0).
     pub nonfinite: u64,

@@ -87,6 +87,7 @@ pub struct GltfCamera {
     pub(crate) name: Option<String>,
     /// Index into the document's `cameras`.
     pub(crate) index: usize,
+    /// The camera as the renderer uses it.
     pub camera: Camera,
 }
 

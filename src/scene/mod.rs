@@ -57,8 +57,10 @@ pub struct Scene {
     pub triangle_instance: Vec<u32>,
     /// One per baked (node, primitive) pair, plus one per back face of a double-sided primitive.
     pub instances: Vec<Instance>,
+    /// The document's materials, resolved.
     pub materials: Vec<Material>,
     pub(crate) textures: Vec<Texture>,
+    /// Punctual lights (`KHR_lights_punctual`), placed in world space.
     pub lights: Vec<Light>,
     /// Every perspective camera placed by a node of the scene, in node traversal order.
     pub cameras: Vec<GltfCamera>,
@@ -72,6 +74,7 @@ pub struct Instance {
     /// glTF node, mesh and primitive (within the mesh) indices.
     pub node: u32,
     pub(crate) mesh: u32,
+    /// The glTF primitive index within the mesh (see `node`).
     pub primitive: u32,
     /// Index into [`Scene::materials`].
     pub(crate) material: u32,
@@ -321,6 +324,7 @@ impl Scene {
         0.5 * (b - a).cross(c - a).length()
     }
 
+    /// The surface at barycentrics `b` of triangle `t` (the weights of its second and third vertices): position, normals, texture coordinates.
     pub fn surface_point(&self, t: u32, b: Vec2) -> SurfacePoint {
         let [i0, i1, i2] = self.triangles[t as usize].map(|v| v as usize);
         let w = Vec3::new(1.0 - b.x - b.y, b.x, b.y);

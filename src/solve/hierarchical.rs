@@ -70,7 +70,9 @@ use crate::{Progress, Result};
 /// Statistics of a hierarchical solve (links of the final refinement).
 #[derive(Clone, Copy, Debug, Default)]
 pub struct Stats {
+    /// Nodes of the hierarchy (texels included).
     pub nodes: usize,
+    /// Links of the final refinement.
     pub links: usize,
 }
 

@@ -45,6 +45,7 @@ pub struct Iteration {
 pub struct Solution {
     /// Incident irradiance `H_i` (W/m²) per texel; the lightmap stores `H/π`.
     pub irradiance: Vec<Vec3>,
+    /// Each sweep, in order.
     pub history: Vec<Iteration>,
     /// True when the error estimate fell below the tolerance before the iteration cap.
     pub converged: bool,

@@ -47,12 +47,14 @@ pub struct Texels {
     pub emission: Vec<Vec3>,
     /// Page and texel coordinates.
     pub page: Vec<u32>,
+    /// Texel coordinates (x, y) on its page.
     pub xy: Vec<[u32; 2]>,
     /// The triangle covering most of the texel.
     pub(crate) triangle: Vec<u32>,
     /// World-space vectors spanning one texel step in x and in y on `triangle`'s plane
     /// (the texel footprint is `position + s·du + t·dv`, s,t ∈ [−½, ½]).
     pub du: Vec<Vec3>,
+    /// The step in y (see `du`).
     pub dv: Vec<Vec3>,
     /// Fraction of the footprint that sample points jitter over: 1, or the candidate cell
     /// (1/G of a side) around a sample point that validity moved out of geometry, so gathering
@@ -74,6 +76,7 @@ pub struct Texels {
 }
 
 impl Texels {
+    /// Texels held.
     pub fn len(&self) -> usize {
         self.position.len()
     }
@@ -86,6 +89,7 @@ impl Texels {
         }
         valid
     }
+    /// No texels.
     pub fn is_empty(&self) -> bool {
         self.position.is_empty()
     }

@@ -44,8 +44,11 @@ pub use storage::{CountRow, CountRows, Row, Rows, WeightRows};
 /// What every transport method reads: the scene, its texels and the tracer over the scene.
 #[derive(Clone, Copy)]
 pub struct Surfaces<'a> {
+    /// The scene.
     pub scene: &'a Scene,
+    /// Its texels.
     pub texels: &'a Texels,
+    /// The BVH over the scene.
     pub tracer: &'a Tracer,
 }
 
@@ -148,9 +151,11 @@ impl Transport {
         }
     }
 
+    /// Texels (receivers).
     pub fn len(&self) -> usize {
         self.direct.len()
     }
+    /// No texels.
     pub fn is_empty(&self) -> bool {
         self.direct.is_empty()
     }

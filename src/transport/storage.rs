@@ -536,6 +536,7 @@ impl Rows {
             Rows::Counts(c) => c.len(),
         }
     }
+    /// No rows.
     pub fn is_empty(&self) -> bool {
         self.len() == 0
     }
@@ -593,7 +594,9 @@ impl Rows {
 /// One row's entries, whichever the storage.
 #[derive(Clone, Debug)]
 pub enum Row<'a> {
+    /// A row of f32 weights: (source texel, form factor).
     Weights(Zip<Copied<Iter<'a, u32>>, Copied<Iter<'a, f32>>>),
+    /// A row of ray counts.
     Counts(CountRow<'a>),
 }
 

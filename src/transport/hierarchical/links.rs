@@ -44,8 +44,11 @@ const PURPOSE: u64 = 0x4852_4c4b;
 /// Links in compressed rows by receiver node: row `p` is `source[start[p]..start[p+1]]`.
 #[derive(Default)]
 pub struct Links {
+    /// Where each receiver node's row starts in `source` and `f` (one more than the nodes).
     pub start: Vec<u32>,
+    /// Source node of each link.
     pub source: Vec<u32>,
+    /// Form factor of each link (visibility included).
     pub f: Vec<f32>,
     /// Visible fraction of each link's unoccluded form factor (what its shadow rays saw).
     pub(crate) visible: Vec<f32>,
@@ -54,9 +57,12 @@ pub struct Links {
 }
 
 impl Links {
+    /// Links held.
     pub fn len(&self) -> usize {
         self.source.len()
     }
+    /// No links.
+    #[cfg(feature = "testing")] // public only with `testing`, where clippy asks for it beside `len`
     pub fn is_empty(&self) -> bool {
         self.source.is_empty()
     }
@@ -64,14 +70,19 @@ impl Links {
 
 /// What refinement reads.
 pub struct Refiner<'a> {
+    /// The texels the tree is built on.
     pub texels: &'a Texels,
+    /// The BVH the shadow rays are cast against.
     pub tracer: &'a Tracer,
+    /// The hierarchy over the texels.
     pub tree: &'a Tree,
+    /// Every texel's footprint polygon.
     pub footprints: &'a [Footprint],
     /// Radiosity of each node used by the oracle (W/m², largest channel).
     pub b: &'a [f32],
     /// Oracle threshold ε (W).
     pub epsilon: f32,
+    /// Seed of the random streams.
     pub seed: u64,
 }
 

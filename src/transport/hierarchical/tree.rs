@@ -46,13 +46,17 @@ pub struct Tree {
 }
 
 impl Tree {
+    /// Nodes, texels included.
     pub fn len(&self) -> usize {
         self.area.len()
     }
+    /// No nodes.
+    #[cfg(feature = "testing")] // public only with `testing`, where clippy asks for it beside `len`
     pub fn is_empty(&self) -> bool {
         self.area.is_empty()
     }
 
+    /// Node `k` has no children (a texel).
     pub fn is_leaf(&self, k: u32) -> bool {
         self.child_start[k as usize] == self.child_start[k as usize + 1]
     }
@@ -98,6 +102,7 @@ impl Tree {
         Some((area as f32, centroid.as_vec3(), normal.as_vec3()))
     }
 
+    /// The hierarchy over `texels`: a quadtree per page over the texels in Morton order.
     pub fn build(texels: &Texels) -> Tree {
         let n = texels.len();
         let mut t = Tree::default();
