@@ -10,7 +10,7 @@
 //!
 //! | function           | formula                         | used for                                          |
 //! |--------------------|---------------------------------|---------------------------------------------------|
-//! | [`rmse_over_mean`] | `√(mean((x−r)²)) / mean(r)`     | *the* relative RMSE: README, benchmark, `--target-error`, the planner's pilot noise ([`relative_noise`]) |
+//! | [`rmse_over_mean`] | `√(mean((x−r)²)) / mean(r)`     | *the* relative RMSE: README, benchmark, `--target-error`, the planner's pilot noise (`relative_noise`) |
 //! | [`rmse_over_rms`]  | `√(Σ‖x−r‖² / Σ‖r‖²)`            | the reference's stopping rule and the tests written against it (images, bake vs reference) |
 //!
 //! They differ by the factor `rms(r)/mean(r)` ≥ 1 (`rmse_over_rms` is the smaller): a bright

@@ -13,12 +13,12 @@
 //!   3.0–9.7% off on the Cornell box and the two-room scene (where Monte Carlo reaches
 //!   1.5–3.6%), hierarchical is 2.7–7.9% off at 4–5× the time.
 //! - **Rays per texel** from a measured noise level: a *pilot* bakes the texels twice with
-//!   [`PILOT_RAYS`] gathering rays and independent seeds; the RMS difference of the two
+//!   `PILOT_RAYS` gathering rays and independent seeds; the RMS difference of the two
 //!   lightmaps over √2 is the noise of one such bake. Assuming 1/√K, the rays that reach the
 //!   target are `K = K₀ · (noise₀ / (0.75·E))²` (a quarter of the error budget left for what
 //!   the pilot cannot see: texel placement, leaks, solver tolerance), rounded up to four steps
-//!   per octave. When that asks for more than [`SECOND_PILOT_ABOVE`], a second pair at 4·K₀
-//!   measures how fast the noise really falls (exponent clamped to ½ … [`MAX_EXPONENT`]):
+//!   per octave. When that asks for more than `SECOND_PILOT_ABOVE`, a second pair at 4·K₀
+//!   measures how fast the noise really falls (exponent clamped to ½ … `MAX_EXPONENT`):
 //!   stratified samples fall faster than 1/√K at first (the 116k-triangle hall: 66% at K=16,
 //!   15% at K=64), and 1/√K from K=16 asked that hall for 4096 rays for a 4% target; the
 //!   fit asks for 640, which gave 4.4% (bench.md).
@@ -29,24 +29,24 @@
 //!   of independent estimates whose variance falls as 1/K.
 //! - **Fewer rays where the lightmap matters less**: from the pilot's irradiance, an emitter
 //!   texel whose rendered radiance is mostly its own `Le` gets `K·w²` rays (`w` the lightmap's
-//!   share of what is seen), black and unlit texels the minimum ([`MIN_TEXEL_RAYS`]); on the
+//!   share of what is seen), black and unlit texels the minimum (`MIN_TEXEL_RAYS`); on the
 //!   fixtures this saves 1.8–3.0% of the rays (emitters are small) and never touches lit texels.
 //! - **Tolerance** E/10: the solver stops once its remaining error is well below the Monte
 //!   Carlo error, not later.
 //! - **Texel density where the error is** ([`density`]): a pilot pair on a uniform atlas of its
-//!   own (quickly charted, at most [`density::PILOT_TEXELS`] texels) and its lookup-error sample
-//!   at random surface points ([`GatheredSample`]) give each region of the surfaces (a
+//!   own (quickly charted, at most `density::PILOT_TEXELS` texels) and its lookup-error sample
+//!   at random surface points (`GatheredSample`) give each region of the surfaces (a
 //!   connected surface between creases: a wall, a cabinet door, a cup) a density factor, ∝ the
 //!   fourth root of its measured mean square error, within ×¼…×4; regions nobody sees (buried,
 //!   facing into geometry) or no light reaches get ×⅛. Seen regions keep at least the preset's
 //!   density; the total rises (up to ×4 and the preset's budget) when the sample is sure the
 //!   error is above what the target leaves beside the noise. The atlas, texels and validity
-//!   are then laid out once, and the pilot's noise at [`PILOT_RAYS`] is the transport plan's
+//!   are then laid out once, and the pilot's noise at `PILOT_RAYS` is the transport plan's
 //!   first measurement (its pair is not cast again on the new atlas).
-//! - **Resolution error** is predicted ([`predict_resolution`]): what a renderer shows
+//! - **Resolution error** is predicted (`predict_resolution`): what a renderer shows
 //!   between texel centres, where it blends four texels bilinearly, differs from the light at
 //!   that point where the light changes within a texel.
-//!   It is *measured* at random surface points ([`GatheredSample`]): the last pilot pair's texel
+//!   It is *measured* at random surface points (`GatheredSample`): the last pilot pair's texel
 //!   values read back by bilinear lookup against the light there — punctual lights exactly (one
 //!   shadow ray each, about the shading normal), emitters, sky and interreflection gathered at
 //!   the point as transport gathers at a texel (32 rays and 8 emitter light samples through
@@ -55,9 +55,9 @@
 //!   square is known to ±40% (two standard errors), is clearly small, or the sample has cast
 //!   half the pilot's rays (it always casts one batch: 0.1–0.3 s, as much as a sub-second bake;
 //!   2.0 s of 22 s on the furnished interior at draft, 2.9 s of 65 s at medium). The pilot's
-//!   second differences ([`resolution_error`]) it replaced are a lower bound (emitter shadows and
+//!   second differences (`resolution_error`) it replaced are a lower bound (emitter shadows and
 //!   contacts narrower than a texel are not in them) and stay in `--explain` beside it; the
-//!   punctual sample ([`PunctualSample`], about the face normal) still steers the adaptive
+//!   punctual sample (`PunctualSample`, about the face normal) still steers the adaptive
 //!   density. Predicted (noise before denoising and resolution error in quadrature) against
 //!   measured point error (reference noise out), draft / medium: furnished interior 8.9% / 4.9%
 //!   for 8.1% / 5.6% (the second differences predicted 6.5% / 3.5%), Cornell box 6.6% / 3.0% for
@@ -66,7 +66,7 @@
 //!   prediction is above the target, which part dominates, and about how much more texels (a
 //!   range: the error falls as `h²` where light curves smoothly, as `√h` at edges) or rays
 //!   would take.
-//! - **Error map** ([`error_map`], `--error-map`): the same two parts texel by texel, written
+//! - **Error map** (`error_map`, `--error-map`): the same two parts texel by texel, written
 //!   beside each page so an artist sees where a bake is weak and whether texels or rays would help.
 //!
 //! The pilot costs nothing extra when its bakes suffice and a few solves otherwise (Cornell
@@ -122,27 +122,27 @@ impl std::fmt::Debug for TexelRays {
 pub struct Plan {
     /// The relative RMSE aimed at.
     pub target_error: f32,
-    /// The pilot's measured relative noise at [`PILOT_RAYS`], if a pilot ran.
+    /// The pilot's measured relative noise at `PILOT_RAYS`, if a pilot ran.
     pub pilot_noise: Option<f32>,
     /// Expected noise of the chosen bake (before denoising).
     pub predicted_noise: Option<f32>,
-    /// Expected resolution error of the chosen density ([`resolution_error`]), measured on
+    /// Expected resolution error of the chosen density (`resolution_error`), measured on
     /// the pilot's irradiance.
     pub predicted_resolution: Option<f32>,
-    /// What the resolution error is made of ([`predict_resolution`]).
+    /// What the resolution error is made of (`predict_resolution`).
     pub resolution_parts: Option<ResolutionParts>,
     /// Gathering rays per texel in all, the reused pilot bakes included.
     pub total_rays: Option<u32>,
     /// Wall seconds of the pilot bakes.
     pub pilot_seconds: f64,
-    /// Seconds of the gathered point sample ([`GatheredSample`]) behind the resolution error.
+    /// Seconds of the gathered point sample (`GatheredSample`) behind the resolution error.
     pub resolution_seconds: f64,
     /// Gathering rays the pilot bakes cast.
     pub pilot_rays: u64,
     /// The texel budget of the preset's density ([`choose_density`]), when the plan chose it:
     /// the most texels the density regions ([`density`]) may ask for.
     pub texel_budget: Option<(f64, f64)>,
-    /// Gathering rays per texel of the pilot pair the resolution sample read ([`PILOT_RAYS`],
+    /// Gathering rays per texel of the pilot pair the resolution sample read (`PILOT_RAYS`,
     /// or 4× when a second pilot ran).
     pub resolution_pilot_rays: u32,
     /// Rays of pilot bakes not reused in the result (the density pilot's, and the first pair
@@ -152,7 +152,7 @@ pub struct Plan {
     /// atlas, pair and sample), pilot pairs not reused, the lookup-error samples. Pilot pairs
     /// the final bake averages in are the bake's own work, not counted here.
     pub overhead_seconds: f64,
-    /// Whether the noise at [`PILOT_RAYS`] behind the rays is the density pilot's.
+    /// Whether the noise at `PILOT_RAYS` behind the rays is the density pilot's.
     pub noise_from_density_pilot: bool,
     /// Gathering rays per texel of the last bake where fewer than its `gather_rays` suffice
     /// (emitters, black and unlit texels, measured by the pilot); `None`: `gather_rays`
@@ -168,7 +168,7 @@ pub struct Plan {
 #[derive(Clone, Copy, Debug, Default)]
 pub struct ResolutionParts {
     /// Relative RMS lookup error of all the light at random surface points against a gather
-    /// there ([`GatheredSample`]), with its spread from the sample's own noise (the relative
+    /// there (`GatheredSample`), with its spread from the sample's own noise (the relative
     /// errors at the mean square ∓ two standard errors); the prediction when measured.
     pub gathered: Option<(f32, f32, f32)>,
     /// Its parts: the light other than punctual direct light (emitters, sky,
@@ -177,10 +177,10 @@ pub struct ResolutionParts {
     /// The part from punctual direct light (see `rest`).
     pub point_punctual: Option<f32>,
     /// Relative RMS lookup error of the light other than punctual direct light, from the
-    /// pilot's second differences ([`resolution_error`]'s model; a lower bound).
+    /// pilot's second differences (`resolution_error`'s model; a lower bound).
     pub curved: f32,
     /// Relative RMS lookup error of punctual direct light, sampled at random surface points
-    /// ([`PunctualSample`]): hard shadow and cone edges, sub-texel features, gutters.
+    /// (`PunctualSample`): hard shadow and cone edges, sub-texel features, gutters.
     pub sampled: f32,
     /// Share of those lookups that read a gutter or buried neighbour.
     pub border_share: f32,
@@ -860,7 +860,7 @@ pub(crate) const LARGE_BAKE_BYTES: f64 = 512.0 * 1024.0 * 1024.0;
 /// (fastest sweeps) when their estimated peak `f32_rows` fits `limit`, else exact ray counts
 /// (`count_rows`: the same output, slower sweeps) when theirs does; left as is when
 /// neither fits ([`fit_memory`] may then switch to the gather solver). A large bake of
-/// `texels` texels whose f32 rows would pass [`MAX_BYTES_PER_TEXEL`] takes counts too: the
+/// `texels` texels whose f32 rows would pass `MAX_BYTES_PER_TEXEL` takes counts too: the
 /// same bytes out, 4–6× less row memory, and whole bakes measured within ±4% of f32's time
 /// (the sweeps are a small part next to casting the rays). Sets `config.transport.count_rows`;
 /// returns the reason, with both estimates.

@@ -17,7 +17,7 @@
 //! importance sampling (power heuristic, one sample of each; emitters that `Emitters` leaves out
 //! as large are found by the cosine rays alone), so emission counts exactly once. Rays that
 //! leave the scene see the sky; rays that hit the back of a single-sided surface are absorbed.
-//! After [`ROULETTE_DEPTH`] bounces a path survives each bounce with probability `q = max_c ρ_c`
+//! After `ROULETTE_DEPTH` bounces a path survives each bounce with probability `q = max_c ρ_c`
 //! and carries `β/q` (Russian roulette: unbiased; ends paths in a ρ → 1 furnace). Survival by
 //! albedo rather than by throughput `max(β)` keeps the weights of survivors bounded: with
 //! `q = max(β)` the ρ = 0.5 furnace had 5% noise at 64 paths, since the whole tail after the
@@ -32,7 +32,7 @@
 //! |---------------------|----------|---------------------------------------------------------------|
 //! | `samples_per_pass`  | 16       | paths per texel between stopping checks                       |
 //! | `max_samples`       | 1024     | paths per texel at most; standard error ∝ 1/√samples          |
-//! | `target_rel_error`  | none     | stop when the relative RMS standard error ≤ this ([`rms_rel_error`]) |
+//! | `target_rel_error`  | none     | stop when the relative RMS standard error ≤ this (`rms_rel_error`) |
 //! | `time_limit`        | none     | stop after the pass that crosses it                           |
 //! | `seed`              | 0        | output depends on it, never on the thread count               |
 //! | `max_depth`         | 1024     | bounces per path at most (0.99^1024 ≈ 3e-5: no visible bias)   |
@@ -197,7 +197,7 @@ pub struct Reference {
     pub rays: u64,
     /// Wall seconds.
     pub seconds: f64,
-    /// Relative RMS standard error over items, `√(Σσ²/Σμ²)` (see [`rms_rel_error`]).
+    /// Relative RMS standard error over items, `√(Σσ²/Σμ²)` (see `rms_rel_error`).
     pub rms_rel_error: f32,
     /// Why tracing stopped.
     pub stop: Stop,

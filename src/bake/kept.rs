@@ -28,7 +28,7 @@
 //!    fill and the pages read them.
 //! 3. rows: `n` escape fractions (f32), `n` row lengths (u32), then every row's entries in
 //!    texel order as (u32 source texel, f32 form factor). Written through
-//!    [`Transport::row`] and read back through [`Transport::from_rows`], so the file does not
+//!    [`Transport::row`] and read back through `Transport::from_rows`, so the file does not
 //!    depend on how rows are held in memory. Form factors are stored as f32, the precision the
 //!    solver uses: a Monte Carlo entry is a hit count over the texel's ray count, which f32
 //!    holds exactly enough for the count to be recovered (`round(f · K)`, K ≤ 2²⁰).

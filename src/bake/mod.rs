@@ -151,9 +151,9 @@ pub struct Baked {
     /// The lightmap pages as written: dilated into the gutters, seams stitched.
     pub pages: LightmapPages,
     /// Per page, each texel's estimated relative error: resolution, noise and total in R, G, B
-    /// (`config.output.error_map`; [`plan::error_map`]).
+    /// (`config.output.error_map`; `plan::error_map`).
     pub error_map: Option<LightmapPages>,
-    /// The directional pages ([`lightmap::directional::NAMES`]), dilated and stitched like
+    /// The directional pages (`lightmap::directional::NAMES`), dilated and stitched like
     /// `pages`, their agreement with the lightmap and the gather's rays
     /// (`config.output.directional`).
     pub directional: Option<([LightmapPages; 4], lightmap::directional::Agreement, u64)>,

@@ -22,14 +22,14 @@
 //!   (relative L1; lights scaled and tinted one by one, a wall colour, shadow cuts off), 2e-8
 //!   (both lights halved and a floor colour, shadow cuts on) and 6e-8 (the Cornell light ×3) —
 //!   float rounding: the same system, solved with the same sweeps.
-//! - **Layers** ([`plan_layers`], [`solve_layers`]): one lightmap per light, one for the
+//! - **Layers** (`plan_layers`, `solve_layers`): one lightmap per light, one for the
 //!   emissive materials and one for the sky, or named groups of them. Each layer's direct
 //!   light is solved with the full solve's solver and, for Jacobi and Gauss–Seidel, exactly its
 //!   number of sweeps: each sweep is linear, so the layers sum to the full solution within
 //!   float rounding (Southwell's shooting order depends on the values: its layers stop at the
 //!   tolerance each and sum to it within the tolerance). Denoising is not linear (its range
 //!   kernel reads the values), so each layer is filtered with the weights of the full lightmap
-//!   ([`denoise_guided`](crate::lightmap::denoise::denoise_guided)): the same linear filter for every layer, and the filtered layers sum
+//!   (`lightmap::denoise::denoise_guided`): the same linear filter for every layer, and the filtered layers sum
 //!   to the filtered lightmap (up to the clamp of a plane fit below zero). The invalid-texel
 //!   fill and dilation are linear; seam stitching is a least-squares solve stopped at a
 //!   tolerance, so after it the pages sum within that tolerance.

@@ -1,6 +1,6 @@
 //! Building many scenes at once, as a game-asset build step does: a [`Manifest`] lists the
 //! scenes and their options, [`build`] bakes each one not already baked (the content-addressed
-//! [`cache`]), and a [`BuildReport`] says what happened in a form tools read (JSON, with a
+//! `cache`), and a [`BuildReport`] says what happened in a form tools read (JSON, with a
 //! schema in `src/build/report.schema.json`).
 //!
 //! Scenes the cache does not vouch for are baked side by side as memory allows: up to

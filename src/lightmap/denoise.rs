@@ -19,7 +19,7 @@
 //! that rejects texels of other charts packed next to `i`'s, texels across creases, and texels
 //! whose sample points validity moved. Charts are therefore never mixed.
 //!
-//! Noise model ([`expected_noise`]): indirect light comes from `K` gathering rays (relative noise
+//! Noise model (`expected_noise`): indirect light comes from `K` gathering rays (relative noise
 //! ≈ 1/√K); direct light from emitters from `L` stratified light samples, whose error falls
 //! about as 1/L; punctual direct light is exact but cannot be told apart from it, so
 //! `σ_i² = indirect_i²/K + (direct_i/L)²`, with the direct term dropped in scenes without
@@ -155,7 +155,7 @@ pub(crate) fn bake_noise(
         .collect()
 }
 
-/// Filters `values` (indexed like `texels`) in place; `noise[i]` is [`expected_noise`] of texel
+/// Filters `values` (indexed like `texels`) in place; `noise[i]` is `expected_noise` of texel
 /// `i`. Invalid texels (`texels.invalid`) are neither read nor changed: fill them afterwards.
 /// Stops with [`Error::Aborted`] (values unchanged) soon after `progress` is aborted.
 pub fn denoise(

@@ -29,7 +29,7 @@
 //!   E(n)/π ≈ max(0, L0 + L1x·n.x + L1y·n.y + L1z·n.z)        per colour channel
 //! ```
 //!
-//! At the surface's own normal this is the lightmap's `H/π` (the bake checks it: [`agreement`]).
+//! At the surface's own normal this is the lightmap's `H/π` (the bake checks it: `agreement`).
 //! We chose the linear reconstruction over Geomerics' non-linear one because it is exact for the
 //! band-0/1 part of any radiance, is what both Godot and Bakery (with its non-linear option off)
 //! evaluate, is linear (filtering, mipmapping and layer sums commute with it) and its error is a
@@ -53,7 +53,7 @@
 //! projection's integrand has no cosine, and cosine-distributed rays would give L0 and the
 //! tangential L1 an infinite variance at the horizon) from jittered footprint points. A ray
 //! that reaches texel `j` sees `ρ_j H_j/π + Le_j` (the solved irradiance, through
-//! [`Texels::ray_end`]); one that escapes sees the sky. Small emitters are also light-sampled,
+//! `Texels::ray_end`); one that escapes sees the sky. Small emitters are also light-sampled,
 //! one sample per ray, combined with the hemisphere rays by the power heuristic; punctual
 //! lights add their unoccluded radiant flux density along their direction (2 × 2 footprint
 //! points, as transport does). With `indirect_only` light that reaches the texel without a
@@ -290,7 +290,7 @@ pub(crate) fn agreement(texels: &Texels, gathered: &Gathered, lightmap: &[Vec3])
     }
 }
 
-/// [`agreement`]'s figures, relative to the lightmap's mean.
+/// `agreement`'s figures, relative to the lightmap's mean.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Agreement {
     /// The gathered irradiance (no truncation) against the lightmap: the gather's noise and

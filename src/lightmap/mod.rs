@@ -40,7 +40,7 @@ impl Page {
         a.lerp(b, fx).lerp(c.lerp(d, fx), fy)
     }
 
-    /// The four texels [`Page::bilinear`] blends at `uv` — top-left, top-right, bottom-left,
+    /// The four texels `Page::bilinear` blends at `uv` — top-left, top-right, bottom-left,
     /// bottom-right, as indices into `rgb` (repeated at a clamped edge) — with their weights.
     pub fn footprint(&self, uv: Vec2) -> [(usize, f32); 4] {
         let (w, h) = (self.width as i64, self.height as i64);

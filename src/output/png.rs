@@ -3,12 +3,12 @@
 //!
 //! | picture | tone mapping | writer |
 //! |---|---|---|
-//! | lightmap page preview | `2^exposure`, clip to [0, 1], sRGB | [`write_png_preview`] |
-//! | rendered image | `2^exposure`, [`tone_map`] (identity, then a soft shoulder), sRGB | [`write_png_image`] |
-//! | RGBM page | none: linear RGBM (see [`super::rgbm`]) | [`write_rgbm_png`] |
+//! | lightmap page preview | `2^exposure`, clip to [0, 1], sRGB | `write_png_preview` |
+//! | rendered image | `2^exposure`, [`tone_map`] (identity, then a soft shoulder), sRGB | `write_png_image` |
+//! | RGBM page | none: linear RGBM (see [`super::rgbm`]) | `write_rgbm_png` |
 //!
 //! Previews clip rather than compress highlights so that a lightmap value of 0.5 looks like
-//! 0.5; rendered images roll off above [`SHOULDER`] so highlights keep some detail.
+//! 0.5; rendered images roll off above `SHOULDER` so highlights keep some detail.
 
 use glam::Vec3;
 use image::{ExtendedColorType, ImageEncoder};
@@ -70,7 +70,7 @@ pub(crate) fn write_rgbm_png(page: &Page, range: f32) -> Result<Vec<u8>> {
 /// Where the tone curve of rendered images leaves the identity.
 pub(crate) const SHOULDER: f32 = 0.8;
 
-/// Identity up to [`SHOULDER`], then `k + (1−k)(1 − e^{−(x−k)/(1−k)})` → 1 (C¹ at `k`):
+/// Identity up to `SHOULDER`, then `k + (1−k)(1 − e^{−(x−k)/(1−k)})` → 1 (C¹ at `k`):
 /// mid-tones stay true and highlights keep some detail instead of clipping. NaN → 0.
 pub fn tone_map(x: f32) -> f32 {
     if x.is_nan() || x <= 0.0 {

@@ -28,7 +28,7 @@
 //! | `range`   | [`DEFAULT_RANGE`] = 8 | largest value stored; the dark-end step is `range/255²` |
 //!
 //! The bake writes `<stem>_lightmap<k>_rgbm.png` per page with `--rgbm` (range 8), through
-//! [`super::png::write_rgbm_png`]. Invalid
+//! `super::png::write_rgbm_png`. Invalid
 //! (never solved nor dilated) and non-finite texels are stored as black.
 
 use glam::Vec3;

@@ -2,12 +2,12 @@
 //! the density pilot's lookup error sits.
 //!
 //! **Regions.** A region is a connected surface of one instance, bounded by open edges, creases
-//! of 60° or more and the sides of a junction split ([`Regions::of`]): a wall, a cabinet's
+//! of 60° or more and the sides of a junction split (`Regions::of`): a wall, a cabinet's
 //! door, the top of a shelf, a cup. xatlas never grows a chart over those borders, so giving
 //! each region its own density adds no chart border; the atlas sends regions of different
 //! densities to xatlas as different meshes (`AtlasParams::triangle_density`).
 //!
-//! **What each region asks for.** The density pilot's [`GatheredSample`] holds, per random
+//! **What each region asks for.** The density pilot's `GatheredSample` holds, per random
 //! visible surface point, an unbiased estimate of the squared lookup error a renderer shows
 //! there (all the light). Each point counts for its region. A region's mean square `m_r` is
 //! its points' mean shrunk towards its instance's, and the instance's towards the scene's
@@ -16,17 +16,17 @@
 //! points (a cup's face has one or none in 4096) and borrow from their object. Only a region's
 //! seen part shows its error while all of it costs texels, so `m_r` is weighed by the share of
 //! the points drawn there that were seen (a shelf's underside behind a cabinet, a lamp's inside). The error is taken to fall as the texel size (the mean square as `s^−Q`,
-//! [`ERROR_EXPONENT`]: between the `√h` of edges narrower than a texel and the `h²` of smoothly
+//! `ERROR_EXPONENT`: between the `√h` of edges narrower than a texel and the `h²` of smoothly
 //! curving light; the furnished interior measured `h^1.0–1.4`). Minimising the area-weighted
 //! mean square `Σ A_r·m_r·s_r^−Q` for a texel count `Σ A_r·s_r²` gives
 //! `s_r ∝ m_r^{1/(Q+2)}` — the fourth root: a region with 16× the scene's mean square gets
-//! twice the density. Factors stay within [`DENSITY_RANGE`], on quarter-octave steps (few
+//! twice the density. Factors stay within `DENSITY_RANGE`, on quarter-octave steps (few
 //! distinct densities: few xatlas meshes, a stable choice), with a floor of
-//! [`MIN_REGION_TEXELS`] texels for every seen, lit region.
+//! `MIN_REGION_TEXELS` texels for every seen, lit region.
 //!
 //! **The pilot's atlas** is its own: uniform, charted quickly (`crate::atlas::build_quick`), at
-//! the preset's density or, when that would pass [`PILOT_TEXELS`] texels, coarser; mean
-//! squares measured there are carried to the preset's density by [`PILOT_EXPONENT`] (a pilot
+//! the preset's density or, when that would pass `PILOT_TEXELS` texels, coarser; mean
+//! squares measured there are carried to the preset's density by `PILOT_EXPONENT` (a pilot
 //! at half the density on every preset was tried: it carried too little error at `medium`,
 //! 110k texels and 4.19% against a 4% target, and too much at `high`, 1.25 M texels).
 //!
@@ -42,7 +42,7 @@
 //! predicts an error above what the target leaves beside the noise (`room`), the factors are
 //! scaled up together until the prediction meets it (waiting until even the lower end of its
 //! range was above left `medium` under-raised on some seeds, 4.5% off its 4% target),
-//! at most ×[`MAX_TEXEL_RAISE`] the uniform atlas's texels and the preset's texel budget; in
+//! at most ×`MAX_TEXEL_RAISE` the uniform atlas's texels and the preset's texel budget; in
 //! that raise a region whose central estimate is low but uncertain rises as far as the upper
 //! end of its estimate (`m_r` + two posterior standard deviations, capped at the scene's)
 //! allows, so a noisy zero does not keep a wall at the preset's density while the rest rise.

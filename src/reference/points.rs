@@ -9,11 +9,11 @@
 //! (double-sided surfaces count twice: the loader made a flipped back instance for them, so
 //! each side is drawn on its own), candidate `k` from its own random stream `(seed, k)`. A
 //! candidate is **hidden** and left out (and counted) when its face looks into geometry: more
-//! than [`MAX_BACK`] of [`PROBE_RAYS`] cosine-distributed probe rays from it hit back faces
-//! ([`validity::back_hits`], the texel validity pass's test, with unlimited reach) — a floor
+//! than `MAX_BACK` of `PROBE_RAYS` cosine-distributed probe rays from it hit back faces
+//! (`validity::back_hits`, the texel validity pass's test, with unlimited reach) — a floor
 //! inside a table leg, the bottom of a box resting on the floor, the inside of a closed solid.
 //! Single-sided faces are seen from the front only. Candidates are drawn until `n` are visible.
-//! With a [`Strip`] ([`draw_in`]) only the candidates in it count: the junction strip along a
+//! With a [`Strip`] (`draw_in`) only the candidates in it count: the junction strip along a
 //! wall, measured with all of the reference's points instead of the few a draw over the whole
 //! scene puts there.
 //!
@@ -43,7 +43,7 @@
 //! baked surface under it (a short ray along `−n` from just above it; a face seen from behind
 //! — the flipped copy a bake writes for a double-sided primitive, lying in the same plane — is
 //! resolved by a scan for the front-facing triangle under the point), interpolates its
-//! `TEXCOORD_1` and samples the page bilinearly ([`Page::bilinear`]: glTF's image convention,
+//! `TEXCOORD_1` and samples the page bilinearly (`Page::bilinear`: glTF's image convention,
 //! texel centres, clamp-to-edge). Nothing of the bake's internal data is used, so the figure is
 //! what a game engine would show.
 //!
@@ -371,7 +371,7 @@ pub fn compute(
     compute_in(input, config, params, n, None, progress)
 }
 
-/// [`compute`] with the points drawn in `strip` only ([`draw_in`]).
+/// [`compute`] with the points drawn in `strip` only (`draw_in`).
 pub fn compute_in(
     input: &Path,
     config: &BakeConfig,

@@ -34,7 +34,7 @@
 //! `extras.lightmap = {"exr", "page"}` (a shared mesh's node carries it with its page rect,
 //! `scale_offset`, which the loader applies to `TEXCOORD_1`); the EXR pages hold `H/π`. The scene loader resolves
 //! everything the renderer reads — each instance's EXR page, each material's specular
-//! parameters ([`scene::Surface`]), the cameras — so this module never looks at glTF JSON. Scenes without any lightmap are
+//! parameters (`scene::Surface`), the cameras — so this module never looks at glTF JSON. Scenes without any lightmap are
 //! refused. As glTF asks, back faces of single-sided materials are culled (rays pass through
 //! them); the bake writes a double-sided surface as two single-sided primitives back to back. Limits: no alpha, no texture transforms, punctual lights are invisible (their light
 //! is in the lightmap), and the baker treated glass and mirrors as Lambertian (ρ = baseColor),

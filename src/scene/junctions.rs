@@ -11,16 +11,16 @@
 //! neighbours in the mesh turn by 30° or more, so curved surfaces are left alone):
 //! 1. **Find the junctions**: every other triangle (any instance; a uniform grid finds the
 //!    candidates) that crosses the patch's plane or has an edge lying in it (a wall standing on
-//!    the floor; corners within [`TOUCH_TEXELS`] of the plane count as on it) gives a segment,
+//!    the floor; corners within `TOUCH_TEXELS` of the plane count as on it) gives a segment,
 //!    clipped to the patch's triangles. Coplanar triangles and single touching points give none.
-//! 2. **Make the cuts separate**: segment ends within [`SNAP_TEXELS`] merge, move onto the patch
+//! 2. **Make the cuts separate**: segment ends within `SNAP_TEXELS` merge, move onto the patch
 //!    border's vertices and edges, and split segments they touch; inside the patch a cut point
-//!    within [`TOUCH_TEXELS`] of a mesh vertex or edge moves onto it (walls meeting on a floor's
+//!    within `TOUCH_TEXELS` of a mesh vertex or edge moves onto it (walls meeting on a floor's
 //!    diagonal: left a millionth of a texel beside it, it made needles). A segment end left free
 //!    inside the patch (the jamb of a doorway: the floor runs on under the opening) is extended
 //!    straight on to the next segment or the patch's border; that extension is a cut too, but an
 //!    ordinary seam (stitched later), while junction edges are never stitched
-//!    ([`Split::junction_edges`]).
+//!    (`Split::junction_edges`).
 //!    In a patch with shadow outlines extensions are never stitched either (see below).
 //! 3. **Retriangulate**: each triangle a cut touches is triangulated again with spade's
 //!    constrained Delaunay triangulation (robust predicates; crossing cuts split each other).
@@ -34,8 +34,8 @@
 //! 4. **Sides**: the instance's triangles are grouped into sides, connected across edges that are
 //!    not cuts; the atlas never puts two sides into one chart.
 //!
-//! [`split_with`] cuts along the hard shadow outlines of punctual lights too
-//! ([`super::shadow_cuts`]): they join step 2 as segments that are never stitched, and a patch
+//! `split_with` cuts along the hard shadow outlines of punctual lights too
+//! (`super::shadow_cuts`): they join step 2 as segments that are never stitched, and a patch
 //! with such cuts is bounded by its border in step 4 as well. The extensions of such a patch
 //! are never stitched either: a curved outline's free end is extended along its tangent, which
 //! hugs the shadow's edge, and stitching there blurred the sphere's shadow (`sphere_on_floor`

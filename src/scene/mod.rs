@@ -4,7 +4,7 @@
 //! The loader ([`load`]) resolves every input quirk (node transforms, instancing, strips and fans,
 //! missing normals, emissive strength, sRGB textures, double-sided materials) so later stages never
 //! look at glTF. It resolves what the renderer needs too — each material's specular parameters
-//! ([`Surface`]), each instance's lightmap page (`extras.lightmap` of a baked file; on the node
+//! (`Surface`), each instance's lightmap page (`extras.lightmap` of a baked file; on the node
 //! for a mesh baked with `--instancing share`, whose `scale_offset` rect is applied to the
 //! instance's `TEXCOORD_1`) and the document's cameras — so `render` never reads glTF either. It also keeps the untouched input
 //! document ([`Source`]) for the output writer.
@@ -351,7 +351,7 @@ impl Scene {
     /// frame is the triangle's own, from its `TEXCOORD_0` derivatives (`∂p/∂u`, `∂p/∂v`,
     /// Gram–Schmidt against the normal, handedness from the UV winding): MikkTSpace's result on
     /// planar, uniformly mapped triangles (the TANGENT attribute is not read). Turned to the
-    /// side of the face like [`SurfacePoint::n`].
+    /// side of the face like `SurfacePoint::n`.
     pub fn shading_normal(&self, t: u32, sp: &SurfacePoint) -> Vec3 {
         let m = &self.materials[sp.material as usize];
         let Some(texture) = m.normal_texture else {

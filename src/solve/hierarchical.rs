@@ -87,7 +87,7 @@ pub(crate) fn solve(
     solve_with_stats(surfaces, params, solve, progress).map(|(t, s, _)| (t, s))
 }
 
-/// [`solve`], also returning node and link counts (for benchmarks and tests).
+/// `solve`, also returning node and link counts (for benchmarks and tests).
 pub fn solve_with_stats(
     surfaces: Surfaces,
     params: &TransportParams,

@@ -11,7 +11,7 @@
 
 //!
 //! The stored-row solvers ([`solve`]: Jacobi, Gauss–Seidel, Southwell) take a built
-//! [`Transport`]; [`gather`] (matrix-free Monte Carlo) and [`hierarchical`] make the light
+//! [`Transport`]; `gather` (matrix-free Monte Carlo) and [`hierarchical`] make the light
 //! transport they iterate as they go. All of them stop by one shared rule (`Stopping`, below).
 
 pub(crate) mod gather;

@@ -59,7 +59,7 @@ pub struct Texels {
     /// Fraction of the footprint that sample points jitter over: 1, or the candidate cell
     /// (1/G of a side) around a sample point that validity moved out of geometry, so gathering
     /// rays do not start back inside it, narrowed further to stay clear of a wall that divides
-    /// the texel ([`Cuts`]). Empty means 1 everywhere.
+    /// the texel (`Cuts`). Empty means 1 everywhere.
     pub jitter: Vec<f32>,
     /// Per page, row-major `width × height`: texel id or [`NO_TEXEL`].
     pub(crate) index: Vec<Vec<u32>>,
@@ -95,8 +95,8 @@ impl Texels {
     }
 
     /// The texel a surface hit on triangle `t` at barycentrics (`u`, `v`) lands in
-    /// (`p = (1−u−v)·p0 + u·p1 + v·p2`), or [`NO_TEXEL`] for triangles with no texels. A hit
-    /// on the far side of a wall that divides its texel reads the neighbour there ([`Cuts`]).
+    /// (`p = (1−u−v)·p0 + u·p1 + v·p2`), or `NO_TEXEL` for triangles with no texels. A hit
+    /// on the far side of a wall that divides its texel reads the neighbour there (`Cuts`).
     #[inline]
     pub fn texel_at(&self, t: u32, bary: Vec2) -> u32 {
         let [a, b, c] = self.triangle_uv[t as usize];

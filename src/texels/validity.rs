@@ -86,7 +86,7 @@ pub struct ValidityReport {
     pub moved: usize,
     /// Texels with no valid point (listed in [`Texels::invalid`]).
     pub invalid: usize,
-    /// Texels another surface divides (a wall standing on them; see [`Cuts`](super::Cuts)).
+    /// Texels another surface divides (a wall standing on them; see `Cuts`).
     pub divided: usize,
 }
 

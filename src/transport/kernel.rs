@@ -4,11 +4,11 @@
 //! |---------------------------------|-------------------------------------------------------------------|
 //! | [`point_to_point`]              | `cosθ_i cosθ_j A_j / (π r²)` — unbounded as r → 0                 |
 //! | [`point_to_disk_bound`]         | `A_j / (π r² + A_j)` — a coaxial facing disk of area `A_j`, ≤ 1   |
-//! | [`point_to_polygon`]            | Lambert: `(1/2π) Σ_e γ_e n·(R_e × R_e+1)/‖R_e × R_e+1‖`           |
+//! | `point_to_polygon`            | Lambert: `(1/2π) Σ_e γ_e n·(R_e × R_e+1)/‖R_e × R_e+1‖`           |
 //! | [`parallel_rectangles`]         | Howell C-11, directly opposed rectangles                          |
 //! | [`perpendicular_rectangles`]    | Howell C-14, perpendicular rectangles sharing an edge             |
 //! | [`point_to_coaxial_disk`]       | `R² / (R² + h²)`                                                  |
-//! | [`coaxial_disks`]               | Howell C-41, coaxial parallel disks                               |
+//! | `coaxial_disks`               | Howell C-41, coaxial parallel disks                               |
 //!
 //! The first three are what the `point` and `polygon` methods evaluate per texel pair; the closed
 //! forms from Howell's catalogue (*A Catalog of Radiation Heat Transfer Configuration Factors*)

@@ -15,7 +15,7 @@
 //! are otherwise missed) combined with the gathering rays by multiple importance sampling.
 
 //!
-//! [`build`] makes stored rows with the chosen [`FormFactors`]; the matrix-free gather solver
+//! `build` makes stored rows with the chosen [`FormFactors`]; the matrix-free gather solver
 //! and the hierarchical solver (in [`crate::solve`]) use the pieces here — the Monte Carlo
 //! method's per-texel gathering, the [`hierarchical`] links — without storing texel rows.
 //! Every method builds its rows with one driver (`rows.rs`): parallel chunks of receivers,
@@ -69,7 +69,7 @@ pub struct Transport {
     /// with explicit light sampling), so rows carry only reflected radiosity `ρ_j H_j`.
     pub rows_carry_emission: bool,
     /// `direct` split by light source, `sources.len()` values per texel (texel-major), when
-    /// [`TransportParams::split_direct`] asks for it (relighting and per-light layers), else
+    /// `TransportParams::split_direct` asks for it (relighting and per-light layers), else
     /// empty. The sky is not a source: its part of `direct` is `π · sky · escape`.
     pub direct_terms: Vec<Vec3>,
     /// The sources of `direct_terms`.

@@ -17,7 +17,7 @@
 //! furnace) is then exact per texel; the spread of light over a row's sources stays the
 //! nodes'.
 //!
-//! Light sources: small emitters (those [`Emitters`] samples) are light-sampled into
+//! Light sources: small emitters (those `Emitters` samples) are light-sampled into
 //! `H_direct` with `light_samples` shadow rays per texel (no gathering rays, so no MIS);
 //! large emitters (more than a quarter of the scene's area, as in the furnace) stay in the
 //! hierarchy as `E = π·Le`, where they are smooth and cheap; punctual lights use 2×2 points per
