@@ -48,6 +48,9 @@ pub(super) fn inside_intervals(
 
 /// The parameter interval of segment `a → b` inside the counter-clockwise triangle `c`
 /// (boundary included within `eps`).
+// Out of line: inlined into `inside_intervals`' closure (as it was once the junction split ran
+// instances in parallel), the furnished interior's split took 15–20% more CPU time.
+#[inline(never)]
 pub(super) fn clip_interval(a: DVec2, b: DVec2, c: [DVec2; 3], eps: f64) -> Option<[f64; 2]> {
     let d = b - a;
     let (mut s0, mut s1) = (0.0f64, 1.0f64);

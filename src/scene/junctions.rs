@@ -44,14 +44,22 @@
 //! New vertices are blends of at most three source vertices of the same primitive
 //! ([`Blend`]); the output writer blends every attribute the same way, so the split exists only
 //! in the baked copy.
+//!
+//! Instances are cut in parallel (largest first), each into its own split and report, which
+//! are put together in instance order. The one thing instances share is the scene's budget of
+//! shadow samples ([`super::shadow_cuts::MAX_SAMPLES`]), spent in instance order: it is
+//! replayed in that order afterwards, and an instance the parallel run served differently is
+//! cut again in order, so the result does not depend on the thread count.
 
 use std::collections::BTreeMap;
+use std::sync::atomic::AtomicUsize;
 
 use glam::{DVec2, DVec3, Vec2, Vec3};
+use rayon::prelude::*;
 use spade::{ConstrainedDelaunayTriangulation, Point2, Triangulation};
 
 use super::geometry::{BoxGrid, Plane, clip_interval, inside_intervals, weld};
-use super::shadow_cuts::ShadowCutter;
+use super::shadow_cuts::{Budget, MAX_SAMPLES, ShadowCutter, ShadowWork};
 use super::{Blend, Instance, Scene, Split};
 
 /// Cut end points closer than this merge, and move onto a patch vertex or edge this close
@@ -106,6 +114,35 @@ pub struct JunctionReport {
 }
 
 impl JunctionReport {
+    /// Adds the counts of `other` (one instance's).
+    fn add(&mut self, other: &JunctionReport) {
+        // Destructured so that a new count cannot be left out.
+        let JunctionReport {
+            receivers,
+            segments,
+            extensions,
+            triangles_split,
+            triangles_added,
+            fallback_triangles,
+            unseparated_edges,
+            shadow_segments,
+            shadow_samples,
+            shadow_skipped,
+            left_whole,
+        } = other;
+        self.receivers += receivers;
+        self.segments += segments;
+        self.extensions += extensions;
+        self.triangles_split += triangles_split;
+        self.triangles_added += triangles_added;
+        self.fallback_triangles += fallback_triangles;
+        self.unseparated_edges += unseparated_edges;
+        self.shadow_segments += shadow_segments;
+        self.shadow_samples += shadow_samples;
+        self.shadow_skipped += shadow_skipped;
+        self.left_whole += left_whole;
+    }
+
     /// One phrase for the bake's summary line.
     pub fn brief(&self) -> String {
         format!(
@@ -174,27 +211,129 @@ pub(crate) fn split_except(
     shadows: Option<&ShadowCutter>,
     whole: &[bool],
 ) -> (Scene, JunctionReport) {
-    let texel = f64::from(texel);
-    let tol = Tolerances {
-        texel,
-        snap: SNAP_TEXELS * texel,
-        touch: TOUCH_TEXELS * texel,
+    split_budgeted(scene, texel, shadows, whole, MAX_SAMPLES)
+}
+
+/// [`split_except`] with a budget of `max_samples` shadow samples (the tests spend small ones).
+fn split_budgeted(
+    scene: Scene,
+    texel: f32,
+    shadows: Option<&ShadowCutter>,
+    whole: &[bool],
+    max_samples: usize,
+) -> (Scene, JunctionReport) {
+    let tol = Tolerances::of(texel);
+    let grid = triangle_grid(&scene, tol.touch, tol.texel);
+    let cutting = Cutting {
+        scene: &scene,
+        grid: &grid,
+        tol,
+        shadows,
+        whole,
     };
-    let grid = triangle_grid(&scene, tol.touch, texel);
+    let taken = AtomicUsize::new(0);
+    let runs = cut_in_parallel(cutting, &taken, max_samples);
+    let (splits, report) = replay_in_order(cutting, runs, max_samples);
+    finish(scene, splits, report)
+}
+
+/// What cutting any instance reads, shared read-only by the instances cut in parallel.
+#[derive(Clone, Copy)]
+struct Cutting<'a> {
+    scene: &'a Scene,
+    /// The broad phase over every triangle of the scene.
+    grid: &'a BoxGrid,
+    tol: Tolerances,
+    shadows: Option<&'a ShadowCutter<'a>>,
+    /// Instances left whole (see [`split_except`]).
+    whole: &'a [bool],
+}
+
+/// One instance cut: its split (`None` when left as it is), its counts, and what it drew on
+/// the shadow samples.
+struct InstanceRun<'b> {
+    split: Option<InstanceSplit>,
+    report: JunctionReport,
+    shadow: ShadowWork<'b>,
+}
+
+/// Cuts instance `i` (unless it is left whole, or dense and curved) with its shadow samples
+/// from `budget`.
+fn run_instance<'b>(cutting: Cutting, i: usize, budget: Budget<'b>) -> InstanceRun<'b> {
+    let mut run = InstanceRun {
+        split: None,
+        report: JunctionReport::default(),
+        shadow: ShadowWork::new(budget),
+    };
+    let whole = cutting.whole.get(i).copied().unwrap_or(false);
+    if !whole && !dense_and_curved(cutting.scene, i, cutting.tol.texel) {
+        let (shadow, report) = (&mut run.shadow, &mut run.report);
+        run.split = split_instance(cutting, i as u32, shadow, report);
+    }
+    run.report.shadow_samples = run.shadow.samples;
+    run.report.shadow_skipped = run.shadow.skipped;
+    run
+}
+
+/// Every instance cut in parallel, returned in instance order. The largest start first (a big
+/// mesh started last would finish alone); shadow samples come from the shared count `taken`,
+/// which bounds the work to `max_samples` as cutting in order does.
+fn cut_in_parallel<'b>(
+    cutting: Cutting,
+    taken: &'b AtomicUsize,
+    max_samples: usize,
+) -> Vec<InstanceRun<'b>> {
+    let instances = &cutting.scene.instances;
+    let mut order: Vec<usize> = (0..instances.len()).collect();
+    order.sort_by_key(|&i| std::cmp::Reverse(instances[i].triangles.len()));
+    let budget = Budget::Shared {
+        taken,
+        limit: max_samples,
+    };
+    let mut runs: Vec<(usize, InstanceRun)> = order
+        .into_par_iter()
+        // One instance per task: no big instance holds smaller ones back in its task.
+        .with_max_len(1)
+        .map(|i| (i, run_instance(cutting, i, budget)))
+        .collect();
+    runs.sort_unstable_by_key(|r| r.0);
+    runs.into_iter().map(|r| r.1).collect()
+}
+
+/// The splits of `runs` (in instance order) and their summed report, with the shadow samples
+/// replayed in instance order: an instance whose samples the shared count gave out otherwise
+/// than cutting in order would have is cut again, in order (this happens only where the
+/// scene's budget runs out).
+fn replay_in_order(
+    cutting: Cutting,
+    runs: Vec<InstanceRun>,
+    max_samples: usize,
+) -> (Vec<Option<InstanceSplit>>, JunctionReport) {
     let mut report = JunctionReport {
-        left_whole: whole.iter().filter(|&&w| w).count(),
+        left_whole: cutting.whole.iter().filter(|&&w| w).count(),
         ..Default::default()
     };
-    let splits: Vec<Option<InstanceSplit>> = (0..scene.instances.len())
-        .map(|i| match whole.get(i) {
-            Some(true) => None,
-            _ if dense_and_curved(&scene, i, texel) => None,
-            _ => split_instance(&scene, i as u32, &grid, tol, shadows, &mut report),
+    let mut left = max_samples;
+    let splits = (runs.into_iter().enumerate())
+        .map(|(i, mut run)| {
+            if !run.shadow.replays(&mut left) {
+                run = run_instance(cutting, i, Budget::Left(left));
+                let replayed = run.shadow.replays(&mut left);
+                debug_assert!(replayed, "a run in order replays itself");
+            }
+            report.add(&run.report);
+            run.split
         })
         .collect();
-    if let Some(shadows) = shadows {
-        (report.shadow_samples, report.shadow_skipped) = shadows.work();
-    }
+    (splits, report)
+}
+
+/// The scene with `splits` put in (unchanged when there are none), and the final report.
+fn finish(
+    scene: Scene,
+    splits: Vec<Option<InstanceSplit>>,
+    mut report: JunctionReport,
+) -> (Scene, JunctionReport) {
     if splits.iter().all(Option::is_none) {
         return (scene, report);
     }
@@ -235,6 +374,17 @@ struct Tolerances {
     texel: f64,
     snap: f64,
     touch: f64,
+}
+
+impl Tolerances {
+    fn of(texel: f32) -> Self {
+        let texel = f64::from(texel);
+        Tolerances {
+            texel,
+            snap: SNAP_TEXELS * texel,
+            touch: TOUCH_TEXELS * texel,
+        }
+    }
 }
 
 /// The new triangulation of one instance, in instance-local vertices.
@@ -526,17 +676,17 @@ impl Cuts {
     }
 }
 
-/// Cuts one instance (see the module docs); `None` when nothing meets it.
+/// Cuts one instance (see the module docs), its shadow samples from `shadow`; `None` when
+/// nothing meets it.
 fn split_instance(
-    scene: &Scene,
+    cutting: Cutting,
     index: u32,
-    grid: &BoxGrid,
-    tol: Tolerances,
-    shadows: Option<&ShadowCutter>,
+    shadow: &mut ShadowWork,
     report: &mut JunctionReport,
 ) -> Option<InstanceSplit> {
-    let inst = &scene.instances[index as usize];
-    let mesh = LocalMesh::new(scene, inst)?;
+    let tol = cutting.tol;
+    let inst = &cutting.scene.instances[index as usize];
+    let mesh = LocalMesh::new(cutting.scene, inst)?;
     let patches = Patches::new(&mesh, tol);
     // Steps 1 and 2 of the module docs: each receiver patch's cuts.
     let patch_cuts: Vec<Option<Cuts>> = (patches.list.iter().enumerate())
@@ -546,9 +696,7 @@ fn split_instance(
                 .then(|| {
                     let pos = |v: u32| mesh.pos(v);
                     let (tris, weld) = (&mesh.triangles, &mesh.weld);
-                    patch_cuts_of(
-                        scene, index, patch, tris, weld, pos, grid, tol, shadows, report,
-                    )
+                    patch_cuts_of(cutting, index, patch, tris, weld, pos, shadow, report)
                 })
                 .flatten();
             if let Some(cuts) = &cuts {
@@ -1088,17 +1236,22 @@ fn own_frame(p: [DVec3; 3]) -> Patch {
 /// The junction segments of a receiver patch, snapped, split and with free ends extended.
 #[allow(clippy::too_many_arguments)]
 fn patch_cuts_of(
-    scene: &Scene,
+    cutting: Cutting,
     index: u32,
     patch: &Patch,
     tris: &[[u32; 3]],
     weld: &[u32],
     pos: impl Fn(u32) -> DVec3 + Copy,
-    grid: &BoxGrid,
-    tol: Tolerances,
-    shadows: Option<&ShadowCutter>,
+    shadow: &mut ShadowWork,
     report: &mut JunctionReport,
 ) -> Option<Cuts> {
+    let Cutting {
+        scene,
+        grid,
+        tol,
+        shadows,
+        ..
+    } = cutting;
     // The patch's edges and vertices in plane coordinates.
     let mut counted: BTreeMap<[u32; 2], (usize, [DVec2; 2])> = BTreeMap::new();
     let (mut lo, mut hi) = (DVec3::INFINITY, DVec3::NEG_INFINITY);
@@ -1167,7 +1320,8 @@ fn patch_cuts_of(
     }
     // Shadow outlines of punctual lights: cuts never stitched, as junctions are.
     if let Some(shadows) = shadows {
-        for [a, b] in shadows.patch_cuts(&patch.plane, &corners2d, (lo, hi), tol.texel, tol.touch) {
+        let (plane, texel, touch) = (&patch.plane, tol.texel, tol.touch);
+        for [a, b] in shadows.patch_cuts(plane, &corners2d, (lo, hi), texel, touch, shadow) {
             let i = cuts.point(a, &patch_edges, tol);
             let j = cuts.point(b, &patch_edges, tol);
             let before = cuts.segments.len();
@@ -1899,6 +2053,109 @@ mod tests {
                 };
                 assert!(side_at(2.45).is_some());
                 assert_ne!(side_at(2.45), side_at(2.55));
+            }
+        }
+    }
+
+    /// The split in instance order, as it ran before instances were cut in parallel: each
+    /// instance's shadow samples are what the instances before it left of `max_samples`.
+    fn split_in_order(
+        scene: Scene,
+        texel: f32,
+        shadows: Option<&ShadowCutter>,
+        max_samples: usize,
+    ) -> (Scene, JunctionReport) {
+        let tol = Tolerances::of(texel);
+        let grid = triangle_grid(&scene, tol.touch, tol.texel);
+        let cutting = Cutting {
+            scene: &scene,
+            grid: &grid,
+            tol,
+            shadows,
+            whole: &[],
+        };
+        let mut left = max_samples;
+        let mut report = JunctionReport::default();
+        let splits: Vec<Option<InstanceSplit>> = (0..scene.instances.len())
+            .map(|i| {
+                let run = run_instance(cutting, i, Budget::Left(left));
+                assert!(run.shadow.replays(&mut left));
+                report.add(&run.report);
+                run.split
+            })
+            .collect();
+        finish(scene, splits, report)
+    }
+
+    /// Cutting instances in parallel gives exactly what cutting them in order does, whatever
+    /// the thread count, also when the shadow samples run out part way (the shared count then
+    /// serves some instances otherwise, and the replay cuts them again in order).
+    #[test]
+    fn cutting_in_parallel_equals_cutting_in_order() {
+        let roof = (
+            vec![
+                Vec3::new(0.5, 3.0, 0.0),
+                Vec3::new(2.0, 3.0, 0.0),
+                Vec3::new(2.0, 3.0, 4.0),
+                Vec3::new(0.5, 3.0, 4.0),
+            ],
+            vec![[0, 1, 2], [0, 2, 3]],
+        );
+        // Sizes out of order, so that largest first differs from instance order.
+        let mut scene = scene_of(&[
+            floor(),
+            wall(2.0, 0.0, 1.5),
+            cuboid(Vec3::new(0.5, 0.0, 2.5), Vec3::new(1.5, 1.0, 3.5)),
+            wall(2.0, 2.5, 4.0),
+            cuboid(Vec3::new(2.0, 0.0, 0.5), Vec3::new(3.0, 0.5, 1.5)),
+            roof,
+            cuboid(Vec3::new(2.5, 0.0, 2.5), Vec3::new(3.5, 1.5, 3.0)),
+        ]);
+        let direction = Vec3::new(1.0, -2.0, 0.5).normalize();
+        scene.lights.push(crate::scene::Light {
+            name: None,
+            source: None,
+            kind: LightKind::Directional,
+            position: Vec3::ZERO,
+            direction,
+            intensity: Vec3::ONE,
+            range: None,
+        });
+        let shadows_of = scene.clone();
+        let light_at = |_: usize, p: Vec3, n: Vec3| {
+            let l = -direction;
+            let lit = n.dot(l) > 0.0 && !blocked(&shadows_of, p + n * 1e-4, l);
+            if lit { n.dot(l) } else { 0.0 }
+        };
+        let cutter = ShadowCutter::new(&scene, &light_at);
+        let texel = 0.1;
+        let (_, all) = split_in_order(scene.clone(), texel, Some(&cutter), MAX_SAMPLES);
+        assert!(all.receivers >= 4 && all.shadow_segments > 0, "{all:?}");
+        let budgets = [
+            MAX_SAMPLES,
+            all.shadow_samples / 2,
+            all.shadow_samples / 5,
+            0,
+        ];
+        for max_samples in budgets {
+            let in_order = split_in_order(scene.clone(), texel, Some(&cutter), max_samples);
+            assert!(max_samples >= all.shadow_samples || in_order.1.shadow_skipped > 0);
+            // Debug prints every float exactly (shortest round trip): equal text, equal bits.
+            let expected = format!("{in_order:?}");
+            for threads in [1, 2, 3] {
+                let pool = rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .build()
+                    .expect("thread pool");
+                let parallel = pool.install(|| {
+                    split_budgeted(scene.clone(), texel, Some(&cutter), &[], max_samples)
+                });
+                assert!(
+                    format!("{parallel:?}") == expected,
+                    "{threads} threads, {max_samples} samples: {:?} against {:?} in order",
+                    parallel.1,
+                    in_order.1
+                );
             }
         }
     }

@@ -25,9 +25,12 @@
 //!    and in such a patch the extensions are never stitched either (they hug the outline).
 //!
 //! The work is bounded: at most [`MAX_SAMPLES`] boundary samples per scene and
-//! [`MAX_PATCH_CUTS`] pieces per patch (what is left over is counted in the report).
+//! [`MAX_PATCH_CUTS`] pieces per patch (what is left over is counted in the report). The
+//! cutter itself is read-only, shared by the instances the junction split cuts in parallel;
+//! each instance draws on the scene's budget through its own `ShadowWork`, which records what
+//! it asked for, so that the split can replay the budget in instance order.
 
-use std::cell::Cell;
+use std::sync::atomic::{AtomicUsize, Ordering};
 
 use glam::{DVec2, DVec3, Vec3};
 
@@ -51,17 +54,96 @@ pub(crate) const MAX_PATCH_CUTS: usize = 256;
 
 /// Irradiance (any one measure, e.g. the channel mean) at surface point `p` with normal `n`
 /// from punctual light `l` (index into [`Scene::lights`]), shadow rays included; `p` lies on
-/// the surface (the caller offsets the ray origin).
-pub(crate) type LightAt<'a> = dyn Fn(usize, Vec3, Vec3) -> f32 + 'a;
+/// the surface (the caller offsets the ray origin). `Sync`: instances are cut in parallel.
+pub(crate) type LightAt<'a> = dyn Fn(usize, Vec3, Vec3) -> f32 + Sync + 'a;
 
-/// The scene's punctual lights and their silhouette edges, ready to cut receiver patches.
+/// The scene's punctual lights and their silhouette edges, ready to cut receiver patches
+/// (read-only, so `Sync`).
 pub(crate) struct ShadowCutter<'a> {
     lights: Vec<Source>,
     /// The scene's bounding box.
     bounds: (DVec3, DVec3),
     light_at: &'a LightAt<'a>,
-    samples: Cell<usize>,
-    skipped: Cell<usize>,
+}
+
+/// Where one instance's boundary samples come from.
+#[derive(Clone, Copy)]
+pub(super) enum Budget<'b> {
+    /// Exactly what the instances before it left of the scene's budget (cutting in order).
+    Left(usize),
+    /// First come, first served from a count shared by the instances cut in parallel, up to
+    /// `limit`: it keeps their work bounded, but who gets the last samples depends on timing,
+    /// so the split checks each instance's share with [`ShadowWork::replays`].
+    Shared {
+        taken: &'b AtomicUsize,
+        limit: usize,
+    },
+}
+
+/// One instance's draw on the sample budget: every outline stretch it asked for, in order,
+/// and whether it got the samples. Which stretches an instance asks for does not depend on the
+/// budget, only which of them are tested, so two runs that got the same stretches cut alike.
+pub(super) struct ShadowWork<'b> {
+    budget: Budget<'b>,
+    /// Per stretch asked for: its samples and whether they were taken.
+    asked: Vec<(usize, bool)>,
+    /// Boundary samples taken.
+    pub(super) samples: usize,
+    /// Stretches left untested (the budget was spent) and pieces left out (a patch had
+    /// [`MAX_PATCH_CUTS`]).
+    pub(super) skipped: usize,
+}
+
+impl<'b> ShadowWork<'b> {
+    pub(super) fn new(budget: Budget<'b>) -> Self {
+        ShadowWork {
+            budget,
+            asked: Vec::new(),
+            samples: 0,
+            skipped: 0,
+        }
+    }
+
+    /// Takes `steps` samples for one stretch if the budget has them (else counts it skipped).
+    fn take(&mut self, steps: usize) -> bool {
+        let fits = match &mut self.budget {
+            Budget::Left(left) => {
+                let fits = steps <= *left;
+                if fits {
+                    *left -= steps;
+                }
+                fits
+            }
+            Budget::Shared { taken, limit } => {
+                steps <= *limit && taken.fetch_add(steps, Ordering::Relaxed) + steps <= *limit
+            }
+        };
+        self.asked.push((steps, fits));
+        if fits {
+            self.samples += steps;
+        } else {
+            self.skipped += 1;
+        }
+        fits
+    }
+
+    /// Whether cutting in order with `left` samples left would have taken exactly the
+    /// stretches this run took (then its cuts are the in-order ones); if so, `left` becomes
+    /// what remains after it.
+    pub(super) fn replays(&self, left: &mut usize) -> bool {
+        let mut remaining = *left;
+        for &(steps, took) in &self.asked {
+            let fits = steps <= remaining;
+            if fits != took {
+                return false;
+            }
+            if fits {
+                remaining -= steps;
+            }
+        }
+        *left = remaining;
+        true
+    }
 }
 
 /// One light as the cutter sees it.
@@ -112,20 +194,12 @@ impl<'a> ShadowCutter<'a> {
             lights,
             bounds,
             light_at,
-            samples: Cell::new(0),
-            skipped: Cell::new(0),
         }
-    }
-
-    /// Boundary samples taken so far, and outline stretches left untested (the budget was
-    /// spent) or pieces left out (a patch had [`MAX_PATCH_CUTS`]).
-    pub(crate) fn work(&self) -> (usize, usize) {
-        (self.samples.get(), self.skipped.get())
     }
 
     /// The shadow cut pieces of the patch in `plane` (its triangles `corners` in plane
     /// coordinates, its box `low..high`, its corners within `touch` of the plane), in plane
-    /// coordinates.
+    /// coordinates; the samples come from `work`'s budget.
     pub(super) fn patch_cuts(
         &self,
         plane: &Plane,
@@ -133,6 +207,7 @@ impl<'a> ShadowCutter<'a> {
         (low, high): (DVec3, DVec3),
         texel: f64,
         touch: f64,
+        work: &mut ShadowWork,
     ) -> Vec<[DVec2; 2]> {
         let (mut lo, mut hi) = (DVec2::INFINITY, DVec2::NEG_INFINITY);
         for c in corners.iter().flatten() {
@@ -183,6 +258,7 @@ impl<'a> ShadowCutter<'a> {
                             l,
                             [p.lerp(q, s0), p.lerp(q, s1)],
                             texel,
+                            work,
                             &mut pieces,
                         );
                     }
@@ -190,29 +266,27 @@ impl<'a> ShadowCutter<'a> {
             }
         }
         if pieces.len() > MAX_PATCH_CUTS {
-            self.skipped
-                .set(self.skipped.get() + pieces.len() - MAX_PATCH_CUTS);
+            work.skipped += pieces.len() - MAX_PATCH_CUTS;
             pieces.truncate(MAX_PATCH_CUTS);
         }
         pieces
     }
 
     /// The runs of stretch `[p, q]` (plane coordinates) where light `l`'s shadow ends, at least
-    /// a texel long, appended to `pieces`.
+    /// a texel long, appended to `pieces`; untested when `work`'s budget lacks the samples.
     fn boundaries(
         &self,
         plane: &Plane,
         l: usize,
         [p, q]: [DVec2; 2],
         texel: f64,
+        work: &mut ShadowWork,
         pieces: &mut Vec<[DVec2; 2]>,
     ) {
         let steps = (p.distance(q) / texel).ceil().max(1.0) as usize;
-        if self.samples.get() + steps > MAX_SAMPLES {
-            self.skipped.set(self.skipped.get() + 1);
+        if !work.take(steps) {
             return;
         }
-        self.samples.set(self.samples.get() + steps);
         let n = plane.normal.as_vec3();
         let side = (q - p).perp().normalize() * (0.5 * texel);
         let at = |s: DVec2| plane.to_3d(s).as_vec3();
