@@ -17,9 +17,10 @@
 //!                                                     cameras (all a renderer needs)
 //!   ─ plan::choose_density ──▶ BakeConfig            texel density for the scene's area (auto)
 //!  ─ scene::junctions::split ▶ Scene                 receivers cut where other surfaces meet
-//!                                                     them (new vertices are blends: provenance),
-//!                                                     and along the hard shadow outlines of
-//!                                                     punctual lights (scene::shadow_cuts; its
+//!                                                     them (new vertices are blends: provenance;
+//!                                                     instances in parallel), and along the hard
+//!                                                     shadow outlines of punctual lights
+//!                                                     (scene::shadow_cuts; its
 //!                                                     shadow rays come from a Tracer of the
 //!                                                     uncut scene, passed in by `bake`)
 //!             Tracer::new   ──▶ Tracer                obvhs CWBVH: closest hit, occlusion
@@ -33,10 +34,14 @@
 //!           ─ texels::build ──▶ Texels                one radiosity patch per covered texel
 //!       ─ texels::validity ──▶ Texels                 samples moved out of geometry, invalid marked,
 //!                                                     texels a wall divides kept to one side (cuts)
-//!  ─ pilot + plan::density ──▶ the three stages above again, with a density factor per
-//!                                                     region (connected surface between creases)
-//!                                                     where the pilot's lookup error sits; ×⅛ on
-//!                                                     what nobody sees (auto, adaptive)
+//!  ─ pilot + plan::density ──▶ a density factor per region (connected surface between
+//!                                                     creases) where the lookup error of a pilot
+//!                                                     pair sits, measured on a uniform atlas of
+//!                                                     its own (atlas::build_quick: planar regions
+//!                                                     and smooth patches, shelf-packed by
+//!                                                     atlas::pack); ×⅛ on what nobody sees; the
+//!                                                     three stages above then run once with the
+//!                                                     factors (auto, adaptive)
 //!   (all of the above is `prepare`, shared by the bake and the reference)
 //!    ─ pilot runs + plan   ──▶ BakeConfig + pilot    rays for the target error, measured (auto)
 //!  ─ one dispatch on config::Technique:

@@ -47,7 +47,7 @@
 //!
 //! Instances are cut in parallel (largest first), each into its own split and report, which
 //! are put together in instance order. The one thing instances share is the scene's budget of
-//! shadow samples ([`super::shadow_cuts::MAX_SAMPLES`]), spent in instance order: it is
+//! shadow samples (`shadow_cuts::MAX_SAMPLES`), spent in instance order: it is
 //! replayed in that order afterwards, and an instance the parallel run served differently is
 //! cut again in order, so the result does not depend on the thread count.
 
