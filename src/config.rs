@@ -161,8 +161,8 @@ impl Technique {
 
     /// The technique a method and a solver name together ([`Technique::METHODS`] ×
     /// [`Technique::SOLVERS`]); a pair that does not exist is an error that says why.
-    pub fn from_names(method: &str, solver: &str) -> crate::Result<Technique> {
-        use crate::Error::Option;
+    pub fn from_names(method: &str, solver: &str) -> crate::error::Result<Technique> {
+        use crate::error::Error::Option;
         let rows = match solver {
             "jacobi" => Some(RowSolver::Jacobi),
             "gauss-seidel" => Some(RowSolver::GaussSeidel),
@@ -324,8 +324,9 @@ pub struct LayerGroup {
 
 impl LayerGroup {
     /// A group as the command line and manifests give it: `NAME=MEMBER,MEMBER…`.
-    pub fn parse(spec: &str) -> crate::Result<LayerGroup> {
-        let bad = || crate::Error::Option(format!("layer {spec:?}: expected GROUP=NAME,NAME…"));
+    pub fn parse(spec: &str) -> crate::error::Result<LayerGroup> {
+        let bad =
+            || crate::error::Error::Option(format!("layer {spec:?}: expected GROUP=NAME,NAME…"));
         let (name, members) = spec.split_once('=').ok_or_else(bad)?;
         let members: Vec<String> = (members.split(','))
             .map(|m| m.trim().to_string())
@@ -470,8 +471,8 @@ impl BakeConfig {
     ];
 
     /// Checks option ranges before any work is done.
-    pub fn validate(&self) -> crate::Result<()> {
-        use crate::Error::Option;
+    pub fn validate(&self) -> crate::error::Result<()> {
+        use crate::error::Error::Option;
         let a = &self.atlas;
         if !(a.texels_per_unit.is_finite() && a.texels_per_unit > 0.0) {
             return Err(Option(format!(
