@@ -130,6 +130,32 @@ impl Atlas {
     }
 }
 
+#[cfg(test)]
+impl InstanceUv {
+    /// Each triangle's chart, named by one of its triangles: triangles join across edges whose
+    /// two atlas vertices they share (for the layout tests).
+    pub(crate) fn charts(&self) -> Vec<usize> {
+        let mut parent: Vec<usize> = (0..self.triangles.len()).collect();
+        fn root(parent: &mut [usize], mut i: usize) -> usize {
+            while parent[i] != i {
+                parent[i] = parent[parent[i]];
+                i = parent[i];
+            }
+            i
+        }
+        let mut first = std::collections::BTreeMap::new();
+        for (t, tri) in self.triangles.iter().enumerate() {
+            for k in 0..3 {
+                let (a, b) = (tri[k], tri[(k + 1) % 3]);
+                let other = *first.entry((a.min(b), a.max(b))).or_insert(t);
+                let (ra, rb) = (root(&mut parent, t), root(&mut parent, other));
+                parent[ra] = rb;
+            }
+        }
+        (0..parent.len()).map(|t| root(&mut parent, t)).collect()
+    }
+}
+
 /// Calls `visit` with the index of every texel of a `size` page that the triangle with page
 /// UVs `uv` touches, sampled every quarter texel (for the layout tests).
 #[cfg(test)]

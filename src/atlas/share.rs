@@ -576,28 +576,6 @@ mod tests {
         }
     }
 
-    /// Charts of an instance: triangles joined across edges whose atlas vertices they share.
-    fn charts(inst: &InstanceUv) -> Vec<usize> {
-        let mut parent: Vec<usize> = (0..inst.triangles.len()).collect();
-        fn root(parent: &mut [usize], mut i: usize) -> usize {
-            while parent[i] != i {
-                parent[i] = parent[parent[i]];
-                i = parent[i];
-            }
-            i
-        }
-        let mut first = BTreeMap::new();
-        for (t, tri) in inst.triangles.iter().enumerate() {
-            for k in 0..3 {
-                let (a, b) = (tri[k], tri[(k + 1) % 3]);
-                let other = *first.entry((a.min(b), a.max(b))).or_insert(t);
-                let (ra, rb) = (root(&mut parent, t), root(&mut parent, other));
-                parent[ra] = rb;
-            }
-        }
-        (0..parent.len()).map(|t| root(&mut parent, t)).collect()
-    }
-
     /// Every texel a triangle touches (sampled every quarter texel) belongs to one chart of
     /// one instance, and no texel of another chart lies within `padding` texels of it.
     fn assert_padded(atlas: &Atlas, padding: u32) {
@@ -607,7 +585,7 @@ mod tests {
             .map(|p| vec![(u32::MAX, 0); (p.width * p.height) as usize])
             .collect();
         for (i, inst) in atlas.instances.iter().enumerate() {
-            let chart = charts(inst);
+            let chart = inst.charts();
             for (t, tri) in inst.triangles.iter().enumerate() {
                 let page = inst.triangle_page[t] as usize;
                 let uv = tri.map(|k| inst.uv[k as usize]);

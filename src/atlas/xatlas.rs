@@ -1803,28 +1803,10 @@ pub(crate) mod tests {
         part
     }
 
-    /// Charts of an instance: triangles joined across edges whose two atlas vertices they share.
+    /// Charts of an instance (see `InstanceUv::charts`).
     fn chart_count(inst: &InstanceUv) -> usize {
-        let mut parent: Vec<usize> = (0..inst.triangles.len()).collect();
-        fn root(parent: &mut [usize], mut i: usize) -> usize {
-            while parent[i] != i {
-                parent[i] = parent[parent[i]];
-                i = parent[i];
-            }
-            i
-        }
-        let mut first = std::collections::BTreeMap::new();
-        for (t, tri) in inst.triangles.iter().enumerate() {
-            for k in 0..3 {
-                let (a, b) = (tri[k], tri[(k + 1) % 3]);
-                let other = *first.entry((a.min(b), a.max(b))).or_insert(t);
-                let (ra, rb) = (root(&mut parent, t), root(&mut parent, other));
-                parent[ra] = rb;
-            }
-        }
-        (0..parent.len())
-            .filter(|&t| root(&mut parent, t) == t)
-            .count()
+        let chart = inst.charts();
+        (0..chart.len()).filter(|&t| chart[t] == t).count()
     }
 
     fn regions_of(scene: &Scene, tpu: f32) -> (Vec<Region>, Vec<u32>) {
