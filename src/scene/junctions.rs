@@ -222,6 +222,22 @@ fn split_budgeted(
     whole: &[bool],
     max_samples: usize,
 ) -> (Scene, JunctionReport) {
+    cut_with(scene, texel, shadows, whole, |cutting| {
+        let taken = AtomicUsize::new(0);
+        let runs = cut_in_parallel(cutting, &taken, max_samples);
+        replay_in_order(cutting, runs, max_samples)
+    })
+}
+
+/// Sets up what cutting reads (tolerances, the triangle grid), lets `cut` cut the instances,
+/// and puts the scene together from their splits.
+fn cut_with(
+    scene: Scene,
+    texel: f32,
+    shadows: Option<&ShadowCutter>,
+    whole: &[bool],
+    cut: impl FnOnce(Cutting) -> (Vec<Option<InstanceSplit>>, JunctionReport),
+) -> (Scene, JunctionReport) {
     let tol = Tolerances::of(texel);
     let grid = triangle_grid(&scene, tol.touch, tol.texel);
     let cutting = Cutting {
@@ -231,9 +247,7 @@ fn split_budgeted(
         shadows,
         whole,
     };
-    let taken = AtomicUsize::new(0);
-    let runs = cut_in_parallel(cutting, &taken, max_samples);
-    let (splits, report) = replay_in_order(cutting, runs, max_samples);
+    let (splits, report) = cut(cutting);
     finish(scene, splits, report)
 }
 
@@ -2065,26 +2079,19 @@ mod tests {
         shadows: Option<&ShadowCutter>,
         max_samples: usize,
     ) -> (Scene, JunctionReport) {
-        let tol = Tolerances::of(texel);
-        let grid = triangle_grid(&scene, tol.touch, tol.texel);
-        let cutting = Cutting {
-            scene: &scene,
-            grid: &grid,
-            tol,
-            shadows,
-            whole: &[],
-        };
-        let mut left = max_samples;
-        let mut report = JunctionReport::default();
-        let splits: Vec<Option<InstanceSplit>> = (0..scene.instances.len())
-            .map(|i| {
-                let run = run_instance(cutting, i, Budget::Left(left));
-                assert!(run.shadow.replays(&mut left));
-                report.add(&run.report);
-                run.split
-            })
-            .collect();
-        finish(scene, splits, report)
+        cut_with(scene, texel, shadows, &[], |cutting| {
+            let mut left = max_samples;
+            let mut report = JunctionReport::default();
+            let splits: Vec<Option<InstanceSplit>> = (0..cutting.scene.instances.len())
+                .map(|i| {
+                    let run = run_instance(cutting, i, Budget::Left(left));
+                    assert!(run.shadow.replays(&mut left));
+                    report.add(&run.report);
+                    run.split
+                })
+                .collect();
+            (splits, report)
+        })
     }
 
     /// Cutting instances in parallel gives exactly what cutting them in order does, whatever
