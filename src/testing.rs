@@ -15,6 +15,7 @@ use base64::Engine;
 use glam::{Mat3, Mat4, Quat, Vec2, Vec3};
 use serde_json::{Map, Value, json};
 
+use crate::scene::LightKind;
 use crate::{Error, Result};
 
 /// Cornell box light: emitted radiance per channel, `emissiveFactor (1,1,1) × emissiveStrength`.
@@ -454,17 +455,6 @@ fn rotation_towards(direction: Vec3) -> Quat {
     let right = forward.cross(up_hint).normalize();
     let up = right.cross(forward);
     Quat::from_mat3(&Mat3::from_cols(right, up, -forward)).normalize()
-}
-
-/// A KHR_lights_punctual light type.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub(crate) enum LightKind {
-    Point,
-    Spot {
-        inner_cone_angle: f32,
-        outer_cone_angle: f32,
-    },
-    Directional,
 }
 
 /// A KHR_lights_punctual light: point/spot `intensity` in W/sr, directional in W/m².
