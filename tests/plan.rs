@@ -33,6 +33,20 @@ fn reaches_its_target_on_the_cornell_box() {
     );
     assert_eq!(baked.config.technique.method(), "montecarlo");
     assert_eq!(baked.config.solve.tolerance, target / 10.0);
+    // A renderer's bilinear lookup blends four independent texels: it reads less noise than
+    // one texel holds (about ⅔ for lookups spread evenly over a cell).
+    let lookup = plan
+        .reasons
+        .iter()
+        .find_map(|r| r.strip_prefix("noise as a renderer reads it: "))
+        .expect("the lookup noise is reported");
+    let share: f32 = lookup
+        .split("(×")
+        .nth(1)
+        .and_then(|r| r.split(';').next())
+        .and_then(|x| x.parse().ok())
+        .expect("a share");
+    assert!((0.4..0.9).contains(&share), "{lookup}");
 
     let tracer = Tracer::new(&baked.scene);
     let params = ReferenceParams {

@@ -1,8 +1,6 @@
 //! Layout figures shared by the atlas programs (`atlas_speed`, `dense_unwrap`): a digest of
 //! the layout, its chart count and overlapping texel centres.
 
-use std::collections::HashMap;
-
 use lightbake::atlas::{Atlas, Overlaps};
 use lightbake::scene::Scene;
 
@@ -32,29 +30,7 @@ pub fn digest(atlas: &Atlas) -> u64 {
 /// Charts: triangles joined through shared atlas vertex pairs (edges inside a chart), per
 /// instance.
 pub fn charts(atlas: &Atlas) -> usize {
-    let mut total = 0;
-    for inst in &atlas.instances {
-        let n = inst.triangles.len();
-        let mut parent: Vec<usize> = (0..n).collect();
-        fn root(parent: &mut [usize], mut i: usize) -> usize {
-            while parent[i] != i {
-                parent[i] = parent[parent[i]];
-                i = parent[i];
-            }
-            i
-        }
-        let mut first_with_edge: HashMap<(u32, u32), usize> = HashMap::new();
-        for (t, tri) in inst.triangles.iter().enumerate() {
-            for k in 0..3 {
-                let (a, b) = (tri[k], tri[(k + 1) % 3]);
-                let other = *first_with_edge.entry((a.min(b), a.max(b))).or_insert(t);
-                let (ra, rb) = (root(&mut parent, t), root(&mut parent, other));
-                parent[ra] = rb;
-            }
-        }
-        total += (0..n).filter(|&t| root(&mut parent, t) == t).count();
-    }
-    total
+    atlas.instances.iter().map(|inst| inst.chart_count()).sum()
 }
 
 /// Texel centres strictly inside more than one triangle of the same page.

@@ -130,11 +130,10 @@ impl Atlas {
     }
 }
 
-#[cfg(test)]
 impl InstanceUv {
     /// Each triangle's chart, named by one of its triangles: triangles join across edges whose
-    /// two atlas vertices they share (for the layout tests).
-    pub(crate) fn charts(&self) -> Vec<usize> {
+    /// two atlas vertices they share.
+    pub fn charts(&self) -> Vec<usize> {
         let mut parent: Vec<usize> = (0..self.triangles.len()).collect();
         fn root(parent: &mut [usize], mut i: usize) -> usize {
             while parent[i] != i {
@@ -153,6 +152,12 @@ impl InstanceUv {
             }
         }
         (0..parent.len()).map(|t| root(&mut parent, t)).collect()
+    }
+
+    /// How many charts the instance's triangles form ([`InstanceUv::charts`]).
+    pub fn chart_count(&self) -> usize {
+        let chart = self.charts();
+        (0..chart.len()).filter(|&t| chart[t] == t).count()
     }
 }
 

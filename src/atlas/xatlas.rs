@@ -1803,12 +1803,6 @@ pub(crate) mod tests {
         part
     }
 
-    /// Charts of an instance (see `InstanceUv::charts`).
-    fn chart_count(inst: &InstanceUv) -> usize {
-        let chart = inst.charts();
-        (0..chart.len()).filter(|&t| chart[t] == t).count()
-    }
-
     fn regions_of(scene: &Scene, tpu: f32) -> (Vec<Region>, Vec<u32>) {
         let limits = Limits {
             max_chart_area: 0.25 * 1024.0 * 1024.0,
@@ -1826,7 +1820,7 @@ pub(crate) mod tests {
         assert_eq!((regions.len(), rest.len()), (1, 0));
         assert_eq!(regions[0].outline.len(), 4);
         let atlas = unwrap_ok(&scene, &params(16.0, 1024));
-        assert_eq!(chart_count(&atlas.instances[0]), 1);
+        assert_eq!(atlas.instances[0].chart_count(), 1);
         let overlaps = first_page_overlaps(&scene, &atlas);
         assert_eq!(overlaps.overlapping, 0, "{overlaps:?}");
         // 64 × 64 texels; xatlas only rounds the chart's extents up to whole texels.

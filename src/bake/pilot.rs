@@ -97,8 +97,10 @@ pub(crate) fn choose_transport(
             seconds,
         } = Samples::measure(surfaces, &config.transport, &runs, stored, e, budget);
         if let Some(g) = &gathered {
+            // The last pair's own noise per texel, measured above.
+            let texel_noise = second.unwrap_or(first);
             plan.reasons
-                .push(lookup_noise_reason(g, &runs, texels, &config.transport));
+                .push(lookup_noise_reason(g, runs.gather_rays, texel_noise));
         }
         plan.resolution_seconds = seconds;
         plan.overhead_seconds += seconds;
@@ -199,23 +201,14 @@ pub(crate) fn measure_density(
 /// (about ⅔ of one texel's noise for lookups spread evenly over a cell) and points weigh texels
 /// by area. Measured 0.60–0.76 on the fixtures; the rays still aim at the texels' noise, a
 /// margin that today covers the resolution error's under-prediction (see the guide).
-fn lookup_noise_reason(
-    sample: &GatheredSample,
-    runs: &PilotRuns,
-    texels: &Texels,
-    transport: &TransportParams,
-) -> String {
-    let (lookup, texel) = (
-        sample.lookup_noise(),
-        runs.noise(texels, transport.indirect_only),
-    );
+fn lookup_noise_reason(sample: &GatheredSample, rays: u32, texel_noise: f32) -> String {
+    let lookup = sample.lookup_noise();
     format!(
-        "noise as a renderer reads it: {:.2}% at K={} at the sample's points against {:.2}% per \
-         texel (×{:.2}; the rays aim at the texels' noise)",
+        "noise as a renderer reads it: {:.2}% at K={rays} at the sample's points against {:.2}% \
+         per texel (×{:.2}; the rays aim at the texels' noise)",
         lookup * 100.0,
-        runs.gather_rays,
-        texel * 100.0,
-        lookup / texel
+        texel_noise * 100.0,
+        lookup / texel_noise
     )
 }
 
