@@ -133,6 +133,7 @@ pub mod reference;
 pub mod render;
 pub mod sampling;
 pub mod scene;
+pub(crate) mod shard;
 pub mod solve;
 pub mod texels;
 pub mod trace;

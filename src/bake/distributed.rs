@@ -1,27 +1,40 @@
 //! A bake over several processes, on the `timely` dataflow crate and its own TCP communication.
 //!
-//! Every process loads the same input with the same options and runs [`super::prepare`] and the
-//! automatic choice (pilot runs included) in full: both are deterministic, so every process
-//! gets the same texels and settings. The final bake's rows are sharded: process `p` of `P`
-//! builds the Monte Carlo rows of texels `n·p/P .. n·(p+1)/P` (from the full scene) and keeps
-//! them. Each Jacobi sweep gathers its rows from the full radiosity vector and broadcasts its
-//! slice of the new `H` to every other process (an all-gather through a timely dataflow), so
-//! every process holds the whole vector after every sweep. The stopping rule is
-//! [`crate::solve`]'s, fed with the same sums in the same texel order, so every process stops
-//! after the same sweep and the solution is bit for bit the single-process one. Process 0 then
-//! denoises, dilates, stitches seams and writes; the others write nothing.
+//! Every process loads the same input with the same options and runs every stage of
+//! [`super::prepare`] and the automatic choice; all are deterministic, so every process gets
+//! the same atlas, texels and settings. What casts rays is divided ([`Shared`]):
+//!
+//! - every bake of a transport — the density pilot's pair, the ray pilots' pairs and the final
+//!   bake — is sharded by rows: process `p` of `P` builds the Monte Carlo rows of texels
+//!   `n·p/P .. n·(p+1)/P` (from the full scene) and keeps them. The first exchange gathers
+//!   everyone's direct light; each Jacobi sweep then gathers its rows from the full radiosity
+//!   vector and broadcasts its slice of the new `H` to every other process (an all-gather
+//!   through a timely dataflow), so every process holds the whole vector after every sweep.
+//!   The stopping rule is [`crate::solve`]'s, fed with the same sums in the same texel order,
+//!   so every process stops after the same sweep with the single-process solution, bit for bit;
+//! - the validity pass (the density pilot's and the final atlas's), the punctual light per
+//!   texel and the planner's point samples compute their part of the items and gather the rest
+//!   ([`crate::shard`]).
+//!
+//! What every process still does in full: loading, the junction split, the BVH, both atlases
+//! and their texels, the whole-vector work of each sweep and the planner's arithmetic. Process
+//! 0 then denoises, dilates, stitches seams and writes; the others write nothing.
 //!
 //! Failures: a process that fails with an error sends it to the others in its next exchange;
 //! a process that dies closes its connections, which timely turns into a failure of its peers'
 //! exchange (the message names the processes whose share did not come). Every process fails
 //! then, before process 0 writes anything (output is staged, [`crate::output::Staging`]).
-//! Connecting waits at most [`Cluster::connect_timeout`]: timely itself retries for ever, so
-//! the thread that connects is left behind when it gives up (the caller is about to exit).
+//! Connecting starts before loading and is waited for at the first exchange (timely polls for
+//! its peers once a second, so waiting up front would cost a second of every bake); it waits
+//! at most [`Cluster::connect_timeout`]: timely itself retries for ever, so the thread that
+//! connects is left behind when it gives up (the caller is about to exit).
 //!
 //! Only the stored Monte Carlo rows with the Jacobi solver ([`Technique::DEFAULT`]) are
 //! distributed; the error map (which reads every row) is not.
 
 use std::cell::RefCell;
+use std::io::{self, Read, Write};
+use std::net::{TcpListener, TcpStream, ToSocketAddrs};
 use std::ops::Range;
 use std::path::Path;
 use std::rc::Rc;
@@ -33,17 +46,22 @@ use std::time::{Duration, Instant};
 use glam::Vec3;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
+use timely::communication::allocator::zero_copy::initialize::initialize_networking_from_sockets;
+use timely::communication::allocator::{AllocatorBuilder, ProcessBuilder};
+use timely::communication::initialize::Hooks;
 use timely::dataflow::channels::pact::Pipeline;
 use timely::dataflow::operators::generic::operator::Operator;
 use timely::dataflow::operators::vec::Broadcast;
 use timely::dataflow::operators::{Input, Probe};
 use timely::dataflow::{InputHandle, ProbeHandle};
+use timely::execute::execute_from;
 use timely::worker::Worker;
 
-use super::light::Lit;
+use super::light::{Lit, Processes};
 use super::{BakeReport, refuse_overwriting_input};
-use crate::config::{BakeConfig, Technique};
+use crate::config::{BakeConfig, SolveParams, Technique, TransportParams};
 use crate::lights::Emitters;
+use crate::shard::{self, Shards};
 use crate::solve::{self, Solution, Stopping, jacobi};
 use crate::transport::{Surfaces, Transport, montecarlo, rows};
 use crate::{Error, Progress, Result};
@@ -73,13 +91,15 @@ pub struct DistributedReport {
     pub sweeps: usize,
     /// Payload bytes this process sent to the others in one sweep (its slice of `H` to each).
     pub bytes_per_sweep: u64,
-    /// Payload bytes this process sent in all, the first exchange (direct light) included.
+    /// Payload bytes this process sent in all exchanges (pilots, samples and validity included).
     pub bytes_sent: u64,
-    /// Wall seconds this process spent building its rows, and in the sweeps.
+    /// Wall seconds this process spent building its rows of the last transport (the final
+    /// bake's, or the last pilot's when the pilot pair suffices).
     pub rows_seconds: f64,
-    /// Wall seconds this process spent in the sweeps (see `rows_seconds`).
+    /// Wall seconds this process spent in that transport's sweeps.
     pub sweeps_seconds: f64,
-    /// Of those, seconds spent in exchanges: the network, and waiting for slower processes.
+    /// Seconds of the whole bake spent in exchanges: the network, and waiting for slower
+    /// processes (and, at the first, for every process to connect).
     pub exchange_seconds: f64,
 }
 
@@ -97,6 +117,8 @@ pub fn bake(
     }
     let config = distributable(config)?;
     let t = Instant::now();
+    // Connecting runs while the scene loads and is prepared; the first exchange waits for it.
+    let exchange = Exchange::connect(cluster)?;
     let (scene, source) = super::load(input, progress)?;
     if scene.triangles.is_empty() {
         // Nothing to share: process 0 writes the scene through as one process would.
@@ -116,16 +138,14 @@ pub fn bake(
             exchange_seconds: 0.0,
         });
     }
-    let mut exchange = Exchange::connect(cluster)?;
-    let processes = exchange.processes;
-    let prepared = super::prepare_loaded(scene, source, input, &config, processes, progress, t);
-    let result =
-        prepared.and_then(|p| bake_connected(p, out_dir, &config, &mut exchange, progress));
+    let shared = Shared(RefCell::new(exchange));
+    let prepared = super::prepare_loaded(scene, source, input, &config, &shared, progress, t);
+    let result = prepared.and_then(|p| bake_connected(p, out_dir, &config, &shared, progress));
     if let Err(e) = &result
         && !matches!(e, Error::Cluster(_))
     {
         // The others learn why in their next exchange, instead of waiting for a share.
-        exchange.fail(e);
+        shared.0.borrow_mut().fail(e);
     }
     result
 }
@@ -168,22 +188,12 @@ fn bake_connected(
     mut prepared: super::Prepared,
     out_dir: &Path,
     config: &BakeConfig,
-    exchange: &mut Exchange,
+    shared: &Shared,
     progress: &dyn Progress,
 ) -> Result<DistributedReport> {
     let input = prepared.source.path.clone();
-    let input = input.as_path();
-    let exchange_cell = RefCell::new(&mut *exchange);
-    let shared = |surfaces: Surfaces,
-                  config: &BakeConfig,
-                  texel_rays: Option<&[u32]>,
-                  progress: &dyn Progress| {
-        // `light` takes a shared function; the exchange is used by one bake at a time.
-        let mut exchange = exchange_cell.borrow_mut();
-        solve_shared(surfaces, config, texel_rays, progress, &mut exchange)
-    };
-    let lit = super::light(&mut prepared, progress, &shared)?;
-    let exchange = exchange_cell.into_inner();
+    let lit = super::light(&mut prepared, shared, progress)?;
+    let exchange = shared.0.borrow();
     let n = prepared.texels.len();
     let mut report = DistributedReport {
         bake: None,
@@ -197,28 +207,62 @@ fn bake_connected(
         exchange_seconds: exchange.waited.as_secs_f64(),
     };
     if exchange.process == 0 {
+        drop(exchange);
         let baked = super::finish(prepared, lit, progress)?;
-        report.bake = Some(super::write(baked, input, out_dir, config, progress)?);
+        report.bake = Some(super::write(baked, &input, out_dir, config, progress)?);
     }
     Ok(report)
 }
 
-/// The final bake's rows of this process's texels, and the Jacobi solution of all of them
-/// (see the module doc): the same as [`super::light::by_technique`] on one machine.
+/// The processes of a distributed bake, through their exchange.
+struct Shared(RefCell<Exchange>);
+
+impl Shards for Shared {
+    fn count(&self) -> usize {
+        self.0.borrow().processes
+    }
+
+    fn part(&self, n: usize) -> Range<usize> {
+        self.0.borrow().rows(n)
+    }
+
+    fn gather(&self, mine: Vec<f32>, rays: u64, len: usize) -> Result<(Vec<f32>, u64)> {
+        self.0.borrow_mut().all_gather(mine, rays, len)
+    }
+}
+
+impl Processes for Shared {
+    fn light(
+        &self,
+        surfaces: Surfaces,
+        technique: Technique,
+        params: &TransportParams,
+        texel_rays: Option<&[u32]>,
+        solve: &SolveParams,
+        progress: &dyn Progress,
+    ) -> Result<Lit> {
+        if technique != Technique::DEFAULT {
+            return Err(Error::Internal(format!(
+                "a distributed bake runs {} only; the plan chose {technique}",
+                Technique::DEFAULT,
+            )));
+        }
+        let mut exchange = self.0.borrow_mut();
+        solve_shared(surfaces, params, texel_rays, solve, progress, &mut exchange)
+    }
+}
+
+/// A bake's rows of this process's texels, and the Jacobi solution of all of them (see the
+/// module doc): the same as [`super::light::transport_and_solve`] with
+/// [`Technique::DEFAULT`] on one machine.
 fn solve_shared(
     surfaces: Surfaces,
-    config: &BakeConfig,
+    params: &TransportParams,
     texel_rays: Option<&[u32]>,
+    solve: &SolveParams,
     progress: &dyn Progress,
     exchange: &mut Exchange,
 ) -> Result<Lit> {
-    if config.technique != Technique::DEFAULT {
-        return Err(Error::Internal(format!(
-            "a distributed bake runs {} only; the plan chose {}",
-            Technique::DEFAULT,
-            config.technique
-        )));
-    }
     let texels = surfaces.texels;
     let n = texels.len();
     let mine = exchange.rows(n);
@@ -226,7 +270,7 @@ fn solve_shared(
     let emitters = Emitters::new(surfaces.scene, texels);
     let context = montecarlo::Context {
         surfaces,
-        params: &config.transport,
+        params,
         emitters: &emitters,
         texel_rays,
         // Direct light split by source is for a kept transport, which a distributed bake has
@@ -239,7 +283,7 @@ fn solve_shared(
         "transport",
         progress,
         |range, out| {
-            let mut hits = Vec::with_capacity(config.transport.gather_rays as usize);
+            let mut hits = Vec::with_capacity(params.gather_rays as usize);
             for i in range {
                 context.texel_row(mine.start + i, &mut hits, out);
             }
@@ -262,7 +306,7 @@ fn solve_shared(
     let mut solution = Solution::default();
     let mut stopping = Stopping::begin(
         ("jacobi", "sweeps"),
-        &config.solve,
+        solve,
         &mut solution.history,
         Instant::now(),
         progress,
@@ -335,13 +379,16 @@ struct Exchange {
     waited: Duration,
     rows_seconds: f64,
     sweeps_seconds: f64,
+    /// Until every process has connected: the signal that they have, and when to give up.
+    connecting: Option<(Receiver<()>, Instant)>,
+    connect_timeout: Duration,
     /// Joined when the exchange ends (a clean shutdown sends what is in flight); left running
     /// when connecting timed out or a process was lost.
     timely: Option<JoinHandle<std::result::Result<(), String>>>,
 }
 
 impl Exchange {
-    /// Starts timely's communication and waits until every process is connected.
+    /// Starts timely's communication; the first round waits until every process is connected.
     fn connect(cluster: &Cluster) -> Result<Exchange> {
         let processes = cluster.addresses.len();
         if cluster.process >= processes {
@@ -354,22 +401,27 @@ impl Exchange {
         let (worker_out, incoming) = mpsc::channel();
         let (ready, connected) = mpsc::channel();
         let arrived = Arc::new(Mutex::new(vec![0; processes]));
-        let config = timely::Config {
-            communication: timely::CommunicationConfig::Cluster {
-                threads: 1,
-                process: cluster.process,
-                addresses: cluster.addresses.clone(),
-                report: false,
-                zerocopy: false,
-            },
-            worker: timely::WorkerConfig::default(),
-        };
+        let deadline = Instant::now() + cluster.connect_timeout;
+        let (process, addresses) = (cluster.process, cluster.addresses.clone());
         // One worker per process: timely's Fn closure takes the channels once.
         let ends = Mutex::new(Some((worker_in, worker_out, ready, arrived.clone())));
         let timely = std::thread::Builder::new()
             .name("timely".into())
             .spawn(move || {
-                let guards = timely::execute(config, move |worker| {
+                // A second past the deadline: the bake reports the timeout itself, and this
+                // thread then ends rather than retrying for ever.
+                let give_up = deadline + Duration::from_secs(1);
+                let sockets = connect_sockets(&addresses, process, give_up)
+                    .map_err(|e| format!("connecting: {e}"))?;
+                let hooks = Hooks::default();
+                let allocators =
+                    ProcessBuilder::new_typed_vector(1, hooks.refill.clone(), hooks.spill.clone());
+                let (builders, guard) =
+                    initialize_networking_from_sockets(allocators, sockets, process, 1, hooks)
+                        .map_err(|e| format!("starting timely's network threads: {e}"))?;
+                let builders = builders.into_iter().map(AllocatorBuilder::Tcp).collect();
+                let config = timely::WorkerConfig::default();
+                let guards = execute_from(builders, Box::new(guard), config, move |worker| {
                     let ends = ends.lock().unwrap().take();
                     let (outgoing, incoming, ready, arrived) =
                         ends.expect("one worker per process");
@@ -381,7 +433,7 @@ impl Exchange {
                 }
             })
             .map_err(|e| Error::Cluster(format!("cannot start timely: {e}")))?;
-        let mut exchange = Exchange {
+        Ok(Exchange {
             process: cluster.process,
             processes,
             addresses: cluster.addresses.clone(),
@@ -393,25 +445,39 @@ impl Exchange {
             waited: Duration::ZERO,
             rows_seconds: 0.0,
             sweeps_seconds: 0.0,
+            connecting: Some((connected, deadline)),
+            connect_timeout: cluster.connect_timeout,
             timely: Some(timely),
+        })
+    }
+
+    /// Waits, until the connect timeout's deadline, for every process to connect.
+    fn connected(&mut self) -> Result<()> {
+        let Some((connected, deadline)) = self.connecting.take() else {
+            return Ok(());
         };
-        match connected.recv_timeout(cluster.connect_timeout) {
-            Ok(()) => Ok(exchange),
+        let start = Instant::now();
+        let outcome = connected.recv_timeout(deadline.saturating_duration_since(start));
+        self.waited += start.elapsed();
+        match outcome {
+            Ok(()) => Ok(()),
             Err(RecvTimeoutError::Timeout) => {
-                exchange.timely = None; // still retrying; left behind
+                self.timely = None; // still retrying; left behind
                 Err(Error::Cluster(format!(
                     "process {}: not every process connected within {:.0} s; is each of {} \
                      running with the same list and reachable?",
-                    cluster.process,
-                    cluster.connect_timeout.as_secs_f64(),
-                    exchange.others()
+                    self.process,
+                    self.connect_timeout.as_secs_f64(),
+                    self.others()
                 )))
             }
-            Err(RecvTimeoutError::Disconnected) => Err(Error::Cluster(format!(
-                "process {} could not start its communication: {}",
-                cluster.process,
-                exchange.join()
-            ))),
+            Err(RecvTimeoutError::Disconnected) => {
+                let why = self.join();
+                Err(Error::Cluster(format!(
+                    "process {} could not start its communication: {why}",
+                    self.process,
+                )))
+            }
         }
     }
 
@@ -424,14 +490,9 @@ impl Exchange {
         others.join(", ")
     }
 
-    /// The texels of process `p` of `n`.
-    fn rows_of(&self, p: usize, n: usize) -> Range<usize> {
-        n * p / self.processes..n * (p + 1) / self.processes
-    }
-
-    /// This process's texels.
+    /// This process's part of `n` texels (or other items).
     fn rows(&self, n: usize) -> Range<usize> {
-        self.rows_of(self.process, n)
+        shard::part_of(self.process, self.processes, n)
     }
 
     fn bytes_per_sweep(&self, n: usize) -> u64 {
@@ -487,6 +548,7 @@ impl Exchange {
 
     /// One round: every process's share, in process order.
     fn round(&mut self, share: Share) -> Result<Vec<Share>> {
+        self.connected()?;
         self.round += 1;
         let lost = |exchange: &mut Exchange| {
             // Not joined: timely's threads end when the other processes close their
@@ -497,8 +559,8 @@ impl Exchange {
                 .map(|(p, _)| format!("{p} ({})", exchange.addresses[p]))
                 .collect();
             Error::Cluster(format!(
-                "process {} lost contact with process {} in exchange {} (the first carries \
-                 direct light, then one per sweep): it died or its network failed",
+                "process {} lost contact with process {} in exchange {}: it died or its network \
+                 failed",
                 exchange.process,
                 missing.join(", "),
                 exchange.round,
@@ -538,9 +600,76 @@ impl Drop for Exchange {
         // Closing the channel ends the worker, which shuts its connections down cleanly.
         let (closed, _) = mpsc::channel();
         self.outgoing = closed;
+        // Still connecting (a bake that ended before its first exchange): timely's thread
+        // waits for peers that may never come, so it is left behind.
+        if let Some((connected, _)) = self.connecting.take()
+            && connected.try_recv().is_err()
+        {
+            self.timely = None;
+        }
         if let Some(timely) = self.timely.take() {
             let _ = timely.join();
         }
+    }
+}
+
+/// TCP connections to every other process, in process order (`None` for this one), set up as
+/// timely's own `create_sockets` does — each process connects to the lower ones and sends its
+/// index, and accepts the higher ones — but polling every few milliseconds where timely sleeps
+/// a second between attempts (a second of every bake), printing nothing, and giving up at
+/// `give_up`.
+fn connect_sockets(
+    addresses: &[String],
+    me: usize,
+    give_up: Instant,
+) -> io::Result<Vec<Option<TcpStream>>> {
+    let listener = TcpListener::bind(&addresses[me])?;
+    listener.set_nonblocking(true)?;
+    let mut sockets: Vec<Option<TcpStream>> = addresses.iter().map(|_| None).collect();
+    loop {
+        for (p, address) in addresses.iter().enumerate().take(me) {
+            if sockets[p].is_some() {
+                continue;
+            }
+            // Not up yet (refused), or not resolvable yet: tried again on the next poll.
+            let Some(addr) = address.to_socket_addrs().ok().and_then(|mut a| a.next()) else {
+                continue;
+            };
+            if let Ok(mut stream) = TcpStream::connect_timeout(&addr, Duration::from_millis(500)) {
+                stream.set_nodelay(true)?;
+                stream.write_all(&(me as u64).to_be_bytes())?;
+                sockets[p] = Some(stream);
+            }
+        }
+        loop {
+            match listener.accept() {
+                Ok((mut stream, _)) => {
+                    stream.set_nonblocking(false)?;
+                    stream.set_nodelay(true)?;
+                    let mut index = [0; 8];
+                    stream.set_read_timeout(Some(Duration::from_secs(5)))?;
+                    stream.read_exact(&mut index)?;
+                    stream.set_read_timeout(None)?;
+                    let p = u64::from_be_bytes(index) as usize;
+                    if p > me && p < addresses.len() {
+                        sockets[p] = Some(stream);
+                    }
+                }
+                Err(e) if e.kind() == io::ErrorKind::WouldBlock => break,
+                Err(e) => return Err(e),
+            }
+        }
+        let missing = (0..addresses.len()).any(|p| p != me && sockets[p].is_none());
+        if !missing {
+            return Ok(sockets);
+        }
+        if Instant::now() > give_up {
+            return Err(io::Error::new(
+                io::ErrorKind::TimedOut,
+                "not every process connected",
+            ));
+        }
+        std::thread::sleep(Duration::from_millis(5));
     }
 }
 

@@ -3,7 +3,8 @@
 //! [`solve::solve`]; the matrix-free gatherer and the hierarchy make their transport as they
 //! solve ([`solve::gather`], [`solve::hierarchical`]).
 
-use crate::config::{BakeConfig, SolveParams, Technique, TransportParams};
+use crate::config::{SolveParams, Technique, TransportParams};
+use crate::shard::{Alone, Shards};
 use crate::solve::{self, Solution};
 use crate::transport::{self, Surfaces, Transport};
 use crate::{Progress, Result};
@@ -15,27 +16,35 @@ pub(crate) struct Lit {
     pub(crate) solution: Solution,
 }
 
-/// What makes the final bake's transport and solution from the planned settings and the
-/// per-texel rays: [`by_technique`] on this machine, or a distributed solve
-/// ([`super::distributed`]).
-pub(crate) type LightFn<'a> =
-    &'a dyn Fn(Surfaces, &BakeConfig, Option<&[u32]>, &dyn Progress) -> Result<Lit>;
+/// The processes a bake runs on: what they share of the per-item work ([`Shards`]), and how
+/// they make a transport and its solution — the pilot bakes' and the final bake's: on one
+/// process ([`Alone`]) [`transport_and_solve`], on several a distributed solve
+/// ([`super::distributed`]) with the same result.
+pub(crate) trait Processes: Shards {
+    /// [`transport_and_solve`]'s result.
+    fn light(
+        &self,
+        surfaces: Surfaces,
+        technique: Technique,
+        params: &TransportParams,
+        texel_rays: Option<&[u32]>,
+        solve: &SolveParams,
+        progress: &dyn Progress,
+    ) -> Result<Lit>;
+}
 
-/// [`transport_and_solve`] with `config`'s technique and parameters.
-pub(crate) fn by_technique(
-    surfaces: Surfaces,
-    config: &BakeConfig,
-    texel_rays: Option<&[u32]>,
-    progress: &dyn Progress,
-) -> Result<Lit> {
-    transport_and_solve(
-        surfaces,
-        config.technique,
-        &config.transport,
-        texel_rays,
-        &config.solve,
-        progress,
-    )
+impl Processes for Alone {
+    fn light(
+        &self,
+        surfaces: Surfaces,
+        technique: Technique,
+        params: &TransportParams,
+        texel_rays: Option<&[u32]>,
+        solve: &SolveParams,
+        progress: &dyn Progress,
+    ) -> Result<Lit> {
+        transport_and_solve(surfaces, technique, params, texel_rays, solve, progress)
+    }
 }
 
 /// Light transport and its solution with `technique`; `texel_rays` as in [`transport::build`].

@@ -20,9 +20,11 @@ use crate::config::{BakeConfig, FormFactors, Technique, TransportParams};
 use crate::lightmap::{self, LightmapPages};
 use crate::output::{self, PageFiles, Staging};
 use crate::plan::{self, Plan};
+use crate::shard::{Alone, Shards};
 use crate::trace::Tracer;
 use crate::transport::Surfaces;
 use crate::{Error, Progress, Result, atlas, scene, solve, texels, transport};
+use light::Processes;
 
 /// Wall time of one pipeline stage.
 #[derive(Clone, Debug)]
@@ -188,7 +190,7 @@ pub fn bake(
     if scene.triangles.is_empty() {
         return pass_through(&source, input, out_dir, progress, t);
     }
-    let prepared = prepare_loaded(scene, source, input, config, 1, progress, t)?;
+    let prepared = prepare_loaded(scene, source, input, config, &Alone, progress, t)?;
     let baked = compute_prepared(prepared, progress)?;
     write(baked, input, out_dir, config, progress)
 }
@@ -330,7 +332,7 @@ pub fn prepare(input: &Path, config: &BakeConfig, progress: &dyn Progress) -> Re
     if scene.triangles.is_empty() {
         return Err(Error::invalid(input, "the scene has no triangles"));
     }
-    prepare_loaded(scene, source, input, config, 1, progress, t)
+    prepare_loaded(scene, source, input, config, &Alone, progress, t)
 }
 
 /// Loads `input` and hands the loader's warnings to `progress`.
@@ -342,14 +344,14 @@ fn load(input: &Path, progress: &dyn Progress) -> Result<(scene::Scene, scene::S
     Ok((scene, source))
 }
 
-/// [`prepare`] from a loaded scene with triangles (loading began at `load_start`), for one of
-/// `processes` processes sharing the final rows.
+/// [`prepare`] from a loaded scene with triangles (loading began at `load_start`), on
+/// `processes` (which share the density pilot and the validity pass).
 fn prepare_loaded(
     scene: scene::Scene,
     source: scene::Source,
     input: &Path,
     config: &BakeConfig,
-    processes: usize,
+    processes: &dyn Processes,
     progress: &dyn Progress,
     load_start: Instant,
 ) -> Result<Prepared> {
@@ -374,7 +376,7 @@ fn prepare_loaded(
     config.max_memory = Some(memory::limit(&config));
     memory::check(
         input,
-        &plan::memory::Sizes::predicted(&scene, &source, &config).per_process(processes),
+        &plan::memory::Sizes::predicted(&scene, &source, &config).per_process(processes.count()),
         &config,
         config.max_memory.unwrap_or(u64::MAX),
     )?;
@@ -406,13 +408,13 @@ fn prepare_loaded(
             .min(1.0);
         let mut coarse = config.clone();
         coarse.atlas.texels_per_unit = tpu * scale as f32;
-        let texels = pilot_layout(&scene, &source, &tracer, &coarse, progress)?;
+        let texels = pilot_layout(&scene, &source, &tracer, &coarse, processes, progress)?;
         let surfaces = Surfaces {
             scene: &scene,
             texels: &texels,
             tracer: &tracer,
         };
-        let density = pilot::measure_density(surfaces, &coarse, tpu, plan, progress)?;
+        let density = pilot::measure_density(surfaces, &coarse, tpu, plan, processes, progress)?;
         density_noise = density.noise;
         if let Some(factors) = density.triangle_factors {
             config.atlas.triangle_density = factors;
@@ -420,8 +422,15 @@ fn prepare_loaded(
         timed(&mut stages, "density pilot", t);
         plan.overhead_seconds += t.elapsed().as_secs_f64();
     }
-    let (atlas, texels, validity) =
-        lay_out(&scene, &source, &tracer, &config, progress, &mut stages)?;
+    let (atlas, texels, validity) = lay_out(
+        &scene,
+        &source,
+        &tracer,
+        &config,
+        processes,
+        progress,
+        &mut stages,
+    )?;
 
     Ok(Prepared {
         scene,
@@ -435,7 +444,7 @@ fn prepare_loaded(
         density_noise,
         junctions,
         stages,
-        processes,
+        processes: processes.count(),
     })
 }
 
@@ -445,6 +454,7 @@ fn lay_out(
     source: &scene::Source,
     tracer: &Tracer,
     config: &BakeConfig,
+    shards: &dyn Shards,
     progress: &dyn Progress,
     stages: &mut Vec<StageTime>,
 ) -> Result<(
@@ -463,17 +473,18 @@ fn lay_out(
     check_aborted(progress)?;
 
     let t = Instant::now();
-    let validity = fix_validity(&mut texels, scene, tracer, config, progress)?;
+    let validity = fix_validity(&mut texels, scene, tracer, config, shards, progress)?;
     timed(stages, "validity", t);
     Ok((atlas, texels, validity))
 }
 
-/// The validity pass over `texels` when `config` asks for it.
+/// The validity pass over `texels` when `config` asks for it, its probes divided among `shards`.
 fn fix_validity(
     texels: &mut texels::Texels,
     scene: &scene::Scene,
     tracer: &Tracer,
     config: &BakeConfig,
+    shards: &dyn Shards,
     progress: &dyn Progress,
 ) -> Result<texels::validity::ValidityReport> {
     if !config.transport.validity {
@@ -483,7 +494,7 @@ fn fix_validity(
         seed: config.transport.seed,
         ..Default::default()
     };
-    texels::validity::fix(texels, scene, tracer, &params, progress)
+    texels::validity::fix_sharded(texels, scene, tracer, &params, shards, progress)
 }
 
 /// The density pilot's texels: a quickly charted atlas (`atlas::build_quick`) and its validity
@@ -493,12 +504,13 @@ fn pilot_layout(
     source: &scene::Source,
     tracer: &Tracer,
     config: &BakeConfig,
+    shards: &dyn Shards,
     progress: &dyn Progress,
 ) -> Result<texels::Texels> {
     let atlas = atlas::build_quick(scene, source, &config.atlas, progress)?;
     check_aborted(progress)?;
     let mut texels = texels::build(scene, &atlas)?;
-    fix_validity(&mut texels, scene, tracer, config, progress)?;
+    fix_validity(&mut texels, scene, tracer, config, shards, progress)?;
     Ok(texels)
 }
 
@@ -509,7 +521,7 @@ pub fn compute(input: &Path, config: &BakeConfig, progress: &dyn Progress) -> Re
 
 /// [`compute`] from the prepared stages.
 fn compute_prepared(mut prepared: Prepared, progress: &dyn Progress) -> Result<Baked> {
-    let lit = light(&mut prepared, progress, &light::by_technique)?;
+    let lit = light(&mut prepared, &Alone, progress)?;
     finish(prepared, lit, progress)
 }
 
@@ -521,12 +533,12 @@ pub(crate) struct Lighting {
     last: pilot::FinalBake,
 }
 
-/// The automatic choice (pilot runs included) and the final bake, whose transport and solution
-/// `lit` makes (on this machine, [`light::by_technique`]; or [`distributed`]).
+/// The automatic choice (pilot runs included) and the final bake, on `processes` (one, or
+/// those of a [`distributed`] bake).
 pub(crate) fn light(
     prepared: &mut Prepared,
+    processes: &dyn Processes,
     progress: &dyn Progress,
-    lit: light::LightFn,
 ) -> Result<Lighting> {
     let density_noise = prepared.density_noise;
     let (mut config, mut plan, mut stages) = (
@@ -552,6 +564,7 @@ pub(crate) fn light(
             &auto.keep,
             progress,
             density_noise,
+            processes,
         )?;
         config.validate()?;
         timed(&mut stages, "plan", t);
@@ -596,7 +609,7 @@ pub(crate) fn light(
 
     let t = Instant::now();
     // With a plan, the pilot bakes are part of the result (a ray-weighted mean).
-    let last = pilot::final_bake(surfaces, &config, plan.as_ref(), pilot, progress, lit)?;
+    let last = pilot::final_bake(surfaces, &config, plan.as_ref(), pilot, processes, progress)?;
     if !last.solution.converged {
         progress.warn(&format!(
             "the solver stopped on the iteration cap ({}) at residual {:.2e}, above the tolerance {:.1e}",

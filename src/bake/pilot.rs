@@ -9,10 +9,11 @@ use std::time::Instant;
 
 use glam::Vec3;
 
-use super::light::{Lit, transport_and_solve};
+use super::light::{Lit, Processes};
 use crate::config::{BakeConfig, FormFactors, Keep, SolveParams, Technique, TransportParams};
 use crate::plan::{self, GatheredSample, PILOT_RAYS, Plan, PunctualSample};
 use crate::progress::CancelOnly;
+use crate::shard::Shards;
 use crate::solve::Solution;
 use crate::texels::Texels;
 use crate::transport::{Surfaces, Transport};
@@ -31,6 +32,7 @@ pub(crate) fn choose_transport(
     keep: &Keep,
     progress: &dyn Progress,
     density_noise: Option<f32>,
+    processes: &dyn Processes,
 ) -> Result<Option<PilotRuns>> {
     let texels = surfaces.texels;
     let n = texels.len();
@@ -43,7 +45,16 @@ pub(crate) fn choose_transport(
         progress.begin("pilot", 2);
         let start = Instant::now();
         let tolerance = (e / 10.0).min(1e-3);
-        let bake = |k| PilotRuns::bake(surfaces, &config.transport, k, tolerance, progress);
+        let bake = |k| {
+            PilotRuns::bake(
+                surfaces,
+                &config.transport,
+                k,
+                tolerance,
+                processes,
+                progress,
+            )
+        };
         let indirect_only = config.transport.indirect_only;
         let measured = density_noise.filter(|&n| n > 0.0 && n.is_finite());
         plan.noise_from_density_pilot = measured.is_some();
@@ -95,7 +106,15 @@ pub(crate) fn choose_transport(
             punctual,
             gathered,
             seconds,
-        } = Samples::measure(surfaces, &config.transport, &runs, stored, e, budget);
+        } = Samples::measure(
+            surfaces,
+            &config.transport,
+            &runs,
+            stored,
+            e,
+            budget,
+            processes,
+        )?;
         if let Some(g) = &gathered {
             // The last pair's own noise per texel, measured above.
             let texel_noise = second.unwrap_or(first);
@@ -171,6 +190,7 @@ pub(crate) fn measure_density(
     config: &BakeConfig,
     tpu: f32,
     plan: &mut Plan,
+    processes: &dyn Processes,
     progress: &dyn Progress,
 ) -> Result<Density> {
     let mut density = Density {
@@ -181,11 +201,26 @@ pub(crate) fn measure_density(
         return Ok(density);
     }
     let tolerance = (plan.target_error / 10.0).min(1e-3);
-    let runs = PilotRuns::bake(surfaces, &config.transport, PILOT_RAYS, tolerance, progress)?;
+    let runs = PilotRuns::bake(
+        surfaces,
+        &config.transport,
+        PILOT_RAYS,
+        tolerance,
+        processes,
+        progress,
+    )?;
     let [a, b] = runs.stored(config.transport.indirect_only);
     let (stored, budget) = ([a.as_slice(), b.as_slice()], runs.rays() / 2);
     let target = plan.target_error;
-    let samples = Samples::measure(surfaces, &config.transport, &runs, stored, target, budget);
+    let samples = Samples::measure(
+        surfaces,
+        &config.transport,
+        &runs,
+        stored,
+        target,
+        budget,
+        processes,
+    )?;
     let (scene, texels) = (surfaces.scene, surfaces.texels);
     let densities = (tpu, config.atlas.texels_per_unit);
     density.triangle_factors = samples.gathered.as_ref().and_then(|g| {
@@ -219,9 +254,10 @@ fn punctual_sample(
     surfaces: Surfaces,
     transport: &TransportParams,
     pilot: [&[Vec3]; 2],
-) -> Option<PunctualSample> {
+    shards: &dyn Shards,
+) -> Result<Option<PunctualSample>> {
     if transport.indirect_only {
-        return None;
+        return Ok(None);
     }
     let mean: Vec<Vec3> = pilot[0]
         .iter()
@@ -234,6 +270,7 @@ fn punctual_sample(
         surfaces.tracer,
         &mean,
         transport.seed,
+        shards,
     )
 }
 
@@ -247,9 +284,10 @@ fn gathered_sample(
     punctual: Option<&PunctualSample>,
     target: f32,
     budget_rays: u64,
-) -> Option<GatheredSample> {
+    shards: &dyn Shards,
+) -> Result<Option<GatheredSample>> {
     if transport.indirect_only {
-        return None;
+        return Ok(None);
     }
     let runs = plan::gathered::Runs {
         irradiance: [
@@ -267,6 +305,7 @@ fn gathered_sample(
         surfaces.tracer,
         &runs,
         punctual,
+        shards,
     )
 }
 
@@ -299,9 +338,10 @@ impl Samples {
         stored: [&[Vec3]; 2],
         target: f32,
         budget_rays: u64,
-    ) -> Samples {
+        shards: &dyn Shards,
+    ) -> Result<Samples> {
         let start = Instant::now();
-        let punctual = punctual_sample(surfaces, transport, stored);
+        let punctual = punctual_sample(surfaces, transport, stored, shards)?;
         let gathered = gathered_sample(
             surfaces,
             transport,
@@ -309,12 +349,13 @@ impl Samples {
             punctual.as_ref(),
             target,
             budget_rays,
-        );
-        Samples {
+            shards,
+        )?;
+        Ok(Samples {
             punctual,
             gathered,
             seconds: start.elapsed().as_secs_f64(),
-        }
+        })
     }
 }
 
@@ -324,6 +365,7 @@ impl PilotRuns {
         transport: &TransportParams,
         k: u32,
         tolerance: f32,
+        processes: &dyn Processes,
         progress: &dyn Progress,
     ) -> Result<PilotRuns> {
         let solve_params = SolveParams {
@@ -340,7 +382,7 @@ impl PilotRuns {
                     ..transport.clone()
                 };
                 let technique = Technique::DEFAULT;
-                let mut lit = transport_and_solve(
+                let mut lit = processes.light(
                     surfaces,
                     technique,
                     &params,
@@ -417,14 +459,17 @@ pub(crate) fn final_bake(
     config: &BakeConfig,
     plan: Option<&Plan>,
     pilot: Option<PilotRuns>,
+    processes: &dyn Processes,
     progress: &dyn Progress,
-    lit: super::light::LightFn,
 ) -> Result<FinalBake> {
     let (k, l) = (config.transport.gather_rays, config.transport.light_samples);
     let texel_rays = plan
         .and_then(|p| p.texel_rays.as_ref())
         .map(|r| r.0.as_slice());
-    let bake = || lit(surfaces, config, texel_rays, progress);
+    let bake = || {
+        let (technique, transport, solve) = (config.technique, &config.transport, &config.solve);
+        processes.light(surfaces, technique, transport, texel_rays, solve, progress)
+    };
     let Some(pilot) = pilot else {
         let Lit {
             transport,

@@ -37,12 +37,13 @@
 use std::f32::consts::PI;
 
 use glam::Vec3;
-use rayon::prelude::*;
 
 use super::punctual::{PunctualSample, bilinear};
+use crate::Result;
 use crate::lights::{Emitters, punctual_irradiance};
 use crate::sampling::{self, Rng, cosine_hemisphere, frame, hammersley, power_weight};
 use crate::scene::Scene;
+use crate::shard::{self, Packed, Shards, bits};
 use crate::texels::validity::{self, MAX_BACK, PROBE_RAYS};
 use crate::texels::{RayEnd, Texels};
 use crate::trace::Tracer;
@@ -93,6 +94,37 @@ enum Drawn {
     Skipped,
 }
 
+impl Packed for Drawn {
+    const FLOATS: usize = 6;
+    fn pack(&self, out: &mut Vec<f32>) {
+        match self {
+            Drawn::Kept(p) => out.extend([
+                1.0,
+                bits(p.triangle),
+                p.rest_square,
+                p.punctual_square,
+                p.total,
+                p.noise_square,
+            ]),
+            Drawn::Unseen(t) => out.extend([2.0, bits(*t), 0.0, 0.0, 0.0, 0.0]),
+            Drawn::Skipped => out.extend([0.0; 6]),
+        }
+    }
+    fn unpack(v: &[f32]) -> Self {
+        match v[0] as u32 {
+            1 => Drawn::Kept(GatheredPoint {
+                triangle: v[1].to_bits(),
+                rest_square: v[2],
+                punctual_square: v[3],
+                total: v[4],
+                noise_square: v[5],
+            }),
+            2 => Drawn::Unseen(v[1].to_bits()),
+            _ => Drawn::Skipped,
+        }
+    }
+}
+
 /// The lookup error of the pilot's lightmap at random surface points against a gather there.
 #[derive(Clone, Debug, Default)]
 pub(crate) struct GatheredSample {
@@ -132,9 +164,10 @@ impl GatheredSample {
         tracer: &Tracer,
         runs: &Runs,
         punctual: Option<&PunctualSample>,
-    ) -> Option<GatheredSample> {
+        shards: &dyn Shards,
+    ) -> Result<Option<GatheredSample>> {
         if texels.is_empty() || scene.triangles.is_empty() {
-            return None;
+            return Ok(None);
         }
         let emitters = Emitters::new(scene, texels);
         let light_samples = if emitters.is_empty() {
@@ -151,7 +184,10 @@ impl GatheredSample {
             emitters,
             light_samples,
             valid: texels.valid_mask(),
-            cdf: area_cdf(scene)?,
+            cdf: match area_cdf(scene) {
+                Some(cdf) => cdf,
+                None => return Ok(None),
+            },
         };
         let per_point =
             (PROBE_RAYS + 2 * (GATHER_RAYS + light_samples)) as u64 + scene.lights.len() as u64;
@@ -160,10 +196,7 @@ impl GatheredSample {
         let mut sample = GatheredSample::default();
         let mut drawn = 0;
         while drawn < MAX_POINTS {
-            let batch: Vec<Drawn> = (drawn..drawn + BATCH)
-                .into_par_iter()
-                .map(|k| drawer.draw(k))
-                .collect();
+            let batch = shard::map(shards, BATCH, |k| drawer.draw(drawn + k))?;
             drawn += BATCH;
             for d in batch {
                 match d {
@@ -189,7 +222,7 @@ impl GatheredSample {
         }
         sample.drawn = drawn;
         sample.rays = per_point * sample.points.len() as u64;
-        Some(sample)
+        Ok(Some(sample))
     }
 
     /// Relative RMS lookup error of the light other than punctual direct light (its mean

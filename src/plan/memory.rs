@@ -286,8 +286,8 @@ impl Sizes {
             triangles: self.triangles,
             texels: n,
             page_texels: self.page_texels,
-            held_entries: held * held_rays * n,
-            // Each process builds the rows of its own texels only.
+            // Each process builds (and holds) the rows of its own texels only, the pilots' too.
+            held_entries: held * held_rays * (n / self.processes),
             built_entries: entries_per_texel(technique, n, rays) * (n / self.processes),
             held_runs: held,
             technique,

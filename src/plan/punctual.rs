@@ -13,11 +13,12 @@
 //! such lookups are counted ([`PunctualSample::border_share`]).
 
 use glam::{Vec2, Vec3};
-use rayon::prelude::*;
 
+use crate::Result;
 use crate::lights::{punctual_irradiance, triangle_point};
 use crate::sampling::{self, Rng};
 use crate::scene::Scene;
+use crate::shard::{self, Packed, Shards, flag};
 use crate::texels::{NO_TEXEL, Texels};
 use crate::trace::Tracer;
 
@@ -42,6 +43,24 @@ pub(crate) struct PointError {
     pub(crate) total: f32,
 }
 
+/// A sampled point's error, or none where the lookup finds no texel.
+impl Packed for Option<PointError> {
+    const FLOATS: usize = 4;
+    fn pack(&self, out: &mut Vec<f32>) {
+        match self {
+            Some(p) => out.extend([1.0, p.square, flag(p.border), p.total]),
+            None => out.extend([0.0; 4]),
+        }
+    }
+    fn unpack(v: &[f32]) -> Self {
+        (v[0] != 0.0).then(|| PointError {
+            square: v[1],
+            border: v[2] != 0.0,
+            total: v[3],
+        })
+    }
+}
+
 /// Direct punctual light at the texels and its lookup error at random surface points.
 #[derive(Clone, Debug, Default)]
 pub(crate) struct PunctualSample {
@@ -61,9 +80,10 @@ impl PunctualSample {
         tracer: &Tracer,
         total: &[Vec3],
         seed: u64,
-    ) -> Option<PunctualSample> {
+        shards: &dyn Shards,
+    ) -> Result<Option<PunctualSample>> {
         if scene.lights.is_empty() || texels.is_empty() {
-            return None;
+            return Ok(None);
         }
         let exact = |p: Vec3, n: Vec3| -> Vec3 {
             let origin = p + n * tracer.epsilon;
@@ -73,20 +93,17 @@ impl PunctualSample {
                 .map(|l| punctual_irradiance(l, origin, n, tracer))
                 .sum()
         };
-        let texel: Vec<Vec3> = (0..texels.len())
-            .into_par_iter()
-            .map(|i| {
-                let mut rng = Rng::new(seed ^ SALT, i as u64, 0);
-                let n = texels.normal[i];
-                let mut sum = Vec3::ZERO;
-                for s in 0..GRID * GRID {
-                    let cell = Vec2::new((s % GRID) as f32, (s / GRID) as f32);
-                    let u = (cell + rng.next_vec2()) / GRID as f32;
-                    sum += exact(texels.footprint_point(i, u), n);
-                }
-                sum / (GRID * GRID) as f32
-            })
-            .collect();
+        let texel: Vec<Vec3> = shard::map(shards, texels.len(), |i| {
+            let mut rng = Rng::new(seed ^ SALT, i as u64, 0);
+            let n = texels.normal[i];
+            let mut sum = Vec3::ZERO;
+            for s in 0..GRID * GRID {
+                let cell = Vec2::new((s % GRID) as f32, (s / GRID) as f32);
+                let u = (cell + rng.next_vec2()) / GRID as f32;
+                sum += exact(texels.footprint_point(i, u), n);
+            }
+            sum / (GRID * GRID) as f32
+        })?;
         let valid = texels.valid_mask();
         let mut cdf = Vec::with_capacity(scene.triangles.len());
         let mut area = 0.0f64;
@@ -95,28 +112,26 @@ impl PunctualSample {
             area += 0.5 * (b - a).cross(c - a).length();
             cdf.push(area as f32);
         }
-        let points = (0..POINTS)
-            .into_par_iter()
-            .filter_map(|k| {
-                let mut rng = Rng::new(seed ^ SALT, k as u64, 1);
-                let t = sampling::sample_cdf(&cdf, rng.next_f32()) as u32;
-                let b = sampling::triangle_point(rng.next_vec2());
-                let (p, n) = triangle_point(scene, t, b);
-                let [ua, ub, uc] = texels.triangle_uv[t as usize];
-                let uv = ua * (1.0 - b.x - b.y) + ub * b.x + uc * b.y;
-                let page = texels.triangle_page[t as usize] as usize;
-                let lookup = bilinear(texels, &valid, page, uv)?;
-                let read =
-                    |v: &[Vec3]| -> Vec3 { lookup.0.iter().map(|&(j, w)| v[j as usize] * w).sum() };
-                let d = read(&texel) - exact(p, n);
-                Some(PointError {
-                    square: (d * d).element_sum() / 3.0,
-                    border: lookup.1,
-                    total: read(total).element_sum() / 3.0,
-                })
+        let points = shard::map(shards, POINTS, |k| {
+            let mut rng = Rng::new(seed ^ SALT, k as u64, 1);
+            let t = sampling::sample_cdf(&cdf, rng.next_f32()) as u32;
+            let b = sampling::triangle_point(rng.next_vec2());
+            let (p, n) = triangle_point(scene, t, b);
+            let [ua, ub, uc] = texels.triangle_uv[t as usize];
+            let uv = ua * (1.0 - b.x - b.y) + ub * b.x + uc * b.y;
+            let page = texels.triangle_page[t as usize] as usize;
+            let lookup = bilinear(texels, &valid, page, uv)?;
+            let read =
+                |v: &[Vec3]| -> Vec3 { lookup.0.iter().map(|&(j, w)| v[j as usize] * w).sum() };
+            let d = read(&texel) - exact(p, n);
+            Some(PointError {
+                square: (d * d).element_sum() / 3.0,
+                border: lookup.1,
+                total: read(total).element_sum() / 3.0,
             })
-            .collect();
-        Some(PunctualSample { texel, points })
+        })?;
+        let points = points.into_iter().flatten().collect();
+        Ok(Some(PunctualSample { texel, points }))
     }
 
     /// Relative RMS error of the lookups (over the points' mean total light).

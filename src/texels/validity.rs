@@ -40,12 +40,12 @@
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use glam::{Vec2, Vec3};
-use rayon::prelude::*;
 
 use super::Texels;
 use super::cuts::{self, page_neighbours};
 use crate::sampling::{Rng, cosine_hemisphere, frame, hammersley};
 use crate::scene::Scene;
+use crate::shard::{self, Alone, Packed, Shards, flag};
 use crate::trace::Tracer;
 use crate::{Error, Progress, Result};
 
@@ -100,28 +100,38 @@ pub fn fix(
     params: &ValidityParams,
     progress: &dyn Progress,
 ) -> Result<ValidityReport> {
+    fix_sharded(texels, scene, tracer, params, &Alone, progress)
+}
+
+/// [`fix`] with the texels' probes divided among `shards`.
+pub(crate) fn fix_sharded(
+    texels: &mut Texels,
+    scene: &Scene,
+    tracer: &Tracer,
+    params: &ValidityParams,
+    shards: &dyn Shards,
+    progress: &dyn Progress,
+) -> Result<ValidityReport> {
     let rays = params.rays.max(1);
     let grid = params.grid.max(1);
     let limit = (MAX_BACK * rays as f32) as u32;
     let texels_ref = &*texels;
     let aborted = AtomicBool::new(false);
-    let outcome: Vec<(Option<Vec3>, bool)> = (0..texels.len())
-        .into_par_iter()
-        .map(|i| {
-            // Once per texel: a few dozen rays each, so the check costs nothing.
-            if aborted.load(Ordering::Relaxed) || progress.aborted() {
-                aborted.store(true, Ordering::Relaxed);
-                return (None, false);
-            }
-            probe_texel(texels_ref, tracer, i, rays, grid, limit, params.seed)
-        })
-        .collect();
+    let outcome = shard::map(shards, texels.len(), |i| {
+        // Once per texel: a few dozen rays each, so the check costs nothing.
+        if aborted.load(Ordering::Relaxed) || progress.aborted() {
+            aborted.store(true, Ordering::Relaxed);
+            return Probed::default();
+        }
+        let (moved, invalid) = probe_texel(texels_ref, tracer, i, rays, grid, limit, params.seed);
+        Probed { moved, invalid }
+    })?;
     if aborted.into_inner() {
         return Err(Error::Aborted);
     }
     let mut report = ValidityReport::default();
     texels.invalid.clear();
-    for (i, (moved, invalid)) in outcome.into_iter().enumerate() {
+    for (i, Probed { moved, invalid }) in outcome.into_iter().enumerate() {
         if let Some(p) = moved {
             texels.position[i] = p;
             if let Some(j) = texels.jitter.get_mut(i) {
@@ -138,6 +148,35 @@ pub fn fix(
     report.moved += divided.moved;
     report.divided = divided.divided;
     Ok(report)
+}
+
+/// What the probes found at one texel.
+#[derive(Clone, Copy, Debug, Default)]
+struct Probed {
+    /// The new sample point, when it moved.
+    moved: Option<Vec3>,
+    /// No candidate point is outside geometry.
+    invalid: bool,
+}
+
+impl Packed for Probed {
+    const FLOATS: usize = 5;
+    fn pack(&self, out: &mut Vec<f32>) {
+        let p = self.moved.unwrap_or(Vec3::ZERO);
+        out.extend([
+            p.x,
+            p.y,
+            p.z,
+            flag(self.moved.is_some()),
+            flag(self.invalid),
+        ]);
+    }
+    fn unpack(v: &[f32]) -> Self {
+        Probed {
+            moved: (v[3] != 0.0).then(|| Vec3::new(v[0], v[1], v[2])),
+            invalid: v[4] != 0.0,
+        }
+    }
 }
 
 /// (new position if moved, invalid) for texel `i`.
