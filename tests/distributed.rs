@@ -64,8 +64,8 @@ fn free_addresses(n: usize) -> Vec<String> {
 fn processes_give_the_bytes_of_one_process() {
     let scene = fixture("cornell_box.gltf");
     let scene = scene.to_str().unwrap();
-    // With the automatic choice (its pilot bakes run in every process) and without it (the
-    // whole final bake is sharded).
+    // With the automatic choice (its pilot bakes, validity passes and samples sharded too)
+    // and without it (only the final bake and the validity pass).
     let settings: [&[&str]; 2] = [
         &["--quality", "draft"],
         &["--quality", "draft", "--no-auto", "--rays", "48"],

@@ -17,7 +17,11 @@
 //!
 //! The model, per machine of P, for a scene of N texels (one thread per machine, as measured):
 //!
-//! - prepare (load, atlas, texels, validity): `t_prep·N`, on every machine — not divided;
+//! - prepare (load, junctions, BVH, atlas, texels, validity) and plan (the density pilot and
+//!   the ray pilots with their samples): each `(s + d/P)·N`, a serial part `s` every machine
+//!   does whole (loading, the atlases, the sweeps' whole-vector work, the planner's arithmetic)
+//!   and a divided part `d` (rays: validity probes, pilot rows, point samples), calibrated from
+//!   the one- and two-process runs (`s = 2·T₂ − T₁`, `d = T₁ − s`, per texel);
 //! - rows: `t_row·N/P`;
 //! - sweeps: `S·(t_gather·N/P + t_vector·N)`: each sweep gathers its rows and then reads the
 //!   whole vector (radiosity, the stopping sums);
@@ -50,12 +54,14 @@ struct Sample {
     sweeps_seconds: f64,
     exchange_seconds: f64,
     bytes_per_sweep: u64,
-    /// Process 0 only: the stages before light transport, and after it.
+    /// Process 0 only: the stages before light transport but the plan's, the plan's (density
+    /// pilot, ray pilots), and those after light transport.
     prepare_seconds: f64,
+    plan_seconds: f64,
     finish_seconds: f64,
 }
 
-const CSV_HEADER: &str = "processes,run,process,texels,wall_s,peak_mb,rows,rows_s,sweeps,sweeps_s,exchange_s,bytes_per_sweep,prepare_s,finish_s";
+const CSV_HEADER: &str = "processes,run,process,texels,wall_s,peak_mb,rows,rows_s,sweeps,sweeps_s,exchange_s,bytes_per_sweep,prepare_s,plan_s,finish_s";
 
 /// Network of the modelled machines.
 const BANDWIDTHS: [(&str, f64); 2] = [("10 Gbit/s", 1.25e9), ("1 Gbit/s", 1.25e8)];
@@ -188,6 +194,7 @@ fn bake(
                 .and_then(|n| n.parse().ok())
                 .unwrap_or(0);
             let prepare = ["load", "junctions", "bvh", "atlas", "texels", "validity"];
+            let plan = ["density pilot", "plan"];
             let finish = ["denoise", "dilate", "seams", "write"];
             Sample {
                 processes,
@@ -203,6 +210,7 @@ fn bake(
                 exchange_seconds: exchange_s,
                 bytes_per_sweep: bytes as u64,
                 prepare_seconds: prepare.iter().map(|s| stage(s)).sum(),
+                plan_seconds: plan.iter().map(|s| stage(s)).sum(),
                 finish_seconds: finish.iter().map(|s| stage(s)).sum(),
             }
         })
@@ -214,7 +222,7 @@ fn to_csv(samples: &[Sample]) -> String {
     for s in samples {
         let _ = writeln!(
             csv,
-            "{},{},{},{},{:.2},{:.1},{},{:.3},{},{:.3},{:.3},{},{:.3},{:.3}",
+            "{},{},{},{},{:.2},{:.1},{},{:.3},{},{:.3},{:.3},{},{:.3},{:.3},{:.3}",
             s.processes,
             s.run,
             s.process,
@@ -228,6 +236,7 @@ fn to_csv(samples: &[Sample]) -> String {
             s.exchange_seconds,
             s.bytes_per_sweep,
             s.prepare_seconds,
+            s.plan_seconds,
             s.finish_seconds
         );
     }
@@ -255,7 +264,8 @@ fn read_csv(text: &str) -> Vec<Sample> {
                 exchange_seconds: f(10),
                 bytes_per_sweep: f(11) as u64,
                 prepare_seconds: f(12),
-                finish_seconds: f(13),
+                plan_seconds: f(13),
+                finish_seconds: f(14),
             }
         })
         .collect()
@@ -316,8 +326,9 @@ fn print_measured(samples: &[Sample]) {
 struct Model {
     texels: f64,
     sweeps: f64,
-    /// Seconds per texel (one thread).
-    prepare: f64,
+    /// Seconds per texel (one thread): (every machine's, divided among the machines).
+    prepare: (f64, f64),
+    plan: (f64, f64),
     rows: f64,
     gather: f64,
     vector: f64,
@@ -347,10 +358,17 @@ impl Model {
             .map(|p| mean_of(samples, 2, Some(p), |s| s.rows_seconds))
             .collect();
         let imbalance = rows_2.iter().cloned().fold(0.0, f64::max) / mean(rows_2.iter().cloned());
+        // Stage times are process 0's (the others print no summary).
+        let split = |f: &dyn Fn(&Sample) -> f64| {
+            let (t1, t2) = (one(f), mean_of(samples, 2, Some(0), f));
+            let serial = (2.0 * t2 - t1).clamp(0.0, t1);
+            (serial / n, (t1 - serial) / n)
+        };
         Model {
             texels: n,
             sweeps,
-            prepare: one(&|s| s.prepare_seconds) / n,
+            prepare: split(&|s| s.prepare_seconds),
+            plan: split(&|s| s.plan_seconds),
             rows: one(&|s| s.rows_seconds) / n,
             gather,
             vector,
@@ -363,13 +381,17 @@ impl Model {
 
     fn describe(&self) -> String {
         format!(
-            "calibrated on {:.0} texels, {:.0} sweeps:\n  prepare {:.2} µs/texel (every machine), rows {:.1} µs/texel, \
+            "calibrated on {:.0} texels, {:.0} sweeps:\n  prepare {:.2} µs/texel on every machine + {:.2} divided, \
+             plan {:.2} µs/texel on every machine + {:.2} divided, rows {:.1} µs/texel, \
              sweep gather {:.3} µs/texel/sweep, whole-vector work {:.3} µs/texel/sweep, finish {:.2} µs/texel (process 0)\n  \
              memory: {:.0} B/texel held by every machine, {:.0} B/texel of rows (split)\n  \
              row-building imbalance of the two processes: slower one at {:.2}× their mean\n\n",
             self.texels,
             self.sweeps,
-            self.prepare * 1e6,
+            self.prepare.0 * 1e6,
+            self.prepare.1 * 1e6,
+            self.plan.0 * 1e6,
+            self.plan.1 * 1e6,
             self.rows * 1e6,
             self.gather * 1e6,
             self.vector * 1e6,
@@ -380,17 +402,19 @@ impl Model {
         )
     }
 
-    /// Seconds per stage on one of `p` machines for `n` texels: prepare, rows, sweeps,
+    /// Seconds per stage on one of `p` machines for `n` texels: prepare, plan, rows, sweeps,
     /// exchange, finish.
-    fn time(&self, n: f64, p: usize, bandwidth: f64) -> [f64; 5] {
+    fn time(&self, n: f64, p: usize, bandwidth: f64) -> [f64; 6] {
         let pf = p as f64;
         let exchange = if p > 1 {
             self.sweeps * (LATENCY + 12.0 * n * (pf - 1.0) / pf / bandwidth)
         } else {
             0.0
         };
+        let shared = |(serial, divided): (f64, f64)| (serial + divided / pf) * n;
         [
-            self.prepare * n,
+            shared(self.prepare),
+            shared(self.plan),
             self.rows * n / pf,
             self.sweeps * (self.gather * n / pf + self.vector * n),
             exchange,
@@ -403,7 +427,7 @@ impl Model {
     }
 }
 
-const STAGES: [&str; 5] = ["prepare", "rows", "sweeps", "exchange", "finish"];
+const STAGES: [&str; 6] = ["prepare", "plan", "rows", "sweeps", "exchange", "finish"];
 
 fn print_predictions(model: &Model) {
     for (name, bandwidth) in BANDWIDTHS {
@@ -413,18 +437,19 @@ fn print_predictions(model: &Model) {
             LATENCY * 1e6
         );
         println!(
-            "| machines | prepare s | rows s | sweeps s | exchange s | finish s | total s | memory / machine GB |"
+            "| machines | prepare s | plan s | rows s | sweeps s | exchange s | finish s | total s | memory / machine GB |"
         );
-        println!("|---:|---:|---:|---:|---:|---:|---:|---:|");
+        println!("|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
         for p in std::iter::once(1).chain(MACHINES) {
             let t = model.time(TEXELS, p, bandwidth);
             println!(
-                "| {p} | {:.0} | {:.0} | {:.0} | {:.0} | {:.0} | {:.0} | {:.1} |",
+                "| {p} | {:.0} | {:.0} | {:.0} | {:.0} | {:.0} | {:.0} | {:.0} | {:.1} |",
                 t[0],
                 t[1],
                 t[2],
                 t[3],
                 t[4],
+                t[5],
                 t.iter().sum::<f64>(),
                 model.memory(TEXELS, p) / 1e9
             );
@@ -486,6 +511,7 @@ fn stacked(
         RGBColor(44, 160, 44),
         RGBColor(214, 39, 40),
         RGBColor(148, 103, 189),
+        RGBColor(255, 127, 14),
     ];
     let top = bars
         .iter()

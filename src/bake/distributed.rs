@@ -24,10 +24,10 @@
 //! a process that dies closes its connections, which timely turns into a failure of its peers'
 //! exchange (the message names the processes whose share did not come). Every process fails
 //! then, before process 0 writes anything (output is staged, [`crate::output::Staging`]).
-//! Connecting starts before loading and is waited for at the first exchange (timely polls for
-//! its peers once a second, so waiting up front would cost a second of every bake); it waits
-//! at most [`Cluster::connect_timeout`]: timely itself retries for ever, so the thread that
-//! connects is left behind when it gives up (the caller is about to exit).
+//! Connecting starts before loading and is waited for at the first exchange, at most
+//! [`Cluster::connect_timeout`]. The TCP connections are set up here ([`connect_sockets`]) and
+//! handed to timely: its own setup polls for peers once a second (a second of every bake) and
+//! prints its progress to standard output.
 //!
 //! Only the stored Monte Carlo rows with the Jacobi solver ([`Technique::DEFAULT`]) are
 //! distributed; the error map (which reads every row) is not.
@@ -98,8 +98,7 @@ pub struct DistributedReport {
     pub rows_seconds: f64,
     /// Wall seconds this process spent in that transport's sweeps.
     pub sweeps_seconds: f64,
-    /// Seconds of the whole bake spent in exchanges: the network, and waiting for slower
-    /// processes (and, at the first, for every process to connect).
+    /// Of those, seconds spent in exchanges: the network, and waiting for slower processes.
     pub exchange_seconds: f64,
 }
 
@@ -204,7 +203,7 @@ fn bake_connected(
         bytes_sent: exchange.bytes_sent,
         rows_seconds: exchange.rows_seconds,
         sweeps_seconds: exchange.sweeps_seconds,
-        exchange_seconds: exchange.waited.as_secs_f64(),
+        exchange_seconds: exchange.sweeps_waited.as_secs_f64(),
     };
     if exchange.process == 0 {
         drop(exchange);
@@ -291,7 +290,7 @@ fn solve_shared(
     )?;
 
     exchange.rows_seconds = start.elapsed().as_secs_f64();
-    let start = Instant::now();
+    let (start, waited) = (Instant::now(), exchange.waited);
 
     // First exchange: direct light and sky fraction of every texel, and the rays cast.
     let local: Vec<f32> = (rows.direct.iter().zip(&rows.escape))
@@ -330,6 +329,7 @@ fn solve_shared(
     }
     stopping.end();
     exchange.sweeps_seconds = start.elapsed().as_secs_f64();
+    exchange.sweeps_waited = exchange.waited - waited;
     solution.irradiance = h;
     // The rows stay with the processes that built them; the rest is whole on every process.
     let transport = Transport {
@@ -377,8 +377,11 @@ struct Exchange {
     round: usize,
     bytes_sent: u64,
     waited: Duration,
+    /// The last transport's: seconds building rows, in sweeps, and waiting in those sweeps'
+    /// exchanges.
     rows_seconds: f64,
     sweeps_seconds: f64,
+    sweeps_waited: Duration,
     /// Until every process has connected: the signal that they have, and when to give up.
     connecting: Option<(Receiver<()>, Instant)>,
     connect_timeout: Duration,
@@ -445,6 +448,7 @@ impl Exchange {
             waited: Duration::ZERO,
             rows_seconds: 0.0,
             sweeps_seconds: 0.0,
+            sweeps_waited: Duration::ZERO,
             connecting: Some((connected, deadline)),
             connect_timeout: cluster.connect_timeout,
             timely: Some(timely),
