@@ -34,7 +34,7 @@
 //! - **Tolerance** E/10: the solver stops once its remaining error is well below the Monte
 //!   Carlo error, not later.
 //! - **Texel density where the error is** ([`density`]): a pilot pair on a uniform atlas of its
-//!   own (quickly charted, at most half the preset's density and `density::PILOT_TEXELS` texels) and its lookup-error sample
+//!   own (quickly charted, at most `density::PILOT_TEXELS` texels) and its lookup-error sample
 //!   at random surface points (`GatheredSample`) give each region of the surfaces (a
 //!   connected surface between creases: a wall, a cabinet door, a cup) a density factor, ∝ the
 //!   fourth root of its measured mean square error, within ×¼…×4; regions nobody sees (buried,

@@ -391,8 +391,8 @@ fn prepare_loaded(
     let tracer = Tracer::new(&scene);
     timed(&mut stages, "bvh", t);
 
-    // Adaptive density: a pilot on a uniform atlas of its own, charted quickly, at most at
-    // `PILOT_SCALE` of the preset's density and `PILOT_TEXELS` texels, chooses a density per region (`plan::density`);
+    // Adaptive density: a pilot on a uniform atlas of its own, charted quickly and at most
+    // `plan::density::PILOT_TEXELS` texels, chooses a density per region (`plan::density`);
     // the atlas is then laid out at those densities.
     let mut density_noise = None;
     if let (Some(plan), Some(auto)) = (&mut plan, config.auto)
@@ -405,7 +405,7 @@ fn prepare_loaded(
         let uniform = plan::surface_area(&scene) * f64::from(tpu).powi(2);
         let scale = (plan::density::PILOT_TEXELS / uniform.max(1.0))
             .sqrt()
-            .min(plan::density::PILOT_SCALE);
+            .min(1.0);
         let mut coarse = config.clone();
         coarse.atlas.texels_per_unit = tpu * scale as f32;
         let texels = pilot_layout(&scene, &source, &tracer, &coarse, processes, progress)?;

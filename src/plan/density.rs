@@ -25,12 +25,10 @@
 //! `MIN_REGION_TEXELS` texels for every seen, lit region.
 //!
 //! **The pilot's atlas** is its own: uniform, charted quickly (`crate::atlas::build_quick`), at
-//! most at `PILOT_SCALE` of the preset's density, and coarser when that would pass
-//! `PILOT_TEXELS` texels; mean squares measured there are carried to the preset's density by
-//! `PILOT_EXPONENT`. (A pilot at half the density on every preset was tried before the carry
-//! and the central raise existed: it carried too little error at `medium`, 110k texels and
-//! 4.19% against a 4% target, and too much at `high`, 1.25 M texels. `high` is at about 0.38
-//! of its density already, from `PILOT_TEXELS`.)
+//! the preset's density or, when that would pass `PILOT_TEXELS` texels, coarser; mean
+//! squares measured there are carried to the preset's density by `PILOT_EXPONENT` (a pilot
+//! at half the density on every preset was tried: it carried too little error at `medium`,
+//! 110k texels and 4.19% against a 4% target, and too much at `high`, 1.25 M texels).
 //!
 //! **What nobody sees.** A region whose texels the validity pass found all buried, whose drawn
 //! points were all left out as unseen (faces looking into geometry: the back of a wall standing
@@ -71,14 +69,6 @@ pub(crate) const MAX_TEXEL_RAISE: f64 = 4.0;
 /// when the preset's atlas is larger (its mean squares are carried to the preset's density by
 /// [`ERROR_EXPONENT`]), so that the pilot costs a bounded share of a large bake.
 pub(crate) const PILOT_TEXELS: f64 = 131_072.0;
-/// The density pilot's atlas is at most at this share of the preset's density (a quarter of its
-/// texels): the pilot's rays and validity fall 4×, and its lookup error, carried back by
-/// [`PILOT_EXPONENT`], errs high rather than low. On the furnished interior, same run, seeds 0
-/// and 3, against the pilot at the preset's density: `draft` 5.63% / 5.75% point error against
-/// 6.08% / 5.88%, planning 17% of the bake against 21% / 30%; `medium` 3.75% / 2.82% against
-/// 4.04% / 4.25% (seed 3 raised to 251k texels against 124k), planning 14–17% against 30–31%,
-/// wall time 0.87× / 1.09×. At a third (0.35) `draft` read 6.23% and `medium` took 239k texels.
-pub(crate) const PILOT_SCALE: f64 = 0.5;
 /// The mean square lookup error of a pilot coarser than the preset is carried to the preset's
 /// density as `s^−PILOT_EXPONENT`: the `√h` of edges narrower than a texel, the slowest fall
 /// (from the furnished interior's pilot at 16.5 /m to its atlas at 32 /m the error fell as
