@@ -235,9 +235,10 @@ fn to_csv(samples: &[Sample]) -> String {
             s.sweeps_seconds,
             s.exchange_seconds,
             s.bytes_per_sweep,
-            s.prepare_seconds,
-            s.plan_seconds,
-            s.finish_seconds
+            // + 0.0: an empty sum is −0.0 (process 1 prints no stage times).
+            s.prepare_seconds + 0.0,
+            s.plan_seconds + 0.0,
+            s.finish_seconds + 0.0
         );
     }
     csv
