@@ -11,7 +11,10 @@
 //! binary bakes with `bake SCENE --quality Q` under `/usr/bin/time` (wall seconds, peak resident
 //! memory); the output is read as a renderer reads it and compared with the reference
 //! (`points::compare`): relative RMSE with the reference's noise taken out, p95, share of
-//! lookups touching black texels. Prints a Markdown table, writes `OUT/density_figures.csv`
+//! lookups touching black texels. A camera view is the other yardstick: NEW_BIN path-traces
+//! the scene's default view once (`reference --view`, stored as `REFS/<stem>_view.exr`), renders
+//! each bake's view (`render`) and compares 4×4-pixel block means (`compare --view`, the
+//! reference's noise taken out). Prints a Markdown table, writes `OUT/density_figures.csv`
 //! and `OUT/density_before_after.png` (point error against time, one panel per scene).
 
 use std::path::{Path, PathBuf};
@@ -36,6 +39,8 @@ struct Row {
     point: f32,
     p95: f32,
     black: f32,
+    /// The default camera view's block error, the reference's noise out.
+    view: f32,
     target: f32,
 }
 
@@ -49,13 +54,14 @@ fn main() {
     std::fs::create_dir_all(refs).expect("REFS");
     let mut rows = Vec::new();
     println!(
-        "| scene | quality | target | binary | time s | peak MB | point RMSE (noise out) | p95 | touching black |"
+        "| scene | quality | target | binary | time s | peak MB | point RMSE (noise out) | p95 | touching black | view (noise out) |"
     );
-    println!("|---|---|---:|---|---:|---:|---:|---:|---:|");
+    println!("|---|---|---:|---|---:|---:|---:|---:|---:|---:|");
     for scene in scenes {
         let input = Path::new(scene);
         let stem = input.file_stem().unwrap().to_string_lossy().to_string();
         let reference = point_reference(input, &refs.join(format!("{stem}.csv")));
+        let view_reference = view_reference(new, input, &refs.join(format!("{stem}_view.exr")));
         for quality in qualities.split(',') {
             let target = lightbake::config::AutoParams::for_preset(quality).expect("quality");
             for (binary, bin) in [("before", old), ("after", new)] {
@@ -65,6 +71,7 @@ fn main() {
                 let baked = baked_file(&dir, &stem);
                 let render = RenderScene::load(&baked).expect("load the bake");
                 let c = points::compare(&render, &reference);
+                let view = view_error(new, &baked, &dir.join("view.exr"), &view_reference);
                 let row = Row {
                     scene: stem.clone(),
                     quality: quality.to_string(),
@@ -74,10 +81,11 @@ fn main() {
                     point: c.rmse_without_noise,
                     p95: c.p95,
                     black: c.black_touch,
+                    view,
                     target,
                 };
                 println!(
-                    "| {} | {} | {:.0}% | {} | {:.2} | {:.0} | {:.2}%{} | {:.1}% | {:.2}% |",
+                    "| {} | {} | {:.0}% | {} | {:.2} | {:.0} | {:.2}%{} | {:.1}% | {:.2}% | {:.2}% |",
                     row.scene,
                     row.quality,
                     target * 100.0,
@@ -87,18 +95,28 @@ fn main() {
                     row.point * 100.0,
                     if row.point > target { " (above)" } else { "" },
                     row.p95 * 100.0,
-                    row.black * 100.0
+                    row.black * 100.0,
+                    row.view * 100.0
                 );
                 rows.push(row);
             }
         }
     }
     let mut csv =
-        String::from("scene,quality,target,binary,seconds,peak_mb,point_rmse,p95,black\n");
+        String::from("scene,quality,target,binary,seconds,peak_mb,point_rmse,p95,black,view\n");
     for r in &rows {
         csv += &format!(
-            "{},{},{},{},{:.3},{:.1},{},{},{}\n",
-            r.scene, r.quality, r.target, r.binary, r.seconds, r.peak_mb, r.point, r.p95, r.black
+            "{},{},{},{},{:.3},{:.1},{},{},{},{}\n",
+            r.scene,
+            r.quality,
+            r.target,
+            r.binary,
+            r.seconds,
+            r.peak_mb,
+            r.point,
+            r.p95,
+            r.black,
+            r.view
         );
     }
     std::fs::write(out.join("density_figures.csv"), csv).expect("write CSV");
@@ -122,6 +140,58 @@ fn point_reference(input: &Path, csv: &Path) -> PointReference {
         points::compute(input, &config, &params, 2048, &NoProgress).expect("point reference");
     std::fs::write(csv, reference.to_csv()).expect("store the point reference");
     reference
+}
+
+/// The stored reference of the scene's default camera view, or a new one made by `bin`
+/// (pixel noise to 3%, at most 1024 paths a pixel or 300 s) stored there.
+fn view_reference(bin: &str, input: &Path, exr: &Path) -> PathBuf {
+    if !exr.exists() {
+        run(Command::new(bin)
+            .arg("reference")
+            .arg(input)
+            .args([
+                "--view",
+                "--spp",
+                "1024",
+                "--target-error",
+                "0.03",
+                "--time",
+                "300",
+            ])
+            .arg("-o")
+            .arg(exr));
+    }
+    exr.to_path_buf()
+}
+
+/// The block error of `baked`'s default camera view, rendered by `bin` into `image`, against
+/// `reference`, with the reference's noise out.
+fn view_error(bin: &str, baked: &Path, image: &Path, reference: &Path) -> f32 {
+    run(Command::new(bin)
+        .arg("render")
+        .arg(baked)
+        .arg("-o")
+        .arg(image));
+    let out = run(Command::new(bin)
+        .arg("compare")
+        .arg(image)
+        .arg("--view")
+        .arg(reference));
+    // "relative RMS diff.     2.10% (1.95% without the reference's noise)"
+    out.lines()
+        .find(|l| l.starts_with("relative RMS diff."))
+        .and_then(|l| l.split('(').nth(1))
+        .and_then(|l| l.split('%').next())
+        .and_then(|v| v.trim().parse::<f32>().ok())
+        .map_or(f32::NAN, |v| v / 100.0)
+}
+
+/// Runs `command`, panicking with its error output when it fails; its standard output.
+fn run(command: &mut Command) -> String {
+    let output = command.output().expect("run lightbake");
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(output.status.success(), "{command:?} failed: {stderr}");
+    String::from_utf8_lossy(&output.stdout).into_owned()
 }
 
 /// Bakes with `bin` under `/usr/bin/time`; wall seconds and peak resident memory (MB).
