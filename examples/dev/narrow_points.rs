@@ -207,7 +207,14 @@ fn compare(baked: &str, prefix: &str) {
         );
     }
     rows.sort_by(|a, b| b.0.total_cmp(&a.0));
-    for &(ratio, k, x, r, name) in rows.iter().take(10) {
+    // The test's count: above 1.5× the reference plus three standard errors.
+    let failing = rows
+        .iter()
+        .filter(|&&(_, k, x, r, _)| x > 1.5 * r + 3.0 * grey(narrow.std_error[k]))
+        .count();
+    println!("{failing} point(s) above 1.5x their reference plus 3 standard errors");
+    let worst = std::env::var("WORST").map_or(10, |s| s.parse().expect("WORST"));
+    for &(ratio, k, x, r, name) in rows.iter().take(worst) {
         let p = &narrow.points[k];
         println!(
             "{name:<14} ({:.3}, {:.3}, {:.3}) lookup {x:.4} ref {r:.4} (se {:.4}) ratio {ratio:.2}",
