@@ -55,6 +55,12 @@ pub struct AtlasParams {
     /// (`scene::shadow_cuts`), so a renderer's filtering does not blur them over a texel. Part
     /// of the junction split: no effect without `split_junctions`.
     pub shadow_cuts: bool,
+    /// Cut receivers along the outlines of near contacts too: surfaces facing them from less
+    /// than a texel in front (a door's edge in its lining, a light's side in its recess;
+    /// `scene::junctions`), so a slot's texels hold the slot's light, not the open surface's
+    /// beside it; cut ends then snap at 1/16 texel instead of ¼. More charts and triangles. Part
+    /// of the junction split: no effect without `split_junctions`. Off by default.
+    pub near_contacts: bool,
     /// Meshes placed by several nodes: duplicated (each placement its own UVs) or shared (one
     /// unwrap, a page rectangle per node). Unwrapped atlases only.
     pub instancing: Instancing,
@@ -418,6 +424,7 @@ impl BakeConfig {
                 padding: 2,
                 split_junctions: true,
                 shadow_cuts: true,
+                near_contacts: false,
                 instancing: Instancing::Duplicate,
             },
             technique: Technique::DEFAULT,

@@ -22,7 +22,10 @@
 //!                                                     shadow outlines of punctual lights
 //!                                                     (scene::shadow_cuts; its
 //!                                                     shadow rays come from a Tracer of the
-//!                                                     uncut scene, passed in by `bake`)
+//!                                                     uncut scene, passed in by `bake`);
+//!                                                     with --near-contacts, along the outlines
+//!                                                     of surfaces facing them from under a
+//!                                                     texel away too
 //!             Tracer::new   ──▶ Tracer                obvhs CWBVH: closest hit, occlusion
 //!            ─ atlas::build ──▶ Atlas                 xatlas charts + pages, or input TEXCOORD_1;
 //!                                                     meshes far finer than a texel charted by

@@ -12,7 +12,9 @@
 //! paths each, default 1024) and `PREFIX.all.csv` (1024 points over the whole scene, 256 paths:
 //! the scene mean). `compare` prints, per face, the points, how many read above 1.5× their
 //! reference (counting only references above 5% of the scene mean), the largest ratio, and
-//! the mean lookup and reference, then the ten worst points.
+//! the mean lookup and reference, then the test's count (above 1.5× plus three standard
+//! errors) and the `WORST` worst points (default 10). `texels` (a diagnostic) bakes with near
+//! contacts when `NEAR_CONTACTS` is set.
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -72,11 +74,12 @@ fn reference(prefix: &str, n: usize, paths: u32) {
 /// the point reference at its sample point.
 fn texels(quality: &str) {
     let input = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/narrow_faces.gltf");
-    let config = match quality {
+    let mut config = match quality {
         "draft" => BakeConfig::draft(),
         "medium" => BakeConfig::medium(),
         _ => BakeConfig::high(),
     };
+    config.atlas.near_contacts = std::env::var_os("NEAR_CONTACTS").is_some();
     let b = lightbake::compute(&input, &config, &NoProgress).expect("bakes");
     let t = &b.texels;
     let params = ReferenceParams {
@@ -207,7 +210,14 @@ fn compare(baked: &str, prefix: &str) {
         );
     }
     rows.sort_by(|a, b| b.0.total_cmp(&a.0));
-    for &(ratio, k, x, r, name) in rows.iter().take(10) {
+    // The test's count: above 1.5× the reference plus three standard errors.
+    let failing = rows
+        .iter()
+        .filter(|&&(_, k, x, r, _)| x > 1.5 * r + 3.0 * grey(narrow.std_error[k]))
+        .count();
+    println!("{failing} point(s) above 1.5x their reference plus 3 standard errors");
+    let worst = std::env::var("WORST").map_or(10, |s| s.parse().expect("WORST"));
+    for &(ratio, k, x, r, name) in rows.iter().take(worst) {
         let p = &narrow.points[k];
         println!(
             "{name:<14} ({:.3}, {:.3}, {:.3}) lookup {x:.4} ref {r:.4} (se {:.4}) ratio {ratio:.2}",

@@ -1585,6 +1585,7 @@ pub(crate) mod tests {
             padding: 2,
             split_junctions: true,
             shadow_cuts: true,
+            near_contacts: false,
             instancing: Default::default(),
         }
     }

@@ -78,6 +78,9 @@ pub struct Settings {
     pub(crate) uv: String,
     pub(crate) split_junctions: bool,
     pub(crate) shadow_cuts: bool,
+    /// `--near-contacts` (left out when false, so files of bakes without it are as before).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub(crate) near_contacts: bool,
     /// `--instancing share`: shared meshes with a page rect per node (left out when false, so
     /// files of duplicate-mode bakes are as before).
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
@@ -173,6 +176,7 @@ impl Settings {
             .to_string(),
             split_junctions: a.split_junctions,
             shadow_cuts: a.shadow_cuts,
+            near_contacts: a.near_contacts,
             share_instances: a.instancing == crate::config::Instancing::Share,
             gather_rays: t.gather_rays,
             light_samples: t.light_samples,
@@ -211,6 +215,7 @@ impl Settings {
         };
         a.split_junctions = self.split_junctions;
         a.shadow_cuts = self.shadow_cuts;
+        a.near_contacts = self.near_contacts;
         if self.share_instances {
             a.instancing = crate::config::Instancing::Share;
         }

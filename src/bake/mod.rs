@@ -299,6 +299,7 @@ pub fn split_junctions(
     let texel = 1.0 / config.atlas.texels_per_unit;
     // Shared meshes (`--instancing share`) cannot carry one node's cuts.
     let whole = atlas::shared_instances(&scene, source, &config.atlas);
+    let near = config.atlas.near_contacts;
     let (scene, report) = if config.atlas.shadow_cuts && !scene.lights.is_empty() {
         // Shadow rays see the geometry as loaded: the split moves no surface.
         let tracer = Tracer::new(&scene);
@@ -309,9 +310,9 @@ pub fn split_junctions(
                 / 3.0
         };
         let cutter = scene::shadow_cuts::ShadowCutter::new(&scene, &light_at);
-        scene::junctions::split_except(scene, texel, Some(&cutter), &whole)
+        scene::junctions::split_except(scene, texel, near, Some(&cutter), &whole)
     } else {
-        scene::junctions::split_except(scene, texel, None, &whole)
+        scene::junctions::split_except(scene, texel, near, None, &whole)
     };
     (scene, Some(report))
 }

@@ -57,6 +57,8 @@ pub struct Options {
     pub no_split_junctions: Option<bool>,
     /// Do not cut receivers along the hard shadow outlines of punctual lights.
     pub no_shadow_cuts: Option<bool>,
+    /// Cut receivers along the outlines of near contacts too.
+    pub near_contacts: Option<bool>,
     /// `duplicate` (the default) or `share`.
     pub instancing: Option<String>,
     /// Keep texel sample points where they are, even inside geometry.
@@ -166,6 +168,7 @@ impl Options {
         });
         c.atlas.split_junctions = !self.no_split_junctions.unwrap_or(false);
         c.atlas.shadow_cuts = !self.no_shadow_cuts.unwrap_or(false);
+        c.atlas.near_contacts = self.near_contacts.unwrap_or(false);
         c.transport.validity = !self.no_validity.unwrap_or(false);
         c.transport.denoise = !self.no_denoise.unwrap_or(false);
         if !no_auto {

@@ -146,6 +146,11 @@ struct AtlasArgs {
     /// renderer's filtering then blurs each such shadow edge over a texel on each side).
     #[arg(long)]
     no_shadow_cuts: bool,
+    /// Cut receivers along the outlines of surfaces facing them from less than a texel away
+    /// too (a door's edge in its lining, a light's side in its recess), so a slot's texels hold
+    /// the slot's light; more charts and triangles.
+    #[arg(long)]
+    near_contacts: bool,
     /// A mesh placed by several nodes: duplicated per node, or written once with a page rect
     /// per node (its instances are then not junction-split).
     #[arg(long, value_enum, default_value = "duplicate")]
@@ -164,6 +169,7 @@ impl AtlasArgs {
         c.atlas.uv = self.uv.mode();
         c.atlas.split_junctions = !self.no_split_junctions;
         c.atlas.shadow_cuts = !self.no_shadow_cuts;
+        c.atlas.near_contacts = self.near_contacts;
         c.atlas.instancing = self.instancing.mode();
         c
     }
@@ -418,6 +424,7 @@ impl BakeArgs {
             uv: Some(value_name(self.atlas.uv)),
             no_split_junctions: Some(self.atlas.no_split_junctions),
             no_shadow_cuts: Some(self.atlas.no_shadow_cuts),
+            near_contacts: Some(self.atlas.near_contacts),
             instancing: Some(value_name(self.atlas.instancing)),
             rays: self.rays,
             light_samples: self.light_samples,

@@ -13,6 +13,10 @@
 //!    candidates) that crosses the patch's plane or has an edge lying in it (a wall standing on
 //!    the floor; corners within `TOUCH_TEXELS` of the plane count as on it) gives a segment,
 //!    clipped to the patch's triangles. Coplanar triangles and single touching points give none.
+//!    With near contacts (`AtlasParams::near_contacts`), the triangles facing the patch from
+//!    less than a texel in front of it (a door's edge 3 mm from its lining) give the
+//!    projection of their outline — their edges no other of them shares — as segments too:
+//!    the slot under them and the open surface beside it get texels of their own.
 //! 2. **Make the cuts separate**: segment ends within `SNAP_TEXELS` merge, move onto the patch
 //!    border's vertices and edges, and split segments they touch; inside the patch a cut point
 //!    within `TOUCH_TEXELS` of a mesh vertex or edge moves onto it (walls meeting on a floor's
@@ -70,6 +74,19 @@ pub(crate) const SNAP_TEXELS: f64 = 0.25;
 /// cut point this close to a vertex or edge of the patch lies on it, likewise.
 pub(crate) const TOUCH_TEXELS: f64 = 1.0 / 16.0;
 
+/// With near contacts (`AtlasParams::near_contacts`), a surface facing a patch from no
+/// farther than this in front of it (texels) is a near contact: the patch is cut along its
+/// outline's projection. A gap narrower than a texel (a door's edge 3 mm from its lining, a
+/// light's side 2 cm from its recess) is a slot the texels cannot resolve: without the cut,
+/// the texel of the patch under the outline holds both the slot and the open surface beside
+/// it, and the slot's faces read that average. Cut ends then snap at [`TOUCH_TEXELS`], not
+/// [`SNAP_TEXELS`]: the lining's 1 cm proud of the wall beside the door's slot, a twelfth of a
+/// draft texel, would otherwise be snapped into the slot.
+const NEAR_TEXELS: f64 = 1.0;
+
+/// Normals opposed at least this much (cosine of 30°) face each other.
+const FACING_DOT: f64 = 0.866;
+
 /// A patch is a receiver only when no neighbour of the same mesh continues it more gently than
 /// this (cosine of 30°): gentler folds belong to curved surfaces, which are left alone.
 const SMOOTH_DOT: f64 = 0.866;
@@ -108,6 +125,8 @@ pub struct JunctionReport {
     pub(crate) shadow_segments: usize,
     pub(crate) shadow_samples: usize,
     pub(crate) shadow_skipped: usize,
+    /// Cuts along the outlines of near contacts (counted among `segments` too).
+    pub(crate) near_segments: usize,
     /// Instances left uncut because their mesh is shared by several nodes (`--instancing
     /// share`; the cell map of divided texels covers them).
     pub(crate) left_whole: usize,
@@ -128,6 +147,7 @@ impl JunctionReport {
             shadow_segments,
             shadow_samples,
             shadow_skipped,
+            near_segments,
             left_whole,
         } = other;
         self.receivers += receivers;
@@ -140,15 +160,21 @@ impl JunctionReport {
         self.shadow_segments += shadow_segments;
         self.shadow_samples += shadow_samples;
         self.shadow_skipped += shadow_skipped;
+        self.near_segments += near_segments;
         self.left_whole += left_whole;
     }
 
     /// One phrase for the bake's summary line.
     pub fn brief(&self) -> String {
         format!(
-            "junctions: {} receiver(s) split ({} segments, {} extensions, {} triangles → +{}){}{}{}",
+            "junctions: {} receiver(s) split ({} segments{}, {} extensions, {} triangles → +{}){}{}{}",
             self.receivers,
             self.segments,
+            if self.near_segments > 0 {
+                format!(" ({} along near contacts)", self.near_segments)
+            } else {
+                String::new()
+            },
             self.extensions,
             self.triangles_split,
             self.triangles_added,
@@ -199,46 +225,48 @@ pub(crate) fn split_with(
     texel: f32,
     shadows: Option<&ShadowCutter>,
 ) -> (Scene, JunctionReport) {
-    split_except(scene, texel, shadows, &[])
+    split_except(scene, texel, false, shadows, &[])
 }
 
-/// [`split_with`], leaving the instances marked in `whole` (parallel to `Scene::instances`;
-/// shorter means unmarked) uncut: the instances of a mesh shared by several nodes
-/// (`--instancing share`), which cannot carry one node's cuts. They still cut the others.
+/// [`split_with`], cutting near contacts too when `near_contacts` (see [`NEAR_TEXELS`]), and
+/// leaving the instances marked in `whole` (parallel to `Scene::instances`; shorter means
+/// unmarked) uncut: the instances of a mesh shared by several nodes (`--instancing share`),
+/// which cannot carry one node's cuts. They still cut the others.
 pub(crate) fn split_except(
     scene: Scene,
     texel: f32,
+    near_contacts: bool,
     shadows: Option<&ShadowCutter>,
     whole: &[bool],
 ) -> (Scene, JunctionReport) {
-    split_budgeted(scene, texel, shadows, whole, MAX_SAMPLES)
+    let tol = Tolerances::of(texel, near_contacts);
+    split_budgeted(scene, tol, shadows, whole, MAX_SAMPLES)
 }
 
 /// [`split_except`] with a budget of `max_samples` shadow samples (the tests spend small ones).
 fn split_budgeted(
     scene: Scene,
-    texel: f32,
+    tol: Tolerances,
     shadows: Option<&ShadowCutter>,
     whole: &[bool],
     max_samples: usize,
 ) -> (Scene, JunctionReport) {
-    cut_with(scene, texel, shadows, whole, |cutting| {
+    cut_with(scene, tol, shadows, whole, |cutting| {
         let taken = AtomicUsize::new(0);
         let runs = cut_in_parallel(cutting, &taken, max_samples);
         replay_in_order(cutting, runs, max_samples)
     })
 }
 
-/// Sets up what cutting reads (tolerances, the triangle grid), lets `cut` cut the instances,
+/// Sets up what cutting reads (the triangle grid), lets `cut` cut the instances,
 /// and puts the scene together from their splits.
 fn cut_with(
     scene: Scene,
-    texel: f32,
+    tol: Tolerances,
     shadows: Option<&ShadowCutter>,
     whole: &[bool],
     cut: impl FnOnce(Cutting) -> (Vec<Option<InstanceSplit>>, JunctionReport),
 ) -> (Scene, JunctionReport) {
-    let tol = Tolerances::of(texel);
     let grid = triangle_grid(&scene, tol.touch, tol.texel);
     let cutting = Cutting {
         scene: &scene,
@@ -388,15 +416,28 @@ struct Tolerances {
     texel: f64,
     snap: f64,
     touch: f64,
+    /// Near contacts cut from no farther than this (0: they do not).
+    near: f64,
 }
 
 impl Tolerances {
-    fn of(texel: f32) -> Self {
+    /// The tolerances at a texel of `texel`; with `near_contacts`, near contacts cut too and
+    /// cut ends snap at the touch distance, not the snap distance (see [`NEAR_TEXELS`]).
+    fn of(texel: f32, near_contacts: bool) -> Self {
         let texel = f64::from(texel);
         Tolerances {
             texel,
-            snap: SNAP_TEXELS * texel,
+            snap: if near_contacts {
+                TOUCH_TEXELS
+            } else {
+                SNAP_TEXELS
+            } * texel,
             touch: TOUCH_TEXELS * texel,
+            near: if near_contacts {
+                NEAR_TEXELS * texel
+            } else {
+                0.0
+            },
         }
     }
 }
@@ -1311,11 +1352,17 @@ fn patch_cuts_of(
                 .binary_search(&(g - inst.triangles.start))
                 .is_ok()
     };
-    for g in grid.query(lo - tol.touch, hi + tol.touch) {
+    // Near contacts: the triangles facing the patch from less than `tol.near` in front of it.
+    let mut facing: Vec<u32> = Vec::new();
+    let reach = tol.touch.max(tol.near);
+    for g in grid.query(lo - reach, hi + reach) {
         if own(g) {
             continue;
         }
         let p = scene.triangles[g as usize].map(|v| scene.positions[v as usize].as_dvec3());
+        if tol.near > 0.0 && faces_near(p, patch, tol) {
+            facing.push(g);
+        }
         let Some([a, b]) = plane_segment(p, patch, tol.touch) else {
             continue;
         };
@@ -1329,6 +1376,24 @@ fn patch_cuts_of(
                 let i = cuts.point(a.lerp(b, s0), &patch_edges, tol);
                 let j = cuts.point(a.lerp(b, s1), &patch_edges, tol);
                 cuts.add(i, j, false);
+            }
+        }
+    }
+    // The outline of the near surfaces, projected: junctions too (the slot between a door's
+    // edge and its lining is dark, the lining beside it in the room is not).
+    for [a, b] in outline(scene, &facing) {
+        let (a, b) = (patch.plane.to_2d(a), patch.plane.to_2d(b));
+        let length = a.distance(b);
+        if length <= tol.snap {
+            continue;
+        }
+        for [s0, s1] in inside_intervals(a, b, &corners2d, tol.snap) {
+            if (s1 - s0) * length > tol.snap {
+                let i = cuts.point(a.lerp(b, s0), &patch_edges, tol);
+                let j = cuts.point(a.lerp(b, s1), &patch_edges, tol);
+                let before = cuts.segments.len();
+                cuts.add(i, j, false);
+                report.near_segments += cuts.segments.len() - before;
             }
         }
     }
@@ -1362,6 +1427,50 @@ fn patch_cuts_of(
     cuts.split_at_points(tol.snap);
     cuts.extend_free_ends(&patch_edges, tol);
     Some(cuts)
+}
+
+/// Whether triangle `p` faces the patch (normals opposed within [`FACING_DOT`]) from in front
+/// of it, every corner farther than the touch distance and no farther than the near distance:
+/// a near contact.
+fn faces_near(p: [DVec3; 3], patch: &Patch, tol: Tolerances) -> bool {
+    let n = (p[1] - p[0]).cross(p[2] - p[0]).normalize_or_zero();
+    n.dot(patch.plane.normal) <= -FACING_DOT
+        && p.iter().all(|&q| {
+            let d = (q - patch.plane.origin).dot(patch.plane.normal);
+            d > tol.touch && d <= tol.near
+        })
+}
+
+/// The outline of the triangles `set` (scene triangle indices): their edges that no other
+/// triangle of the set shares (vertices matched by position), in world space, in a fixed
+/// order.
+fn outline(scene: &Scene, set: &[u32]) -> Vec<[DVec3; 2]> {
+    let key = |v: u32| {
+        (scene.positions[v as usize] + Vec3::ZERO)
+            .to_array()
+            .map(f32::to_bits)
+    };
+    let mut edges: Vec<([[u32; 3]; 2], [u32; 2])> = Vec::with_capacity(3 * set.len());
+    for &g in set {
+        let t = scene.triangles[g as usize];
+        for k in 0..3 {
+            let (a, b) = (t[k], t[(k + 1) % 3]);
+            let (ka, kb) = (key(a), key(b));
+            if ka != kb {
+                edges.push(if ka < kb {
+                    ([ka, kb], [a, b])
+                } else {
+                    ([kb, ka], [b, a])
+                });
+            }
+        }
+    }
+    edges.sort_unstable();
+    edges
+        .chunk_by(|x, y| x.0 == y.0)
+        .filter(|same| same.len() == 1)
+        .map(|e| e[0].1.map(|v| scene.positions[v as usize].as_dvec3()))
+        .collect()
 }
 
 /// Where triangle `p` meets the patch's plane: a segment when it crosses the plane or has an
@@ -1964,6 +2073,49 @@ mod tests {
         (p, t)
     }
 
+    /// A box floating 2 cm over the floor (a fifth of a texel), one side 1 cm short of the
+    /// floor's edge: with near contacts the floor is cut along the box's outline, and the 1 cm
+    /// strip beside it (a tenth of a texel) stays out of the side under the box; without, nothing
+    /// is cut.
+    #[test]
+    fn a_box_floating_over_a_floor_cuts_it_along_its_outline_with_near_contacts() {
+        let scene = scene_of(&[
+            floor(),
+            cuboid(Vec3::new(1.0, 0.02, 1.0), Vec3::new(3.99, 1.0, 3.0)),
+        ]);
+        let (whole, report) = split(scene.clone(), 0.1);
+        assert_eq!(report.segments, 0, "{report:?}");
+        assert_eq!(whole.triangles, scene.triangles);
+
+        let (split, report) =
+            split_budgeted(scene, Tolerances::of(0.1, true), None, &[], MAX_SAMPLES);
+        assert_eq!(report.receivers, 1, "{report:?}");
+        assert_eq!(report.near_segments, 4, "{report:?}");
+        assert_eq!(report.unseparated_edges, 0, "{report:?}");
+        assert_no_t_junctions(&split, 0);
+        // Every floor triangle lies under the box or outside it, and the two are different
+        // sides.
+        let inst = &split.instances[0];
+        let mut sides = [BTreeMap::new(), BTreeMap::new()];
+        for (local, t) in inst.triangles.clone().enumerate() {
+            let p = split.triangles[t as usize].map(|v| split.positions[v as usize]);
+            let inside = |q: Vec3| {
+                q.x >= 1.0 - 1e-6 && q.x <= 3.99 + 1e-6 && q.z >= 1.0 - 1e-6 && q.z <= 3.0 + 1e-6
+            };
+            let under = p.iter().all(|&q| inside(q));
+            let centre = p.iter().fold(Vec3::ZERO, |s, &q| s + q / 3.0);
+            assert!(
+                under || !inside(centre),
+                "triangle {t} straddles the outline: {p:?}"
+            );
+            *sides[usize::from(under)]
+                .entry(inst.split.sides[local])
+                .or_insert(0) += 1;
+        }
+        assert!(!sides[1].is_empty());
+        assert!(sides[0].keys().all(|s| !sides[1].contains_key(s)));
+    }
+
     /// Whether the segment from `o` along `d` (unit) hits a triangle of `scene`.
     fn blocked(scene: &Scene, o: Vec3, d: Vec3) -> bool {
         scene.triangles.iter().any(|t| {
@@ -2079,19 +2231,25 @@ mod tests {
         shadows: Option<&ShadowCutter>,
         max_samples: usize,
     ) -> (Scene, JunctionReport) {
-        cut_with(scene, texel, shadows, &[], |cutting| {
-            let mut left = max_samples;
-            let mut report = JunctionReport::default();
-            let splits: Vec<Option<InstanceSplit>> = (0..cutting.scene.instances.len())
-                .map(|i| {
-                    let run = run_instance(cutting, i, Budget::Left(left));
-                    assert!(run.shadow.replays(&mut left));
-                    report.add(&run.report);
-                    run.split
-                })
-                .collect();
-            (splits, report)
-        })
+        cut_with(
+            scene,
+            Tolerances::of(texel, false),
+            shadows,
+            &[],
+            |cutting| {
+                let mut left = max_samples;
+                let mut report = JunctionReport::default();
+                let splits: Vec<Option<InstanceSplit>> = (0..cutting.scene.instances.len())
+                    .map(|i| {
+                        let run = run_instance(cutting, i, Budget::Left(left));
+                        assert!(run.shadow.replays(&mut left));
+                        report.add(&run.report);
+                        run.split
+                    })
+                    .collect();
+                (splits, report)
+            },
+        )
     }
 
     /// Cutting instances in parallel gives exactly what cutting them in order does, whatever
@@ -2155,7 +2313,8 @@ mod tests {
                     .build()
                     .expect("thread pool");
                 let parallel = pool.install(|| {
-                    split_budgeted(scene.clone(), texel, Some(&cutter), &[], max_samples)
+                    let tol = Tolerances::of(texel, false);
+                    split_budgeted(scene.clone(), tol, Some(&cutter), &[], max_samples)
                 });
                 assert!(
                     format!("{parallel:?}") == expected,
