@@ -81,15 +81,19 @@
 //!   plan                             pure decisions of the automatic choice (no solving),
 //!                                    the estimate of a bake's peak memory
 //!   bake                             prepare/compute/write; `light`: the one dispatch of a
-//!                                    Technique to transport and solver; `pilot`: the pilot runs
+//!                                    Technique to transport and solver, on the `Processes` a
+//!                                    bake runs on (one, or a distributed bake's); `pilot`: the pilot runs
 //!                                    and the final bake that reuses them; `memory`: the
 //!                                    estimate against `--max-memory` (refuse, or gather);
 //!                                    `kept`: the kept transport's file (`--keep-transport`);
 //!                                    `relight`: a kept bake solved again with other light and
 //!                                    material values, and per-light layers;
 //!                                    `distributed`: the same bake over several processes
-//!                                    (timely dataflow): rows sharded, the radiosity vector
-//!                                    exchanged every sweep, process 0 finishes and writes
+//!                                    (timely dataflow): every transport's rows (pilots' and
+//!                                    final) sharded, the radiosity vector exchanged every
+//!                                    sweep, process 0 finishes and writes
+//!   shard                            per-item work (validity probes, the planner's samples)
+//!                                    divided among a bake's processes and gathered
 //!   build                            many scenes from a manifest: `bake` options by name, a
 //!                                    content-addressed cache, a JSON report, the error gate
 //!   reference, render                beside the pipeline (reference uses bake's prepare)
