@@ -1352,6 +1352,21 @@ fn patch_cuts_of(
                 .binary_search(&(g - inst.triangles.start))
                 .is_ok()
     };
+    // The segment a–b (world space, in the patch's plane) as cuts, clipped to the patch.
+    let cut_along = |cuts: &mut Cuts, a: DVec3, b: DVec3| {
+        let (a, b) = (patch.plane.to_2d(a), patch.plane.to_2d(b));
+        let length = a.distance(b);
+        if length <= tol.snap {
+            return;
+        }
+        for [s0, s1] in inside_intervals(a, b, &corners2d, tol.snap) {
+            if (s1 - s0) * length > tol.snap {
+                let i = cuts.point(a.lerp(b, s0), &patch_edges, tol);
+                let j = cuts.point(a.lerp(b, s1), &patch_edges, tol);
+                cuts.add(i, j, false);
+            }
+        }
+    };
     // Near contacts: the triangles facing the patch from less than `tol.near` in front of it.
     let mut facing: Vec<u32> = Vec::new();
     let reach = tol.touch.max(tol.near);
@@ -1363,39 +1378,16 @@ fn patch_cuts_of(
         if tol.near > 0.0 && faces_near(p, patch, tol) {
             facing.push(g);
         }
-        let Some([a, b]) = plane_segment(p, patch, tol.touch) else {
-            continue;
-        };
-        let (a, b) = (patch.plane.to_2d(a), patch.plane.to_2d(b));
-        let length = a.distance(b);
-        if length <= tol.snap {
-            continue;
-        }
-        for [s0, s1] in inside_intervals(a, b, &corners2d, tol.snap) {
-            if (s1 - s0) * length > tol.snap {
-                let i = cuts.point(a.lerp(b, s0), &patch_edges, tol);
-                let j = cuts.point(a.lerp(b, s1), &patch_edges, tol);
-                cuts.add(i, j, false);
-            }
+        if let Some([a, b]) = plane_segment(p, patch, tol.touch) {
+            cut_along(&mut cuts, a, b);
         }
     }
     // The outline of the near surfaces, projected: junctions too (the slot between a door's
     // edge and its lining is dark, the lining beside it in the room is not).
     for [a, b] in outline(scene, &facing) {
-        let (a, b) = (patch.plane.to_2d(a), patch.plane.to_2d(b));
-        let length = a.distance(b);
-        if length <= tol.snap {
-            continue;
-        }
-        for [s0, s1] in inside_intervals(a, b, &corners2d, tol.snap) {
-            if (s1 - s0) * length > tol.snap {
-                let i = cuts.point(a.lerp(b, s0), &patch_edges, tol);
-                let j = cuts.point(a.lerp(b, s1), &patch_edges, tol);
-                let before = cuts.segments.len();
-                cuts.add(i, j, false);
-                report.near_segments += cuts.segments.len() - before;
-            }
-        }
+        let before = cuts.segments.len();
+        cut_along(&mut cuts, a, b);
+        report.near_segments += cuts.segments.len() - before;
     }
     // Shadow outlines of punctual lights: cuts never stitched, as junctions are.
     if let Some(shadows) = shadows {
