@@ -3,6 +3,7 @@
 //!
 //! ```text
 //! cargo run --release --example density_figures -- OUT REFS OLD_BIN NEW_BIN QUALITIES SCENE...
+//! cargo run --release --example density_figures -- --from CSV CHART.png
 //! ```
 //!
 //! `QUALITIES` is a comma-separated list of presets (`draft,medium,high`). For each scene the
@@ -46,6 +47,13 @@ struct Row {
 
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
+    if let [from, csv, png] = &args[..]
+        && from == "--from"
+    {
+        let rows = read_csv(&std::fs::read_to_string(csv).expect("CSV"));
+        chart(Path::new(png), &rows).expect("chart");
+        return;
+    }
     let [out, refs, old, new, qualities, scenes @ ..] = &args[..] else {
         panic!("usage: density_figures OUT REFS OLD_BIN NEW_BIN QUALITIES SCENE...")
     };
@@ -121,6 +129,30 @@ fn main() {
     }
     std::fs::write(out.join("density_figures.csv"), csv).expect("write CSV");
     chart(&out.join("density_before_after.png"), &rows).expect("chart");
+}
+
+/// Rows of a `density_figures.csv`.
+fn read_csv(text: &str) -> Vec<Row> {
+    text.lines()
+        .skip(1)
+        .filter(|l| !l.trim().is_empty())
+        .map(|line| {
+            let v: Vec<&str> = line.split(',').collect();
+            let f = |i: usize| v[i].parse::<f32>().unwrap_or(f32::NAN);
+            Row {
+                scene: v[0].to_string(),
+                quality: v[1].to_string(),
+                binary: if v[3] == "before" { "before" } else { "after" },
+                seconds: f64::from(f(4)),
+                peak_mb: f64::from(f(5)),
+                point: f(6),
+                p95: f(7),
+                black: f(8),
+                view: f(9),
+                target: f(2),
+            }
+        })
+        .collect()
 }
 
 /// The stored point reference, or a new one (2048 points, 1% noise or 4096 paths) stored there.
@@ -259,6 +291,9 @@ fn chart(path: &Path, rows: &[Row]) -> Result<(), Box<dyn std::error::Error>> {
             .configure_mesh()
             .x_desc("wall time (s)")
             .y_desc("point RMSE")
+            .x_labels(6)
+            .y_labels(8)
+            .x_label_formatter(&|v| format!("{}", (v * 100.0).round() / 100.0))
             .y_label_formatter(&|v| format!("{:.1}%", v * 100.0))
             .draw()?;
         for (binary, color) in [
