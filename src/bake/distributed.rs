@@ -2,7 +2,7 @@
 //!
 //! Every process loads the same input with the same options and runs every stage of
 //! [`super::prepare`] and the automatic choice; all are deterministic, so every process gets
-//! the same atlas, texels and settings. What casts rays is divided ([`Shared`]):
+//! the same atlas, texels and settings. What casts rays is divided (`Shared`):
 //!
 //! - every bake of a transport — the density pilot's pair, the ray pilots' pairs and the final
 //!   bake — is sharded by rows: process `p` of `P` builds the Monte Carlo rows of texels
@@ -14,7 +14,7 @@
 //!   so every process stops after the same sweep with the single-process solution, bit for bit;
 //! - the validity pass (the density pilot's and the final atlas's), the punctual light per
 //!   texel and the planner's point samples compute their part of the items and gather the rest
-//!   ([`crate::shard`]).
+//!   (`crate::shard`).
 //!
 //! What every process still does in full: loading, the junction split, the BVH, both atlases
 //! and their texels, the whole-vector work of each sweep and the planner's arithmetic. Process
@@ -25,7 +25,7 @@
 //! exchange (the message names the processes whose share did not come). Every process fails
 //! then, before process 0 writes anything (output is staged, [`crate::output::Staging`]).
 //! Connecting starts before loading and is waited for at the first exchange, at most
-//! [`Cluster::connect_timeout`]. The TCP connections are set up here ([`connect_sockets`]) and
+//! [`Cluster::connect_timeout`]. The TCP connections are set up here (`connect_sockets`) and
 //! handed to timely: its own setup polls for peers once a second (a second of every bake) and
 //! prints its progress to standard output.
 //!
