@@ -466,7 +466,7 @@ impl Exchange {
         match outcome {
             Ok(()) => Ok(()),
             Err(RecvTimeoutError::Timeout) => {
-                self.timely = None; // still retrying; left behind
+                self.timely = None; // connecting until a second past the deadline; left behind
                 Err(Error::Cluster(format!(
                     "process {}: not every process connected within {:.0} s; is each of {} \
                      running with the same list and reachable?",

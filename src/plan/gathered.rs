@@ -169,6 +169,9 @@ impl GatheredSample {
         if texels.is_empty() || scene.triangles.is_empty() {
             return Ok(None);
         }
+        let Some(cdf) = area_cdf(scene) else {
+            return Ok(None);
+        };
         let emitters = Emitters::new(scene, texels);
         let light_samples = if emitters.is_empty() {
             0
@@ -184,10 +187,7 @@ impl GatheredSample {
             emitters,
             light_samples,
             valid: texels.valid_mask(),
-            cdf: match area_cdf(scene) {
-                Some(cdf) => cdf,
-                None => return Ok(None),
-            },
+            cdf,
         };
         let per_point =
             (PROBE_RAYS + 2 * (GATHER_RAYS + light_samples)) as u64 + scene.lights.len() as u64;
