@@ -203,7 +203,10 @@ impl Plan {
     /// and resolution error are independent, so they add in quadrature. `None` without a pilot.
     pub fn predicted_error(&self) -> Option<f32> {
         let gain = self.denoise_gain.unwrap_or(1.0);
-        match (self.predicted_noise.map(|n| n * gain), self.predicted_resolution) {
+        match (
+            self.predicted_noise.map(|n| n * gain),
+            self.predicted_resolution,
+        ) {
             (Some(n), Some(r)) => Some(n.hypot(r)),
             (n, r) => n.or(r),
         }
@@ -1076,7 +1079,12 @@ mod tests {
         // is two independent runs, 2.83%/√2 = 2.0%, not one run of 128 rays (1.68%).
         plan.denoise_gain = None;
         plan.target_error = 0.02;
-        assert!(!choose_rays(&mut config, &mut plan, 0.08, Some(0.08 / 4f32.powf(0.75))));
+        assert!(!choose_rays(
+            &mut config,
+            &mut plan,
+            0.08,
+            Some(0.08 / 4f32.powf(0.75))
+        ));
         let pair = 0.08 / 4f32.powf(0.75) / 2f32.sqrt();
         assert!(config.transport.gather_rays > 0 && plan.predicted_noise.unwrap() < pair);
     }

@@ -15,7 +15,9 @@
 //! lookups touching black texels. A camera view is the other yardstick: NEW_BIN path-traces
 //! the scene's default view once (`reference --view`, stored as `REFS/<stem>_view.exr`), renders
 //! each bake's view (`render`) and compares 4×4-pixel block means (`compare --view`, the
-//! reference's noise taken out). Prints a Markdown table, writes `OUT/density_figures.csv`
+//! reference's noise taken out). The share of each bake's wall time spent planning on work the
+//! result does not contain (density pilot, discarded pilot pairs, lookup-error samples) is
+//! read from its summary line. Prints a Markdown table, writes `OUT/density_figures.csv`
 //! and `OUT/density_before_after.png` (point error against time, one panel per scene).
 
 use std::path::{Path, PathBuf};
@@ -43,6 +45,9 @@ struct Row {
     /// The default camera view's block error, the reference's noise out.
     view: f32,
     target: f32,
+    /// Share of the wall time spent planning on work the result does not contain (the
+    /// summary line's "of which planning": density pilot, discarded pilot pairs, samples).
+    planning: f32,
 }
 
 fn main() {
@@ -62,9 +67,9 @@ fn main() {
     std::fs::create_dir_all(refs).expect("REFS");
     let mut rows = Vec::new();
     println!(
-        "| scene | quality | target | binary | time s | peak MB | point RMSE (noise out) | p95 | touching black | view (noise out) |"
+        "| scene | quality | target | binary | time s | peak MB | point RMSE (noise out) | p95 | touching black | view (noise out) | planning |"
     );
-    println!("|---|---|---:|---|---:|---:|---:|---:|---:|---:|");
+    println!("|---|---|---:|---|---:|---:|---:|---:|---:|---:|---:|");
     for scene in scenes {
         let input = Path::new(scene);
         let stem = input.file_stem().unwrap().to_string_lossy().to_string();
@@ -75,7 +80,7 @@ fn main() {
             for (binary, bin) in [("before", old), ("after", new)] {
                 let dir = out.join(format!("{stem}_{quality}_{binary}"));
                 let _ = std::fs::remove_dir_all(&dir);
-                let (seconds, peak_mb) = bake(bin, input, &dir, quality);
+                let (seconds, peak_mb, planning) = bake(bin, input, &dir, quality);
                 let baked = baked_file(&dir, &stem);
                 let render = RenderScene::load(&baked).expect("load the bake");
                 let c = points::compare(&render, &reference);
@@ -91,9 +96,10 @@ fn main() {
                     black: c.black_touch,
                     view,
                     target,
+                    planning,
                 };
                 println!(
-                    "| {} | {} | {:.0}% | {} | {:.2} | {:.0} | {:.2}%{} | {:.1}% | {:.2}% | {:.2}% |",
+                    "| {} | {} | {:.0}% | {} | {:.2} | {:.0} | {:.2}%{} | {:.1}% | {:.2}% | {:.2}% | {:.0}% |",
                     row.scene,
                     row.quality,
                     target * 100.0,
@@ -104,17 +110,19 @@ fn main() {
                     if row.point > target { " (above)" } else { "" },
                     row.p95 * 100.0,
                     row.black * 100.0,
-                    row.view * 100.0
+                    row.view * 100.0,
+                    row.planning * 100.0
                 );
                 rows.push(row);
             }
         }
     }
-    let mut csv =
-        String::from("scene,quality,target,binary,seconds,peak_mb,point_rmse,p95,black,view\n");
+    let mut csv = String::from(
+        "scene,quality,target,binary,seconds,peak_mb,point_rmse,p95,black,view,planning\n",
+    );
     for r in &rows {
         csv += &format!(
-            "{},{},{},{},{:.3},{:.1},{},{},{},{}\n",
+            "{},{},{},{},{:.3},{:.1},{},{},{},{},{}\n",
             r.scene,
             r.quality,
             r.target,
@@ -124,7 +132,8 @@ fn main() {
             r.point,
             r.p95,
             r.black,
-            r.view
+            r.view,
+            r.planning
         );
     }
     std::fs::write(out.join("density_figures.csv"), csv).expect("write CSV");
@@ -150,6 +159,8 @@ fn read_csv(text: &str) -> Vec<Row> {
                 black: f(8),
                 view: f(9),
                 target: f(2),
+                // Older CSVs have no planning column.
+                planning: v.get(10).and_then(|x| x.parse().ok()).unwrap_or(f32::NAN),
             }
         })
         .collect()
@@ -226,14 +237,16 @@ fn run(command: &mut Command) -> String {
     String::from_utf8_lossy(&output.stdout).into_owned()
 }
 
-/// Bakes with `bin` under `/usr/bin/time`; wall seconds and peak resident memory (MB).
-fn bake(bin: &str, input: &Path, dir: &Path, quality: &str) -> (f64, f64) {
+/// Bakes with `bin` under `/usr/bin/time`; wall seconds, peak resident memory (MB) and the
+/// share of the bake spent planning (from the summary line, printed when not `--quiet`; NaN
+/// for a binary that does not print it).
+fn bake(bin: &str, input: &Path, dir: &Path, quality: &str) -> (f64, f64, f32) {
     let output = Command::new("/usr/bin/time")
         .args(["-f", "%e %M", bin, "bake"])
         .arg(input)
         .arg("-o")
         .arg(dir)
-        .args(["--quality", quality, "--quiet"])
+        .args(["--quality", quality])
         .output()
         .expect("run the bake");
     let stderr = String::from_utf8_lossy(&output.stderr);
@@ -244,7 +257,23 @@ fn bake(bin: &str, input: &Path, dir: &Path, quality: &str) -> (f64, f64) {
         .map(|v| v.parse::<f64>().unwrap_or(f64::NAN));
     let seconds = it.next().unwrap_or(f64::NAN);
     let kb = it.next().unwrap_or(f64::NAN);
-    (seconds, kb / 1024.0)
+    (
+        seconds,
+        kb / 1024.0,
+        planning_share(&String::from_utf8_lossy(&output.stdout)),
+    )
+}
+
+/// "… of which planning 0.18s (80%))" in a bake's summary line, as a share.
+fn planning_share(stdout: &str) -> f32 {
+    let Some((_, after)) = stdout.rsplit_once("of which planning ") else {
+        return f32::NAN;
+    };
+    after
+        .split_once('(')
+        .and_then(|(_, p)| p.split_once('%'))
+        .and_then(|(p, _)| p.parse::<f32>().ok())
+        .map_or(f32::NAN, |p| p / 100.0)
 }
 
 /// The glTF or GLB a bake wrote into `dir`.

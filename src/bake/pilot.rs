@@ -11,13 +11,13 @@ use glam::Vec3;
 
 use super::light::{Lit, Processes};
 use crate::config::{BakeConfig, FormFactors, Keep, SolveParams, Technique, TransportParams};
+use crate::lightmap::denoise;
 use crate::plan::{self, GatheredSample, PILOT_RAYS, Plan, PunctualSample};
 use crate::progress::CancelOnly;
 use crate::shard::Shards;
 use crate::solve::Solution;
 use crate::texels::Texels;
 use crate::transport::{Surfaces, Transport};
-use crate::lightmap::denoise;
 use crate::{Progress, Result, metrics};
 
 /// Step 2 onwards of the automatic choice, once texels and the tracer exist: method, rays
@@ -270,8 +270,11 @@ fn denoise_gain(
         ..config.transport.clone()
     };
     let denoised = |run: &Lit| -> Result<Vec<Vec3>> {
-        let mut values =
-            super::stored_values(&run.solution.irradiance, &run.transport.direct, indirect_only);
+        let mut values = super::stored_values(
+            &run.solution.irradiance,
+            &run.transport.direct,
+            indirect_only,
+        );
         let noise = denoise::bake_noise(texels, &run.transport.direct, &values, &model);
         denoise::denoise(
             texels,
