@@ -56,8 +56,9 @@
 //!   between texel centres, where it blends four texels bilinearly, differs from the light at
 //!   that point where the light changes within a texel.
 //!   It is *measured* at random surface points (`GatheredSample`): the last pilot pair's texel
-//!   values read back by bilinear lookup against the light there — punctual lights exactly (one
-//!   shadow ray each, about the shading normal), emitters, sky and interreflection gathered at
+//!   values (denoised as the final lightmap will be, when the denoiser's gain is credited, so
+//!   that its smoothing of edges counts) read back by bilinear lookup against the light there
+//!   — punctual lights exactly (one shadow ray each, about the shading normal), emitters, sky and interreflection gathered at
 //!   the point as transport gathers at a texel (32 rays and 8 emitter light samples through
 //!   each run's solution). Each run's difference is independent of the other's, so the mean of
 //!   their products has neither's noise; points are drawn in batches of 4096 until the mean
@@ -631,7 +632,7 @@ pub(crate) fn predict_resolution(
     let pct = |x: f32| format!("{:.2}%", x * 100.0);
     let measured = match (gathered_bounds, gathered) {
         (Some((_, lo, hi)), Some(g)) => format!(
-            "measured at {} random surface points: the pilot's texel values read back by \
+            "measured at {} random surface points: the pilot's texel values{} read back by \
              bilinear lookup against the light gathered at each point ({} rays and light \
              samples per point and run; the two runs' independent differences multiplied, so \
              neither's noise counts; {}…{} within two standard errors; {:.2}s, {:.1}% of the \
@@ -640,6 +641,11 @@ pub(crate) fn predict_resolution(
              points; {} at {} points about the face normals, {:.1}% of those lookups reading a \
              gutter or buried neighbour)",
             g.points.len(),
+            if plan.denoise_gain.is_some() {
+                " (denoised, as the final lightmap will be)"
+            } else {
+                ""
+            },
             gathered::GATHER_RAYS + gathered::LIGHT_SAMPLES,
             pct(lo),
             pct(hi),

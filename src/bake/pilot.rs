@@ -5,6 +5,7 @@
 //! rays. The final lightmap is the ray-weighted mean of the last pilot pair and, unless they
 //! suffice, one more bake at the chosen rays.
 
+use std::f32::consts::PI;
 use std::time::Instant;
 
 use glam::Vec3;
@@ -90,9 +91,11 @@ pub(crate) fn choose_transport(
             }
         };
         // The denoiser's share of the noise, from a pair at 4× only (see `denoise_gain`).
-        if second.is_some() {
-            plan.denoise_gain = denoise_gain(texels, config, &runs, progress)?;
-        }
+        let denoised = match second {
+            Some(_) => denoise_gain(texels, config, &runs, progress)?,
+            None => None,
+        };
+        plan.denoise_gain = denoised.as_ref().map(|d| d.gain);
         let rays = runs.rays();
         progress.advance(1);
         progress.end();
@@ -115,7 +118,12 @@ pub(crate) fn choose_transport(
         } = Samples::measure(
             surfaces,
             &config.transport,
-            &runs,
+            // The pair as the final lightmap will be read: denoised when the denoiser's gain
+            // is credited, so the resolution error holds what its smoothing costs at edges.
+            match &denoised {
+                Some(d) => [&d.irradiance[0], &d.irradiance[1]],
+                None => runs.irradiance(),
+            },
             stored,
             e,
             budget,
@@ -124,8 +132,12 @@ pub(crate) fn choose_transport(
         if let Some(g) = &gathered {
             // The last pair's own noise per texel, measured above.
             let texel_noise = second.unwrap_or(first);
-            plan.reasons
-                .push(lookup_noise_reason(g, runs.gather_rays, texel_noise));
+            plan.reasons.push(lookup_noise_reason(
+                g,
+                runs.gather_rays,
+                texel_noise,
+                denoised.is_some(),
+            ));
         }
         plan.resolution_seconds = seconds;
         plan.overhead_seconds += seconds;
@@ -221,7 +233,7 @@ pub(crate) fn measure_density(
     let samples = Samples::measure(
         surfaces,
         &config.transport,
-        &runs,
+        runs.irradiance(),
         stored,
         target,
         budget,
@@ -259,7 +271,7 @@ fn denoise_gain(
     config: &BakeConfig,
     runs: &PilotRuns,
     progress: &dyn Progress,
-) -> Result<Option<f32>> {
+) -> Result<Option<Denoised>> {
     if !config.transport.denoise {
         return Ok(None);
     }
@@ -287,14 +299,24 @@ fn denoise_gain(
     };
     let [a, b] = runs.stored(indirect_only);
     let raw = metrics::relative_noise(&a, &b, &texels.invalid);
-    let filtered = metrics::relative_noise(
-        &denoised(&runs.runs[0])?,
-        &denoised(&runs.runs[1])?,
-        &texels.invalid,
-    );
-    let gain = filtered / raw;
-    Ok((raw > 0.0 && gain.is_finite())
-        .then(|| gain.clamp(DENOISE_GAIN_RANGE.0, DENOISE_GAIN_RANGE.1)))
+    let (da, db) = (denoised(&runs.runs[0])?, denoised(&runs.runs[1])?);
+    let gain = metrics::relative_noise(&da, &db, &texels.invalid) / raw;
+    if !(raw > 0.0 && gain.is_finite()) {
+        return Ok(None);
+    }
+    let irradiance = |v: Vec<Vec3>| -> Vec<Vec3> { v.into_iter().map(|x| x * PI).collect() };
+    Ok(Some(Denoised {
+        gain: gain.clamp(DENOISE_GAIN_RANGE.0, DENOISE_GAIN_RANGE.1),
+        irradiance: [irradiance(da), irradiance(db)],
+    }))
+}
+
+/// A pilot pair as the bake's denoiser leaves it ([`denoise_gain`]).
+struct Denoised {
+    /// Denoised over raw relative noise, within [`DENOISE_GAIN_RANGE`].
+    gain: f32,
+    /// Each run's denoised lightmap as irradiance `H` (W/m²).
+    irradiance: [Vec<Vec3>; 2],
 }
 
 /// What a renderer reads of the last pair's noise at the sample's points, against the texels'
@@ -302,11 +324,17 @@ fn denoise_gain(
 /// (about ⅔ of one texel's noise for lookups spread evenly over a cell) and points weigh texels
 /// by area. Measured 0.60–0.76 on the fixtures; the rays still aim at the texels' noise, a
 /// margin that today covers the resolution error's under-prediction (see the guide).
-fn lookup_noise_reason(sample: &GatheredSample, rays: u32, texel_noise: f32) -> String {
+fn lookup_noise_reason(
+    sample: &GatheredSample,
+    rays: u32,
+    texel_noise: f32,
+    denoised: bool,
+) -> String {
     let lookup = sample.lookup_noise();
+    let after = if denoised { " after denoising" } else { "" };
     format!(
-        "noise as a renderer reads it: {:.2}% at K={rays} at the sample's points against {:.2}% \
-         per texel (×{:.2}; the rays aim at the texels' noise)",
+        "noise as a renderer reads it: {:.2}% at K={rays}{after} at the sample's points against \
+         {:.2}% per texel before (×{:.2}; the rays aim at the texels' noise{after})",
         lookup * 100.0,
         texel_noise * 100.0,
         lookup / texel_noise
@@ -346,7 +374,7 @@ fn punctual_sample(
 fn gathered_sample(
     surfaces: Surfaces,
     transport: &TransportParams,
-    runs: &PilotRuns,
+    irradiance: [&[Vec3]; 2],
     punctual: Option<&PunctualSample>,
     target: f32,
     budget_rays: u64,
@@ -356,10 +384,7 @@ fn gathered_sample(
         return Ok(None);
     }
     let runs = plan::gathered::Runs {
-        irradiance: [
-            &runs.runs[0].solution.irradiance,
-            &runs.runs[1].solution.irradiance,
-        ],
+        irradiance,
         sky: transport.sky,
         target,
         budget_rays,
@@ -400,7 +425,7 @@ impl Samples {
     fn measure(
         surfaces: Surfaces,
         transport: &TransportParams,
-        runs: &PilotRuns,
+        irradiance: [&[Vec3]; 2],
         stored: [&[Vec3]; 2],
         target: f32,
         budget_rays: u64,
@@ -411,7 +436,7 @@ impl Samples {
         let gathered = gathered_sample(
             surfaces,
             transport,
-            runs,
+            irradiance,
             punctual.as_ref(),
             target,
             budget_rays,
@@ -474,6 +499,14 @@ impl PilotRuns {
 
     fn rays(&self) -> u64 {
         self.runs.iter().map(|r| r.transport.rays).sum()
+    }
+
+    /// Each run's solved irradiance `H`.
+    fn irradiance(&self) -> [&[Vec3]; 2] {
+        [
+            &self.runs[0].solution.irradiance,
+            &self.runs[1].solution.irradiance,
+        ]
     }
 
     /// What the lightmap stores, from each of the two runs.
