@@ -135,6 +135,7 @@ pub(crate) mod lights;
 pub mod metrics;
 pub mod output;
 pub mod plan;
+pub mod probes;
 pub mod progress;
 pub mod reference;
 pub mod render;
@@ -154,8 +155,8 @@ pub mod testing;
 mod bake;
 
 pub use bake::{
-    BakeReport, Baked, Prepared, StageTime, bake, compute, distributed, kept, prepare, relight,
-    split_junctions, write,
+    BakeReport, Baked, Prepared, ProbeCount, StageTime, bake, compute, distributed, kept, prepare,
+    relight, split_junctions, write,
 };
 pub use build::{BuildReport, Manifest, build};
 pub use config::BakeConfig;
