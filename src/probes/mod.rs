@@ -49,7 +49,7 @@
 //! | parameter       | default | effect                                                        |
 //! |-----------------|---------|---------------------------------------------------------------|
 //! | `budget`        | 1024    | probes at most; spacing `∛(bounds volume / budget)`           |
-//! | `rays`          | 1024    | sphere rays per probe (+ as many emitter samples); noise ∝ 1/√rays |
+//! | `rays`          | 256     | sphere rays per probe (+ as many emitter samples); noise ∝ 1/√rays |
 //! | `indirect_only` | false   | leave out punctual lights' direct light                       |
 //!
 //! Limits: the grid is uniform (no refinement near light changes); a probe inside a closed
@@ -78,7 +78,7 @@ pub use sh::Sh2;
 /// Probes placed when `--probes` gives no number.
 pub const DEFAULT_BUDGET: u32 = 1024;
 /// Sphere rays per probe.
-pub const DEFAULT_RAYS: u32 = 1024;
+pub const DEFAULT_RAYS: u32 = 256;
 /// Probes per parallel work item (one progress tick each).
 const CHUNK: usize = 16;
 /// Mixed into the seed: the probes' streams differ from the texels' of the same index.
@@ -156,7 +156,7 @@ impl Probes {
 
     /// The interpolated coefficients at `p` (see the module docs); `visible(q)` says whether
     /// the point sees a probe at `q` (always true without ray queries).
-    pub fn sh_at(&self, p: Vec3, visible: impl Fn(Vec3) -> bool) -> Sh2 {
+    pub fn sh_at(&self, p: Vec3, mut visible: impl FnMut(Vec3) -> bool) -> Sh2 {
         let zero = [Vec3::ZERO; 9];
         if self.is_empty() {
             return zero;
@@ -239,6 +239,50 @@ impl Probes {
         nearest.map_or(zero, |q| self.sh[q])
     }
 
+    /// `n` random points in free space between the probes, each with a random unit normal,
+    /// to measure the probes against the path tracer: uniform in the box of the grid
+    /// positions, points buried in geometry (the probes' own test) drawn again. With
+    /// `whole_cells`, only points whose eight cell probes are all valid and visible from them
+    /// (away from walls and furniture: the interpolation's own error) are kept. Point `k` comes
+    /// from its own random stream `(seed, k)`.
+    pub fn points_between(
+        &self,
+        tracer: &Tracer,
+        n: usize,
+        seed: u64,
+        whole_cells: bool,
+    ) -> Vec<(Vec3, Vec3)> {
+        let last = Vec3::from(self.count.map(|c| c.saturating_sub(1) as f32));
+        let span = self.step * last;
+        let mut points = Vec::with_capacity(n);
+        for k in 0..(n as u64).saturating_mul(200) {
+            if points.len() == n {
+                break;
+            }
+            let mut rng = Rng::new(seed ^ SALT, k, 0);
+            let u = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32());
+            let p = self.origin + span * u;
+            let normal = uniform_sphere(rng.next_vec2());
+            if place::buried(tracer, p, rng.next_vec2()) {
+                continue;
+            }
+            if whole_cells {
+                let (mut all, mut corners) = (true, 0);
+                self.sh_at(p, |q| {
+                    corners += 1;
+                    all &= !tracer.occluded(p, q);
+                    true
+                });
+                let every = corners == 1 << self.count.iter().filter(|&&c| c > 1).count();
+                if !(all && every) {
+                    continue;
+                }
+            }
+            points.push((p, normal));
+        }
+        points
+    }
+
     /// `E/π` at `p` about unit normal `n` from the interpolated coefficients, in the lightmaps'
     /// unit; with a `tracer`, probes that `p` (lifted by the ray offset along `n`) cannot see
     /// are left out.
@@ -264,7 +308,6 @@ pub(crate) fn bake(
     progress: &dyn Progress,
 ) -> Result<Probes> {
     let placement = place::place(surfaces.scene, surfaces.tracer, params.budget, seed ^ SALT);
-    let place_rays = placement.position.len() as u64 * u64::from(place::TEST_RAYS);
     let gatherer = Gatherer {
         surfaces,
         h,
@@ -302,7 +345,7 @@ pub(crate) fn bake(
         valid: placement.valid,
         sh,
         indirect_only: params.indirect_only,
-        rays: place_rays + out.iter().map(|o| o.1).sum::<u64>(),
+        rays: placement.rays + out.iter().map(|o| o.1).sum::<u64>(),
         moved: placement.moved,
     })
 }

@@ -12,9 +12,10 @@
 //! tolerance"). Double-sided surfaces have no back, so a probe inside a closed double-sided
 //! mesh is not found (a limit).
 //!
-//! **Clearance.** A probe whose nearest hit is closer than `CLEARANCE` of the smallest grid
-//! step is moved straight away from that hit to the clearance, if the move itself crosses no
-//! surface, and tested again (`NUDGES` times at most): a probe a hair from a wall reads that
+//! **Clearance.** A probe whose nearest surface is closer than `CLEARANCE` of the smallest grid
+//! step (looking both ways along each test ray, so that a probe lying exactly on a surface —
+//! a grid plane through a wall — finds it too) is moved straight away from it to the
+//! clearance, if the move itself crosses no surface, and tested again (`NUDGES` times at most): a probe a hair from a wall reads that
 //! wall at grazing angles only, and a point beside the wall interpolates it. Interpolation
 //! keeps the probe's grid cell (the move is at most a fraction of a step).
 
@@ -27,7 +28,7 @@ use crate::texels::validity::MAX_BACK;
 use crate::trace::Tracer;
 
 /// Rays per probe of the buried test.
-pub(crate) const TEST_RAYS: u32 = 64;
+const TEST_RAYS: u32 = 64;
 /// Wanted distance from the nearest surface, as a fraction of the smallest grid step.
 const CLEARANCE: f32 = 0.2;
 /// Moves away from a surface at most.
@@ -50,6 +51,8 @@ pub(crate) struct Placement {
     pub(crate) valid: Vec<bool>,
     /// Probes moved away from a surface.
     pub(crate) moved: usize,
+    /// Rays the tests cast.
+    pub(crate) rays: u64,
 }
 
 /// The scene's bounding box over its triangles' vertices (`None` without triangles).
@@ -108,7 +111,7 @@ pub(crate) fn place(scene: &Scene, tracer: &Tracer, budget: u32, seed: u64) -> P
     let (origin, step, count) = grid(lo, hi, budget);
     let n = (count[0] * count[1] * count[2]) as usize;
     let clearance = CLEARANCE * step.min_element();
-    let tested: Vec<(Vec3, bool, bool)> = (0..n)
+    let tested: Vec<(Vec3, bool, bool, u64)> = (0..n)
         .into_par_iter()
         .map(|i| {
             let ijk = unflatten(i, count);
@@ -124,6 +127,7 @@ pub(crate) fn place(scene: &Scene, tracer: &Tracer, budget: u32, seed: u64) -> P
         position: tested.iter().map(|t| t.0).collect(),
         valid: tested.iter().map(|t| t.1).collect(),
         moved: tested.iter().filter(|t| t.2).count(),
+        rays: tested.iter().map(|t| t.3).sum(),
     }
 }
 
@@ -138,19 +142,24 @@ pub(crate) fn unflatten(i: usize, count: [u32; 3]) -> [u32; 3] {
     ]
 }
 
-/// The probe that starts at `p`: (where it ends, not buried, moved).
-fn settle(tracer: &Tracer, mut p: Vec3, shift: Vec2, clearance: f32) -> (Vec3, bool, bool) {
+/// The probe that starts at `p`: (where it ends, not buried, moved, rays cast).
+fn settle(tracer: &Tracer, mut p: Vec3, shift: Vec2, clearance: f32) -> (Vec3, bool, bool, u64) {
     let limit = (MAX_BACK * TEST_RAYS as f32) as u32;
     let mut moved = false;
+    let mut rays = 0;
     for _ in 0..=NUDGES {
-        let (back, nearest) = look_around(tracer, p, shift);
+        let (back, nearest) = look_around(tracer, p, shift, clearance);
+        rays += 2 * u64::from(TEST_RAYS);
         if back > limit {
-            return (p, false, moved);
+            return (p, false, moved, rays);
         }
         match nearest {
             Some((t, dir)) if t < clearance => {
                 let to = p - dir * (clearance - t);
-                if tracer.occluded(p, to) {
+                rays += 1;
+                // Tested from where it goes: the surface `p` lies on (the one it moves off)
+                // is in the segment's untested last epsilon.
+                if tracer.occluded(to, p) {
                     break;
                 }
                 p = to;
@@ -159,20 +168,39 @@ fn settle(tracer: &Tracer, mut p: Vec3, shift: Vec2, clearance: f32) -> (Vec3, b
             _ => break,
         }
     }
-    (p, true, moved)
+    (p, true, moved, rays)
 }
 
-/// Back-face hits of `TEST_RAYS` rays from `p`, and the nearest hit (distance, direction).
-fn look_around(tracer: &Tracer, p: Vec3, shift: Vec2) -> (u32, Option<(f32, Vec3)>) {
+/// Whether the point `p` is buried (the probes' test, its rays turned by `shift`).
+pub(crate) fn buried(tracer: &Tracer, p: Vec3, shift: Vec2) -> bool {
+    look_around(tracer, p, shift, 0.0).0 > (MAX_BACK * TEST_RAYS as f32) as u32
+}
+
+/// Back-face hits of `TEST_RAYS` rays from `p`, and the nearest surface along them (distance,
+/// direction towards it). Along each direction a second ray comes back through `p` from `reach` away: the
+/// tracer loses hits closer than its entry clamp (see `trace`), so a probe lying on a surface
+/// (a grid plane through a wall) would not see the surface it lies on from there.
+fn look_around(tracer: &Tracer, p: Vec3, shift: Vec2, reach: f32) -> (u32, Option<(f32, Vec3)>) {
     let mut back = 0;
     let mut nearest: Option<(f32, Vec3)> = None;
+    let mut closer = |t: f32, dir: Vec3| {
+        if nearest.is_none_or(|(n, _)| t < n) {
+            nearest = Some((t, dir));
+        }
+    };
     for k in 0..TEST_RAYS {
         let dir = uniform_sphere(hammersley(k, TEST_RAYS, shift));
         if let Some(hit) = tracer.closest(p, dir, f32::INFINITY) {
             back += u32::from(!hit.front);
-            if nearest.is_none_or(|(t, _)| hit.t < t) {
-                nearest = Some((hit.t, dir));
-            }
+            closer(hit.t, dir);
+        }
+        // Back from `reach` beyond `p` to `reach` before it: a surface through `p` lies
+        // mid-way, away from both ends.
+        if reach > 0.0
+            && let Some(hit) = tracer.closest(p + dir * reach, -dir, 2.0 * reach)
+        {
+            let toward = if hit.t <= reach { dir } else { -dir };
+            closer((reach - hit.t).abs(), toward);
         }
     }
     (back, nearest)
