@@ -93,7 +93,8 @@ pub fn from_json(bytes: &[u8], path: &Path) -> Result<Probes> {
         || file.positions.len() != 3 * n
         || file.valid.len() != n
         || file.sh.len() != 27 * n
-        || !(step.min_element() > 0.0)
+        || step.min_element().is_nan()
+        || step.min_element() <= 0.0
     {
         return Err(Error::invalid(
             path,

@@ -12,7 +12,7 @@
 //!                     ─ file ───────▶ <stem>_probes.json, named in the glTF's root extras
 //! ```
 //!
-//! **Placement** ([`place`]): a regular grid over the scene's bounds at the spacing the budget
+//! **Placement** (`place.rs`): a regular grid over the scene's bounds at the spacing the budget
 //! allows (`--probes N`, default [`DEFAULT_BUDGET`]); probes buried in solids (or outside an
 //! interior's closed shell) are marked invalid, probes too close to a surface are moved off it.
 //! A regular grid was chosen over an adaptive octree or a tetrahedralisation for this first
@@ -21,7 +21,7 @@
 //! weights, and its error is measured below; density where light changes is left to a later
 //! slice (see the guide).
 //!
-//! **Gathering** ([`gather`]): per probe, `rays` directions stratified over the sphere
+//! **Gathering** (`Gatherer::gather`): per probe, `rays` directions stratified over the sphere
 //! (Hammersley, turned by the probe's own random stream `(seed, probe)`: the result does not
 //! depend on the thread count). A ray that hits texel `j` from the front reads the solved
 //! radiance leaving it, `ρ_j·H_j/π + Le_j` (the solution itself, not the dilated pages); one
@@ -298,7 +298,7 @@ impl Probes {
     }
 }
 
-/// Places probes ([`place`]) and gathers the solved light at them; `h` is the solved
+/// Places probes (`place::place`) and gathers the solved light at them; `h` is the solved
 /// irradiance per texel (`H`, W/m²), `seed` and `sky` the bake's.
 pub(crate) fn bake(
     surfaces: Surfaces,

@@ -8,7 +8,7 @@
 //! **Buried.** From each probe `TEST_RAYS` rays go out over the sphere (a Hammersley set turned
 //! by the probe's own random stream). A probe is buried — inside a closed solid, or outside
 //! the closed shell of an interior, where rays meet the backs of its walls — when more than
-//! [`MAX_BACK`] of them hit a back face (the texels' validity test, Unity's "backface
+//! `MAX_BACK` of them hit a back face (the texels' validity test, Unity's "backface
 //! tolerance"). Double-sided surfaces have no back, so a probe inside a closed double-sided
 //! mesh is not found (a limit).
 //!
