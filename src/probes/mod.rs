@@ -116,8 +116,8 @@ pub struct Probes {
     pub step: Vec3,
     /// Probes along x, y, z.
     pub count: [u32; 3],
-    /// Where each probe was baked: its grid position, or moved off a nearby surface by less
-    /// than a fifth of a step.
+    /// Where each probe was baked: its grid position, or moved off a nearby surface (by at
+    /// most four fifths of a step: up to four moves of at most a fifth).
     pub position: Vec<Vec3>,
     /// False for probes buried in geometry (their coefficients are filled from neighbours).
     pub valid: Vec<bool>,

@@ -17,7 +17,7 @@
 //! a grid plane through a wall — finds it too) is moved straight away from it to the
 //! clearance, if the move itself crosses no surface, and tested again (`NUDGES` times at most): a probe a hair from a wall reads that
 //! wall at grazing angles only, and a point beside the wall interpolates it. Interpolation
-//! keeps the probe's grid cell (the move is at most a fraction of a step).
+//! keeps the probe's grid cell (each move is at most a fifth of a step, four moves at most).
 
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;

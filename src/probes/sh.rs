@@ -113,15 +113,19 @@ mod tests {
         Vec3::new(r * phi.cos(), r * phi.sin(), z)
     }
 
-    /// Coefficients of radiance `l(ω)` over the sphere, by a dense Hammersley rule.
+    /// Coefficients of radiance `l(ω)` over the sphere, by a dense Hammersley rule (summed in
+    /// f64: 2¹⁸ f32 additions of small terms would drift by a percent).
     fn project_sphere(l: impl Fn(Vec3) -> f32) -> Sh2 {
         let n = 1 << 18;
-        let mut c = [Vec3::ZERO; 9];
+        let mut sum = [0.0f64; 9];
         for k in 0..n {
             let d = sphere(hammersley(k, n, Vec2::ZERO));
-            project(&mut c, d, Vec3::splat(l(d) * 4.0 * PI / n as f32));
+            let w = f64::from(l(d)) * 4.0 * std::f64::consts::PI / f64::from(n);
+            for (s, y) in sum.iter_mut().zip(basis(d)) {
+                *s += w * f64::from(y);
+            }
         }
-        c
+        sum.map(|s| Vec3::splat(s as f32))
     }
 
     #[test]
