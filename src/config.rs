@@ -309,6 +309,8 @@ pub struct OutputParams {
     /// Also write directional pages (L1 spherical harmonics of the incident radiance,
     /// `lightmap::directional`) from a final gather with this many rays per texel.
     pub directional: Option<u32>,
+    /// Also place and bake light probes (`crate::probes`) and write `<stem>_probes.json`.
+    pub probes: Option<crate::probes::ProbeParams>,
     /// Also write `<stem>.transport`: the rows, direct light per source and the settings, from
     /// which `lightbake relight` re-solves with other light and material values without casting
     /// a ray (see the crate's `relight`). Monte Carlo rows only.
@@ -453,6 +455,7 @@ impl BakeConfig {
                 keep_transport: false,
                 layers: None,
                 directional: None,
+                probes: None,
             },
             auto: None,
             max_memory: None,
@@ -517,6 +520,14 @@ impl BakeConfig {
         {
             return Err(Option(format!(
                 "directional rays must be within 1..=1048576, got {rays}"
+            )));
+        }
+        if let Some(p) = &self.output.probes
+            && (p.budget == 0 || p.budget > 1 << 24 || p.rays == 0 || p.rays > 1 << 20)
+        {
+            return Err(Option(format!(
+                "probes must be within 1..=16777216 and probe rays within 1..=1048576, got {} and {}",
+                p.budget, p.rays
             )));
         }
         if t.light_samples > 1 << 20 {

@@ -54,6 +54,9 @@
 //!     ─ lightmap::denoise  ──▶ H/π per texel         edge-aware, Monte Carlo only
 //!  ─ lightmap::directional ──▶ L1 SH per texel       with --directional: a final gather over
 //!                                                     the solution (pages like the lightmap's)
+//!           ─ probes::bake ──▶ Probes                with --probes: a grid of L2 SH light
+//!                                                     probes in the empty space, buried ones
+//!                                                     marked, gathered from the solution
 //! ─ LightmapPages::from_texels ▶ LightmapPages         H/π per texel, dilated into the gutters
 //!         ─ lightmap::seams ──▶ LightmapPages         UV seams stitched (least squares)
 //!                  ─ output ──▶ .exr + .png pages, .gltf/.bin or .glb (every file format
@@ -77,7 +80,7 @@
 //!   solve                            one stopping rule; jacobi, gauss_seidel, southwell on stored
 //!                                    rows; gather (matrix-free) and hierarchical make their own
 //!                                    transport as they iterate
-//!   lightmap, output
+//!   lightmap, probes, output
 //!   plan                             pure decisions of the automatic choice (no solving),
 //!                                    the estimate of a bake's peak memory
 //!   bake                             prepare/compute/write; `light`: the one dispatch of a
@@ -107,7 +110,9 @@
 //! reference also measures what a renderer shows: [`reference::points`] path-traces random
 //! visible surface points (over the whole scene, or within a [`reference::points::Strip`] beside
 //! a wall, where leaks would show) and reads the written bake there as a renderer does
-//! (`TEXCOORD_1`, bilinear lookup in the EXR page). [`view`] serves a page that shows a bake in a browser with
+//! (`TEXCOORD_1`, bilinear lookup in the EXR page). [`probes`] carries the solved light to
+//! points off the surfaces (what moves), read back through [`render::RenderScene`] and
+//! measured at free-space points by [`reference::points::trace_about`]. [`view`] serves a page that shows a bake in a browser with
 //! three.js (vendored, offline), loaded exactly as a three.js user would load it.
 //!
 //! ## Conventions
@@ -135,6 +140,7 @@ pub(crate) mod lights;
 pub mod metrics;
 pub mod output;
 pub mod plan;
+pub mod probes;
 pub mod progress;
 pub mod reference;
 pub mod render;
@@ -154,8 +160,8 @@ pub mod testing;
 mod bake;
 
 pub use bake::{
-    BakeReport, Baked, Prepared, StageTime, bake, compute, distributed, kept, prepare, relight,
-    split_junctions, write,
+    BakeReport, Baked, Prepared, ProbeCount, StageTime, bake, compute, distributed, kept, prepare,
+    relight, split_junctions, write,
 };
 pub use build::{BuildReport, Manifest, build};
 pub use config::BakeConfig;

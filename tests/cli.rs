@@ -485,3 +485,59 @@ fn relight_from_a_kept_transport_with_layers() {
     assert!(!o.status.success());
     assert!(stderr(&o).contains("\"bulb\", \"spot\""), "{}", stderr(&o));
 }
+
+/// `bake --probes N` writes the probe file and names it; `lightbake probes --at` prints one
+/// `r,g,b` line per point, the library's interpolation exactly; without probes it says how to
+/// get them.
+#[test]
+fn probes_at_points_print_the_interpolated_irradiance() {
+    let dir = scratch();
+    let input = fixture("two_rooms.gltf");
+    let out = bake(&input, dir.path(), &["--probes", "64"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(String::from_utf8_lossy(&out.stdout).contains(" probes ("));
+    let gltf = dir.path().join("two_rooms.gltf");
+    let csv = dir.path().join("points.csv");
+    std::fs::write(
+        &csv,
+        "x,y,z,nx,ny,nz\n-1,1,0,0,1,0\n\n# room B\n1,1,0,0,1,0\n",
+    )
+    .unwrap();
+    let o = lightbake(&[
+        "probes",
+        gltf.to_str().unwrap(),
+        "--at",
+        csv.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let printed: Vec<glam::Vec3> = String::from_utf8_lossy(&o.stdout)
+        .lines()
+        .map(|l| {
+            let v: Vec<f32> = l.split(',').map(|x| x.parse().unwrap()).collect();
+            glam::Vec3::new(v[0], v[1], v[2])
+        })
+        .collect();
+    let baked = lightbake::render::RenderScene::load(&gltf).unwrap();
+    let probes = baked.probes.as_ref().expect("the glTF names its probes");
+    let expected: Vec<glam::Vec3> = [(-1.0, 0.0), (1.0, 0.0)]
+        .map(|(x, z)| {
+            let p = glam::Vec3::new(x, 1.0, z);
+            probes.irradiance_over_pi(p, glam::Vec3::Y, Some(&baked.tracer))
+        })
+        .to_vec();
+    assert_eq!(printed, expected);
+    // Room A holds the panel.
+    assert!(printed[0].x > 2.0 * printed[1].x, "{printed:?}");
+
+    let plain = scratch();
+    assert!(bake(&input, plain.path(), &[]).status.success());
+    let gltf = plain.path().join("two_rooms.gltf");
+    let o = lightbake(&[
+        "probes",
+        gltf.to_str().unwrap(),
+        "--at",
+        csv.to_str().unwrap(),
+    ]);
+    assert!(!o.status.success());
+    assert!(stderr(&o).contains("--probes"), "{}", stderr(&o));
+}

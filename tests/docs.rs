@@ -345,7 +345,7 @@ fn prose(path: &Path) -> String {
 /// The flags of every `lightbake` command, from their `--help`.
 fn cli_flags() -> Vec<String> {
     let mut flags = Vec::new();
-    for command in "bake relight render reference compare build view".split(' ') {
+    for command in "bake relight render reference compare probes build view".split(' ') {
         let o = Command::new(env!("CARGO_BIN_EXE_lightbake"))
             .args([command, "--help"])
             .output()

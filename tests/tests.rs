@@ -19,6 +19,7 @@ mod narrow_faces;
 mod pipeline;
 mod plan;
 mod points;
+mod probes;
 mod quality;
 mod reference;
 mod relight;

@@ -61,6 +61,8 @@ pub struct BakeReport {
     /// How the directional pages' reconstruction at the texel normals agrees with the lightmap
     /// (`None` without `config.output.directional`).
     pub(crate) directional: Option<lightmap::directional::Agreement>,
+    /// Probes baked (all, valid) and their rays (`None` without `config.output.probes`).
+    pub probes: Option<ProbeCount>,
     /// Wall time per stage, in pipeline order.
     pub stages: Vec<StageTime>,
     /// The files written, the glTF first.
@@ -111,8 +113,17 @@ impl BakeReport {
                 a.l1_bias * 100.0
             )
         });
+        let probes = self.probes.map_or(String::new(), |p| {
+            format!(
+                "; {} probes ({} valid, {} moved off a surface), {:.2} M probe rays",
+                p.probes,
+                p.valid,
+                p.moved,
+                p.rays as f64 * 1e-6
+            )
+        });
         format!(
-            "{} texels ({} moved out of geometry, {} invalid, {} divided by a wall) on {} page(s), {} triangles, {:.2} M rays, {} iterations, residual {:.1e}{}{}{junctions}{sharing}{directional}{plan}; {} (total {:.2}s{overhead})",
+            "{} texels ({} moved out of geometry, {} invalid, {} divided by a wall) on {} page(s), {} triangles, {:.2} M rays, {} iterations, residual {:.1e}{}{}{junctions}{sharing}{directional}{probes}{plan}; {} (total {:.2}s{overhead})",
             self.texels,
             self.validity.moved,
             self.validity.invalid,
@@ -131,6 +142,31 @@ impl BakeReport {
             stages.join(", "),
             total
         )
+    }
+}
+
+/// How many probes a bake placed, how many are valid (not buried in geometry), and the rays
+/// placing and gathering them cast.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ProbeCount {
+    /// Probes on the grid.
+    pub probes: usize,
+    /// Probes not buried in geometry.
+    pub valid: usize,
+    /// Probes moved away from a surface.
+    pub moved: usize,
+    /// Rays cast by placement and gathering.
+    pub rays: u64,
+}
+
+impl ProbeCount {
+    fn of(p: &crate::probes::Probes) -> ProbeCount {
+        ProbeCount {
+            probes: p.len(),
+            valid: p.valid_count(),
+            moved: p.moved,
+            rays: p.rays,
+        }
     }
 }
 
@@ -159,6 +195,8 @@ pub struct Baked {
     /// `pages`, their agreement with the lightmap and the gather's rays
     /// (`config.output.directional`).
     pub directional: Option<([LightmapPages; 4], lightmap::directional::Agreement, u64)>,
+    /// The light probes (`config.output.probes`).
+    pub probes: Option<crate::probes::Probes>,
     /// Texel sample points moved out of geometry, and texels with none outside it.
     pub validity: texels::validity::ValidityReport,
     /// The settings the bake ran with: `config` with the automatic choices applied.
@@ -241,6 +279,7 @@ fn pass_through(
         junctions: None,
         sharing: None,
         directional: None,
+        probes: None,
         stages,
         files,
     })
@@ -663,6 +702,22 @@ pub(crate) fn finish(prepared: Prepared, lit: Lighting, progress: &dyn Progress)
     if directional.is_some() {
         timed(&mut stages, "directional", t);
     }
+    let t = Instant::now();
+    let probes = (config.output.probes.as_ref())
+        .map(|params| {
+            let bake = (config.transport.seed, config.transport.sky);
+            crate::probes::bake(
+                prepared.surfaces(),
+                &solution.irradiance,
+                params,
+                bake,
+                progress,
+            )
+        })
+        .transpose()?;
+    if probes.is_some() {
+        timed(&mut stages, "probes", t);
+    }
     let Prepared {
         scene,
         source,
@@ -765,6 +820,7 @@ pub(crate) fn finish(prepared: Prepared, lit: Lighting, progress: &dyn Progress)
         pages,
         error_map,
         directional,
+        probes,
         validity,
         config,
         plan,
@@ -883,6 +939,9 @@ pub fn write(
         &mut staging,
         &stem,
     )?;
+    if let Some(probes) = &baked.probes {
+        stage_probes(probes, &baked.source, &mut staging, input, &stem)?;
+    }
     if !layer_files.is_empty() || config.output.keep_transport {
         keep_with_gltf(&baked, &mut staging, input, &stem, &layer_files)?;
     }
@@ -898,7 +957,8 @@ pub fn write(
         // gather included.
         rays: baked.transport.rays
             + baked.plan.as_ref().map_or(0, |p| p.discarded_rays)
-            + baked.directional.as_ref().map_or(0, |d| d.2),
+            + baked.directional.as_ref().map_or(0, |d| d.2)
+            + baked.probes.as_ref().map_or(0, |p| p.rays),
         iterations: baked.solution.history.len(),
         residual: baked.solution.residual(),
         converged: baked.solution.converged,
@@ -908,9 +968,36 @@ pub fn write(
         junctions: baked.junctions,
         sharing: atlas::ShareReport::of(&baked.atlas),
         directional: baked.directional.map(|(_, a, _)| a),
+        probes: baked.probes.as_ref().map(ProbeCount::of),
         stages: baked.stages,
         files,
     })
+}
+
+/// Stages `<stem>_probes.json` and names it in the staged glTF's root
+/// `extras.light_probes = {"uri", "count"}`.
+fn stage_probes(
+    probes: &crate::probes::Probes,
+    source: &scene::Source,
+    staging: &mut Staging,
+    input: &Path,
+    stem: &str,
+) -> Result<()> {
+    let uri = format!("{stem}_probes.json");
+    staging.write(&uri, &crate::probes::file::to_json(probes)?)?;
+    let name = match source.is_glb {
+        true => format!("{stem}.glb"),
+        false => format!("{stem}.gltf"),
+    };
+    let gltf = staging.read(&name)?;
+    let edited = output::gltf_edit::edit_gltf(&gltf, input, |json| {
+        output::gltf_edit::set_root_extra(
+            json,
+            crate::probes::file::EXTRAS_KEY,
+            serde_json::json!({ "uri": uri, "count": probes.len() }),
+        )
+    })?;
+    staging.replace(&name, &edited)
 }
 
 /// Names the layers' pages in the staged glTF's extras, and with `keep_transport` stages

@@ -53,6 +53,10 @@ pub struct Options {
     pub directional: Option<bool>,
     /// Hemisphere rays per texel of the directional gather.
     pub directional_rays: Option<u32>,
+    /// Also bake light probes, at most this many (see `crate::probes`).
+    pub probes: Option<u32>,
+    /// Leave punctual lights' direct light out of the probes.
+    pub probes_indirect_only: Option<bool>,
     /// Keep receivers whole where other surfaces meet them.
     pub no_split_junctions: Option<bool>,
     /// Do not cut receivers along the hard shadow outlines of punctual lights.
@@ -166,6 +170,16 @@ impl Options {
             self.directional_rays
                 .unwrap_or(crate::lightmap::directional::DEFAULT_RAYS)
         });
+        c.output.probes = self.probes.map(|budget| crate::probes::ProbeParams {
+            budget,
+            indirect_only: self.probes_indirect_only.unwrap_or(false),
+            ..Default::default()
+        });
+        if self.probes_indirect_only == Some(true) && self.probes.is_none() {
+            return Err(Error::Option(
+                "probes-indirect-only needs probes: give probes too".into(),
+            ));
+        }
         c.atlas.split_junctions = !self.no_split_junctions.unwrap_or(false);
         c.atlas.shadow_cuts = !self.no_shadow_cuts.unwrap_or(false);
         c.atlas.near_contacts = self.near_contacts.unwrap_or(false);

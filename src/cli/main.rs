@@ -4,6 +4,7 @@ mod build;
 mod compare;
 mod distributed;
 mod interrupt;
+mod probes;
 mod progress;
 mod reference;
 mod relight;
@@ -48,6 +49,8 @@ enum Command {
     Reference(reference::Args),
     /// Compare a baked scene, read as a renderer reads it, with a point reference.
     Compare(compare::Args),
+    /// Print the light a bake's probes give at points (irradiance over π, one r,g,b line each).
+    Probes(probes::Args),
     /// Bake every scene a manifest (lightbake.toml) lists, skipping those whose outputs are up
     /// to date.
     Build(build::Args),
@@ -246,6 +249,14 @@ struct BakeArgs {
     /// Hemisphere rays per texel of the directional gather.
     #[arg(long, value_name = "N", requires = "directional")]
     directional_rays: Option<u32>,
+    /// Also place and bake light probes in the scene's empty space, at most N [default: 1024]:
+    /// <stem>_probes.json, named in the glTF's root extras (see the guide, src/guide/output.md).
+    #[arg(long, value_name = "N", num_args = 0..=1, default_missing_value = "1024")]
+    probes: Option<u32>,
+    /// Leave punctual lights' direct light out of the probes (for engines that light moving
+    /// objects with the same lights at run time).
+    #[arg(long, requires = "probes")]
+    probes_indirect_only: bool,
     /// Keep texel sample points where they are even inside geometry (to measure leaks).
     #[arg(long)]
     no_validity: bool,
@@ -439,6 +450,8 @@ impl BakeArgs {
             error_map: Some(self.error_map),
             directional: Some(self.directional),
             directional_rays: self.directional_rays,
+            probes: self.probes,
+            probes_indirect_only: Some(self.probes_indirect_only),
             no_validity: Some(self.no_validity),
             no_denoise: Some(self.no_denoise),
             no_seams: Some(self.no_seams),
@@ -530,6 +543,7 @@ fn main() -> ExitCode {
         Command::Bake(args) => bake(args),
         Command::Relight(args) => relight::run(args),
         Command::Compare(args) => compare::run(args),
+        Command::Probes(args) => probes::run(args),
         Command::View(args) => view::run(args),
         Command::Build(args) => build::run(args),
     };

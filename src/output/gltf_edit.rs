@@ -158,6 +158,21 @@ pub(crate) fn set_layer_extras(json: &mut Value, layers: &[LayerExtras]) -> Resu
     Ok(())
 }
 
+/// Sets `key` of the glTF root's `extras` (made an object if missing) to `value`.
+pub(crate) fn set_root_extra(json: &mut Value, key: &str, value: Value) -> Result<()> {
+    let root = json
+        .as_object_mut()
+        .ok_or_else(|| Error::Internal("the glTF is not a JSON object".to_string()))?;
+    let extras = root.entry("extras").or_insert_with(|| json!({}));
+    let extras = extras.as_object_mut().ok_or_else(|| {
+        Error::Option(format!(
+            "the glTF's root extras is not an object: {key} cannot be named in it"
+        ))
+    })?;
+    extras.insert(key.to_string(), value);
+    Ok(())
+}
+
 /// Stages a copy of every external buffer and image `json` (the glTF at `gltf`) references
 /// that is not staged yet (the pages are).
 pub(crate) fn copy_referenced(staging: &mut Staging, gltf: &Path, json: &Value) -> Result<()> {

@@ -54,6 +54,7 @@ use rayon::prelude::*;
 pub use crate::scene::{Camera, GltfCamera, select};
 
 use crate::lightmap::Page;
+use crate::probes::Probes;
 use crate::sampling::Rng;
 use crate::scene::{self, Scene};
 use crate::trace::Tracer;
@@ -121,6 +122,22 @@ pub struct RenderScene {
     /// Transmissive surfaces are kept: a single-sided one bounds a volume, and its back face
     /// is where rays leave the glass.
     pub(crate) cull_back: Vec<bool>,
+    /// The bake's light probes, when its root `extras.light_probes` names a probe file
+    /// (`crate::probes`): the light at points off the baked surfaces.
+    pub probes: Option<Probes>,
+}
+
+/// The probe file the glTF `json` at `path` names in its root extras, read.
+fn load_probes(path: &Path, json: &serde_json::Value) -> Result<Option<Probes>> {
+    let key = crate::probes::file::EXTRAS_KEY;
+    let Some(uri) = json["extras"][key]["uri"].as_str() else {
+        return Ok(None);
+    };
+    let uri = output::decode_uri(uri)
+        .ok_or_else(|| Error::invalid(path, format!("extras.{key}.uri {uri:?} is not a file")))?;
+    let file = path.parent().unwrap_or(Path::new(".")).join(uri);
+    let bytes = std::fs::read(&file).map_err(|e| Error::io(&file, e))?;
+    crate::probes::file::from_json(&bytes, &file).map(Some)
 }
 
 /// A rendered image: linear RGB radiance, row 0 at the top.
@@ -141,7 +158,8 @@ pub struct Image {
 impl RenderScene {
     /// Loads a baked glTF/GLB and the EXR pages its primitives reference.
     pub fn load(path: &Path) -> Result<RenderScene> {
-        let (scene, _) = scene::load(path)?;
+        let (scene, source) = scene::load(path)?;
+        let probes = load_probes(path, &source.json)?;
         let mut pages = Vec::new();
         let mut page_of_file: HashMap<PathBuf, u32> = HashMap::new();
         let mut instance_page = Vec::with_capacity(scene.instances.len());
@@ -196,6 +214,7 @@ impl RenderScene {
             instance_page,
             instance_directional,
             cull_back,
+            probes,
         })
     }
 

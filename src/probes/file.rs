@@ -1,0 +1,122 @@
+//! `<stem>_probes.json`: the baked probes as an engine reads them (documented in the guide's
+//! output chapter, `src/guide/output.md`).
+//!
+//! One JSON object: `format` (`"lightbake-probes"`), `version` (1), `convention` (how to read
+//! the coefficients, in words), `indirectOnly`, `grid` (`origin`, `step`, `count` and `order`:
+//! probe `(i, j, k)` is entry `i + nx·(j + ny·k)`), then flat arrays per probe: `positions`
+//! (3 floats each: where it was baked), `valid` (0 or 1) and `sh` (27 floats each: coefficient
+//! `m` of channel `c` at `27·probe + 3·m + c`). Floats are written in their shortest exact
+//! decimal form, so the file reads back bit for bit and its bytes do not depend on the thread
+//! count.
+
+use std::path::Path;
+
+use glam::Vec3;
+use serde::{Deserialize, Serialize};
+
+use super::Probes;
+use crate::{Error, Result};
+
+/// The key of the glTF root's `extras` that names the file: `{"uri": "<stem>_probes.json",
+/// "count": N}`, the uri relative to the glTF.
+pub const EXTRAS_KEY: &str = "light_probes";
+/// The `format` field.
+pub const FORMAT: &str = "lightbake-probes";
+/// The `version` field.
+pub const VERSION: u32 = 1;
+/// How to read the coefficients, as the file states it.
+pub const CONVENTION: &str = "sh: 9 RGB coefficients of incident radiance per probe, \
+    c_m = integral of L(w) Y_m(w) dw, three.js SphericalHarmonics3 order and basis; \
+    E(n)/pi = sum_m w_l(m) c_m Y_m(n) with w = 1, 2/3, 1/4 for bands 0, 1, 2 \
+    (three.js getIrradianceAt(n) / pi): the lightmaps' unit";
+
+#[derive(Serialize, Deserialize)]
+#[serde(rename_all = "camelCase")]
+struct ProbeFile {
+    format: String,
+    version: u32,
+    convention: String,
+    indirect_only: bool,
+    grid: Grid,
+    positions: Vec<f32>,
+    valid: Vec<u8>,
+    sh: Vec<f32>,
+}
+
+#[derive(Serialize, Deserialize)]
+struct Grid {
+    origin: [f32; 3],
+    step: [f32; 3],
+    count: [u32; 3],
+    order: String,
+}
+
+/// The file's bytes for `probes`.
+pub fn to_json(probes: &Probes) -> Result<Vec<u8>> {
+    let file = ProbeFile {
+        format: FORMAT.into(),
+        version: VERSION,
+        convention: CONVENTION.into(),
+        indirect_only: probes.indirect_only,
+        grid: Grid {
+            origin: probes.origin.to_array(),
+            step: probes.step.to_array(),
+            count: probes.count,
+            order: "x fastest, then y, then z".into(),
+        },
+        positions: probes.position.iter().flat_map(|p| p.to_array()).collect(),
+        valid: probes.valid.iter().map(|&v| u8::from(v)).collect(),
+        sh: (probes.sh.iter())
+            .flat_map(|c| c.iter().flat_map(|v| v.to_array()))
+            .collect(),
+    };
+    serde_json::to_vec(&file).map_err(|e| Error::Internal(format!("probes: {e}")))
+}
+
+/// Reads a probe file (`path` names it in errors).
+pub fn from_json(bytes: &[u8], path: &Path) -> Result<Probes> {
+    let file: ProbeFile = serde_json::from_slice(bytes)
+        .map_err(|e| Error::invalid(path, format!("not a probe file: {e}")))?;
+    if file.format != FORMAT || file.version != VERSION {
+        return Err(Error::invalid(
+            path,
+            format!(
+                "format {:?} version {}, expected {FORMAT:?} version {VERSION}",
+                file.format, file.version
+            ),
+        ));
+    }
+    let [nx, ny, nz] = file.grid.count;
+    let n = nx as usize * ny as usize * nz as usize;
+    let step = Vec3::from(file.grid.step);
+    if n == 0
+        || file.positions.len() != 3 * n
+        || file.valid.len() != n
+        || file.sh.len() != 27 * n
+        || step.min_element().is_nan()
+        || step.min_element() <= 0.0
+    {
+        return Err(Error::invalid(
+            path,
+            format!(
+                "a {nx}×{ny}×{nz} grid needs {} positions, {n} flags and {} coefficients, a positive step",
+                3 * n,
+                27 * n
+            ),
+        ));
+    }
+    let vec3 = |v: &[f32]| Vec3::new(v[0], v[1], v[2]);
+    Ok(Probes {
+        origin: Vec3::from(file.grid.origin),
+        step,
+        count: file.grid.count,
+        position: file.positions.chunks_exact(3).map(vec3).collect(),
+        valid: file.valid.iter().map(|&v| v != 0).collect(),
+        sh: (file.sh.chunks_exact(27))
+            .map(|c| std::array::from_fn(|m| vec3(&c[3 * m..])))
+            .collect(),
+        indirect_only: file.indirect_only,
+        rays: 0,
+        moved: 0,
+    })
+}

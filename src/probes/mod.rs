@@ -1,0 +1,492 @@
+//! Light probes: the bake's light at points in empty space, for what moves through the scene
+//! (characters, props placed at run time), as L2 spherical harmonics of the incident radiance on
+//! a regular grid.
+//!
+//! ## Pipeline stage
+//!
+//! Plain data in, plain data out, after the solve (`bake::finish`):
+//!
+//! ```text
+//!   Scene + Tracer ─ place::place ──▶ Placement      grid positions, buried ones marked
+//!   + Texels + solved H ─ gather ───▶ Probes          9 RGB SH coefficients per probe
+//!                     ─ file ───────▶ <stem>_probes.json, named in the glTF's root extras
+//! ```
+//!
+//! **Placement** (`place.rs`): a regular grid over the scene's bounds at the spacing the budget
+//! allows (`--probes N`, default [`DEFAULT_BUDGET`]); probes buried in solids (or outside an
+//! interior's closed shell) are marked invalid, probes too close to a surface are moved off it.
+//! A regular grid was chosen over an adaptive octree or a tetrahedralisation for this first
+//! slice because every engine can read it without a mesh or a tree (Bevy's irradiance volume,
+//! Godot's and three.js's probe grids are regular), its lookup is a few lines of trilinear
+//! weights, and its error is measured below; density where light changes is left to a later
+//! slice (see the guide).
+//!
+//! **Gathering** (`Gatherer::gather`): per probe, `rays` directions stratified over the sphere
+//! (Hammersley, turned by the probe's own random stream `(seed, probe)`: the result does not
+//! depend on the thread count). A ray that hits texel `j` from the front reads the solved
+//! radiance leaving it, `ρ_j·H_j/π + Le_j` (the solution itself, not the dilated pages); one
+//! that escapes reads the sky; the back of a single-sided surface absorbs. Small emitters are
+//! also light-sampled, one sample per ray, combined with the sphere rays by the power heuristic
+//! (as the directional gather and the reference do); punctual lights add their unoccluded flux
+//! density along their direction, unless `indirect_only` (engines that light characters with
+//! the same lights at run time). Emitted and sky light reaching the probe directly stays in
+//! either way: no engine renders it at run time. Each sample is projected onto the SH basis
+//! ([`sh`]). Invalid probes are then filled from valid neighbours ring by ring, so a renderer
+//! that ignores the validity flags still reads plausible light.
+//!
+//! **Lookup** ([`Probes::sh_at`], [`Probes::irradiance_over_pi`]): trilinear weights of the
+//! eight probes around the point, invalid probes and probes the point cannot see (a shadow ray
+//! from the point to the probe; only when a [`Tracer`] is given) dropped and the rest
+//! renormalised; with none left, inverse-square weights of the visible valid probes in the
+//! 4 × 4 × 4 block around it, then the nearest valid probe. The visibility test is what keeps
+//! light from leaking through a wall thinner than the spacing; an engine without ray queries
+//! can precompute it per cell or accept the leak near walls. `lightbake probes --at` and the
+//! tests read probes through this one function.
+//!
+//! Units: coefficients are of incident radiance (W/(sr·m²)), so irradiance over π from them is
+//! in the lightmaps' unit `H/π` (see [`sh`] for the convolution and three.js's convention).
+//!
+//! | parameter       | default | effect                                                        |
+//! |-----------------|---------|---------------------------------------------------------------|
+//! | `budget`        | 1024    | probes at most; spacing `∛(bounds volume / budget)`           |
+//! | `rays`          | 256     | sphere rays per probe (+ as many emitter samples); noise ∝ 1/√rays |
+//! | `indirect_only` | false   | leave out punctual lights' direct light                       |
+//!
+//! Limits: the grid is uniform (no refinement near light changes); a probe inside a closed
+//! double-sided mesh is not found buried; trilinear interpolation blurs light that changes
+//! faster than the spacing (shadow edges, close to emitters).
+
+pub mod file;
+mod place;
+pub mod sh;
+
+use std::f32::consts::PI;
+
+use glam::Vec3;
+use rayon::prelude::*;
+
+use crate::lights::{Emitters, punctual_irradiance, triangle_point};
+use crate::sampling::{Rng, hammersley, power_weight, triangle_point as sample_triangle};
+use crate::scene::LightKind;
+use crate::texels::{NO_TEXEL, RayEnd};
+use crate::trace::Tracer;
+use crate::transport::Surfaces;
+use crate::{Error, Progress, Result};
+use place::{Placement, uniform_sphere};
+pub use sh::Sh2;
+
+/// Probes placed when `--probes` gives no number.
+pub const DEFAULT_BUDGET: u32 = 1024;
+/// Sphere rays per probe.
+pub const DEFAULT_RAYS: u32 = 256;
+/// Probes per parallel work item (one progress tick each).
+const CHUNK: usize = 16;
+/// Mixed into the seed: the probes' streams differ from the texels' of the same index.
+const SALT: u64 = 0x5052_4f42_4553; // "PROBES"
+/// Random-stream purpose of the gather (placement uses its own).
+const GATHER: u64 = 2;
+
+/// How probes are placed and baked.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ProbeParams {
+    /// Probes at most.
+    pub budget: u32,
+    /// Sphere rays per probe.
+    pub rays: u32,
+    /// Leave out punctual lights' direct light.
+    pub indirect_only: bool,
+}
+
+impl Default for ProbeParams {
+    fn default() -> Self {
+        ProbeParams {
+            budget: DEFAULT_BUDGET,
+            rays: DEFAULT_RAYS,
+            indirect_only: false,
+        }
+    }
+}
+
+/// Baked probes on a regular grid: probe `(i, j, k)` is entry `i + nx·(j + ny·k)`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Probes {
+    /// Grid position of probe (0, 0, 0) (world space).
+    pub origin: Vec3,
+    /// Distance between neighbouring grid positions along x, y, z.
+    pub step: Vec3,
+    /// Probes along x, y, z.
+    pub count: [u32; 3],
+    /// Where each probe was baked: its grid position, or moved off a nearby surface (by at
+    /// most four fifths of a step: up to four moves of at most a fifth).
+    pub position: Vec<Vec3>,
+    /// False for probes buried in geometry (their coefficients are filled from neighbours).
+    pub valid: Vec<bool>,
+    /// Radiance SH coefficients per probe ([`sh`]).
+    pub sh: Vec<Sh2>,
+    /// Punctual lights' direct light left out.
+    pub indirect_only: bool,
+    /// Rays cast by placement and gathering.
+    pub rays: u64,
+    /// Probes moved away from a surface.
+    pub moved: usize,
+}
+
+impl Probes {
+    /// Probes held.
+    pub fn len(&self) -> usize {
+        self.position.len()
+    }
+
+    /// No probes.
+    pub fn is_empty(&self) -> bool {
+        self.position.is_empty()
+    }
+
+    /// Valid probes.
+    pub fn valid_count(&self) -> usize {
+        self.valid.iter().filter(|&&v| v).count()
+    }
+
+    /// Flat index of grid probe (i, j, k).
+    #[inline]
+    fn index(&self, [i, j, k]: [u32; 3]) -> usize {
+        let [nx, ny, _] = self.count;
+        (i + nx * (j + ny * k)) as usize
+    }
+
+    /// The interpolated coefficients at `p` (see the module docs); `visible(q)` says whether
+    /// the point sees a probe at `q` (always true without ray queries).
+    pub fn sh_at(&self, p: Vec3, mut visible: impl FnMut(Vec3) -> bool) -> Sh2 {
+        let zero = [Vec3::ZERO; 9];
+        if self.is_empty() {
+            return zero;
+        }
+        let g = (p - self.origin) / self.step;
+        let mut base = [0u32; 3];
+        let mut frac = [0.0f32; 3];
+        for a in 0..3 {
+            let last = self.count[a].saturating_sub(1) as f32;
+            let x = g[a].clamp(0.0, last);
+            let i = (x.floor() as u32).min(self.count[a].saturating_sub(2));
+            base[a] = i;
+            frac[a] = if self.count[a] > 1 { x - i as f32 } else { 0.0 };
+        }
+        // Trilinear over the cell's corners that are valid and visible.
+        let mut sum = zero;
+        let mut total = 0.0f32;
+        for corner in 0..8u32 {
+            let mut w = 1.0;
+            let mut ijk = base;
+            for a in 0..3 {
+                let up = (corner >> a) & 1 == 1;
+                if up {
+                    if self.count[a] < 2 {
+                        w = 0.0;
+                    }
+                    ijk[a] += 1;
+                    w *= frac[a];
+                } else {
+                    w *= 1.0 - frac[a];
+                }
+            }
+            if w <= 0.0 {
+                continue;
+            }
+            let q = self.index(ijk);
+            if self.valid[q] && visible(self.position[q]) {
+                sum = sh::add(&sum, &sh::scaled(&self.sh[q], w));
+                total += w;
+            }
+        }
+        if total > 1e-6 {
+            return sh::scaled(&sum, 1.0 / total);
+        }
+        // None of the cell's corners: the visible valid probes of the 4 × 4 × 4 block around it.
+        let mut sum = zero;
+        let mut total = 0.0f32;
+        for dk in -1..=2i64 {
+            for dj in -1..=2i64 {
+                for di in -1..=2i64 {
+                    let ijk = [di, dj, dk];
+                    let mut at = [0u32; 3];
+                    let mut inside = true;
+                    for a in 0..3 {
+                        let c = base[a] as i64 + ijk[a];
+                        inside &= c >= 0 && c < self.count[a] as i64;
+                        at[a] = c.max(0) as u32;
+                    }
+                    if !inside {
+                        continue;
+                    }
+                    let q = self.index(at);
+                    if self.valid[q] && visible(self.position[q]) {
+                        let w = 1.0 / (self.position[q] - p).length_squared().max(1e-8);
+                        sum = sh::add(&sum, &sh::scaled(&self.sh[q], w));
+                        total += w;
+                    }
+                }
+            }
+        }
+        if total > 0.0 {
+            return sh::scaled(&sum, 1.0 / total);
+        }
+        // Nothing visible near: the nearest valid probe.
+        let nearest = (0..self.len()).filter(|&q| self.valid[q]).min_by(|&a, &b| {
+            let da = (self.position[a] - p).length_squared();
+            let db = (self.position[b] - p).length_squared();
+            da.total_cmp(&db)
+        });
+        nearest.map_or(zero, |q| self.sh[q])
+    }
+
+    /// `n` random points in free space between the probes, each with a random unit normal,
+    /// to measure the probes against the path tracer: uniform in the box of the grid
+    /// positions, points buried in geometry (the probes' own test) drawn again. With
+    /// `whole_cells`, only points whose eight cell probes are all valid and visible from them
+    /// (away from walls and furniture: the interpolation's own error) are kept. Point `k` comes
+    /// from its own random stream `(seed, k)`.
+    pub fn points_between(
+        &self,
+        tracer: &Tracer,
+        n: usize,
+        seed: u64,
+        whole_cells: bool,
+    ) -> Vec<(Vec3, Vec3)> {
+        let last = Vec3::from(self.count.map(|c| c.saturating_sub(1) as f32));
+        let span = self.step * last;
+        let mut points = Vec::with_capacity(n);
+        for k in 0..(n as u64).saturating_mul(200) {
+            if points.len() == n {
+                break;
+            }
+            let mut rng = Rng::new(seed ^ SALT, k, 0);
+            let u = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32());
+            let p = self.origin + span * u;
+            let normal = uniform_sphere(rng.next_vec2());
+            if place::buried(tracer, p, rng.next_vec2()) {
+                continue;
+            }
+            if whole_cells {
+                let (mut all, mut corners) = (true, 0);
+                self.sh_at(p, |q| {
+                    corners += 1;
+                    all &= !tracer.occluded(p, q);
+                    true
+                });
+                let every = corners == 1 << self.count.iter().filter(|&&c| c > 1).count();
+                if !(all && every) {
+                    continue;
+                }
+            }
+            points.push((p, normal));
+        }
+        points
+    }
+
+    /// `E/π` at `p` about unit normal `n` from the interpolated coefficients, in the lightmaps'
+    /// unit; with a `tracer`, probes that `p` (lifted by the ray offset along `n`) cannot see
+    /// are left out.
+    pub fn irradiance_over_pi(&self, p: Vec3, n: Vec3, tracer: Option<&Tracer>) -> Vec3 {
+        let c = match tracer {
+            Some(t) => {
+                let from = p + n * t.epsilon;
+                self.sh_at(p, |q| !t.occluded(from, q))
+            }
+            None => self.sh_at(p, |_| true),
+        };
+        sh::irradiance_over_pi(&c, n)
+    }
+}
+
+/// Places probes (`place::place`) and gathers the solved light at them; `h` is the solved
+/// irradiance per texel (`H`, W/m²), `seed` and `sky` the bake's.
+pub(crate) fn bake(
+    surfaces: Surfaces,
+    h: &[Vec3],
+    params: &ProbeParams,
+    (seed, sky): (u64, Vec3),
+    progress: &dyn Progress,
+) -> Result<Probes> {
+    let placement = place::place(surfaces.scene, surfaces.tracer, params.budget, seed ^ SALT);
+    let gatherer = Gatherer {
+        surfaces,
+        h,
+        emitters: Emitters::new(surfaces.scene, surfaces.texels),
+        params,
+        seed: seed ^ SALT,
+        sky,
+    };
+    let n = placement.position.len();
+    progress.begin("probes", n as u64);
+    let mut out = vec![([Vec3::ZERO; 9], 0u64); n];
+    out.par_chunks_mut(CHUNK)
+        .enumerate()
+        .try_for_each(|(c, chunk)| {
+            if progress.aborted() {
+                return Err(Error::Aborted);
+            }
+            for (k, (sh, rays)) in chunk.iter_mut().enumerate() {
+                let i = c * CHUNK + k;
+                if placement.valid[i] {
+                    *rays = gatherer.gather(i, placement.position[i], sh);
+                }
+            }
+            progress.advance(chunk.len() as u64);
+            Ok(())
+        })?;
+    progress.end();
+    let mut sh: Vec<Sh2> = out.iter().map(|o| o.0).collect();
+    fill_invalid(&placement, &mut sh);
+    Ok(Probes {
+        origin: placement.origin,
+        step: placement.step,
+        count: placement.count,
+        position: placement.position,
+        valid: placement.valid,
+        sh,
+        indirect_only: params.indirect_only,
+        rays: placement.rays + out.iter().map(|o| o.1).sum::<u64>(),
+        moved: placement.moved,
+    })
+}
+
+/// The gather of incident radiance at probes.
+struct Gatherer<'a> {
+    surfaces: Surfaces<'a>,
+    h: &'a [Vec3],
+    emitters: Emitters,
+    params: &'a ProbeParams,
+    seed: u64,
+    sky: Vec3,
+}
+
+impl Gatherer<'_> {
+    /// Projects the incident radiance at `x` (probe `i`) into `c`; returns the rays cast.
+    fn gather(&self, i: usize, x: Vec3, c: &mut Sh2) -> u64 {
+        let Surfaces {
+            scene,
+            texels,
+            tracer,
+        } = self.surfaces;
+        let k = self.params.rays.max(1);
+        let kf = k as f32;
+        let mut rng = Rng::new(self.seed, i as u64, GATHER);
+        let (shift, light_shift) = (rng.next_vec2(), rng.next_vec2());
+        // Uniform over the sphere: every direction matters for the projection.
+        let p_sphere = 1.0 / (4.0 * PI);
+        let mut rays = 0u64;
+        for s in 0..k {
+            let dir = uniform_sphere(hammersley(s, k, shift));
+            rays += 1;
+            match texels.ray_end(tracer, x, dir) {
+                RayEnd::Escaped => sh::project(c, dir, self.sky / (p_sphere * kf)),
+                RayEnd::Texel(hit, j) => {
+                    let j = j as usize;
+                    let mut l = texels.albedo[j] * self.h[j] / PI / p_sphere;
+                    let le = texels.emission[j];
+                    if le.max_element() > 0.0 {
+                        let (_, n_l) = triangle_point(scene, hit.triangle, hit.bary);
+                        let p_light = self.emitters.pdf_toward(hit.triangle, n_l, dir, hit.t);
+                        l += le * power_weight(p_sphere, p_light);
+                    }
+                    sh::project(c, dir, l / kf);
+                }
+                RayEnd::Absorbed => {}
+            }
+            if !self.emitters.is_empty() {
+                rays += 1;
+                let u = hammersley(s, k, light_shift);
+                if let Some((dir, w)) = self.light_sample(x, u, p_sphere) {
+                    sh::project(c, dir, w / kf);
+                }
+            }
+        }
+        if !self.params.indirect_only {
+            for light in &scene.lights {
+                let l = match light.kind {
+                    LightKind::Directional => -light.direction,
+                    _ => (light.position - x).normalize_or_zero(),
+                };
+                rays += 1;
+                // About its own direction the light's irradiance is its flux density.
+                sh::project(c, l, punctual_irradiance(light, x, l, tracer));
+            }
+        }
+        rays
+    }
+
+    /// One light sample of the small emitters seen from the free point `x` (no surface: every
+    /// direction counts): its direction and MIS-weighted radiance over density, or `None` when
+    /// the emitter faces away, has no texel or is hidden.
+    #[inline]
+    fn light_sample(&self, x: Vec3, u: glam::Vec2, p_sphere: f32) -> Option<(Vec3, Vec3)> {
+        let Surfaces {
+            scene,
+            texels,
+            tracer,
+        } = self.surfaces;
+        let (tri, u0) = self.emitters.pick_stratified(u.x);
+        let bary = sample_triangle(glam::Vec2::new(u0, u.y));
+        let (point, n_l) = triangle_point(scene, tri, bary);
+        let to = point - x;
+        let r2 = to.length_squared();
+        if r2 <= 0.0 {
+            return None;
+        }
+        let dir = to / r2.sqrt();
+        let cos_l = -n_l.dot(dir);
+        let j = texels.texel_at(tri, bary);
+        if cos_l <= 0.0 || j == NO_TEXEL || tracer.occluded(x, point) {
+            return None;
+        }
+        let pdf = self.emitters.pdf_area[tri as usize] * r2 / cos_l;
+        Some((
+            dir,
+            texels.emission[j as usize] * power_weight(pdf, p_sphere),
+        ))
+    }
+}
+
+/// Coefficients of invalid probes from the mean of their valid (or already filled) face
+/// neighbours, ring by ring inwards; each ring reads only values known before it, so the result
+/// does not depend on order. Probes no valid probe reaches stay zero.
+fn fill_invalid(placement: &Placement, sh: &mut [Sh2]) {
+    let count = placement.count;
+    let mut known = placement.valid.clone();
+    let mut pending: Vec<usize> = (0..sh.len()).filter(|&i| !known[i]).collect();
+    let mut ring: Vec<(usize, Sh2)> = Vec::new();
+    while !pending.is_empty() {
+        ring.clear();
+        for &i in &pending {
+            let ijk = place::unflatten(i, count);
+            let mut sum = [Vec3::ZERO; 9];
+            let mut n = 0u32;
+            for a in 0..3 {
+                for d in [-1i64, 1] {
+                    let c = ijk[a] as i64 + d;
+                    if c < 0 || c >= count[a] as i64 {
+                        continue;
+                    }
+                    let mut at = ijk;
+                    at[a] = c as u32;
+                    let q = (at[0] + count[0] * (at[1] + count[1] * at[2])) as usize;
+                    if known[q] {
+                        sum = sh::add(&sum, &sh[q]);
+                        n += 1;
+                    }
+                }
+            }
+            if n > 0 {
+                ring.push((i, sh::scaled(&sum, 1.0 / n as f32)));
+            }
+        }
+        if ring.is_empty() {
+            break;
+        }
+        for &(i, v) in &ring {
+            sh[i] = v;
+            known[i] = true;
+        }
+        pending.retain(|&i| !known[i]);
+    }
+}

@@ -1,0 +1,240 @@
+//! Where probes go: a regular grid over the scene's bounds at the spacing the budget allows,
+//! probes buried in solids marked invalid, probes too close to a surface moved away from it.
+//!
+//! **Grid.** The spacing `s = ∛(V/N)` for the bounds' volume `V` and budget `N`; each axis gets
+//! `⌊extent/s⌋` probes (at least one) at the centres of equal cells, so probes sit half a cell
+//! from the bounds and the count never exceeds the budget.
+//!
+//! **Buried.** From each probe `TEST_RAYS` rays go out over the sphere (a Hammersley set turned
+//! by the probe's own random stream). A probe is buried — inside a closed solid, or outside
+//! the closed shell of an interior, where rays meet the backs of its walls — when more than
+//! `MAX_BACK` of them hit a back face (the texels' validity test, Unity's "backface
+//! tolerance"). Double-sided surfaces have no back, so a probe inside a closed double-sided
+//! mesh is not found (a limit).
+//!
+//! **Clearance.** A probe whose nearest surface is closer than `CLEARANCE` of the smallest grid
+//! step (looking both ways along each test ray, so that a probe lying exactly on a surface —
+//! a grid plane through a wall — finds it too) is moved straight away from it to the
+//! clearance, if the move itself crosses no surface, and tested again (`NUDGES` times at most): a probe a hair from a wall reads that
+//! wall at grazing angles only, and a point beside the wall interpolates it. Interpolation
+//! keeps the probe's grid cell (each move is at most a fifth of a step, four moves at most).
+
+use glam::{Vec2, Vec3};
+use rayon::prelude::*;
+
+use crate::sampling::{Rng, hammersley};
+use crate::scene::Scene;
+use crate::texels::validity::MAX_BACK;
+use crate::trace::Tracer;
+
+/// Rays per probe of the buried test.
+const TEST_RAYS: u32 = 64;
+/// Wanted distance from the nearest surface, as a fraction of the smallest grid step.
+const CLEARANCE: f32 = 0.2;
+/// Moves away from a surface at most.
+const NUDGES: u32 = 3;
+/// Random-stream purpose of the buried test (the gather uses its own).
+const PLACE: u64 = 1;
+
+/// The grid and what the tests found, before any light is gathered.
+#[derive(Clone, Debug)]
+pub(crate) struct Placement {
+    /// Grid position of probe (0, 0, 0).
+    pub(crate) origin: Vec3,
+    /// Distance between neighbouring probes along x, y, z.
+    pub(crate) step: Vec3,
+    /// Probes along x, y, z.
+    pub(crate) count: [u32; 3],
+    /// Where each probe is (its grid position, or moved off a surface), x fastest, then y, z.
+    pub(crate) position: Vec<Vec3>,
+    /// Not buried.
+    pub(crate) valid: Vec<bool>,
+    /// Probes moved away from a surface.
+    pub(crate) moved: usize,
+    /// Rays the tests cast.
+    pub(crate) rays: u64,
+}
+
+/// The scene's bounding box over its triangles' vertices (`None` without triangles).
+pub(crate) fn bounds(scene: &Scene) -> Option<(Vec3, Vec3)> {
+    let mut lo = Vec3::splat(f32::INFINITY);
+    let mut hi = Vec3::splat(f32::NEG_INFINITY);
+    for t in &scene.triangles {
+        for &v in t {
+            let p = scene.positions[v as usize];
+            lo = lo.min(p);
+            hi = hi.max(p);
+        }
+    }
+    (lo.x <= hi.x).then_some((lo, hi))
+}
+
+/// The grid for `budget` probes over the box `lo..hi`: (origin, step, count).
+pub(crate) fn grid(lo: Vec3, hi: Vec3, budget: u32) -> (Vec3, Vec3, [u32; 3]) {
+    let extent = (hi - lo).max(Vec3::ZERO);
+    // The spacing over the axes longer than it (a flat scene, a floor alone, gets one layer):
+    // `s = (Π extent / budget)^(1/d)` over those d axes, shrinking d while an axis is shorter.
+    let mut long = [true; 3];
+    let mut s = 0.0f32;
+    for _ in 0..3 {
+        let d = long.iter().filter(|&&l| l).count();
+        let product: f32 = (0..3).filter(|&a| long[a]).map(|a| extent[a]).product();
+        s = match d {
+            0 => 1.0,
+            d => (product / budget.max(1) as f32).powf(1.0 / d as f32),
+        };
+        let shorter = (0..3)
+            .filter(|&a| long[a] && extent[a] < s)
+            .collect::<Vec<_>>();
+        if shorter.is_empty() {
+            break;
+        }
+        shorter.into_iter().for_each(|a| long[a] = false);
+    }
+    let count = std::array::from_fn(|a| match long[a] && s > 0.0 {
+        true => ((extent[a] / s + 1e-3).floor() as u32).max(1),
+        false => 1,
+    });
+    let cell = Vec3::from(count.map(|c| c as f32));
+    // One probe on an axis: at the middle; its step only sets the clearance.
+    let step = Vec3::from(std::array::from_fn::<f32, 3, _>(|a| match count[a] {
+        1 => s.max(extent[a]),
+        c => extent[a] / c as f32,
+    }));
+    (lo + extent / cell * 0.5, step, count)
+}
+
+/// Places probes in `scene` within `budget` (see the module docs), the tests' streams seeded
+/// by `seed` and the probe's index.
+pub(crate) fn place(scene: &Scene, tracer: &Tracer, budget: u32, seed: u64) -> Placement {
+    let (lo, hi) = bounds(scene).unwrap_or((Vec3::ZERO, Vec3::ZERO));
+    let (origin, step, count) = grid(lo, hi, budget);
+    let n = (count[0] * count[1] * count[2]) as usize;
+    let clearance = CLEARANCE * step.min_element();
+    let tested: Vec<(Vec3, bool, bool, u64)> = (0..n)
+        .into_par_iter()
+        .map(|i| {
+            let ijk = unflatten(i, count);
+            let start = origin + step * Vec3::from(ijk.map(|c| c as f32));
+            let shift = Rng::new(seed, i as u64, PLACE).next_vec2();
+            settle(tracer, start, shift, clearance)
+        })
+        .collect();
+    Placement {
+        origin,
+        step,
+        count,
+        position: tested.iter().map(|t| t.0).collect(),
+        valid: tested.iter().map(|t| t.1).collect(),
+        moved: tested.iter().filter(|t| t.2).count(),
+        rays: tested.iter().map(|t| t.3).sum(),
+    }
+}
+
+/// Grid index (i, j, k) of flat index `i` (x fastest).
+#[inline]
+pub(crate) fn unflatten(i: usize, count: [u32; 3]) -> [u32; 3] {
+    let (nx, ny) = (count[0] as usize, count[1] as usize);
+    [
+        (i % nx) as u32,
+        ((i / nx) % ny) as u32,
+        (i / (nx * ny)) as u32,
+    ]
+}
+
+/// The probe that starts at `p`: (where it ends, not buried, moved, rays cast).
+fn settle(tracer: &Tracer, mut p: Vec3, shift: Vec2, clearance: f32) -> (Vec3, bool, bool, u64) {
+    let limit = (MAX_BACK * TEST_RAYS as f32) as u32;
+    let mut moved = false;
+    let mut rays = 0;
+    for _ in 0..=NUDGES {
+        let (back, nearest) = look_around(tracer, p, shift, clearance);
+        rays += 2 * u64::from(TEST_RAYS);
+        if back > limit {
+            return (p, false, moved, rays);
+        }
+        match nearest {
+            Some((t, dir)) if t < clearance => {
+                let to = p - dir * (clearance - t);
+                rays += 1;
+                // Tested from where it goes: the surface `p` lies on (the one it moves off)
+                // is in the segment's untested last epsilon.
+                if tracer.occluded(to, p) {
+                    break;
+                }
+                p = to;
+                moved = true;
+            }
+            _ => break,
+        }
+    }
+    (p, true, moved, rays)
+}
+
+/// Whether the point `p` is buried (the probes' test, its rays turned by `shift`).
+pub(crate) fn buried(tracer: &Tracer, p: Vec3, shift: Vec2) -> bool {
+    look_around(tracer, p, shift, 0.0).0 > (MAX_BACK * TEST_RAYS as f32) as u32
+}
+
+/// Back-face hits of `TEST_RAYS` rays from `p`, and the nearest surface along them (distance,
+/// direction towards it). Along each direction a second ray comes back through `p` from `reach` away: the
+/// tracer loses hits closer than its entry clamp (see `trace`), so a probe lying on a surface
+/// (a grid plane through a wall) would not see the surface it lies on from there.
+fn look_around(tracer: &Tracer, p: Vec3, shift: Vec2, reach: f32) -> (u32, Option<(f32, Vec3)>) {
+    let mut back = 0;
+    let mut nearest: Option<(f32, Vec3)> = None;
+    let mut closer = |t: f32, dir: Vec3| {
+        if nearest.is_none_or(|(n, _)| t < n) {
+            nearest = Some((t, dir));
+        }
+    };
+    for k in 0..TEST_RAYS {
+        let dir = uniform_sphere(hammersley(k, TEST_RAYS, shift));
+        if let Some(hit) = tracer.closest(p, dir, f32::INFINITY) {
+            back += u32::from(!hit.front);
+            closer(hit.t, dir);
+        }
+        // Back from `reach` beyond `p` to `reach` before it: a surface through `p` lies
+        // mid-way, away from both ends.
+        if reach > 0.0
+            && let Some(hit) = tracer.closest(p + dir * reach, -dir, 2.0 * reach)
+        {
+            let toward = if hit.t <= reach { dir } else { -dir };
+            closer((reach - hit.t).abs(), toward);
+        }
+    }
+    (back, nearest)
+}
+
+/// Uniformly distributed direction on the unit sphere (pdf `1/4π`) from a point of the unit
+/// square: `z = 1 − 2u.x`, azimuth `2π·u.y`.
+#[inline]
+#[must_use]
+pub(crate) fn uniform_sphere(u: Vec2) -> Vec3 {
+    let z = 1.0 - 2.0 * u.x;
+    let r = (1.0 - z * z).max(0.0).sqrt();
+    let phi = std::f32::consts::TAU * u.y;
+    Vec3::new(r * phi.cos(), r * phi.sin(), z)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_grid_keeps_to_the_budget_and_centres_its_cells() {
+        let (lo, hi) = (Vec3::new(-2.0, 0.0, -1.0), Vec3::new(2.0, 2.0, 1.0));
+        let (origin, step, count) = grid(lo, hi, 1024);
+        assert_eq!(count, [16, 8, 8]);
+        assert!((step - Vec3::splat(0.25)).abs().max_element() < 1e-5);
+        assert!((origin - (lo + step * 0.5)).abs().max_element() < 1e-5);
+        for budget in [1, 7, 100, 999, 5000] {
+            let (_, _, c) = grid(lo, hi, budget);
+            assert!(c[0] * c[1] * c[2] <= budget.max(1), "{budget}: {c:?}");
+        }
+        // A flat scene gets one layer, in its plane.
+        let (origin, _, count) = grid(Vec3::ZERO, Vec3::new(4.0, 0.0, 4.0), 100);
+        assert_eq!(count[1], 1);
+        assert_eq!(origin.y, 0.0);
+    }
+}
