@@ -46,7 +46,8 @@
 //!                                                     three stages above then run once with the
 //!                                                     factors (auto, adaptive)
 //!   (all of the above is `prepare`, shared by the bake and the reference)
-//!    ─ pilot runs + plan   ──▶ BakeConfig + pilot    rays for the target error, measured (auto)
+//!    ─ pilot runs + plan   ──▶ BakeConfig + pilot    rays for the target error after
+//!                                                     denoising, measured (auto)
 //!  ─ one dispatch on config::Technique:
 //!        ─ transport::build ──▶ Transport             form factors F_ij (CSR rows) + H_direct
 //!            ─ solve::solve ──▶ Solution              H = H_direct + F·(ρH), iterated
