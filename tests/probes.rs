@@ -271,3 +271,61 @@ fn probes_on_a_thin_wall_are_moved_off_it() {
         assert!(!on_wall(p), "probe {i} at {p} lies in the wall");
     }
 }
+
+/// `render` lights a mesh without a lightmap from the probes, as an engine lights what moves:
+/// two rooms' floor, its lightmap taken away, reads about what the lightmap held there (the
+/// probes above it, interpolated at the floor's normal), and black without probes.
+#[test]
+fn render_lights_meshes_without_a_lightmap_from_the_probes() {
+    let dir = scratch();
+    let config = with_probes(BakeConfig::draft());
+    lightbake::bake(&fixture("two_rooms.gltf"), dir.path(), &config, &NoProgress).unwrap();
+    let mut scene = lightbake::render::RenderScene::load(&dir.path().join("two_rooms.gltf"))
+        .expect("loads the bake");
+    assert!(scene.probes.is_some(), "the bake names its probes");
+    let options = lightbake::render::RenderOptions::default();
+    // Straight down onto the floor of each room, away from the walls.
+    let spots = [Vec3::new(-1.0, 1.0, 0.2), Vec3::new(1.0, 1.0, -0.3)];
+    let look = |scene: &lightbake::render::RenderScene| -> Vec<f32> {
+        (spots.iter())
+            .map(|&o| {
+                let mut rng = lightbake::sampling::Rng::new(0, 0, 0);
+                scene
+                    .radiance(o, Vec3::NEG_Y, &options, &mut rng)
+                    .element_sum()
+                    / 3.0
+            })
+            .collect()
+    };
+    let lightmapped = look(&scene);
+    // Every instance the spots look at (the floor, and its back-face copy if any) loses its
+    // lightmap.
+    for &o in &spots {
+        let hit = scene
+            .tracer
+            .closest(o, Vec3::NEG_Y, f32::INFINITY)
+            .expect("the floor");
+        let floor = (scene.scene.instances.iter())
+            .position(|i| i.triangles.contains(&hit.triangle))
+            .expect("the floor's instance");
+        let node = scene.scene.instances[floor].node;
+        for (k, i) in scene.scene.instances.iter().enumerate() {
+            if i.node == node {
+                scene.instance_page[k] = None;
+            }
+        }
+    }
+    let from_probes = look(&scene);
+    for (l, p) in lightmapped.iter().zip(&from_probes) {
+        assert!(*l > 0.0, "the lightmap lights the floor");
+        assert!(
+            (p / l - 1.0).abs() < 0.35,
+            "probes read {p} where the lightmap read {l}"
+        );
+    }
+    scene.probes = None;
+    assert!(
+        look(&scene).iter().all(|&v| v == 0.0),
+        "black without probes"
+    );
+}

@@ -110,8 +110,8 @@ pub struct RenderScene {
     pub tracer: Tracer,
     /// Decoded EXR pages (one per distinct `extras.lightmap` file).
     pub pages: Vec<Page>,
-    /// Page of each scene instance (`None`: the primitive has no lightmap and shades black
-    /// apart from its emission).
+    /// Page of each scene instance (`None`: the primitive has no lightmap; it is lit by the
+    /// probes when the bake has them, else black apart from its emission).
     pub instance_page: Vec<Option<u32>>,
     /// Directional pages (L0, L1x, L1y, L1z, indices into `pages`) of each instance whose bake
     /// has them: diffuse light is then reconstructed for the shading normal (the material's
@@ -234,7 +234,8 @@ impl RenderScene {
         self.instance_page[instance as usize].map(|k| &self.pages[k as usize])
     }
 
-    /// Instances that have no lightmap (they render black apart from emission).
+    /// Instances that have no lightmap (lit by the probes when the bake has them, else black
+    /// apart from emission).
     pub fn unlit_instances(&self) -> usize {
         self.instance_page.iter().filter(|p| p.is_none()).count()
     }

@@ -220,16 +220,23 @@ impl<'a> Shader<'a> {
 
     /// `H/π` at `sp` (a point of triangle `t`): the L1 reconstruction at the shading normal
     /// from the directional pages when the bake has them, else the bilinear lookup of the
-    /// lightmap at `uv1` (see [`crate::lightmap::Page::bilinear`]).
+    /// lightmap at `uv1` (see [`crate::lightmap::Page::bilinear`]). A mesh without a lightmap
+    /// (one the bake did not light, such as a prop added to the baked scene) reads the bake's
+    /// light probes at the shading normal when there are any, as an engine lights what moves.
     fn diffuse_light(&self, t: u32, sp: &SurfacePoint) -> Vec3 {
         if let Some(pages) = self.scene.directional(sp.instance) {
             let c = pages.map(|p| p.bilinear(sp.uv1));
             let n = self.scene.scene.shading_normal(t, sp);
             return directional::irradiance_over_pi(&c, n);
         }
-        self.scene
-            .page(sp.instance)
-            .map_or(Vec3::ZERO, |p| p.bilinear(sp.uv1))
+        match (self.scene.page(sp.instance), &self.scene.probes) {
+            (Some(page), _) => page.bilinear(sp.uv1),
+            (None, Some(probes)) => {
+                let n = self.scene.scene.shading_normal(t, sp);
+                probes.irradiance_over_pi(sp.p, n, Some(&self.scene.tracer))
+            }
+            (None, None) => Vec3::ZERO,
+        }
     }
 }
 
