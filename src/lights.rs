@@ -159,7 +159,7 @@ impl Emitters {
         &self,
         (scene, texels, tracer): (&Scene, &Texels, &Tracer),
         x: Vec3,
-        n: Vec3,
+        n: Option<Vec3>,
         u: Vec2,
     ) -> Option<LightSample> {
         let (tri, u0) = self.pick_stratified(u.x);
@@ -169,14 +169,15 @@ impl Emitters {
     }
 
     /// The point at barycentrics `bary` of emissive triangle `tri` as a light sample seen from
-    /// `x` with normal `n`, visibility not tested (the caller traces the shadow ray to
-    /// [`LightSample::point`]): `None` when either side faces away or the point has no texel.
+    /// `x` with normal `n` (`None`: a point in free space, which faces every way), visibility
+    /// not tested (the caller traces the shadow ray to [`LightSample::point`]): `None` when
+    /// either side faces away or the point has no texel.
     #[inline]
     pub(crate) fn sample_at(
         &self,
         (scene, texels): (&Scene, &Texels),
         x: Vec3,
-        n: Vec3,
+        n: Option<Vec3>,
         tri: u32,
         bary: Vec2,
     ) -> Option<LightSample> {
@@ -187,7 +188,8 @@ impl Emitters {
             return None;
         }
         let dir = to / r2.sqrt();
-        let (cos_i, cos_l) = (n.dot(dir), -n_l.dot(dir));
+        // A point in free space (a light probe) has no surface: every direction counts.
+        let (cos_i, cos_l) = (n.map_or(1.0, |n| n.dot(dir)), -n_l.dot(dir));
         if cos_i <= 0.0 || cos_l <= 0.0 {
             return None;
         }

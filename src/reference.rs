@@ -566,7 +566,7 @@ impl Paths<'_> {
         let bary = sample_triangle(rng.next_vec2());
         let Some(y) = self
             .emitters
-            .sample_at((self.scene, self.texels), x, n, tri, bary)
+            .sample_at((self.scene, self.texels), x, Some(n), tri, bary)
         else {
             return e;
         };

@@ -124,20 +124,7 @@ fn probes_are_never_buried_nor_lit_through_a_wall() {
     let grey = gltf.add_material(Material::grey("grey", 0.7));
     let panel = gltf.add_material(Material::grey("panel", 0.8).emitting([1.0; 3], 10.0));
     let (min, max) = (Vec3::new(-2.0, 0.0, -1.0), Vec3::new(2.0, 2.0, 1.0));
-    let shell = Geometry::box_faces(
-        min,
-        max,
-        &[
-            Face::PosX,
-            Face::NegX,
-            Face::PosY,
-            Face::NegY,
-            Face::PosZ,
-            Face::NegZ,
-        ],
-        4,
-    )
-    .flipped();
+    let shell = Geometry::box_faces(min, max, &Face::ALL, 4).flipped();
     let mesh = gltf.add_mesh("shell", shell, grey);
     gltf.add_mesh_node("shell", mesh);
     let (wall_lo, wall_hi) = (Vec3::new(-0.05, 0.0, -1.0), Vec3::new(0.05, 2.0, 1.0));
@@ -145,8 +132,7 @@ fn probes_are_never_buried_nor_lit_through_a_wall() {
     let mesh = gltf.add_mesh("wall", wall, grey);
     gltf.add_mesh_node("wall", mesh);
     let (block_lo, block_hi) = (Vec3::new(-1.4, 0.0, -0.5), Vec3::new(-0.6, 0.8, 0.3));
-    let faces = [Face::PosX, Face::NegX, Face::PosY, Face::PosZ, Face::NegZ];
-    let block = Geometry::box_faces(block_lo, block_hi, &faces, 2);
+    let block = Geometry::box_faces(block_lo, block_hi, &Face::NO_BOTTOM, 2);
     let mesh = gltf.add_mesh("block", block, grey);
     gltf.add_mesh_node("block", mesh);
     let light = Geometry::grid(Vec3::new(-1.5, 1.99, -0.4), Vec3::X, Vec3::Z * 0.8, 1, 1);

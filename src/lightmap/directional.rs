@@ -234,9 +234,9 @@ impl<'a> Gatherer<'a> {
             }
             if sample_emitters {
                 let u = hammersley(s, k, light_shift);
-                if let Some(y) = self
-                    .emitters
-                    .sample_from((scene, texels, tracer), origin, n, u)
+                if let Some(y) =
+                    self.emitters
+                        .sample_from((scene, texels, tracer), origin, Some(n), u)
                 {
                     rays += 1;
                     let dir = (y.point - origin).normalize();

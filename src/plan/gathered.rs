@@ -420,7 +420,7 @@ impl PointDrawer<'_> {
         let light_shift = rng.next_vec2();
         for s in 0..light_samples {
             let u = hammersley(s, light_samples, light_shift);
-            let Some(x) = emitters.sample_from((scene, texels, tracer), origin, n, u) else {
+            let Some(x) = emitters.sample_from((scene, texels, tracer), origin, Some(n), u) else {
                 continue;
             };
             let p_gather = x.cos_i / PI;

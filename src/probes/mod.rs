@@ -66,9 +66,9 @@ use glam::Vec3;
 use rayon::prelude::*;
 
 use crate::lights::{Emitters, punctual_irradiance, triangle_point};
-use crate::sampling::{Rng, hammersley, power_weight, triangle_point as sample_triangle};
+use crate::sampling::{Rng, hammersley, power_weight};
 use crate::scene::LightKind;
-use crate::texels::{NO_TEXEL, RayEnd};
+use crate::texels::RayEnd;
 use crate::trace::Tracer;
 use crate::transport::Surfaces;
 use crate::{Error, Progress, Result};
@@ -425,25 +425,11 @@ impl Gatherer<'_> {
             texels,
             tracer,
         } = self.surfaces;
-        let (tri, u0) = self.emitters.pick_stratified(u.x);
-        let bary = sample_triangle(glam::Vec2::new(u0, u.y));
-        let (point, n_l) = triangle_point(scene, tri, bary);
-        let to = point - x;
-        let r2 = to.length_squared();
-        if r2 <= 0.0 {
-            return None;
-        }
-        let dir = to / r2.sqrt();
-        let cos_l = -n_l.dot(dir);
-        let j = texels.texel_at(tri, bary);
-        if cos_l <= 0.0 || j == NO_TEXEL || tracer.occluded(x, point) {
-            return None;
-        }
-        let pdf = self.emitters.pdf_area[tri as usize] * r2 / cos_l;
-        Some((
-            dir,
-            texels.emission[j as usize] * power_weight(pdf, p_sphere),
-        ))
+        let s = self
+            .emitters
+            .sample_from((scene, texels, tracer), x, None, u)?;
+        let dir = (s.point - x) / s.r2.sqrt();
+        Some((dir, s.le * power_weight(s.pdf_solid_angle(), p_sphere)))
     }
 }
 

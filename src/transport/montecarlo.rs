@@ -164,7 +164,7 @@ impl Context<'_> {
             let origin = self.footprint_point(i, rng.next_vec2());
             let Some(x) = self
                 .emitters
-                .sample_from((scene, texels, tracer), origin, n, u)
+                .sample_from((scene, texels, tracer), origin, Some(n), u)
             else {
                 continue;
             };

@@ -195,7 +195,7 @@ fn texel_direct(
     for s in 0..l {
         let u = hammersley(s, l, light_shift);
         let x = footprint_point(texels, tracer, i, rng.next_vec2());
-        if let Some(y) = emitters.sample_from((scene, texels, tracer), x, n, u) {
+        if let Some(y) = emitters.sample_from((scene, texels, tracer), x, Some(n), u) {
             h += y.le * (y.cos_i * y.cos_l / (y.r2 * y.pdf_area));
         }
     }
