@@ -632,7 +632,7 @@ pub(crate) fn predict_resolution(
     let pct = |x: f32| format!("{:.2}%", x * 100.0);
     let measured = match (gathered_bounds, gathered) {
         (Some((_, lo, hi)), Some(g)) => format!(
-            "measured at {} random surface points: the pilot's texel values{} read back by \
+            "measured at {} random surface points{}: the pilot's texel values{} read back by \
              bilinear lookup against the light gathered at each point ({} rays and light \
              samples per point and run; the two runs' independent differences multiplied, so \
              neither's noise counts; {}…{} within two standard errors; {:.2}s, {:.1}% of the \
@@ -641,6 +641,15 @@ pub(crate) fn predict_resolution(
              points; {} at {} points about the face normals, {:.1}% of those lookups reading a \
              gutter or buried neighbour)",
             g.points.len(),
+            if g.reused > 0 {
+                format!(
+                    " ({} of them the density pilot's, read against the light it gathered \
+                     there: no ray cast again)",
+                    g.reused
+                )
+            } else {
+                String::new()
+            },
             if plan.denoise_gain.is_some() {
                 " (denoised, as the final lightmap will be)"
             } else {

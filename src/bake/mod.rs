@@ -303,9 +303,9 @@ pub struct Prepared {
     pub(crate) config: BakeConfig,
     /// The automatic choice so far (the density), when `config.auto` asks for one.
     pub(crate) plan: Option<Plan>,
-    /// The density pilot's relative noise at `plan::PILOT_RAYS`, which the transport choice
-    /// starts from.
-    pub(crate) density_noise: Option<f32>,
+    /// What the density pilot measured that the transport choice starts from: its pair's
+    /// noise and its sampled points' gathered light.
+    pub(crate) density: pilot::Reused,
     /// What the junction split cut (`None` when it did not run).
     pub(crate) junctions: Option<scene::junctions::JunctionReport>,
     pub(crate) stages: Vec<StageTime>,
@@ -434,7 +434,7 @@ fn prepare_loaded(
     // Adaptive density: a pilot on a uniform atlas of its own, charted quickly and at most
     // `plan::density::PILOT_TEXELS` texels, chooses a density per region (`plan::density`);
     // the atlas is then laid out at those densities.
-    let mut density_noise = None;
+    let mut reused = pilot::Reused::default();
     if let (Some(plan), Some(auto)) = (&mut plan, config.auto)
         && !auto.keep.texels_per_unit
         && !atlas::reuses_input_uvs(&scene, &source, &config.atlas)
@@ -455,7 +455,7 @@ fn prepare_loaded(
             tracer: &tracer,
         };
         let density = pilot::measure_density(surfaces, &coarse, tpu, plan, processes, progress)?;
-        density_noise = density.noise;
+        reused = density.reused;
         if let Some(factors) = density.triangle_factors {
             config.atlas.triangle_density = factors;
         }
@@ -481,7 +481,7 @@ fn prepare_loaded(
         validity,
         config,
         plan,
-        density_noise,
+        density: reused,
         junctions,
         stages,
         processes: processes.count(),
@@ -580,7 +580,7 @@ pub(crate) fn light(
     processes: &dyn Processes,
     progress: &dyn Progress,
 ) -> Result<Lighting> {
-    let density_noise = prepared.density_noise;
+    let density = std::mem::take(&mut prepared.density);
     let (mut config, mut plan, mut stages) = (
         prepared.config.clone(),
         prepared.plan.clone(),
@@ -603,7 +603,7 @@ pub(crate) fn light(
             plan,
             &auto.keep,
             progress,
-            density_noise,
+            &density,
             processes,
         )?;
         config.validate()?;

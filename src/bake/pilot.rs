@@ -13,6 +13,7 @@ use glam::Vec3;
 use super::light::{Lit, Processes};
 use crate::config::{BakeConfig, FormFactors, Keep, SolveParams, Technique, TransportParams};
 use crate::lightmap::denoise;
+use crate::plan::gathered::PointLight;
 use crate::plan::{self, GatheredSample, PILOT_RAYS, Plan, PunctualSample};
 use crate::progress::CancelOnly;
 use crate::shard::Shards;
@@ -23,18 +24,20 @@ use crate::{Progress, Result, metrics};
 
 /// Step 2 onwards of the automatic choice, once texels and the tracer exist: method, rays
 /// (measured by the pilot), light samples, solver, tolerance and per-texel rays. Returns the
-/// pilot bakes for [`final_bake`] to reuse. `density_noise` is the density pilot's relative
+/// pilot bakes for [`final_bake`] to reuse. `density.noise` is the density pilot's relative
 /// noise at [`PILOT_RAYS`] on its own atlas: when it asks for a second pilot, that pilot is the
 /// first cast here (noise at a given K hardly depends on the texel density: 10.9%, 10.2% and
 /// 11.9% on the furnished interior's uniform atlases at 32, 16 and 8 /m). A second pilot's
-/// runs are denoised to measure what the denoiser leaves of the noise ([`denoise_gain`]).
+/// runs are denoised to measure what the denoiser leaves of the noise ([`denoise_gain`]). The
+/// lookup-error sample on this atlas reads its points' light from the density pilot's sample
+/// (`density.lights`) rather than gathering it again.
 pub(crate) fn choose_transport(
     surfaces: Surfaces,
     config: &mut BakeConfig,
     plan: &mut Plan,
     keep: &Keep,
     progress: &dyn Progress,
-    density_noise: Option<f32>,
+    density: &Reused,
     processes: &dyn Processes,
 ) -> Result<Option<PilotRuns>> {
     let texels = surfaces.texels;
@@ -59,7 +62,7 @@ pub(crate) fn choose_transport(
             )
         };
         let indirect_only = config.transport.indirect_only;
-        let measured = density_noise.filter(|&n| n > 0.0 && n.is_finite());
+        let measured = density.noise.filter(|&n| n > 0.0 && n.is_finite());
         plan.noise_from_density_pilot = measured.is_some();
         let (mut first, mut runs) = match measured {
             Some(noise) => (noise, None),
@@ -126,7 +129,7 @@ pub(crate) fn choose_transport(
             },
             stored,
             e,
-            budget,
+            (budget, &density.lights),
             processes,
         )?;
         if let Some(g) = &gathered {
@@ -189,7 +192,17 @@ fn lit(surfaces: Surfaces, transport: &TransportParams) -> bool {
 /// from instead of casting a pair to measure it again.
 pub(crate) struct Density {
     pub(crate) triangle_factors: Option<Vec<f32>>,
+    pub(crate) reused: Reused,
+}
+
+/// What the density pilot measured that the transport plan reuses on the final atlas.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct Reused {
+    /// The pair's relative noise at [`PILOT_RAYS`].
     pub(crate) noise: Option<f32>,
+    /// Its lookup-error sample's points and the light gathered there
+    /// ([`GatheredSample::lights`]; empty without a sample).
+    pub(crate) lights: Vec<PointLight>,
 }
 
 /// Whether the density pilot can measure anything: Monte Carlo transport and some light.
@@ -213,7 +226,7 @@ pub(crate) fn measure_density(
 ) -> Result<Density> {
     let mut density = Density {
         triangle_factors: None,
-        noise: None,
+        reused: Reused::default(),
     };
     if surfaces.texels.is_empty() || !lit(surfaces, &config.transport) {
         return Ok(density);
@@ -236,7 +249,7 @@ pub(crate) fn measure_density(
         runs.irradiance(),
         stored,
         target,
-        budget,
+        (budget, &[]),
         processes,
     )?;
     let (scene, texels) = (surfaces.scene, surfaces.texels);
@@ -244,8 +257,11 @@ pub(crate) fn measure_density(
     density.triangle_factors = samples.gathered.as_ref().and_then(|g| {
         plan::density::choose_region_density(scene, texels, stored, g, densities, plan)
     });
-    density.noise = Some(metrics::relative_noise(&a, &b, &texels.invalid));
+    density.reused.noise = Some(metrics::relative_noise(&a, &b, &texels.invalid));
     plan.discarded_rays += runs.rays() + samples.gathered.as_ref().map_or(0, |g| g.rays);
+    if let Some(g) = samples.gathered {
+        density.reused.lights = g.lights;
+    }
     Ok(density)
 }
 
@@ -377,7 +393,7 @@ fn gathered_sample(
     irradiance: [&[Vec3]; 2],
     punctual: Option<&PunctualSample>,
     target: f32,
-    budget_rays: u64,
+    (budget_rays, reuse): (u64, &[PointLight]),
     shards: &dyn Shards,
 ) -> Result<Option<GatheredSample>> {
     if transport.indirect_only {
@@ -389,6 +405,7 @@ fn gathered_sample(
         target,
         budget_rays,
         seed: transport.seed,
+        reuse,
     };
     GatheredSample::measure(
         surfaces.scene,
@@ -421,14 +438,15 @@ struct Samples {
 
 impl Samples {
     /// Both samples of `runs`, whose stored values are `stored`; the gathered one for the
-    /// relative error `target`, casting up to `budget_rays` past its first batch.
+    /// relative error `target`, casting up to `budget_rays` past its first batch, reading the
+    /// light of an earlier sample's points (`reuse`) first.
     fn measure(
         surfaces: Surfaces,
         transport: &TransportParams,
         irradiance: [&[Vec3]; 2],
         stored: [&[Vec3]; 2],
         target: f32,
-        budget_rays: u64,
+        budget: (u64, &[PointLight]),
         shards: &dyn Shards,
     ) -> Result<Samples> {
         let start = Instant::now();
@@ -439,7 +457,7 @@ impl Samples {
             irradiance,
             punctual.as_ref(),
             target,
-            budget_rays,
+            budget,
             shards,
         )?;
         Ok(Samples {
@@ -648,4 +666,86 @@ pub(crate) fn final_bake(
         light_samples: l_total,
         texel_gather_rays,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use std::path::Path;
+
+    use super::*;
+    use crate::NoProgress;
+    use crate::shard::Alone;
+
+    /// The Cornell box's lookup-error sample on a uniform atlas at `tpu` texels per metre, with
+    /// a pilot pair baked there, reading `reuse`'s light first.
+    fn cornell_sample(tpu: f32, reuse: &[PointLight]) -> GatheredSample {
+        let input = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/cornell_box.gltf");
+        let mut config = BakeConfig {
+            auto: None,
+            ..BakeConfig::default()
+        };
+        config.atlas.texels_per_unit = tpu;
+        let p = crate::prepare(&input, &config, &NoProgress).expect("prepares");
+        let transport = &config.transport;
+        let runs = PilotRuns::bake(
+            p.surfaces(),
+            transport,
+            PILOT_RAYS,
+            1e-3,
+            &Alone,
+            &NoProgress,
+        )
+        .expect("bakes");
+        let [a, b] = runs.stored(false);
+        Samples::measure(
+            p.surfaces(),
+            transport,
+            runs.irradiance(),
+            [&a, &b],
+            0.04,
+            (0, reuse),
+            &Alone,
+        )
+        .expect("samples")
+        .gathered
+        .expect("a gathered sample")
+    }
+
+    #[test]
+    fn a_sample_reads_an_earlier_samples_light_without_casting_a_ray() {
+        let fresh = cornell_sample(16.0, &[]);
+        assert!(fresh.rays > 0 && fresh.reused == 0 && fresh.points.len() > 1000);
+        assert_eq!(fresh.lights.len(), fresh.drawn);
+
+        // The same atlas and runs: the same points bit for bit, none of them gathered again.
+        let again = cornell_sample(16.0, &fresh.lights);
+        assert_eq!((again.rays, again.reused), (0, fresh.points.len()));
+        let bits = |s: &GatheredSample| -> Vec<[u32; 5]> {
+            s.points
+                .iter()
+                .map(|p| {
+                    [
+                        p.triangle,
+                        p.rest_square.to_bits(),
+                        p.punctual_square.to_bits(),
+                        p.total.to_bits(),
+                        p.noise_square.to_bits(),
+                    ]
+                })
+                .collect()
+        };
+        assert_eq!(bits(&again), bits(&fresh));
+
+        // Another atlas (twice the density): the earlier light gives the same mean square
+        // lookup error as gathering there afresh, within the two estimates' standard errors.
+        let finer = cornell_sample(32.0, &[]);
+        let read = cornell_sample(32.0, &fresh.lights);
+        assert_eq!(read.rays, 0);
+        let ((m_fresh, se_fresh), (m_read, se_read)) =
+            (finer.mean_square_total(), read.mean_square_total());
+        assert!(
+            (m_fresh - m_read).abs() <= 3.0 * se_fresh.hypot(se_read),
+            "fresh {m_fresh:.3e} ± {se_fresh:.1e}, read {m_read:.3e} ± {se_read:.1e}"
+        );
+    }
 }

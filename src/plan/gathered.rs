@@ -33,6 +33,14 @@
 //! precise and the sample has cast less than its budget (the bake gives it half the pilot's
 //! rays). Measured (the guide, `src/guide/performance.md`): 0.1–0.3 s for the first batch, as much as
 //! a sub-second bake; 9% of the furnished interior's draft bake and 4% of its medium one.
+//!
+//! **Gathered once.** A point's light does not depend on the atlas its lookup reads (apart
+//! from the second bounce at the gathering run's texel resolution), so the sample on the final
+//! atlas draws the density pilot's points again and reads its own pair's lookups against the
+//! light the density pilot gathered there ([`Runs::reuse`], [`PointLight`]): no ray, and
+//! `E[d_a·d_b]` stays the squared bias, each run's lookup being independent of the other run's
+//! gather. Only points past those, while the sample is not precise and its budget holds a
+//! whole batch, are gathered afresh.
 
 use std::f32::consts::PI;
 
@@ -85,41 +93,87 @@ pub(crate) struct GatheredPoint {
     pub(crate) noise_square: f32,
 }
 
+/// What a drawn point's draw found that no atlas changes: whether anybody sees it and the
+/// light gathered there through each run. A later sample of the same scene on another atlas
+/// (the final one, after the density pilot's) reads its own pair's lookups against these
+/// gathers rather than gathering again ([`Runs::reuse`]).
+#[derive(Clone, Copy, Debug)]
+pub(crate) enum PointLight {
+    /// The non-punctual light gathered through each run about the shading normal (`rest`), and
+    /// the exact punctual light there (zero when the sample leaves punctual light out).
+    Gathered { rest: [Vec3; 2], exact: Vec3 },
+    /// Nobody sees the point (the probe test), or it is degenerate: no atlas changes that.
+    LeftOut,
+    /// Its lookup found no texel on that atlas, so nothing was gathered: draw it again.
+    Redraw,
+}
+
 /// What became of one drawn point.
 enum Drawn {
-    Kept(GatheredPoint),
-    /// On this triangle, where nobody sees it.
-    Unseen(u32),
+    /// Kept, with its light for a later sample, and whether its light was gathered here
+    /// (rays cast) or read from an earlier sample's.
+    Kept(GatheredPoint, PointLight, bool),
+    /// On this triangle, where nobody sees it; with whether an atlas had a say (a buried
+    /// texel) or the geometry alone (the probe test).
+    Unseen(u32, PointLight),
     /// Degenerate or not finite.
     Skipped,
 }
 
 impl Packed for Drawn {
-    const FLOATS: usize = 6;
+    const FLOATS: usize = 16;
     fn pack(&self, out: &mut Vec<f32>) {
+        let light = |l: &PointLight, out: &mut Vec<f32>| match l {
+            PointLight::Gathered { rest, exact } => {
+                out.push(1.0);
+                out.extend(rest[0].to_array());
+                out.extend(rest[1].to_array());
+                out.extend(exact.to_array());
+            }
+            PointLight::LeftOut => out.extend([2.0; 1].into_iter().chain([0.0; 9])),
+            PointLight::Redraw => out.extend([0.0; 10]),
+        };
         match self {
-            Drawn::Kept(p) => out.extend([
-                1.0,
-                bits(p.triangle),
-                p.rest_square,
-                p.punctual_square,
-                p.total,
-                p.noise_square,
-            ]),
-            Drawn::Unseen(t) => out.extend([2.0, bits(*t), 0.0, 0.0, 0.0, 0.0]),
-            Drawn::Skipped => out.extend([0.0; 6]),
+            Drawn::Kept(p, l, fresh) => {
+                out.extend([
+                    if *fresh { 1.0 } else { 3.0 },
+                    bits(p.triangle),
+                    p.rest_square,
+                    p.punctual_square,
+                    p.total,
+                    p.noise_square,
+                ]);
+                light(l, out);
+            }
+            Drawn::Unseen(t, l) => {
+                out.extend([2.0, bits(*t), 0.0, 0.0, 0.0, 0.0]);
+                light(l, out);
+            }
+            Drawn::Skipped => out.extend([0.0; 16]),
         }
     }
     fn unpack(v: &[f32]) -> Self {
+        let light = |w: &[f32]| match w[0] as u32 {
+            1 => PointLight::Gathered {
+                rest: [Vec3::from_slice(&w[1..4]), Vec3::from_slice(&w[4..7])],
+                exact: Vec3::from_slice(&w[7..10]),
+            },
+            2 => PointLight::LeftOut,
+            _ => PointLight::Redraw,
+        };
         match v[0] as u32 {
-            1 => Drawn::Kept(GatheredPoint {
-                triangle: v[1].to_bits(),
-                rest_square: v[2],
-                punctual_square: v[3],
-                total: v[4],
-                noise_square: v[5],
-            }),
-            2 => Drawn::Unseen(v[1].to_bits()),
+            1 | 3 => Drawn::Kept(
+                GatheredPoint {
+                    triangle: v[1].to_bits(),
+                    rest_square: v[2],
+                    punctual_square: v[3],
+                    total: v[4],
+                    noise_square: v[5],
+                },
+                light(&v[6..]),
+                v[0] as u32 == 1,
+            ),
+            2 => Drawn::Unseen(v[1].to_bits(), light(&v[6..])),
             _ => Drawn::Skipped,
         }
     }
@@ -137,6 +191,11 @@ pub(crate) struct GatheredSample {
     pub(crate) rays: u64,
     /// Points drawn, the left-out ones included.
     pub(crate) drawn: usize,
+    /// What each drawn point's draw found that no atlas changes, by its stream index: for a
+    /// later sample on another atlas ([`Runs::reuse`]).
+    pub(crate) lights: Vec<PointLight>,
+    /// Kept points whose light was read from an earlier sample's rather than gathered.
+    pub(crate) reused: usize,
 }
 
 /// What the two runs give the sample: per texel, the irradiance `H` each run solved (what the
@@ -151,6 +210,13 @@ pub(crate) struct Runs<'a> {
     pub(crate) target: f32,
     pub(crate) budget_rays: u64,
     pub(crate) seed: u64,
+    /// An earlier sample's [`GatheredSample::lights`] on the same scene with the same seed
+    /// (empty for none): its points are drawn again and read on this atlas against the light
+    /// gathered there, without a ray. The products stay unbiased: each run's lookup here is
+    /// independent of the other run's gather there. What the earlier atlas changes in the
+    /// gather is the second bounce at its texels' resolution (second order, as the module
+    /// docs say of the pilot's own).
+    pub(crate) reuse: &'a [PointLight],
 }
 
 impl GatheredSample {
@@ -195,23 +261,40 @@ impl GatheredSample {
         // result does not depend on the thread count.
         let mut sample = GatheredSample::default();
         let mut drawn = 0;
+        // Points whose light an earlier sample gathered are read first, all of them (they
+        // cost no ray); past them a batch is cast only while the budget holds it whole.
+        let free = runs.reuse.len();
         while drawn < MAX_POINTS {
-            let batch = shard::map(shards, BATCH, |k| drawer.draw(drawn + k))?;
-            drawn += BATCH;
+            let size = if drawn < free { free - drawn } else { BATCH };
+            let batch = shard::map(shards, size, |k| drawer.draw(drawn + k))?;
+            drawn += size;
             for d in batch {
-                match d {
-                    Drawn::Kept(p) => sample.points.push(p),
-                    Drawn::Unseen(t) => sample.unseen.push(t),
-                    Drawn::Skipped => {}
-                }
+                let light = match d {
+                    Drawn::Kept(p, light, fresh) => {
+                        sample.points.push(p);
+                        sample.reused += usize::from(!fresh);
+                        sample.rays += if fresh { per_point } else { 0 };
+                        light
+                    }
+                    Drawn::Unseen(t, light) => {
+                        sample.unseen.push(t);
+                        light
+                    }
+                    Drawn::Skipped => PointLight::Redraw,
+                };
+                sample.lights.push(light);
             }
             let (_, lo, hi) = sample.relative_error_bounds();
             let (rest, stderr) = sample.mean_square(|p| p.rest_square);
             let mean_square = rest.max(0.0) + sample.mean_square(|p| p.punctual_square).0;
-            let rays = per_point * sample.points.len() as u64;
+            let spent = if free > 0 {
+                sample.rays + per_point * BATCH as u64 > runs.budget_rays
+            } else {
+                sample.rays >= runs.budget_rays
+            };
             if hi < SMALL * runs.target
                 || (mean_square > 0.0 && 2.0 * stderr <= PRECISION * mean_square)
-                || rays >= runs.budget_rays
+                || spent
             {
                 break;
             }
@@ -221,7 +304,6 @@ impl GatheredSample {
             }
         }
         sample.drawn = drawn;
-        sample.rays = per_point * sample.points.len() as u64;
         Ok(Some(sample))
     }
 
@@ -334,39 +416,53 @@ impl PointDrawer<'_> {
         if sp.n_geo == Vec3::ZERO {
             return Drawn::Skipped;
         }
+        let earlier = runs.reuse.get(k).copied().unwrap_or(PointLight::Redraw);
         // Points nobody sees (faces looking into geometry: a floor under a cabinet, the
         // bottom of a box on the floor) are left out, as the point yardstick leaves them.
         let shift = rng.next_vec2();
-        let back = validity::back_hits(tracer, sp.p, sp.n_geo, PROBE_RAYS, shift, f32::INFINITY);
-        if back > (MAX_BACK * PROBE_RAYS as f32) as u32 {
-            return Drawn::Unseen(t);
+        match earlier {
+            PointLight::LeftOut => return Drawn::Unseen(t, PointLight::LeftOut),
+            PointLight::Gathered { .. } => {}
+            PointLight::Redraw => {
+                let back =
+                    validity::back_hits(tracer, sp.p, sp.n_geo, PROBE_RAYS, shift, f32::INFINITY);
+                if back > (MAX_BACK * PROBE_RAYS as f32) as u32 {
+                    return Drawn::Unseen(t, PointLight::LeftOut);
+                }
+            }
         }
         let [ua, ub, uc] = texels.triangle_uv[t as usize];
         let uv = ua * (1.0 - b.x - b.y) + ub * b.x + uc * b.y;
         let page = texels.triangle_page[t as usize] as usize;
         let Some((lookup, _)) = bilinear(texels, &self.valid, page, uv) else {
-            return Drawn::Unseen(t);
+            // A buried texel here: the earlier light, if any, stays for another atlas.
+            return Drawn::Unseen(t, earlier);
         };
         let read = |v: &[Vec3]| -> Vec3 { lookup.iter().map(|&(j, w)| v[j as usize] * w).sum() };
         let origin = sp.p + sp.n_geo * tracer.epsilon;
-        // Punctual light: the sample's texel values against the exact light about the
-        // shading normal (noise-free: no product needed).
-        let (punctual_texels, exact) = match self.punctual {
-            Some(p) => (
-                read(&p.texel),
-                scene
-                    .lights
-                    .iter()
-                    .map(|l| punctual_irradiance(l, origin, sp.n, tracer))
-                    .sum(),
-            ),
-            None => (Vec3::ZERO, Vec3::ZERO),
+        let punctual_texels = self.punctual.map_or(Vec3::ZERO, |p| read(&p.texel));
+        let (rest, exact, fresh) = match earlier {
+            PointLight::Gathered { rest, exact } => (rest, exact, false),
+            _ => {
+                // Punctual light: the exact light about the shading normal (noise-free: no
+                // product needed); the rest gathered through each run.
+                let exact = match self.punctual {
+                    Some(_) => scene
+                        .lights
+                        .iter()
+                        .map(|l| punctual_irradiance(l, origin, sp.n, tracer))
+                        .sum(),
+                    None => Vec3::ZERO,
+                };
+                let rest = [0usize, 1].map(|r| {
+                    let mut rng = Rng::new(seed ^ SALT, k as u64, 1 + r as u64);
+                    self.gather(origin, sp.n, runs.irradiance[r], &mut rng)
+                });
+                (rest, exact, true)
+            }
         };
-        let [da, db] = [0usize, 1].map(|r| {
-            let mut rng = Rng::new(seed ^ SALT, k as u64, 1 + r as u64);
-            let h = runs.irradiance[r];
-            read(h) - punctual_texels - self.gather(origin, sp.n, h, &mut rng)
-        });
+        let light = PointLight::Gathered { rest, exact };
+        let [da, db] = [0usize, 1].map(|r| read(runs.irradiance[r]) - punctual_texels - rest[r]);
         let dp = punctual_texels - exact;
         let [ha, hb] = runs.irradiance.map(read);
         let total = (ha + hb) * 0.5;
@@ -383,7 +479,7 @@ impl PointDrawer<'_> {
             && point.total.is_finite()
             && point.noise_square.is_finite()
         {
-            Drawn::Kept(point)
+            Drawn::Kept(point, light, fresh)
         } else {
             Drawn::Skipped
         }
