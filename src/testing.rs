@@ -110,7 +110,7 @@ impl Geometry {
 
     /// A UV sphere with smooth normals: `nu` segments around +Y, `nv` rings, `uv0 = (s, t)`
     /// (one column of vertices repeated where `s` wraps, as exporters write it).
-    pub(crate) fn uv_sphere(center: Vec3, radius: f32, nu: u32, nv: u32) -> Self {
+    pub fn uv_sphere(center: Vec3, radius: f32, nu: u32, nv: u32) -> Self {
         assert!(
             nu >= 3 && nv >= 2,
             "a sphere needs at least 3 segments and 2 rings"
@@ -800,6 +800,95 @@ impl GltfBuilder {
         let path = path.as_ref();
         std::fs::write(path, self.to_glb_bytes()).map_err(|e| Error::io(path, e))
     }
+}
+
+/// Adds `part`'s meshes (with their materials, its buffer as a data URI) and root nodes to
+/// the glTF `json` (a baked scene, say), each node in `json`'s scene: how a test or an example
+/// puts an object the bake never saw into a baked scene. Images, lights and cameras of `part`
+/// are left out.
+pub fn add_to_gltf(json: &mut Value, part: &GltfBuilder) -> Result<()> {
+    let (part, bin) = part.to_gltf_json();
+    let bad = |what: &str| Error::invalid(Path::new("<glTF JSON>"), what.to_owned());
+    let len = |json: &Value, key: &str| json[key].as_array().map_or(0, Vec::len) as u64;
+    let [buffer, views, accessors, materials, meshes, nodes] = [
+        "buffers",
+        "bufferViews",
+        "accessors",
+        "materials",
+        "meshes",
+        "nodes",
+    ]
+    .map(|key| len(json, key));
+    let shifted = |v: &Value, by: u64| -> Result<Value> {
+        Ok(json!(
+            by + v.as_u64().ok_or_else(|| bad("an index is not a number"))?
+        ))
+    };
+    let mut items: Vec<(&str, Value)> = vec![(
+        "buffers",
+        json!({
+            "byteLength": bin.len(),
+            "uri": format!(
+                "data:application/octet-stream;base64,{}",
+                base64::engine::general_purpose::STANDARD.encode(&bin)
+            ),
+        }),
+    )];
+    let array = |key: &str| part[key].as_array().cloned().unwrap_or_default();
+    for mut view in array("bufferViews") {
+        view["buffer"] = json!(buffer);
+        items.push(("bufferViews", view));
+    }
+    for mut accessor in array("accessors") {
+        accessor["bufferView"] = shifted(&accessor["bufferView"], views)?;
+        items.push(("accessors", accessor));
+    }
+    for material in array("materials") {
+        items.push(("materials", material));
+    }
+    for mut mesh in array("meshes") {
+        for primitive in mesh["primitives"].as_array_mut().into_iter().flatten() {
+            if let Some(attributes) = primitive["attributes"].as_object_mut() {
+                for a in attributes.values_mut() {
+                    *a = shifted(a, accessors)?;
+                }
+            }
+            primitive["indices"] = shifted(&primitive["indices"], accessors)?;
+            primitive["material"] = shifted(&primitive["material"], materials)?;
+        }
+        items.push(("meshes", mesh));
+    }
+    let roots = part["scenes"][0]["nodes"]
+        .as_array()
+        .cloned()
+        .unwrap_or_default();
+    for mut node in array("nodes") {
+        if node.get("mesh").is_some() {
+            node["mesh"] = shifted(&node["mesh"], meshes)?;
+        }
+        if let Some(children) = node["children"].as_array_mut() {
+            for c in children {
+                *c = shifted(c, nodes)?;
+            }
+        }
+        node.as_object_mut().map(|n| n.remove("camera"));
+        node.as_object_mut().map(|n| n.remove("extensions"));
+        items.push(("nodes", node));
+    }
+    for (key, item) in items {
+        match json[key].as_array_mut() {
+            Some(a) => a.push(item),
+            None => json[key] = json!([item]),
+        }
+    }
+    let scene = json["scene"].as_u64().unwrap_or(0) as usize;
+    let scene_nodes = json["scenes"][scene]["nodes"]
+        .as_array_mut()
+        .ok_or_else(|| bad("the glTF has no scene to add nodes to"))?;
+    for r in roots {
+        scene_nodes.push(shifted(&r, nodes)?);
+    }
+    Ok(())
 }
 
 fn mesh_json(mesh: &Mesh, packer: &mut Packer) -> Value {

@@ -233,10 +233,38 @@ impl<'a> Shader<'a> {
             (Some(page), _) => page.bilinear(sp.uv1),
             (None, Some(probes)) => {
                 let n = self.scene.scene.shading_normal(t, sp);
-                probes.irradiance_over_pi(sp.p, n, Some(&self.scene.tracer))
+                let tracer = &self.scene.tracer;
+                let from = sp.p + n * tracer.epsilon;
+                let c = probes.sh_at(sp.p, |q| self.sees_past_itself(sp.instance, from, q));
+                crate::probes::sh::irradiance_over_pi(&c, n)
             }
             (None, None) => Vec3::ZERO,
         }
+    }
+
+    /// Whether nothing but `instance` itself lies between `from` and the probe at `q`: a ball
+    /// lit by probes must not hide the probes behind it from its own front (every point would
+    /// read another set of probes, and the ball would show their seams), as an engine
+    /// interpolates for the object, not through it.
+    fn sees_past_itself(&self, instance: u32, mut from: Vec3, q: Vec3) -> bool {
+        let (tracer, scene) = (&self.scene.tracer, &self.scene.scene);
+        // A closed mesh is crossed at most a few times on the way to a probe.
+        for _ in 0..8 {
+            let d = q - from;
+            let len = d.length();
+            if len <= tracer.epsilon {
+                return true;
+            }
+            let dir = d / len;
+            match tracer.closest(from, dir, len - tracer.epsilon) {
+                None => return true,
+                Some(hit) if scene.triangle_instance[hit.triangle as usize] == instance => {
+                    from += dir * (hit.t + tracer.epsilon);
+                }
+                Some(_) => return false,
+            }
+        }
+        false
     }
 }
 
