@@ -47,7 +47,9 @@
 //!                                                     factors (auto, adaptive)
 //!   (all of the above is `prepare`, shared by the bake and the reference)
 //!    ─ pilot runs + plan   ──▶ BakeConfig + pilot    rays for the target error after
-//!                                                     denoising, measured (auto)
+//!                                                     denoising, measured (auto); the lookup
+//!                                                     error read at the density pilot's points
+//!                                                     against the light it gathered there
 //!  ─ one dispatch on config::Technique:
 //!        ─ transport::build ──▶ Transport             form factors F_ij (CSR rows) + H_direct
 //!            ─ solve::solve ──▶ Solution              H = H_direct + F·(ρH), iterated
