@@ -190,8 +190,8 @@ fn probes_are_never_buried_nor_lit_through_a_wall() {
     }
 }
 
-/// The probe file has the same bytes on one thread and on two, and reads back as baked; the
-/// glTF names it in its root extras.
+/// The probe file and the irradiance volume have the same bytes on one thread and on two, and
+/// the probe file reads back as baked; the glTF names both in its root extras.
 #[test]
 fn probes_are_deterministic_and_round_trip() {
     let input = fixture("two_rooms.gltf");
@@ -207,14 +207,19 @@ fn probes_are_deterministic_and_round_trip() {
         let gltf: serde_json::Value =
             serde_json::from_slice(&std::fs::read(dir.path().join("two_rooms.gltf")).unwrap())
                 .unwrap();
-        let uri = gltf["extras"]["light_probes"]["uri"]
-            .as_str()
-            .unwrap()
-            .to_string();
-        std::fs::read(dir.path().join(uri)).unwrap()
+        let read = |uri: &serde_json::Value| std::fs::read(dir.path().join(uri.as_str().unwrap()));
+        let extras = &gltf["extras"]["light_probes"];
+        (
+            read(&extras["uri"]).unwrap(),
+            read(&extras["irradiance_volume"]["uri"]).unwrap(),
+        )
     };
-    let (one, two) = (run(1), run(2));
+    let ((one, volume_one), (two, volume_two)) = (run(1), run(2));
     assert!(one == two, "probe files differ between 1 and 2 threads");
+    assert!(
+        volume_one == volume_two,
+        "irradiance volumes differ between 1 and 2 threads"
+    );
     let read: Probes = probes::file::from_json(&one, std::path::Path::new("probes.json")).unwrap();
     let again = probes::file::to_json(&read).unwrap();
     assert!(again == one, "the file does not read back as written");
@@ -314,4 +319,107 @@ fn render_lights_meshes_without_a_lightmap_from_the_probes() {
         look(&scene).iter().all(|&v| v == 0.0),
         "black without probes"
     );
+}
+
+/// `<stem>_probes.ktx2` is Bevy's irradiance volume of the probe grid: a KTX2 3D texture of
+/// `(Rx, 2Ry, 3Rz)` half-float RGBA texels, read back with the `ktx2` crate (Bevy's reader).
+/// Each voxel's six sides hold `E(n)/π` of its probe's SH at the six axis directions, at the
+/// texels Bevy's shader samples (the negative sides in the second half of `t`, the X, Y, Z
+/// sides in thirds of `p`); the Transform named in the glTF puts voxel centres on the grid.
+#[test]
+fn the_irradiance_volume_is_the_grid_as_bevy_samples_it() {
+    let dir = scratch();
+    let config = with_probes(BakeConfig::draft());
+    lightbake::bake(&fixture("two_rooms.gltf"), dir.path(), &config, &NoProgress).unwrap();
+    let gltf: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.path().join("two_rooms.gltf")).unwrap()).unwrap();
+    let extras = &gltf["extras"]["light_probes"];
+    let json_uri = extras["uri"].as_str().unwrap();
+    let probes = probes::file::from_json(
+        &std::fs::read(dir.path().join(json_uri)).unwrap(),
+        std::path::Path::new(json_uri),
+    )
+    .unwrap();
+    let volume = &extras["irradiance_volume"];
+    assert_eq!(volume["uri"], "two_rooms_probes.ktx2");
+    let bytes = std::fs::read(dir.path().join(volume["uri"].as_str().unwrap())).unwrap();
+
+    let reader = ktx2::Reader::new(&bytes[..]).expect("a valid KTX2 file");
+    let header = reader.header();
+    let [rx, ry, rz] = probes.count;
+    assert_eq!([rx, ry, rz], [16, 8, 8]);
+    assert_eq!(header.format, Some(ktx2::Format::R16G16B16A16_SFLOAT));
+    assert_eq!(
+        (header.pixel_width, header.pixel_height, header.pixel_depth),
+        (rx, 2 * ry, 3 * rz)
+    );
+    assert_eq!((header.layer_count, header.face_count), (0, 1));
+    assert_eq!(header.supercompression_scheme, None);
+    assert_eq!(
+        reader.transfer_function(),
+        Some(ktx2::TransferFunction::Linear)
+    );
+    let levels: Vec<_> = reader.levels().collect();
+    assert_eq!(levels.len(), 1);
+    let data = levels[0].data;
+    assert_eq!(data.len(), (rx * 2 * ry * 3 * rz * 8) as usize);
+    let (w, h) = (rx as usize, 2 * ry as usize);
+    let rgba = |s: u32, t: u32, p: u32| -> [f32; 4] {
+        let at = ((p as usize * h + t as usize) * w + s as usize) * 8;
+        std::array::from_fn(|k| {
+            half::f16::from_le_bytes([data[at + 2 * k], data[at + 2 * k + 1]]).to_f32()
+        })
+    };
+
+    // Bevy's shader: t += Ry where the normal's component is negative; p += Rz·axis.
+    let sides = [
+        (Vec3::X, 0, 0),
+        (Vec3::NEG_X, ry, 0),
+        (Vec3::Y, 0, rz),
+        (Vec3::NEG_Y, ry, rz),
+        (Vec3::Z, 0, 2 * rz),
+        (Vec3::NEG_Z, ry, 2 * rz),
+    ];
+    let mut worst = 0.0f32;
+    let (mut up, mut down) = (0.0f32, 0.0f32);
+    for i in 0..probes.len() {
+        let (x, y, z) = (i as u32 % rx, (i as u32 / rx) % ry, i as u32 / (rx * ry));
+        for &(n, dt, dp) in &sides {
+            let expected = probes::sh::irradiance_over_pi(&probes.sh[i], n);
+            let texel = rgba(x, y + dt, z + dp);
+            assert_eq!(texel[3], 1.0);
+            for c in 0..3 {
+                let e = (texel[c] - expected[c]).abs() / expected[c].max(1e-3);
+                worst = worst.max(e);
+            }
+            if n == Vec3::Y {
+                up += expected.element_sum();
+            } else if n == Vec3::NEG_Y {
+                down += expected.element_sum();
+            }
+        }
+    }
+    // Half floats keep 11 significant bits.
+    assert!(worst < 1e-3, "voxels differ from the SH by {worst}");
+    // The ceiling panel lights upward-facing normals more: the halves are not swapped.
+    assert!(up > 1.5 * down, "+Y {up} vs -Y {down}");
+
+    // Voxel (i, j, k) of Bevy's unit cube, (ijk + ½)/R − ½, lands on grid probe (i, j, k).
+    let v3 = |v: &serde_json::Value| {
+        Vec3::from_array(std::array::from_fn(|k| v[k].as_f64().unwrap() as f32))
+    };
+    let (translation, scale) = (v3(&volume["translation"]), v3(&volume["scale"]));
+    assert_eq!(volume["rotation"], serde_json::json!([0.0, 0.0, 0.0, 1.0]));
+    assert_eq!(volume["resolution"], serde_json::json!([rx, ry, rz]));
+    let r = Vec3::new(rx as f32, ry as f32, rz as f32);
+    for ijk in [
+        Vec3::ZERO,
+        Vec3::new(15.0, 7.0, 7.0),
+        Vec3::new(3.0, 5.0, 1.0),
+    ] {
+        let unit = (ijk + Vec3::splat(0.5)) / r - Vec3::splat(0.5);
+        let world = translation + scale * unit;
+        let grid = probes.origin + probes.step * ijk;
+        assert!((world - grid).length() < 1e-5, "{ijk}: {world} vs {grid}");
+    }
 }

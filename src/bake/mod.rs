@@ -974,8 +974,8 @@ pub fn write(
     })
 }
 
-/// Stages `<stem>_probes.json` and names it in the staged glTF's root
-/// `extras.light_probes = {"uri", "count"}`.
+/// Stages `<stem>_probes.json` and `<stem>_probes.ktx2` (Bevy's irradiance volume) and names
+/// them in the staged glTF's root `extras.light_probes = {"uri", "count", "irradiance_volume"}`.
 fn stage_probes(
     probes: &crate::probes::Probes,
     source: &scene::Source,
@@ -983,19 +983,31 @@ fn stage_probes(
     input: &Path,
     stem: &str,
 ) -> Result<()> {
+    use crate::probes::volume;
     let uri = format!("{stem}_probes.json");
     staging.write(&uri, &crate::probes::file::to_json(probes)?)?;
+    // Bevy's irradiance volume of the same grid, with the Transform that places it.
+    let volume_uri = format!("{stem}_probes.ktx2");
+    staging.write(&volume_uri, &volume::to_ktx2(probes)?)?;
+    let v = volume::placement(probes);
+    let extras = serde_json::json!({
+        "uri": uri,
+        "count": probes.len(),
+        volume::EXTRAS_KEY: {
+            "uri": volume_uri,
+            "translation": v.translation.to_array(),
+            "rotation": v.rotation,
+            "scale": v.scale.to_array(),
+            "resolution": v.resolution,
+        },
+    });
     let name = match source.is_glb {
         true => format!("{stem}.glb"),
         false => format!("{stem}.gltf"),
     };
     let gltf = staging.read(&name)?;
     let edited = output::gltf_edit::edit_gltf(&gltf, input, |json| {
-        output::gltf_edit::set_root_extra(
-            json,
-            crate::probes::file::EXTRAS_KEY,
-            serde_json::json!({ "uri": uri, "count": probes.len() }),
-        )
+        output::gltf_edit::set_root_extra(json, crate::probes::file::EXTRAS_KEY, extras.clone())
     })?;
     staging.replace(&name, &edited)
 }

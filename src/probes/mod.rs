@@ -59,6 +59,7 @@
 pub mod file;
 mod place;
 pub mod sh;
+pub mod volume;
 
 use std::f32::consts::PI;
 
