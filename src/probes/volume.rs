@@ -48,7 +48,7 @@
 use glam::Vec3;
 use half::f16;
 
-use super::{Probes, sh};
+use super::{Grid, Probes, sh};
 use crate::{Error, Result};
 
 /// The key of `extras.light_probes` that names the volume: `{"uri", "translation",
@@ -79,7 +79,7 @@ pub fn ambient_cube(c: &sh::Sh2) -> [Vec3; 6] {
 pub struct Placement {
     /// The cube's centre (world).
     pub translation: Vec3,
-    /// The grid's axes as a rotation (`x, y, z, w`), identity for the automatic grid.
+    /// The grid's axes as a rotation (`x, y, z, w`): identity for the automatic grid.
     pub rotation: [f32; 4],
     /// The cube's size along its axes.
     pub scale: Vec3,
@@ -87,15 +87,15 @@ pub struct Placement {
     pub resolution: [u32; 3],
 }
 
-/// The Transform of the volume of `probes`' grid.
+/// The Transform of the volume of `grid`.
 #[must_use]
-pub fn placement(probes: &Probes) -> Placement {
-    let count = Vec3::from(probes.count.map(|c| c as f32));
+pub fn placement(grid: &Grid) -> Placement {
+    let count = Vec3::from(grid.count.map(|c| c as f32));
     Placement {
-        translation: probes.origin + probes.step * (count - Vec3::ONE) * 0.5,
-        rotation: [0.0, 0.0, 0.0, 1.0],
-        scale: probes.step * count,
-        resolution: probes.count,
+        translation: grid.origin + grid.rotation * (grid.step * (count - Vec3::ONE) * 0.5),
+        rotation: grid.rotation.to_array(),
+        scale: grid.step * count,
+        resolution: grid.count,
     }
 }
 
@@ -119,9 +119,14 @@ fn half(v: f32) -> [u8; 2] {
     f16::from_f32(v).to_le_bytes()
 }
 
-/// The KTX2 file's bytes for the grid of `probes`.
+/// The KTX2 file's bytes for the grid of `probes` (an error for probes not on a grid).
 pub fn to_ktx2(probes: &Probes) -> Result<Vec<u8>> {
-    let r = probes.count;
+    let Some(grid) = probes.grid else {
+        return Err(Error::Internal(
+            "probes: an irradiance volume needs probes on a grid".into(),
+        ));
+    };
+    let r = grid.count;
     let [w, h, d] = [r[0], 2 * r[1], 3 * r[2]];
     let texels = w as usize * h as usize * d as usize;
     if texels == 0 || probes.sh.len() != r.iter().map(|&c| c as usize).product::<usize>() {
