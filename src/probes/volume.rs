@@ -37,7 +37,11 @@
 //!
 //! Each side's colour is `E(n)/π` from the probe's L2 SH at the axis direction `n`
 //! ([`sh::irradiance_over_pi`]): the lightmaps' unit, exact on the six axes; between them the
-//! ambient cube's `N²` blend differs from the SH (it has no band-2 cross terms). Bevy computes
+//! ambient cube's `N²` blend differs from the SH (it has no band-2 cross terms, and its band 1
+//! is `n²`-shaped). Measured on `two_rooms` (draft, 1024 probes, 20 000 random normals at valid
+//! probes): the blend differs from the SH by 18.6% relative RMS; the least-squares fit of the six
+//! colours to the SH over the sphere, not exact on the axes, still differs by 16.6%, so the
+//! colours stay the SH's values on the axes. Bevy computes
 //! `voxel × intensity × diffuse colour` for a mesh in the volume and
 //! `lightmap × lightmap_exposure × diffuse colour` for a lightmapped one (both times the view's
 //! exposure), so an `IrradianceVolume::intensity` equal to the materials' `lightmap_exposure`
