@@ -24,7 +24,9 @@
 //! irradiance per normal, `E(n)/π` times its albedo. Meshes of the glTF without a lightmap
 //! are lit the same way, each from the probes at its bounding box's centre (per object, as a
 //! three.js `LightProbe` lights an object); without probes they stay black apart from their
-//! emission, as in `render`.
+//! emission, as in `render`. A limit: the visibility test runs from that centre against the
+//! whole scene, the object included, so a closed object hides every probe from its own centre
+//! and takes the nearest valid probe (the lookup's last resort) instead of a blend.
 
 use std::path::{Component, Path, PathBuf};
 
