@@ -58,12 +58,15 @@
 //!  ─ lightmap::directional ──▶ L1 SH per texel       with --directional: a final gather over
 //!                                                     the solution (pages like the lightmap's)
 //!           ─ probes::bake ──▶ Probes                with --probes: a grid of L2 SH light
-//!                                                     probes in the empty space, buried ones
+//!                                                     probes in the empty space (or where a
+//!                                                     node says, --probes-from), buried ones
 //!                                                     marked, gathered from the solution
 //! ─ LightmapPages::from_texels ▶ LightmapPages         H/π per texel, dilated into the gutters
 //!         ─ lightmap::seams ──▶ LightmapPages         UV seams stitched (least squares)
 //!                  ─ output ──▶ .exr + .png pages, .gltf/.bin or .glb (every file format
-//!                                                     lightbake writes: exr, png, rgbm, glb, gltf)
+//!                                                     lightbake writes: exr, png, rgbm, glb, gltf;
+//!                                                     with probes their .json and, on a grid,
+//!                                                     Bevy's irradiance volume, probes::volume)
 //! ```
 //!
 //! [`bake`] chains the stages ([`prepare`], [`compute`], [`write()`]); build tools that want the
@@ -116,7 +119,8 @@
 //! (`TEXCOORD_1`, bilinear lookup in the EXR page). [`probes`] carries the solved light to
 //! points off the surfaces (what moves), read back through [`render::RenderScene`] and
 //! measured at free-space points by [`reference::points::trace_about`]. [`view`] serves a page that shows a bake in a browser with
-//! three.js (vendored, offline), loaded exactly as a three.js user would load it.
+//! three.js (vendored, offline), loaded exactly as a three.js user would load it, and with
+//! probes a sphere they light, moved by the user.
 //!
 //! ## Conventions
 //!

@@ -438,7 +438,7 @@ impl Node {
         self
     }
 
-    pub(crate) fn with_children(mut self, children: &[usize]) -> Self {
+    pub fn with_children(mut self, children: &[usize]) -> Self {
         self.children = children.to_vec();
         self
     }

@@ -2,11 +2,11 @@
 //! tracer at free-space points, no probe buried in a solid or lit through a wall, the same
 //! bytes on any thread count, and the file as the glTF names it.
 
-use glam::Vec3;
+use glam::{Quat, Vec3};
 use lightbake::probes::{self, Probes};
 use lightbake::reference::ReferenceParams;
 use lightbake::reference::points::{self, Normals, Point};
-use lightbake::testing::{Face, Geometry, GltfBuilder, Material};
+use lightbake::testing::{Face, Geometry, GltfBuilder, Material, Node};
 use lightbake::trace::Tracer;
 use lightbake::{BakeConfig, Baked, NoProgress, metrics};
 
@@ -190,8 +190,8 @@ fn probes_are_never_buried_nor_lit_through_a_wall() {
     }
 }
 
-/// The probe file has the same bytes on one thread and on two, and reads back as baked; the
-/// glTF names it in its root extras.
+/// The probe file and the irradiance volume have the same bytes on one thread and on two, and
+/// the probe file reads back as baked; the glTF names both in its root extras.
 #[test]
 fn probes_are_deterministic_and_round_trip() {
     let input = fixture("two_rooms.gltf");
@@ -207,14 +207,19 @@ fn probes_are_deterministic_and_round_trip() {
         let gltf: serde_json::Value =
             serde_json::from_slice(&std::fs::read(dir.path().join("two_rooms.gltf")).unwrap())
                 .unwrap();
-        let uri = gltf["extras"]["light_probes"]["uri"]
-            .as_str()
-            .unwrap()
-            .to_string();
-        std::fs::read(dir.path().join(uri)).unwrap()
+        let read = |uri: &serde_json::Value| std::fs::read(dir.path().join(uri.as_str().unwrap()));
+        let extras = &gltf["extras"]["light_probes"];
+        (
+            read(&extras["uri"]).unwrap(),
+            read(&extras["irradiance_volume"]["uri"]).unwrap(),
+        )
     };
-    let (one, two) = (run(1), run(2));
+    let ((one, volume_one), (two, volume_two)) = (run(1), run(2));
     assert!(one == two, "probe files differ between 1 and 2 threads");
+    assert!(
+        volume_one == volume_two,
+        "irradiance volumes differ between 1 and 2 threads"
+    );
     let read: Probes = probes::file::from_json(&one, std::path::Path::new("probes.json")).unwrap();
     let again = probes::file::to_json(&read).unwrap();
     assert!(again == one, "the file does not read back as written");
@@ -234,17 +239,18 @@ fn probes_on_a_thin_wall_are_moved_off_it() {
     });
     let baked = lightbake::compute(&fixture("two_rooms.gltf"), &config, &NoProgress).unwrap();
     let probes = baked.probes.as_ref().unwrap();
-    assert_eq!(probes.count, [25, 12, 12]);
+    let grid = probes.grid.expect("the automatic grid");
+    assert_eq!(grid.count, [25, 12, 12]);
     let on_wall = |p: Vec3| p.x.abs() < 1e-3 && (p.z.abs() > 0.4 || p.y > 1.6);
     let grid_on_wall = (0..probes.len())
         .filter(|&i| {
-            let [nx, ny, _] = probes.count.map(|c| c as usize);
+            let [nx, ny, _] = grid.count.map(|c| c as usize);
             let ijk = Vec3::new(
                 (i % nx) as f32,
                 ((i / nx) % ny) as f32,
                 (i / (nx * ny)) as f32,
             );
-            on_wall(probes.origin + probes.step * ijk)
+            on_wall(grid.origin + grid.step * ijk)
         })
         .count();
     assert!(
@@ -314,4 +320,295 @@ fn render_lights_meshes_without_a_lightmap_from_the_probes() {
         look(&scene).iter().all(|&v| v == 0.0),
         "black without probes"
     );
+}
+
+/// `<stem>_probes.ktx2` is Bevy's irradiance volume of the probe grid: a KTX2 3D texture of
+/// `(Rx, 2Ry, 3Rz)` half-float RGBA texels, read back with the `ktx2` crate (Bevy's reader).
+/// Each voxel's six sides hold `E(n)/π` of its probe's SH at the six axis directions, at the
+/// texels Bevy's shader samples (the negative sides in the second half of `t`, the X, Y, Z
+/// sides in thirds of `p`); the Transform named in the glTF puts voxel centres on the grid.
+#[test]
+fn the_irradiance_volume_is_the_grid_as_bevy_samples_it() {
+    let dir = scratch();
+    let config = with_probes(BakeConfig::draft());
+    lightbake::bake(&fixture("two_rooms.gltf"), dir.path(), &config, &NoProgress).unwrap();
+    let gltf: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.path().join("two_rooms.gltf")).unwrap()).unwrap();
+    let extras = &gltf["extras"]["light_probes"];
+    let json_uri = extras["uri"].as_str().unwrap();
+    let probes = probes::file::from_json(
+        &std::fs::read(dir.path().join(json_uri)).unwrap(),
+        std::path::Path::new(json_uri),
+    )
+    .unwrap();
+    let volume = &extras["irradiance_volume"];
+    assert_eq!(volume["uri"], "two_rooms_probes.ktx2");
+    let bytes = std::fs::read(dir.path().join(volume["uri"].as_str().unwrap())).unwrap();
+
+    let reader = ktx2::Reader::new(&bytes[..]).expect("a valid KTX2 file");
+    let header = reader.header();
+    let grid = probes.grid.expect("the automatic grid");
+    let [rx, ry, rz] = grid.count;
+    assert_eq!([rx, ry, rz], [16, 8, 8]);
+    assert_eq!(header.format, Some(ktx2::Format::R16G16B16A16_SFLOAT));
+    assert_eq!(
+        (header.pixel_width, header.pixel_height, header.pixel_depth),
+        (rx, 2 * ry, 3 * rz)
+    );
+    assert_eq!((header.layer_count, header.face_count), (0, 1));
+    assert_eq!(header.supercompression_scheme, None);
+    assert_eq!(
+        reader.transfer_function(),
+        Some(ktx2::TransferFunction::Linear)
+    );
+    let levels: Vec<_> = reader.levels().collect();
+    assert_eq!(levels.len(), 1);
+    let data = levels[0].data;
+    assert_eq!(data.len(), (rx * 2 * ry * 3 * rz * 8) as usize);
+    let (w, h) = (rx as usize, 2 * ry as usize);
+    let rgba = |s: u32, t: u32, p: u32| -> [f32; 4] {
+        let at = ((p as usize * h + t as usize) * w + s as usize) * 8;
+        std::array::from_fn(|k| {
+            half::f16::from_le_bytes([data[at + 2 * k], data[at + 2 * k + 1]]).to_f32()
+        })
+    };
+
+    // Bevy's shader: t += Ry where the normal's component is negative; p += Rz·axis.
+    let sides = [
+        (Vec3::X, 0, 0),
+        (Vec3::NEG_X, ry, 0),
+        (Vec3::Y, 0, rz),
+        (Vec3::NEG_Y, ry, rz),
+        (Vec3::Z, 0, 2 * rz),
+        (Vec3::NEG_Z, ry, 2 * rz),
+    ];
+    let mut worst = 0.0f32;
+    let (mut up, mut down) = (0.0f32, 0.0f32);
+    for i in 0..probes.len() {
+        let (x, y, z) = (i as u32 % rx, (i as u32 / rx) % ry, i as u32 / (rx * ry));
+        for &(n, dt, dp) in &sides {
+            let expected = probes::sh::irradiance_over_pi(&probes.sh[i], n);
+            let texel = rgba(x, y + dt, z + dp);
+            assert_eq!(texel[3], 1.0);
+            for c in 0..3 {
+                let e = (texel[c] - expected[c]).abs() / expected[c].max(1e-3);
+                worst = worst.max(e);
+            }
+            if n == Vec3::Y {
+                up += expected.element_sum();
+            } else if n == Vec3::NEG_Y {
+                down += expected.element_sum();
+            }
+        }
+    }
+    // Half floats keep 11 significant bits.
+    assert!(worst < 1e-3, "voxels differ from the SH by {worst}");
+    // The ceiling panel lights upward-facing normals more: the halves are not swapped.
+    assert!(up > 1.5 * down, "+Y {up} vs -Y {down}");
+
+    // Voxel (i, j, k) of Bevy's unit cube, (ijk + ½)/R − ½, lands on grid probe (i, j, k).
+    let v3 = |v: &serde_json::Value| {
+        Vec3::from_array(std::array::from_fn(|k| v[k].as_f64().unwrap() as f32))
+    };
+    let (translation, scale) = (v3(&volume["translation"]), v3(&volume["scale"]));
+    assert_eq!(volume["rotation"], serde_json::json!([0.0, 0.0, 0.0, 1.0]));
+    assert_eq!(volume["resolution"], serde_json::json!([rx, ry, rz]));
+    let r = Vec3::new(rx as f32, ry as f32, rz as f32);
+    for ijk in [
+        Vec3::ZERO,
+        Vec3::new(15.0, 7.0, 7.0),
+        Vec3::new(3.0, 5.0, 1.0),
+    ] {
+        let unit = (ijk + Vec3::splat(0.5)) / r - Vec3::splat(0.5);
+        let world = translation + scale * unit;
+        let on_grid = grid.position(ijk.to_array().map(|c| c as u32));
+        assert!(
+            (world - on_grid).length() < 1e-5,
+            "{ijk}: {world} vs {on_grid}"
+        );
+    }
+}
+
+/// A closed room lit by a ceiling panel, with `extra` nodes added (the probe nodes), written
+/// to `dir/room.gltf`.
+fn room_with(dir: &std::path::Path, extra: impl FnOnce(&mut GltfBuilder)) -> std::path::PathBuf {
+    let mut gltf = GltfBuilder::new("room");
+    let grey = gltf.add_material(Material::grey("grey", 0.7));
+    let panel = gltf.add_material(Material::grey("panel", 0.8).emitting([1.0; 3], 10.0));
+    let shell = Geometry::box_faces(
+        Vec3::new(-2.0, 0.0, -1.0),
+        Vec3::new(2.0, 2.0, 1.0),
+        &Face::ALL,
+        4,
+    )
+    .flipped();
+    let mesh = gltf.add_mesh("shell", shell, grey);
+    gltf.add_mesh_node("shell", mesh);
+    let light = Geometry::grid(
+        Vec3::new(-0.4, 1.99, -0.4),
+        Vec3::X * 0.8,
+        Vec3::Z * 0.8,
+        1,
+        1,
+    );
+    let mesh = gltf.add_mesh("panel", light, panel);
+    gltf.add_mesh_node("panel", mesh);
+    extra(&mut gltf);
+    let input = dir.join("room.gltf");
+    std::fs::write(&input, gltf.to_gltf_bytes()).unwrap();
+    input
+}
+
+/// `config` with probes placed from node `name`.
+fn probes_from(name: &str) -> BakeConfig {
+    let mut config = BakeConfig::draft();
+    config.output.probes = Some(probes::ProbeParams {
+        budget: 64,
+        from: Some(name.to_string()),
+        ..Default::default()
+    });
+    config
+}
+
+/// `--probes-from NODE` with children: one probe at each child's world position (the parent's
+/// transform applied), no grid and so no irradiance volume; the lookup at a probe reads that
+/// probe, and the file reads back without a grid.
+#[test]
+fn probes_from_a_nodes_children_sit_at_their_world_positions() {
+    let dir = scratch();
+    let local = [
+        Vec3::new(-1.0, 0.0, 0.0),
+        Vec3::new(-0.5, 0.2, 0.1),
+        Vec3::new(0.0, 0.0, -0.3),
+        Vec3::new(0.6, -0.3, 0.2),
+        Vec3::new(1.2, 0.4, 0.0),
+    ];
+    let parent_at = Vec3::new(0.3, 1.0, 0.1);
+    let input = room_with(dir.path(), |gltf| {
+        let children: Vec<usize> = (local.iter().enumerate())
+            .map(|(k, &p)| {
+                gltf.add_node(Node::new(&format!("probe {k}")).trs(p, Quat::IDENTITY, Vec3::ONE))
+            })
+            .collect();
+        gltf.add_node(
+            Node::new("Probes")
+                .trs(parent_at, Quat::IDENTITY, Vec3::ONE)
+                .with_children(&children),
+        );
+    });
+    let out = dir.path().join("out");
+    lightbake::bake(&input, &out, &probes_from("Probes"), &NoProgress).unwrap();
+    let gltf: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("room.gltf")).unwrap()).unwrap();
+    let extras = &gltf["extras"]["light_probes"];
+    assert_eq!(extras["count"], 5);
+    assert!(extras.get("irradiance_volume").is_none(), "{extras}");
+    assert!(!out.join("room_probes.ktx2").exists());
+    let bytes = std::fs::read(out.join("room_probes.json")).unwrap();
+    let read = probes::file::from_json(&bytes, std::path::Path::new("room_probes.json")).unwrap();
+    assert_eq!(read.grid, None);
+    assert_eq!(read.len(), 5);
+    let tracer_scene = lightbake::compute(&input, &probes_from("Probes"), &NoProgress).unwrap();
+    let tracer = Tracer::new(&tracer_scene.scene);
+    for (k, &p) in local.iter().enumerate() {
+        let world = parent_at + p;
+        assert!(
+            (read.position[k] - world).length() < 1e-5,
+            "{k}: {}",
+            read.position[k]
+        );
+        assert!(read.valid[k]);
+        assert!(read.sh[k][0].min_element() > 0.0, "probe {k} is lit");
+        // At a probe the blend is that probe alone.
+        let n = Vec3::Y;
+        let at = read.irradiance_over_pi(world, n, Some(&tracer));
+        let own = probes::sh::irradiance_over_pi(&read.sh[k], n);
+        assert!(
+            (at - own).abs().max_element() <= 1e-5 * own.max_element(),
+            "{k}: {at} vs {own}"
+        );
+    }
+    // Between probes the blend is a convex combination of the probes (Shepard's weights).
+    let mid = parent_at + (local[0] + local[1]) * 0.5;
+    let e = read.irradiance_over_pi(mid, Vec3::Y, Some(&tracer)).x;
+    let each: Vec<f32> = (0..5)
+        .map(|k| probes::sh::irradiance_over_pi(&read.sh[k], Vec3::Y).x)
+        .collect();
+    let (lo, hi) = each
+        .iter()
+        .fold((f32::MAX, 0.0f32), |(l, h), &v| (l.min(v), h.max(v)));
+    assert!(
+        e >= lo * 0.9999 && e <= hi * 1.0001,
+        "{e} outside {lo}..{hi}"
+    );
+}
+
+/// `--probes-from NODE` without children: a grid within the budget fills the node's box (the
+/// unit cube under its rotated, stretched transform), and the irradiance volume's Transform is
+/// the node's.
+#[test]
+fn probes_from_a_childless_node_fill_its_box() {
+    let dir = scratch();
+    let (at, turn, size) = (
+        Vec3::new(0.2, 1.0, 0.0),
+        Quat::from_rotation_y(0.5),
+        Vec3::new(2.0, 1.0, 0.8),
+    );
+    let input = room_with(dir.path(), |gltf| {
+        gltf.add_node(Node::new("Volume").trs(at, turn, size));
+    });
+    let out = dir.path().join("out");
+    lightbake::bake(&input, &out, &probes_from("Volume"), &NoProgress).unwrap();
+    let bytes = std::fs::read(out.join("room_probes.json")).unwrap();
+    let read = probes::file::from_json(&bytes, std::path::Path::new("room_probes.json")).unwrap();
+    let grid = read.grid.expect("a grid");
+    let n = grid.count.iter().product::<u32>();
+    assert!((32..=64).contains(&n), "{:?}", grid.count);
+    assert!(grid.rotation.angle_between(turn) < 1e-5);
+    for i in 0..read.len() {
+        let local = turn.inverse() * (read.position[i] - at) / size;
+        assert!(
+            local.abs().max_element() < 0.5,
+            "probe {i} at {local} of the box"
+        );
+    }
+    // The corners of the grid are half a cell in from the box's corners.
+    let cell = size / Vec3::from(grid.count.map(|c| c as f32));
+    let first = turn.inverse() * (grid.origin - at);
+    assert!(
+        (first - (-size * 0.5 + cell * 0.5)).length() < 1e-5,
+        "{first}"
+    );
+    let gltf: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("room.gltf")).unwrap()).unwrap();
+    let volume = &gltf["extras"]["light_probes"]["irradiance_volume"];
+    let v3 = |v: &serde_json::Value| {
+        Vec3::from_array(std::array::from_fn(|k| v[k].as_f64().unwrap() as f32))
+    };
+    assert!((v3(&volume["translation"]) - at).length() < 1e-5);
+    assert!((v3(&volume["scale"]) - size).length() < 1e-5);
+    let q = Quat::from_array(std::array::from_fn(|k| {
+        volume["rotation"][k].as_f64().unwrap() as f32
+    }));
+    assert!(q.angle_between(turn) < 1e-5);
+    assert!(out.join("room_probes.ktx2").exists());
+}
+
+/// A node that is not there, or not one, fails before the bake with the file and node named.
+#[test]
+fn probes_from_a_missing_or_ambiguous_node_is_an_error_naming_both() {
+    let dir = scratch();
+    let input = room_with(dir.path(), |gltf| {
+        gltf.add_node(Node::new("Twice"));
+        gltf.add_node(Node::new("Twice"));
+    });
+    for (name, says) in [("Nowhere", "no node of that name"), ("Twice", "2 nodes")] {
+        let Err(error) = lightbake::compute(&input, &probes_from(name), &NoProgress) else {
+            panic!("--probes-from {name:?} baked");
+        };
+        let error = error.to_string();
+        assert!(error.contains("room.gltf"), "{error}");
+        assert!(error.contains(&format!("{name:?}")), "{error}");
+        assert!(error.contains(says), "{error}");
+    }
 }

@@ -66,9 +66,14 @@ fn lightbake(args: &[&str]) {
 /// Starts `lightbake view` with a point reference on a free port; returns it and the URL it
 /// printed.
 fn view(scene: &Path, points: &Path) -> (Server, String) {
+    view_with(scene, &["--points", points.to_str().unwrap()])
+}
+
+/// Starts `lightbake view` of `scene` with the `extra` options on a free port.
+fn view_with(scene: &Path, extra: &[&str]) -> (Server, String) {
     let mut child = Command::new(env!("CARGO_BIN_EXE_lightbake"))
-        .args(["view", scene.to_str().unwrap(), "--port", "0", "--points"])
-        .arg(points)
+        .args(["view", scene.to_str().unwrap(), "--port", "0"])
+        .args(extra)
         .stdout(Stdio::piped())
         .spawn()
         .expect("start lightbake view");
@@ -200,9 +205,25 @@ fn viewer_page_in_chromium_matches_render_and_every_view_differs() {
 /// Runs `tests/view_browser.js` on the page at `url`: the lit view's pixels and a picture of
 /// each of `views` into `shots`.
 fn browser(url: &str, shots: &Path, node_path: &std::ffi::OsStr, views: &[&str]) {
+    browser_with(url, shots, node_path, views, None);
+}
+
+/// [`browser`], and with `probe_spots` (`LIGHTBAKE_PROBE_SPOTS`, see the script) the probe
+/// sphere's pictures too.
+fn browser_with(
+    url: &str,
+    shots: &Path,
+    node_path: &std::ffi::OsStr,
+    views: &[&str],
+    probe_spots: Option<&str>,
+) {
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/view_browser.js");
     let side = SIZE.to_string();
-    let node = Command::new("node")
+    let mut node = Command::new("node");
+    if let Some(spots) = probe_spots {
+        node.env("LIGHTBAKE_PROBE_SPOTS", spots);
+    }
+    let node = node
         .arg(&script)
         .args([
             url,
@@ -286,4 +307,120 @@ fn shared_meshes_in_chromium_match_render() {
     browser(&url, &shots, &node_path, &["lit", "density"]);
     let difference = lit_vs_render(&shots, &rendered);
     assert!(difference < TOLERANCE, "{difference}");
+}
+
+/// Two rooms sealed from each other by a wall, a ceiling panel lighting room A (x < 0) and
+/// room B dark, a camera in room A: the scene of the probe sphere test.
+fn sealed_rooms() -> lightbake::testing::GltfBuilder {
+    use lightbake::testing::{Camera, Face, Geometry, GltfBuilder, Material};
+    let mut gltf = GltfBuilder::new("sealed_rooms");
+    let grey = gltf.add_material(Material::grey("grey", 0.7));
+    let panel = gltf.add_material(Material::grey("panel", 0.8).emitting([1.0; 3], 10.0));
+    let shell = Geometry::box_faces(
+        Vec3::new(-2.0, 0.0, -1.0),
+        Vec3::new(2.0, 2.0, 1.0),
+        &Face::ALL,
+        4,
+    )
+    .flipped();
+    let mesh = gltf.add_mesh("shell", shell, grey);
+    gltf.add_mesh_node("shell", mesh);
+    let wall = Geometry::box_faces(
+        Vec3::new(-0.05, 0.0, -1.0),
+        Vec3::new(0.05, 2.0, 1.0),
+        &[Face::PosX, Face::NegX],
+        4,
+    );
+    let mesh = gltf.add_mesh("wall", wall, grey);
+    gltf.add_mesh_node("wall", mesh);
+    let light = Geometry::grid(Vec3::new(-1.5, 1.99, -0.4), Vec3::X, Vec3::Z * 0.8, 1, 1);
+    let mesh = gltf.add_mesh("panel", light, panel);
+    gltf.add_mesh_node("panel", mesh);
+    gltf.add_camera_node(
+        Camera::perspective("room A", 1.0, Some(1.0)),
+        Vec3::new(-1.9, 1.6, 0.9),
+        Vec3::new(-0.6, 0.7, -0.6),
+    );
+    gltf
+}
+
+/// `lightbake view` of a `--probes` bake: the page shows the probes (the toggle changes the
+/// picture) and a sphere lit by them, whose centre pixel (facing the camera) is
+/// `E(n)/π` of the SH the page got for the sphere's centre at the normal towards the eye, not
+/// black in the lit room, and black once moved into the sealed dark room.
+#[test]
+fn probe_sphere_in_chromium_is_lit_by_the_probes_where_it_is() {
+    let Some(node_path) = std::env::var_os("LIGHTBAKE_BROWSER_TEST") else {
+        eprintln!("skipped: set LIGHTBAKE_BROWSER_TEST to playwright-core's node_modules");
+        return;
+    };
+    let _browser = ONE_BROWSER.lock().unwrap_or_else(|e| e.into_inner());
+    let dir = scratch();
+    let shots = dir.path().join("shots");
+    std::fs::create_dir(&shots).unwrap();
+    let input = dir.path().join("sealed_rooms.gltf");
+    std::fs::write(&input, sealed_rooms().to_gltf_bytes()).unwrap();
+    let out = dir.path().join("out");
+    lightbake(&[
+        "bake",
+        input.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--quality",
+        "draft",
+        "--probes",
+        "--quiet",
+    ]);
+    let (_server, url) = view_with(&out.join("sealed_rooms.gltf"), &[]);
+    // Room A under the panel, then room B, each seen from 0.8 m in front.
+    let spots = [
+        (Vec3::new(-1.0, 1.0, 0.0), Vec3::new(-1.0, 1.0, 0.8)),
+        (Vec3::new(1.0, 1.0, 0.0), Vec3::new(1.0, 1.0, 0.8)),
+    ];
+    let json = serde_json::json!(
+        spots
+            .iter()
+            .map(|(s, e)| serde_json::json!({"sphere": s.to_array(), "eye": e.to_array()}))
+            .collect::<Vec<_>>()
+    );
+    browser_with(&url, &shots, &node_path, &["lit"], Some(&json.to_string()));
+
+    let result: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(shots.join("probes.json")).unwrap()).unwrap();
+    let floats = |v: &serde_json::Value| -> Vec<f32> {
+        (v.as_array().unwrap().iter())
+            .map(|x| x.as_f64().unwrap() as f32)
+            .collect()
+    };
+    let mut centres = Vec::new();
+    for (k, (sphere, eye)) in spots.iter().enumerate() {
+        let spot = &result["spots"][k];
+        let sh = floats(&spot["sh"]);
+        let c: lightbake::probes::Sh2 =
+            std::array::from_fn(|m| Vec3::new(sh[3 * m], sh[3 * m + 1], sh[3 * m + 2]));
+        let centre = Vec3::from_slice(&floats(&spot["centre"]));
+        let expected = lightbake::probes::sh::irradiance_over_pi(&c, (*eye - *sphere).normalize());
+        eprintln!("sphere at {sphere}: centre pixel {centre}, E/π of its SH {expected}");
+        assert!(
+            (centre - expected).abs().max_element() <= 0.02 * expected.max_element() + 1e-4,
+            "sphere at {sphere}: the shader gives {centre}, the SH {expected}"
+        );
+        centres.push(centre);
+    }
+    assert!(centres[0].min_element() > 0.05, "lit room: {}", centres[0]);
+    assert!(
+        centres[1].max_element() < 1e-3 * centres[0].max_element(),
+        "the sealed room is dark: {} vs {}",
+        centres[1],
+        centres[0]
+    );
+
+    // The probe toggle draws the probes over the lit view.
+    let image = |name: &str| image::open(shots.join(name)).unwrap().to_rgb8();
+    let (off, on) = (image("probes_off.png"), image("probes_on.png"));
+    let changed = (off.pixels().zip(on.pixels()))
+        .filter(|(p, q)| p.0.iter().zip(q.0).any(|(x, y)| x.abs_diff(y) > 8))
+        .count();
+    eprintln!("probes shown: {changed} pixels changed");
+    assert!(changed >= 20, "the probes changed {changed} pixels");
 }

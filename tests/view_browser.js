@@ -2,7 +2,11 @@
 // node tests/view_browser.js URL OUT_DIR WIDTH HEIGHT READ_SIDE [VIEW...]
 // Writes OUT_DIR/lit.json (the lit view from glTF camera 0, READ_SIDE² pixels of linear RGB,
 // rows from the top) and
-// OUT_DIR/<view>.png (the canvas in each view). Exits non-zero on any page error.
+// OUT_DIR/<view>.png (the canvas in each view). With LIGHTBAKE_PROBE_SPOTS set to a JSON list
+// of {"sphere": [x,y,z], "eye": [x,y,z]}, it also moves the probe-lit sphere to each spot, looks
+// at it from the eye and writes OUT_DIR/probes.json ({"spots": [{"sh": 27 floats, "centre":
+// linear RGB of the centre pixel}]}), and the lit view from glTF camera 0 with the probes hidden
+// and shown (probes_off.png, probes_on.png). Exits non-zero on any page error.
 const fs = require('fs');
 const os = require('os');
 const path = require('path');
@@ -47,6 +51,39 @@ async function main() {
         return document.getElementById('canvas').toDataURL('image/png');
       }, view);
       fs.writeFileSync(path.join(out, `${view}.png`), Buffer.from(png.split(',')[1], 'base64'));
+    }
+    if (process.env.LIGHTBAKE_PROBE_SPOTS) {
+      const spots = JSON.parse(process.env.LIGHTBAKE_PROBE_SPOTS);
+      const shots = await page.evaluate(() => {
+        const lb = window.lightbake;
+        if (!lb.probes.available()) throw new Error('the page found no probes');
+        lb.setExposure(0);
+        lb.setCamera(0);
+        lb.setView('lit');
+        const canvas = document.getElementById('canvas');
+        lb.probes.showProbes(false);
+        const off = canvas.toDataURL('image/png');
+        lb.probes.showProbes(true);
+        const on = canvas.toDataURL('image/png');
+        lb.probes.showProbes(false);
+        return [off, on];
+      });
+      shots.forEach((png, k) => fs.writeFileSync(path.join(out, k ? 'probes_on.png' : 'probes_off.png'),
+        Buffer.from(png.split(',')[1], 'base64')));
+      // An odd side: the centre pixel looks straight at the sphere's centre.
+      const side = 33;
+      const result = [];
+      for (const spot of spots) {
+        result.push(await page.evaluate(async ([spot, side]) => {
+          const lb = window.lightbake;
+          const sh = await lb.probes.moveSphere(spot.sphere);
+          lb.probes.lookAtSphere(spot.eye);
+          const rgb = lb.readLinear(side, side);
+          const c = ((side - 1) / 2) * side + (side - 1) / 2;
+          return { sh, centre: rgb.slice(3 * c, 3 * c + 3) };
+        }, [spot, side]));
+      }
+      fs.writeFileSync(path.join(out, 'probes.json'), JSON.stringify({ spots: result }));
     }
   } finally {
     await context.close();

@@ -48,13 +48,14 @@ fn main() {
         .map(|s| s.seconds)
         .sum();
     let probes = baked.probes.as_ref().expect("probes");
+    let grid = probes.grid.expect("the automatic grid");
     println!(
         "{scene} ({quality}): {} probes ({} valid, {} moved), grid {:?} step {:.3}, {:.2} M rays; probes {probe_seconds:.2}s of {total:.2}s computing ({:.1}%)",
         probes.len(),
         probes.valid_count(),
         probes.moved,
-        probes.count,
-        probes.step.x,
+        grid.count,
+        grid.step.x,
         probes.rays as f64 * 1e-6,
         100.0 * probe_seconds / total
     );

@@ -409,6 +409,10 @@ fn prepare_loaded(
     }
     timed(&mut stages, "load", load_start);
 
+    // A probe node that is missing fails now, not after the bake.
+    if let Some(probes) = &config.output.probes {
+        crate::probes::check(&scene, probes, input)?;
+    }
     if let (Some(plan), Some(auto)) = (&mut plan, config.auto) {
         plan::choose_density(&scene, &mut config, plan, &auto.keep);
     }
@@ -705,7 +709,11 @@ pub(crate) fn finish(prepared: Prepared, lit: Lighting, progress: &dyn Progress)
     let t = Instant::now();
     let probes = (config.output.probes.as_ref())
         .map(|params| {
-            let bake = (config.transport.seed, config.transport.sky);
+            let bake = (
+                config.transport.seed,
+                config.transport.sky,
+                prepared.source.path.as_path(),
+            );
             crate::probes::bake(
                 prepared.surfaces(),
                 &solution.irradiance,
@@ -974,8 +982,9 @@ pub fn write(
     })
 }
 
-/// Stages `<stem>_probes.json` and names it in the staged glTF's root
-/// `extras.light_probes = {"uri", "count"}`.
+/// Stages `<stem>_probes.json` and, for probes on a grid, `<stem>_probes.ktx2` (Bevy's
+/// irradiance volume) and names them in the staged glTF's root
+/// `extras.light_probes = {"uri", "count", "irradiance_volume"}`.
 fn stage_probes(
     probes: &crate::probes::Probes,
     source: &scene::Source,
@@ -983,19 +992,31 @@ fn stage_probes(
     input: &Path,
     stem: &str,
 ) -> Result<()> {
+    use crate::probes::volume;
     let uri = format!("{stem}_probes.json");
     staging.write(&uri, &crate::probes::file::to_json(probes)?)?;
+    let mut extras = serde_json::json!({ "uri": uri, "count": probes.len() });
+    // Bevy's irradiance volume of the same grid, with the Transform that places it (probes
+    // placed one by one have no grid to make a 3D texture of).
+    if let Some(grid) = &probes.grid {
+        let volume_uri = format!("{stem}_probes.ktx2");
+        staging.write(&volume_uri, &volume::to_ktx2(probes)?)?;
+        let v = volume::placement(grid);
+        extras[volume::EXTRAS_KEY] = serde_json::json!({
+            "uri": volume_uri,
+            "translation": v.translation.to_array(),
+            "rotation": v.rotation,
+            "scale": v.scale.to_array(),
+            "resolution": v.resolution,
+        });
+    }
     let name = match source.is_glb {
         true => format!("{stem}.glb"),
         false => format!("{stem}.gltf"),
     };
     let gltf = staging.read(&name)?;
     let edited = output::gltf_edit::edit_gltf(&gltf, input, |json| {
-        output::gltf_edit::set_root_extra(
-            json,
-            crate::probes::file::EXTRAS_KEY,
-            serde_json::json!({ "uri": uri, "count": probes.len() }),
-        )
+        output::gltf_edit::set_root_extra(json, crate::probes::file::EXTRAS_KEY, extras.clone())
     })?;
     staging.replace(&name, &edited)
 }

@@ -57,6 +57,8 @@ pub struct Options {
     pub probes: Option<u32>,
     /// Leave punctual lights' direct light out of the probes.
     pub probes_indirect_only: Option<bool>,
+    /// Place the probes from this node of the scene: its children, or its box (implies probes).
+    pub probes_from: Option<String>,
     /// Keep receivers whole where other surfaces meet them.
     pub no_split_junctions: Option<bool>,
     /// Do not cut receivers along the hard shadow outlines of punctual lights.
@@ -170,14 +172,20 @@ impl Options {
             self.directional_rays
                 .unwrap_or(crate::lightmap::directional::DEFAULT_RAYS)
         });
-        c.output.probes = self.probes.map(|budget| crate::probes::ProbeParams {
+        // A probe node asks for probes: at the default budget unless one is given.
+        let budget = match (self.probes, &self.probes_from) {
+            (None, Some(_)) => Some(crate::probes::DEFAULT_BUDGET),
+            (budget, _) => budget,
+        };
+        c.output.probes = budget.map(|budget| crate::probes::ProbeParams {
             budget,
             indirect_only: self.probes_indirect_only.unwrap_or(false),
+            from: self.probes_from.clone(),
             ..Default::default()
         });
-        if self.probes_indirect_only == Some(true) && self.probes.is_none() {
+        if self.probes_indirect_only == Some(true) && budget.is_none() {
             return Err(Error::Option(
-                "probes-indirect-only needs probes: give probes too".into(),
+                "probes-indirect-only needs probes: give probes or probes-from too".into(),
             ));
         }
         c.atlas.split_junctions = !self.no_split_junctions.unwrap_or(false);

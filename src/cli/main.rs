@@ -255,8 +255,14 @@ struct BakeArgs {
     probes: Option<u32>,
     /// Leave punctual lights' direct light out of the probes (for engines that light moving
     /// objects with the same lights at run time).
-    #[arg(long, requires = "probes")]
+    #[arg(long)]
     probes_indirect_only: bool,
+    /// Place the probes from the glTF node of this name instead of the automatic grid: one at
+    /// each child's world position, or, if it has no children, a grid within the budget
+    /// filling its box (the unit cube centred on the node, side 1, under its transform).
+    /// Implies --probes.
+    #[arg(long, value_name = "NODE")]
+    probes_from: Option<String>,
     /// Keep texel sample points where they are even inside geometry (to measure leaks).
     #[arg(long)]
     no_validity: bool,
@@ -452,6 +458,7 @@ impl BakeArgs {
             directional_rays: self.directional_rays,
             probes: self.probes,
             probes_indirect_only: Some(self.probes_indirect_only),
+            probes_from: self.probes_from.clone(),
             no_validity: Some(self.no_validity),
             no_denoise: Some(self.no_denoise),
             no_seams: Some(self.no_seams),

@@ -2,8 +2,10 @@
 //! output chapter, `src/guide/output.md`).
 //!
 //! One JSON object: `format` (`"lightbake-probes"`), `version` (1), `convention` (how to read
-//! the coefficients, in words), `indirectOnly`, `grid` (`origin`, `step`, `count` and `order`:
-//! probe `(i, j, k)` is entry `i + nx·(j + ny·k)`), then flat arrays per probe: `positions`
+//! the coefficients, in words), `indirectOnly`, `grid` (`origin`, `step`, `count`, `rotation`
+//! (the grid's axes, a unit quaternion `x, y, z, w`) and `order`: probe `(i, j, k)` is entry
+//! `i + nx·(j + ny·k)`, at `origin + rotation·(step ⊙ (i, j, k))`; `null` for probes placed one
+//! by one, from a node's children), then flat arrays per probe: `positions`
 //! (3 floats each: where it was baked), `valid` (0 or 1) and `sh` (27 floats each: coefficient
 //! `m` of channel `c` at `27·probe + 3·m + c`). Floats are written in their shortest exact
 //! decimal form, so the file reads back bit for bit and its bytes do not depend on the thread
@@ -11,7 +13,7 @@
 
 use std::path::Path;
 
-use glam::Vec3;
+use glam::{Quat, Vec3};
 use serde::{Deserialize, Serialize};
 
 use super::Probes;
@@ -37,7 +39,7 @@ struct ProbeFile {
     version: u32,
     convention: String,
     indirect_only: bool,
-    grid: Grid,
+    grid: Option<Grid>,
     positions: Vec<f32>,
     valid: Vec<u8>,
     sh: Vec<f32>,
@@ -48,6 +50,7 @@ struct Grid {
     origin: [f32; 3],
     step: [f32; 3],
     count: [u32; 3],
+    rotation: [f32; 4],
     order: String,
 }
 
@@ -58,12 +61,13 @@ pub fn to_json(probes: &Probes) -> Result<Vec<u8>> {
         version: VERSION,
         convention: CONVENTION.into(),
         indirect_only: probes.indirect_only,
-        grid: Grid {
-            origin: probes.origin.to_array(),
-            step: probes.step.to_array(),
-            count: probes.count,
+        grid: probes.grid.map(|g| Grid {
+            origin: g.origin.to_array(),
+            step: g.step.to_array(),
+            count: g.count,
+            rotation: g.rotation.to_array(),
             order: "x fastest, then y, then z".into(),
-        },
+        }),
         positions: probes.position.iter().flat_map(|p| p.to_array()).collect(),
         valid: probes.valid.iter().map(|&v| u8::from(v)).collect(),
         sh: (probes.sh.iter())
@@ -86,30 +90,50 @@ pub fn from_json(bytes: &[u8], path: &Path) -> Result<Probes> {
             ),
         ));
     }
-    let [nx, ny, nz] = file.grid.count;
-    let n = nx as usize * ny as usize * nz as usize;
-    let step = Vec3::from(file.grid.step);
-    if n == 0
-        || file.positions.len() != 3 * n
-        || file.valid.len() != n
-        || file.sh.len() != 27 * n
-        || step.min_element().is_nan()
-        || step.min_element() <= 0.0
-    {
+    let n = file.valid.len();
+    let counts_fit = file.positions.len() == 3 * n && file.sh.len() == 27 * n && n > 0;
+    if !counts_fit {
         return Err(Error::invalid(
             path,
             format!(
-                "a {nx}×{ny}×{nz} grid needs {} positions, {n} flags and {} coefficients, a positive step",
+                "{n} probes need {} position and {} coefficient floats, got {} and {}",
                 3 * n,
-                27 * n
+                27 * n,
+                file.positions.len(),
+                file.sh.len()
             ),
         ));
     }
+    let grid = match &file.grid {
+        None => None,
+        Some(g) => {
+            let [nx, ny, nz] = g.count;
+            let step = Vec3::from(g.step);
+            let rotation = Quat::from_array(g.rotation);
+            if nx as usize * ny as usize * nz as usize != n
+                || step.min_element().is_nan()
+                || step.min_element() <= 0.0
+                || !rotation.is_normalized()
+            {
+                return Err(Error::invalid(
+                    path,
+                    format!(
+                        "a {nx}×{ny}×{nz} grid of {n} probes, step {step}, rotation {rotation}: \
+                         the count must match, the step be positive and the rotation a unit quaternion"
+                    ),
+                ));
+            }
+            Some(super::Grid {
+                origin: Vec3::from(g.origin),
+                step,
+                count: g.count,
+                rotation,
+            })
+        }
+    };
     let vec3 = |v: &[f32]| Vec3::new(v[0], v[1], v[2]);
     Ok(Probes {
-        origin: Vec3::from(file.grid.origin),
-        step,
-        count: file.grid.count,
+        grid,
         position: file.positions.chunks_exact(3).map(vec3).collect(),
         valid: file.valid.iter().map(|&v| v != 0).collect(),
         sh: (file.sh.chunks_exact(27))

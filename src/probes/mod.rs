@@ -1,6 +1,6 @@
 //! Light probes: the bake's light at points in empty space, for what moves through the scene
 //! (characters, props placed at run time), as L2 spherical harmonics of the incident radiance on
-//! a regular grid.
+//! a regular grid (or at positions a node of the scene gives).
 //!
 //! ## Pipeline stage
 //!
@@ -10,10 +10,13 @@
 //!   Scene + Tracer ─ place::place ──▶ Placement      grid positions, buried ones marked
 //!   + Texels + solved H ─ gather ───▶ Probes          9 RGB SH coefficients per probe
 //!                     ─ file ───────▶ <stem>_probes.json, named in the glTF's root extras
+//!                     ─ volume ─────▶ <stem>_probes.ktx2, Bevy's irradiance volume (grids)
 //! ```
 //!
 //! **Placement** (`place.rs`): a regular grid over the scene's bounds at the spacing the budget
-//! allows (`--probes N`, default [`DEFAULT_BUDGET`]); probes buried in solids (or outside an
+//! allows (`--probes N`, default [`DEFAULT_BUDGET`]), or where a node of the scene says
+//! (`--probes-from NODE`: its children's positions, or a grid filling its box, the unit cube
+//! under its transform, in the box's axes); probes buried in solids (or outside an
 //! interior's closed shell) are marked invalid, probes too close to a surface are moved off it.
 //! A regular grid was chosen over an adaptive octree or a tetrahedralisation for this first
 //! slice because every engine can read it without a mesh or a tree (Bevy's irradiance volume,
@@ -40,8 +43,11 @@
 //! renormalised; with none left, inverse-square weights of the visible valid probes in the
 //! 4 × 4 × 4 block around it, then the nearest valid probe. The visibility test is what keeps
 //! light from leaking through a wall thinner than the spacing; an engine without ray queries
-//! can precompute it per cell or accept the leak near walls. `lightbake probes --at` and the
-//! tests read probes through this one function.
+//! can precompute it per cell or accept the leak near walls. Probes placed one by one
+//! (`--probes-from` a node's children) have no cells: the eight nearest valid probes the point
+//! sees are blended by inverse squared distance (Shepard's weights, exact at a probe), else the
+//! nearest valid probe. `lightbake probes --at`, `render`, the viewer and the tests read probes
+//! through this one function.
 //!
 //! Units: coefficients are of incident radiance (W/(sr·m²)), so irradiance over π from them is
 //! in the lightmaps' unit `H/π` (see [`sh`] for the convolution and three.js's convention).
@@ -51,6 +57,7 @@
 //! | `budget`        | 1024    | probes at most; spacing `∛(bounds volume / budget)`           |
 //! | `rays`          | 256     | sphere rays per probe (+ as many emitter samples); noise ∝ 1/√rays |
 //! | `indirect_only` | false   | leave out punctual lights' direct light                       |
+//! | `from`          | none    | a node's children or box instead of the automatic grid        |
 //!
 //! Limits: the grid is uniform (no refinement near light changes); a probe inside a closed
 //! double-sided mesh is not found buried; trilinear interpolation blurs light that changes
@@ -59,10 +66,13 @@
 pub mod file;
 mod place;
 pub mod sh;
+pub mod volume;
 
 use std::f32::consts::PI;
 
-use glam::Vec3;
+use std::path::Path;
+
+use glam::{Quat, Vec3};
 use rayon::prelude::*;
 
 use crate::lights::{Emitters, punctual_irradiance, triangle_point};
@@ -95,6 +105,10 @@ pub struct ProbeParams {
     pub rays: u32,
     /// Leave out punctual lights' direct light.
     pub indirect_only: bool,
+    /// Place the probes from the scene's node of this name instead of the automatic grid: at
+    /// its children's world positions, or, without children, on a grid within the budget
+    /// filling its box (the unit cube centred on the node, side 1, under its transform).
+    pub from: Option<String>,
 }
 
 impl Default for ProbeParams {
@@ -103,21 +117,69 @@ impl Default for ProbeParams {
             budget: DEFAULT_BUDGET,
             rays: DEFAULT_RAYS,
             indirect_only: false,
+            from: None,
         }
     }
 }
 
-/// Baked probes on a regular grid: probe `(i, j, k)` is entry `i + nx·(j + ny·k)`.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Probes {
+/// A regular grid of probes: probe `(i, j, k)` lies at `origin + rotation·(step ⊙ (i, j, k))`
+/// and is entry `i + nx·(j + ny·k)`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Grid {
     /// Grid position of probe (0, 0, 0) (world space).
     pub origin: Vec3,
-    /// Distance between neighbouring grid positions along x, y, z.
+    /// Distance between neighbouring grid positions along the grid's x, y, z.
     pub step: Vec3,
     /// Probes along x, y, z.
     pub count: [u32; 3],
-    /// Where each probe was baked: its grid position, or moved off a nearby surface (by at
-    /// most four fifths of a step: up to four moves of at most a fifth).
+    /// The grid's axes in the world: identity for the automatic grid, a box node's rotation
+    /// for `--probes-from`.
+    pub rotation: Quat,
+}
+
+impl Grid {
+    /// World grid position of probe `(i, j, k)`.
+    #[inline]
+    #[must_use]
+    pub fn position(&self, ijk: [u32; 3]) -> Vec3 {
+        self.origin + self.rotation * (self.step * Vec3::from(ijk.map(|c| c as f32)))
+    }
+
+    /// `p` in grid coordinates: probe `(i, j, k)` is at `(i, j, k)`.
+    #[inline]
+    #[must_use]
+    pub fn local(&self, p: Vec3) -> Vec3 {
+        (self.rotation.inverse() * (p - self.origin)) / self.step
+    }
+
+    /// Probes on the grid.
+    #[must_use]
+    pub fn len(&self) -> usize {
+        self.count.iter().map(|&c| c as usize).product()
+    }
+
+    /// A grid of no probes.
+    #[must_use]
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Flat index of grid probe (i, j, k).
+    #[inline]
+    fn index(&self, [i, j, k]: [u32; 3]) -> usize {
+        let [nx, ny, _] = self.count;
+        (i + nx * (j + ny * k)) as usize
+    }
+}
+
+/// Baked probes: on a regular [`Grid`], or placed one by one (an empty node's children,
+/// `--probes-from`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Probes {
+    /// The grid the probes are on, entry by entry; `None` for probes placed one by one.
+    pub grid: Option<Grid>,
+    /// Where each probe was baked: its grid (or given) position, or moved off a nearby surface
+    /// (by at most four fifths of the clearance's step: up to four moves of at most a fifth).
     pub position: Vec<Vec3>,
     /// False for probes buried in geometry (their coefficients are filled from neighbours).
     pub valid: Vec<bool>,
@@ -147,29 +209,30 @@ impl Probes {
         self.valid.iter().filter(|&&v| v).count()
     }
 
-    /// Flat index of grid probe (i, j, k).
-    #[inline]
-    fn index(&self, [i, j, k]: [u32; 3]) -> usize {
-        let [nx, ny, _] = self.count;
-        (i + nx * (j + ny * k)) as usize
-    }
-
     /// The interpolated coefficients at `p` (see the module docs); `visible(q)` says whether
     /// the point sees a probe at `q` (always true without ray queries).
-    pub fn sh_at(&self, p: Vec3, mut visible: impl FnMut(Vec3) -> bool) -> Sh2 {
-        let zero = [Vec3::ZERO; 9];
+    pub fn sh_at(&self, p: Vec3, visible: impl FnMut(Vec3) -> bool) -> Sh2 {
         if self.is_empty() {
-            return zero;
+            return [Vec3::ZERO; 9];
         }
-        let g = (p - self.origin) / self.step;
+        match &self.grid {
+            Some(grid) => self.sh_on_grid(grid, p, visible),
+            None => self.sh_from_nearest(p, visible),
+        }
+    }
+
+    /// [`Probes::sh_at`] on a grid.
+    fn sh_on_grid(&self, grid: &Grid, p: Vec3, mut visible: impl FnMut(Vec3) -> bool) -> Sh2 {
+        let zero = [Vec3::ZERO; 9];
+        let g = grid.local(p);
         let mut base = [0u32; 3];
         let mut frac = [0.0f32; 3];
         for a in 0..3 {
-            let last = self.count[a].saturating_sub(1) as f32;
+            let last = grid.count[a].saturating_sub(1) as f32;
             let x = g[a].clamp(0.0, last);
-            let i = (x.floor() as u32).min(self.count[a].saturating_sub(2));
+            let i = (x.floor() as u32).min(grid.count[a].saturating_sub(2));
             base[a] = i;
-            frac[a] = if self.count[a] > 1 { x - i as f32 } else { 0.0 };
+            frac[a] = if grid.count[a] > 1 { x - i as f32 } else { 0.0 };
         }
         // Trilinear over the cell's corners that are valid and visible.
         let mut sum = zero;
@@ -180,7 +243,7 @@ impl Probes {
             for a in 0..3 {
                 let up = (corner >> a) & 1 == 1;
                 if up {
-                    if self.count[a] < 2 {
+                    if grid.count[a] < 2 {
                         w = 0.0;
                     }
                     ijk[a] += 1;
@@ -192,7 +255,7 @@ impl Probes {
             if w <= 0.0 {
                 continue;
             }
-            let q = self.index(ijk);
+            let q = grid.index(ijk);
             if self.valid[q] && visible(self.position[q]) {
                 sum = sh::add(&sum, &sh::scaled(&self.sh[q], w));
                 total += w;
@@ -212,13 +275,13 @@ impl Probes {
                     let mut inside = true;
                     for a in 0..3 {
                         let c = base[a] as i64 + ijk[a];
-                        inside &= c >= 0 && c < self.count[a] as i64;
+                        inside &= c >= 0 && c < grid.count[a] as i64;
                         at[a] = c.max(0) as u32;
                     }
                     if !inside {
                         continue;
                     }
-                    let q = self.index(at);
+                    let q = grid.index(at);
                     if self.valid[q] && visible(self.position[q]) {
                         let w = 1.0 / (self.position[q] - p).length_squared().max(1e-8);
                         sum = sh::add(&sum, &sh::scaled(&self.sh[q], w));
@@ -230,21 +293,60 @@ impl Probes {
         if total > 0.0 {
             return sh::scaled(&sum, 1.0 / total);
         }
-        // Nothing visible near: the nearest valid probe.
-        let nearest = (0..self.len()).filter(|&q| self.valid[q]).min_by(|&a, &b| {
+        self.nearest_valid(p).map_or(zero, |q| self.sh[q])
+    }
+
+    /// [`Probes::sh_at`] for probes placed one by one: the `NEAREST` nearest valid probes that
+    /// `p` sees, by inverse squared distance (Shepard's weights: the value at a probe is
+    /// its own), else the nearest valid probe.
+    fn sh_from_nearest(&self, p: Vec3, mut visible: impl FnMut(Vec3) -> bool) -> Sh2 {
+        /// Probes blended at most.
+        const NEAREST: usize = 8;
+        let mut by_distance: Vec<(f32, usize)> = (0..self.len())
+            .filter(|&q| self.valid[q])
+            .map(|q| ((self.position[q] - p).length_squared(), q))
+            .collect();
+        // Ties by index: the same probes on any machine.
+        by_distance.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        let mut sum = [Vec3::ZERO; 9];
+        let (mut total, mut taken) = (0.0f32, 0);
+        for &(d2, q) in &by_distance {
+            if taken == NEAREST {
+                break;
+            }
+            if visible(self.position[q]) {
+                if d2 < 1e-12 {
+                    return self.sh[q];
+                }
+                sum = sh::add(&sum, &sh::scaled(&self.sh[q], 1.0 / d2));
+                total += 1.0 / d2;
+                taken += 1;
+            }
+        }
+        if total > 0.0 {
+            return sh::scaled(&sum, 1.0 / total);
+        }
+        by_distance
+            .first()
+            .map_or([Vec3::ZERO; 9], |&(_, q)| self.sh[q])
+    }
+
+    /// The valid probe nearest to `p` (the lowest index among equals).
+    fn nearest_valid(&self, p: Vec3) -> Option<usize> {
+        (0..self.len()).filter(|&q| self.valid[q]).min_by(|&a, &b| {
             let da = (self.position[a] - p).length_squared();
             let db = (self.position[b] - p).length_squared();
-            da.total_cmp(&db)
-        });
-        nearest.map_or(zero, |q| self.sh[q])
+            da.total_cmp(&db).then(a.cmp(&b))
+        })
     }
 
     /// `n` random points in free space between the probes, each with a random unit normal,
     /// to measure the probes against the path tracer: uniform in the box of the grid
-    /// positions, points buried in geometry (the probes' own test) drawn again. With
-    /// `whole_cells`, only points whose eight cell probes are all valid and visible from them
-    /// (away from walls and furniture: the interpolation's own error) are kept. Point `k` comes
-    /// from its own random stream `(seed, k)`.
+    /// positions (of the probes' positions without a grid), points buried in geometry (the
+    /// probes' own test) drawn again. With `whole_cells` (grids only), only points whose eight
+    /// cell probes are all valid and visible from them (away from walls and furniture: the
+    /// interpolation's own error) are kept. Point `k` comes from its own random stream
+    /// `(seed, k)`.
     pub fn points_between(
         &self,
         tracer: &Tracer,
@@ -252,8 +354,22 @@ impl Probes {
         seed: u64,
         whole_cells: bool,
     ) -> Vec<(Vec3, Vec3)> {
-        let last = Vec3::from(self.count.map(|c| c.saturating_sub(1) as f32));
-        let span = self.step * last;
+        // A point of the box from a point of the unit cube.
+        let in_box = |u: Vec3| match &self.grid {
+            Some(g) => {
+                let last = Vec3::from(g.count.map(|c| c.saturating_sub(1) as f32));
+                g.origin + g.rotation * (g.step * last * u)
+            }
+            None => {
+                let lo = self
+                    .position
+                    .iter()
+                    .copied()
+                    .fold(Vec3::INFINITY, Vec3::min);
+                let hi = (self.position.iter().copied()).fold(Vec3::NEG_INFINITY, Vec3::max);
+                lo + (hi - lo) * u
+            }
+        };
         let mut points = Vec::with_capacity(n);
         for k in 0..(n as u64).saturating_mul(200) {
             if points.len() == n {
@@ -261,19 +377,19 @@ impl Probes {
             }
             let mut rng = Rng::new(seed ^ SALT, k, 0);
             let u = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32());
-            let p = self.origin + span * u;
+            let p = in_box(u);
             let normal = uniform_sphere(rng.next_vec2());
             if place::buried(tracer, p, rng.next_vec2()) {
                 continue;
             }
-            if whole_cells {
+            if let (true, Some(grid)) = (whole_cells, &self.grid) {
                 let (mut all, mut corners) = (true, 0);
                 self.sh_at(p, |q| {
                     corners += 1;
                     all &= !tracer.occluded(p, q);
                     true
                 });
-                let every = corners == 1 << self.count.iter().filter(|&&c| c > 1).count();
+                let every = corners == 1 << grid.count.iter().filter(|&&c| c > 1).count();
                 if !(all && every) {
                     continue;
                 }
@@ -298,16 +414,24 @@ impl Probes {
     }
 }
 
+/// Checks that the probes of `params` can be placed in `scene` (the node of
+/// [`ProbeParams::from`] exists, once, with a usable box): before the bake, so a wrong name
+/// fails at once. `input` names the glTF in errors.
+pub(crate) fn check(scene: &crate::scene::Scene, params: &ProbeParams, input: &Path) -> Result<()> {
+    place::start(scene, params, input).map(|_| ())
+}
+
 /// Places probes (`place::place`) and gathers the solved light at them; `h` is the solved
-/// irradiance per texel (`H`, W/m²), `seed` and `sky` the bake's.
+/// irradiance per texel (`H`, W/m²), `seed` and `sky` the bake's, `input` the glTF (for errors).
 pub(crate) fn bake(
     surfaces: Surfaces,
     h: &[Vec3],
     params: &ProbeParams,
-    (seed, sky): (u64, Vec3),
+    (seed, sky, input): (u64, Vec3, &Path),
     progress: &dyn Progress,
 ) -> Result<Probes> {
-    let placement = place::place(surfaces.scene, surfaces.tracer, params.budget, seed ^ SALT);
+    let start = place::start(surfaces.scene, params, input)?;
+    let placement = place::place(surfaces.tracer, start, seed ^ SALT);
     let gatherer = Gatherer {
         surfaces,
         h,
@@ -338,9 +462,7 @@ pub(crate) fn bake(
     let mut sh: Vec<Sh2> = out.iter().map(|o| o.0).collect();
     fill_invalid(&placement, &mut sh);
     Ok(Probes {
-        origin: placement.origin,
-        step: placement.step,
-        count: placement.count,
+        grid: placement.grid,
         position: placement.position,
         valid: placement.valid,
         sh,
@@ -433,11 +555,28 @@ impl Gatherer<'_> {
     }
 }
 
-/// Coefficients of invalid probes from the mean of their valid (or already filled) face
-/// neighbours, ring by ring inwards; each ring reads only values known before it, so the result
-/// does not depend on order. Probes no valid probe reaches stay zero.
+/// Coefficients of invalid probes: on a grid, from the mean of their valid (or already filled)
+/// face neighbours, ring by ring inwards; each ring reads only values known before it, so the
+/// result does not depend on order (probes no valid probe reaches stay zero). Probes placed one
+/// by one take the nearest valid probe's.
 fn fill_invalid(placement: &Placement, sh: &mut [Sh2]) {
-    let count = placement.count;
+    let Some(grid) = placement.grid else {
+        for i in (0..sh.len()).filter(|&i| !placement.valid[i]) {
+            let p = placement.position[i];
+            let nearest = (0..sh.len())
+                .filter(|&q| placement.valid[q])
+                .min_by(|&a, &b| {
+                    let da = (placement.position[a] - p).length_squared();
+                    let db = (placement.position[b] - p).length_squared();
+                    da.total_cmp(&db).then(a.cmp(&b))
+                });
+            if let Some(q) = nearest {
+                sh[i] = sh[q];
+            }
+        }
+        return;
+    };
+    let count = grid.count;
     let mut known = placement.valid.clone();
     let mut pending: Vec<usize> = (0..sh.len()).filter(|&i| !known[i]).collect();
     let mut ring: Vec<(usize, Sh2)> = Vec::new();

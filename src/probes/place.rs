@@ -5,6 +5,11 @@
 //! `⌊extent/s⌋` probes (at least one) at the centres of equal cells, so probes sit half a cell
 //! from the bounds and the count never exceeds the budget.
 //!
+//! **From a node** (`--probes-from NODE`, [`start`]): the node's children's world positions,
+//! one probe each (the artist's placement: no budget, no grid); or, when the node has no
+//! children, its box — the unit cube centred on the node (side 1, Bevy's light-probe volume)
+//! under its world transform — filled with the grid above in the box's own axes.
+//!
 //! **Buried.** From each probe `TEST_RAYS` rays go out over the sphere (a Hammersley set turned
 //! by the probe's own random stream). A probe is buried — inside a closed solid, or outside
 //! the closed shell of an interior, where rays meet the backs of its walls — when more than
@@ -18,14 +23,20 @@
 //! clearance, if the move itself crosses no surface, and tested again (`NUDGES` times at most): a probe a hair from a wall reads that
 //! wall at grazing angles only, and a point beside the wall interpolates it. Interpolation
 //! keeps the probe's grid cell (each move is at most a fifth of a step, four moves at most).
+//! A probe placed one by one takes a fifth of the distance to its nearest neighbour as its
+//! step.
 
-use glam::{Vec2, Vec3};
+use std::path::Path;
+
+use glam::{Quat, Vec2, Vec3};
 use rayon::prelude::*;
 
+use super::{Grid, ProbeParams};
 use crate::sampling::{Rng, hammersley};
-use crate::scene::Scene;
+use crate::scene::{Scene, SceneNode};
 use crate::texels::validity::MAX_BACK;
 use crate::trace::Tracer;
+use crate::{Error, Result};
 
 /// Rays per probe of the buried test.
 const TEST_RAYS: u32 = 64;
@@ -39,13 +50,10 @@ const PLACE: u64 = 1;
 /// The grid and what the tests found, before any light is gathered.
 #[derive(Clone, Debug)]
 pub(crate) struct Placement {
-    /// Grid position of probe (0, 0, 0).
-    pub(crate) origin: Vec3,
-    /// Distance between neighbouring probes along x, y, z.
-    pub(crate) step: Vec3,
-    /// Probes along x, y, z.
-    pub(crate) count: [u32; 3],
-    /// Where each probe is (its grid position, or moved off a surface), x fastest, then y, z.
+    /// The grid the probes are on (`None`: placed one by one).
+    pub(crate) grid: Option<Grid>,
+    /// Where each probe is (its grid or given position, or moved off a surface); on a grid, x
+    /// fastest, then y, z.
     pub(crate) position: Vec<Vec3>,
     /// Not buried.
     pub(crate) valid: Vec<bool>,
@@ -53,6 +61,82 @@ pub(crate) struct Placement {
     pub(crate) moved: usize,
     /// Rays the tests cast.
     pub(crate) rays: u64,
+}
+
+/// Where the probes start, before the tests.
+#[derive(Clone, Debug, PartialEq)]
+pub(crate) enum Start {
+    /// A grid (automatic, or filling a node's box).
+    Grid(Grid),
+    /// Positions given one by one (a node's children).
+    Points(Vec<Vec3>),
+}
+
+/// Where the probes of `params` start in `scene`: the automatic grid over the scene's bounds,
+/// or the node [`ProbeParams::from`] names (`input` names the glTF in errors).
+pub(crate) fn start(scene: &Scene, params: &ProbeParams, input: &Path) -> Result<Start> {
+    let Some(name) = &params.from else {
+        let (lo, hi) = bounds(scene).unwrap_or((Vec3::ZERO, Vec3::ZERO));
+        let (origin, step, count) = grid(lo, hi, params.budget);
+        return Ok(Start::Grid(Grid {
+            origin,
+            step,
+            count,
+            rotation: Quat::IDENTITY,
+        }));
+    };
+    let named: Vec<&SceneNode> = (scene.nodes.iter())
+        .filter(|n| n.name.as_deref() == Some(name.as_str()))
+        .collect();
+    let node = match named[..] {
+        [node] => node,
+        [] => {
+            return Err(Error::invalid(
+                input,
+                format!(
+                    "--probes-from {name:?}: the scene has no node of that name (probes are placed \
+                     at an empty node's children, or fill its box when it has none)"
+                ),
+            ));
+        }
+        _ => {
+            return Err(Error::invalid(
+                input,
+                format!(
+                    "--probes-from {name:?}: {} nodes of the scene have that name; give one a name of its own",
+                    named.len()
+                ),
+            ));
+        }
+    };
+    if !node.children.is_empty() {
+        // The children's world positions (the loader visits every child of a scene node).
+        let positions = (node.children.iter())
+            .filter_map(|&c| scene.nodes.iter().find(|n| n.index == c))
+            .map(|n| n.world.w_axis.truncate())
+            .collect();
+        return Ok(Start::Points(positions));
+    }
+    // The unit cube centred on the node under its transform (Bevy's light-probe volume); a
+    // mirroring scale keeps the same box.
+    let (scale, rotation, translation) = node.world.to_scale_rotation_translation();
+    let size = scale.abs();
+    if !(size.min_element() > 0.0 && size.is_finite() && rotation.is_finite()) {
+        return Err(Error::invalid(
+            input,
+            format!(
+                "--probes-from {name:?}: the node has no children and its box (the unit cube under \
+                 its transform) is flat: scale {scale}"
+            ),
+        ));
+    }
+    let (origin, step, count) = grid(-size * 0.5, size * 0.5, params.budget);
+    Ok(Start::Grid(Grid {
+        origin: translation + rotation * origin,
+        step,
+        count,
+        rotation,
+    }))
 }
 
 /// The scene's bounding box over its triangles' vertices (`None` without triangles).
@@ -104,26 +188,42 @@ pub(crate) fn grid(lo: Vec3, hi: Vec3, budget: u32) -> (Vec3, Vec3, [u32; 3]) {
     (lo + extent / cell * 0.5, step, count)
 }
 
-/// Places probes in `scene` within `budget` (see the module docs), the tests' streams seeded
-/// by `seed` and the probe's index.
-pub(crate) fn place(scene: &Scene, tracer: &Tracer, budget: u32, seed: u64) -> Placement {
-    let (lo, hi) = bounds(scene).unwrap_or((Vec3::ZERO, Vec3::ZERO));
-    let (origin, step, count) = grid(lo, hi, budget);
-    let n = (count[0] * count[1] * count[2]) as usize;
-    let clearance = CLEARANCE * step.min_element();
-    let tested: Vec<(Vec3, bool, bool, u64)> = (0..n)
+/// Tests the probes from `start` (see the module docs), each probe's streams seeded by `seed`
+/// and its index.
+pub(crate) fn place(tracer: &Tracer, start: Start, seed: u64) -> Placement {
+    let (grid, positions, clearance) = match start {
+        Start::Grid(g) => {
+            let positions = (0..g.len()).map(|i| g.position(unflatten(i, g.count)));
+            let clearance = vec![CLEARANCE * g.step.min_element(); g.len()];
+            (Some(g), positions.collect(), clearance)
+        }
+        Start::Points(p) => {
+            // A fifth of the way to the nearest other probe (none: not moved), as on a grid.
+            let clearance = (0..p.len())
+                .map(|i| {
+                    let nearest = (0..p.len())
+                        .filter(|&j| j != i)
+                        .map(|j| p[i].distance(p[j]))
+                        .fold(f32::INFINITY, f32::min);
+                    if nearest.is_finite() {
+                        CLEARANCE * nearest
+                    } else {
+                        0.0
+                    }
+                })
+                .collect();
+            (None, p, clearance)
+        }
+    };
+    let tested: Vec<(Vec3, bool, bool, u64)> = (0..positions.len())
         .into_par_iter()
         .map(|i| {
-            let ijk = unflatten(i, count);
-            let start = origin + step * Vec3::from(ijk.map(|c| c as f32));
             let shift = Rng::new(seed, i as u64, PLACE).next_vec2();
-            settle(tracer, start, shift, clearance)
+            settle(tracer, positions[i], shift, clearance[i])
         })
         .collect();
     Placement {
-        origin,
-        step,
-        count,
+        grid,
         position: tested.iter().map(|t| t.0).collect(),
         valid: tested.iter().map(|t| t.1).collect(),
         moved: tested.iter().filter(|t| t.2).count(),

@@ -381,6 +381,12 @@ impl Loader<'_> {
                 let message = format!("{} has a non-finite transform", node_label(&node));
                 return Err(self.files.invalid(message));
             }
+            self.scene.nodes.push(super::SceneNode {
+                index: node.index() as u32,
+                name: node.name().map(str::to_string),
+                world,
+                children: node.children().map(|c| c.index() as u32).collect(),
+            });
             let placement = Placement::new(world);
             if let Some(mesh) = node.mesh() {
                 self.add_mesh(&node, &mesh, &placement)?;

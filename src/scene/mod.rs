@@ -64,8 +64,24 @@ pub struct Scene {
     pub lights: Vec<Light>,
     /// Every perspective camera placed by a node of the scene, in node traversal order.
     pub cameras: Vec<GltfCamera>,
+    /// Every node of the loaded scene, in traversal order: its name, world transform and
+    /// children (for probes placed by a node, `probes::ProbeParams::from`).
+    pub nodes: Vec<SceneNode>,
     /// Counts of what the loader skipped or changed (the CLI reports them).
     pub stats: LoadStats,
+}
+
+/// A node of the loaded scene.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SceneNode {
+    /// The glTF node index.
+    pub index: u32,
+    /// The node's name (`None` without one).
+    pub name: Option<String>,
+    /// Its world transform (the parents' composed with its own).
+    pub world: glam::Mat4,
+    /// Its children's glTF node indices, in document order.
+    pub children: Vec<u32>,
 }
 
 /// One baked primitive placed by one node.

@@ -15,14 +15,28 @@
 //! baked with `--instancing share` takes the page its node's `extras.lightmap` names, and the
 //! node's `scale_offset` as the texture's `repeat` and `offset` (a clone per node). three.js
 //! r187 is vendored under `web/three/` (MIT, `web/three/LICENSE`).
+//!
+//! With light probes (a bake with `--probes`), the page also shows the probes (small spheres
+//! coloured by their mean light, invalid ones red; a toggle) and a movable sphere lit by them
+//! (arrow keys, Page Up/Down, or drag it): its L2 SH is the probes' interpolated at its centre
+//! by this server, through [`Probes::sh_at`] with the same visibility test as
+//! `lightbake probes --at` and `render` (`/probes/at?x,y,z`), and its shader evaluates the
+//! irradiance per normal, `E(n)/π` times its albedo. Meshes of the glTF without a lightmap
+//! are lit the same way, each from the probes at its bounding box's centre (per object, as a
+//! three.js `LightProbe` lights an object); without probes they stay black apart from their
+//! emission, as in `render`. A limit: the visibility test runs from that centre against the
+//! whole scene, the object included, so a closed object hides every probe from its own centre
+//! and takes the nearest valid probe (the lookup's last resort) instead of a blend.
 
 use std::path::{Component, Path, PathBuf};
 
 use serde_json::json;
 
 use crate::metrics;
+use crate::probes::Probes;
 use crate::reference::points::{self, PointReference};
 use crate::render::RenderScene;
+use crate::trace::Tracer;
 use crate::{Error, Result};
 
 /// One answer to a request.
@@ -73,6 +87,37 @@ pub struct Viewer {
     file: String,
     /// `/points.json`, when a point reference was given.
     points: Option<Vec<u8>>,
+    /// The bake's probes and a tracer of its scene, when the glTF names probes.
+    probes: Option<std::sync::Arc<ProbeLight>>,
+}
+
+/// The probes of the viewed bake and the scene's tracer, for `/probes/at`.
+struct ProbeLight {
+    probes: Probes,
+    tracer: Tracer,
+}
+
+impl std::fmt::Debug for ProbeLight {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "ProbeLight({} probes)", self.probes.len())
+    }
+}
+
+/// Whether the glTF or GLB at `path` names light probes in its root extras (a quick look at
+/// its JSON, so a scene without probes is not loaded twice).
+fn names_probes(path: &Path) -> bool {
+    let Ok(bytes) = std::fs::read(path) else {
+        return false;
+    };
+    // A GLB's JSON chunk: its length at bytes 12..16, the JSON from byte 20.
+    let json = if bytes.starts_with(b"glTF") && bytes.len() >= 20 {
+        let n = u32::from_le_bytes([bytes[12], bytes[13], bytes[14], bytes[15]]) as usize;
+        bytes.get(20..20 + n).unwrap_or(&[])
+    } else {
+        &bytes[..]
+    };
+    serde_json::from_slice::<serde_json::Value>(json)
+        .is_ok_and(|v| v["extras"][crate::probes::file::EXTRAS_KEY].is_object())
 }
 
 impl Viewer {
@@ -87,15 +132,31 @@ impl Viewer {
             .ok_or_else(|| Error::invalid(gltf, "not a file with a UTF-8 name"))?
             .to_string();
         let dir = canonical.parent().unwrap_or(Path::new("/")).to_path_buf();
-        let points = match reference {
-            Some(csv) => {
+        let baked = match reference.is_some() || names_probes(&canonical) {
+            true => Some(RenderScene::load(gltf)?),
+            false => None,
+        };
+        let points = match (reference, &baked) {
+            (Some(csv), Some(baked)) => {
                 let text = std::fs::read_to_string(csv).map_err(|e| Error::io(csv, e))?;
                 let reference = PointReference::from_csv(&text, csv)?;
-                Some(point_errors(&RenderScene::load(gltf)?, &reference))
+                Some(point_errors(baked, &reference))
             }
-            None => None,
+            _ => None,
         };
-        Ok(Viewer { dir, file, points })
+        let probes = baked.and_then(|b| {
+            let probes = b.probes?;
+            Some(std::sync::Arc::new(ProbeLight {
+                probes,
+                tracer: b.tracer,
+            }))
+        });
+        Ok(Viewer {
+            dir,
+            file,
+            points,
+            probes,
+        })
     }
 
     /// The answer to a GET of `url` (path and query).
@@ -114,12 +175,17 @@ impl Viewer {
                 let info = json!({
                     "scene": format!("{SCENE_PREFIX}{}", encode(&self.file)),
                     "points": self.points.is_some(),
+                    "probes": self.probes.is_some(),
                 });
                 found("application/json", info.to_string().into_bytes())
             }
             "/points.json" if self.points.is_some() => {
                 found("application/json", self.points.clone().unwrap_or_default())
             }
+            "/probes/at" => match (&self.probes, probe_query(url)) {
+                (Some(light), Some(p)) => found("application/json", light.sh_json(p).into_bytes()),
+                _ => not_found(),
+            },
             _ => path
                 .strip_prefix(SCENE_PREFIX)
                 .and_then(|rest| self.scene_file(rest))
@@ -150,9 +216,34 @@ impl Viewer {
             Some("png") => "image/png",
             Some("jpg" | "jpeg") => "image/jpeg",
             Some("exr") => "image/x-exr",
+            Some("json") => "application/json",
+            Some("ktx2") => "image/ktx2",
             _ => "application/octet-stream",
         };
         Some((content_type, std::fs::read(path).ok()?))
+    }
+}
+
+/// The point of a `/probes/at?x,y,z` query (finite coordinates only).
+fn probe_query(url: &str) -> Option<glam::Vec3> {
+    let (_, query) = url.split_once('?')?;
+    let v: Vec<f32> = query
+        .split(',')
+        .map(|c| c.trim().parse::<f32>().ok().filter(|x| x.is_finite()))
+        .collect::<Option<_>>()?;
+    match v[..] {
+        [x, y, z] => Some(glam::Vec3::new(x, y, z)),
+        _ => None,
+    }
+}
+
+impl ProbeLight {
+    /// `{"sh": [27 floats]}`: the probes' coefficients interpolated at `p` (coefficient `m` of
+    /// channel `c` at `3m + c`, the probe file's order), probes `p` cannot see left out.
+    fn sh_json(&self, p: glam::Vec3) -> String {
+        let c = self.probes.sh_at(p, |q| !self.tracer.occluded(p, q));
+        let flat: Vec<f32> = c.iter().flat_map(|v| v.to_array()).collect();
+        json!({ "sh": flat }).to_string()
     }
 }
 
@@ -266,6 +357,30 @@ mod tests {
         ] {
             assert_eq!(v.respond(outside).status, 404, "{outside}");
         }
+    }
+
+    #[test]
+    fn probe_queries_parse_three_finite_numbers_and_need_probes() {
+        assert_eq!(
+            probe_query("/probes/at?1,-2.5,3e-1"),
+            Some(glam::Vec3::new(1.0, -2.5, 0.3))
+        );
+        for bad in [
+            "/probes/at",
+            "/probes/at?1,2",
+            "/probes/at?1,2,3,4",
+            "/probes/at?1,x,3",
+            "/probes/at?1,NaN,3",
+            "/probes/at?inf,0,0",
+        ] {
+            assert_eq!(probe_query(bad), None, "{bad}");
+        }
+        // A bake without probes answers no probe queries, and says so in its info.
+        let (_dir, v) = viewer();
+        assert_eq!(v.respond("/probes/at?0,0,0").status, 404);
+        let info: serde_json::Value =
+            serde_json::from_slice(&v.respond("/info.json").body).unwrap();
+        assert_eq!(info["probes"], false);
     }
 
     #[test]

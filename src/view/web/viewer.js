@@ -18,6 +18,9 @@ const camera = new THREE.PerspectiveCamera(45, 1, 0.01, 1000);
 const controls = new OrbitControls(camera, canvas);
 const scene = new THREE.Scene();
 const overlays = { charts: new THREE.Group(), error: new THREE.Group() };
+/** The light probes (with a --probes bake): the file, the dots that show them and the sphere
+ *  they light. */
+const probes = { file: null, dots: new THREE.Group(), sphere: null, step: 0.1, pending: null, latest: null };
 
 /** Per mesh: its material for each view. */
 const meshes = [];
@@ -46,16 +49,28 @@ async function load() {
     if (o.isMesh) found.push(o);
     if (o.isCamera) cameras.push(o);
   });
+  const named = gltf.parser.json.extras?.light_probes;
+  if (info.probes && named?.uri !== undefined) {
+    probes.file = await (await fetch(new URL(encodePath(named.uri), sceneUrl).href)).json();
+  }
   for (const mesh of found) {
     const rect = nodeRect(mesh);
     const page = (rect ?? mesh.geometry.userData.lightmap)?.exr;
     let lightMap = page === undefined ? null : await loadPage(page);
     if (rect && lightMap) lightMap = rectTexture(lightMap, rect.scale_offset);
-    meshes.push({ mesh, views: materials(mesh.material, lightMap) });
+    const views = materials(mesh.material, lightMap);
+    // (renderer) a mesh without a lightmap is lit by the probes at its centre, per object.
+    if (!lightMap && probes.file) {
+      views.lit = probeMaterial(mesh.material);
+      const centre = new THREE.Box3().setFromObject(mesh).getCenter(new THREE.Vector3());
+      views.lit.uniforms.sh.value = await probeSh(centre);
+    }
+    meshes.push({ mesh, views });
     if (lightMap) overlays.charts.add(chartBorders(mesh));
   }
-  scene.add(overlays.charts, overlays.error);
+  scene.add(overlays.charts, overlays.error, probes.dots);
   if (info.points) overlays.error.add(await pointErrors(gltf.scene));
+  if (probes.file) await addProbes(gltf.scene);
 
   frameScene(gltf.scene);
   const select = document.getElementById('camera');
@@ -217,6 +232,171 @@ async function pointErrors(root) {
   }));
 }
 
+/** The probes' L2 SH interpolated at `p` (a THREE.Vector3) by the server, through the same
+ *  lookup as `lightbake probes --at` and `render` (visibility-tested): nine Vector3s,
+ *  coefficients of incident radiance in three.js's SphericalHarmonics3 order. */
+async function probeSh(p) {
+  const reply = await fetch(`/probes/at?${p.x},${p.y},${p.z}`);
+  if (!reply.ok) throw new Error(`probes/at: ${reply.status}`);
+  const { sh } = await reply.json();
+  return Array.from({ length: 9 }, (_, m) => new THREE.Vector3(sh[3 * m], sh[3 * m + 1], sh[3 * m + 2]));
+}
+
+/** (renderer) A material lit by L2 SH of radiance (uniform `sh`, set per object): outgoing
+ *  radiance albedo × E(n)/π, E(n) the clamped-cosine convolution (band weights π, 2π/3, π/4),
+ *  which is three.js's getIrradianceAt(n) and the lightmaps' unit. */
+function probeMaterial(source = {}) {
+  return new THREE.ShaderMaterial({
+    side: source.side ?? THREE.FrontSide,
+    uniforms: {
+      sh: { value: Array.from({ length: 9 }, () => new THREE.Vector3()) },
+      albedo: { value: (source.color ?? new THREE.Color(1, 1, 1)).clone() },
+      map: { value: source.map ?? null },
+      hasMap: { value: Boolean(source.map) },
+      emissive: { value: (source.emissive ?? new THREE.Color(0, 0, 0)).clone().multiplyScalar(source.emissiveIntensity ?? 1) },
+    },
+    vertexShader: `
+      varying vec3 vNormal;
+      varying vec2 vUv;
+      void main() {
+        vNormal = transpose(inverse(mat3(modelMatrix))) * normal; // world space
+        vUv = uv;
+        gl_Position = projectionMatrix * modelViewMatrix * vec4(position, 1.0);
+      }`,
+    fragmentShader: `
+      uniform vec3 sh[9];
+      uniform vec3 albedo;
+      uniform vec3 emissive;
+      uniform sampler2D map;
+      uniform bool hasMap;
+      varying vec3 vNormal;
+      varying vec2 vUv;
+      vec3 irradianceOverPi(vec3 n) {
+        float x = n.x, y = n.y, z = n.z;
+        vec3 e = sh[0] * 0.282095;
+        e += (sh[1] * y + sh[2] * z + sh[3] * x) * (0.488603 * 2.0 / 3.0);
+        e += (sh[4] * (1.092548 * x * y) + sh[5] * (1.092548 * y * z)
+          + sh[6] * (0.315392 * (3.0 * z * z - 1.0)) + sh[7] * (1.092548 * x * z)
+          + sh[8] * (0.546274 * (x * x - y * y))) * 0.25;
+        return max(e, vec3(0.0));
+      }
+      void main() {
+        vec3 n = normalize(vNormal) * (gl_FrontFacing ? 1.0 : -1.0);
+        vec3 base = hasMap ? albedo * texture2D(map, vUv).rgb : albedo;
+        gl_FragColor = vec4(base * irradianceOverPi(n) + emissive, 1.0);
+        #include <tonemapping_fragment>
+        #include <colorspace_fragment>
+      }`,
+  });
+}
+
+/** The probe dots (coloured by their mean light E/π over all normals, invalid probes red) and
+ *  the movable sphere, white (albedo 1: it shows E/π), placed at the valid probe nearest the
+ *  scene's centre. */
+async function addProbes(root) {
+  const { positions, valid, sh } = probes.file;
+  const n = valid.length;
+  const box = new THREE.Box3().setFromObject(root);
+  const size = box.getSize(new THREE.Vector3()).length();
+  const dot = new THREE.InstancedMesh(
+    new THREE.SphereGeometry(size * 0.004, 8, 6),
+    new THREE.MeshBasicMaterial(),
+    n,
+  );
+  const m = new THREE.Matrix4();
+  let start = null, nearest = Infinity;
+  const centre = box.getCenter(new THREE.Vector3());
+  for (let i = 0; i < n; i++) {
+    const p = new THREE.Vector3(positions[3 * i], positions[3 * i + 1], positions[3 * i + 2]);
+    dot.setMatrixAt(i, m.makeTranslation(p.x, p.y, p.z));
+    // The mean of E(n)/π over all normals is the band-0 term, c_0·Y_0.
+    const c = valid[i] ? new THREE.Color(sh[27 * i] * 0.282095, sh[27 * i + 1] * 0.282095, sh[27 * i + 2] * 0.282095)
+      : new THREE.Color(1, 0, 0);
+    dot.setColorAt(i, c);
+    if (valid[i] && p.distanceTo(centre) < nearest) { nearest = p.distanceTo(centre); start = p; }
+  }
+  probes.dots.add(dot);
+  probes.dots.visible = false;
+  probes.step = size * 0.01;
+  probes.sphere = new THREE.Mesh(new THREE.SphereGeometry(size * 0.02, 48, 24), probeMaterial());
+  probes.sphere.position.copy(start ?? centre);
+  scene.add(probes.sphere);
+  await updateSphere();
+}
+
+/** Fetches the sphere's SH for where it is now; moves made while a fetch is out are folded
+ *  into one more fetch. Resolves once the sphere's light is for its latest position. */
+function updateSphere() {
+  if (!probes.sphere) return Promise.resolve();
+  probes.latest = probes.sphere.position.clone();
+  if (!probes.pending) {
+    probes.pending = (async () => {
+      while (probes.latest) {
+        const at = probes.latest;
+        probes.latest = null;
+        probes.sphere.material.uniforms.sh.value = await probeSh(at);
+      }
+      probes.pending = null;
+    })();
+  }
+  return probes.pending;
+}
+
+function moveSphere(delta) {
+  if (!probes.sphere) return;
+  probes.sphere.position.add(delta);
+  updateSphere();
+}
+
+/** Arrow keys move the sphere across the view (in the horizontal plane), Page Up/Down up and
+ *  down, one step (a hundredth of the scene) per press. */
+function onKey(event) {
+  if (!probes.sphere || event.target.tagName === 'SELECT' || event.target.tagName === 'INPUT') return;
+  const forward = camera.getWorldDirection(new THREE.Vector3()).setY(0).normalize();
+  const right = new THREE.Vector3().crossVectors(forward, new THREE.Vector3(0, 1, 0));
+  const moves = {
+    ArrowUp: forward, ArrowDown: forward.clone().negate(), ArrowRight: right,
+    ArrowLeft: right.clone().negate(), PageUp: new THREE.Vector3(0, 1, 0), PageDown: new THREE.Vector3(0, -1, 0),
+  };
+  const dir = moves[event.key];
+  if (!dir) return;
+  event.preventDefault();
+  moveSphere(dir.clone().multiplyScalar(probes.step));
+}
+
+/** Dragging the sphere moves it in the plane through it facing the camera (the orbit
+ *  controls pause meanwhile). */
+function dragSphere() {
+  const raycaster = new THREE.Raycaster();
+  const plane = new THREE.Plane();
+  let dragging = false;
+  const ray = (event) => {
+    const r = canvas.getBoundingClientRect();
+    const ndc = new THREE.Vector2(((event.clientX - r.left) / r.width) * 2 - 1, -((event.clientY - r.top) / r.height) * 2 + 1);
+    raycaster.setFromCamera(ndc, camera);
+    return raycaster.ray;
+  };
+  // In the capture phase: before the orbit controls see the press.
+  canvas.addEventListener('pointerdown', (event) => {
+    const sphere = probes.sphere;
+    if (!sphere?.visible) return;
+    const bounds = new THREE.Sphere(sphere.position, sphere.geometry.parameters.radius);
+    if (!ray(event).intersectsSphere(bounds)) return;
+    dragging = true;
+    controls.enabled = false;
+    plane.setFromNormalAndCoplanarPoint(camera.getWorldDirection(new THREE.Vector3()), probes.sphere.position);
+    canvas.setPointerCapture(event.pointerId);
+  }, { capture: true });
+  canvas.addEventListener('pointermove', (event) => {
+    if (!dragging) return;
+    const to = ray(event).intersectPlane(plane, new THREE.Vector3());
+    if (to) moveSphere(to.sub(probes.sphere.position));
+  });
+  const stop = () => { dragging = false; controls.enabled = true; };
+  canvas.addEventListener('pointerup', stop);
+  canvas.addEventListener('pointercancel', stop);
+}
+
 function frameScene(root) {
   const box = new THREE.Box3().setFromObject(root);
   const center = box.getCenter(new THREE.Vector3());
@@ -298,13 +478,22 @@ function readLinear(width, height) {
 const cameraSelect = document.getElementById('camera');
 const viewSelect = document.getElementById('view');
 const exposure = document.getElementById('exposure');
+const probesToggle = document.getElementById('probes');
+const sphereToggle = document.getElementById('sphere');
 cameraSelect.addEventListener('change', () => useCamera(+cameraSelect.value));
+probesToggle.addEventListener('change', () => { probes.dots.visible = probesToggle.checked; });
+sphereToggle.addEventListener('change', () => { if (probes.sphere) probes.sphere.visible = sphereToggle.checked; });
+window.addEventListener('keydown', onKey);
+dragSphere();
 viewSelect.addEventListener('change', () => setView(viewSelect.value));
 exposure.addEventListener('input', () => setExposure(+exposure.value));
 
 // What a test drives: the same controls as the panel, and the pixels.
 window.lightbake = {
   ready: load().then(() => {
+    const has = probes.file !== null;
+    probesToggle.disabled = sphereToggle.disabled = !has;
+    if (probes.sphere) probes.sphere.visible = sphereToggle.checked;
     setView(viewSelect.value);
     setExposure(+exposure.value);
     renderer.setAnimationLoop(() => { controls.update(); draw(); });
@@ -314,4 +503,24 @@ window.lightbake = {
   setView(view) { viewSelect.value = view; setView(view); draw(); },
   setExposure(stops) { exposure.value = stops; setExposure(stops); draw(); },
   readLinear,
+  probes: {
+    available: () => probes.file !== null,
+    showProbes(on) { probesToggle.checked = on; probes.dots.visible = on; draw(); },
+    /** Moves the sphere to `at` ([x, y, z]) and resolves with its SH (27 floats) once lit. */
+    async moveSphere(at) {
+      probes.sphere.position.fromArray(at);
+      await updateSphere();
+      draw();
+      return probes.sphere.material.uniforms.sh.value.flatMap((v) => v.toArray());
+    },
+    /** Puts the orbit camera at `eye` ([x, y, z]) looking at the sphere. */
+    lookAtSphere(eye) {
+      camera.position.fromArray(eye);
+      controls.target.copy(probes.sphere.position);
+      camera.lookAt(probes.sphere.position);
+      camera.updateProjectionMatrix();
+      controls.update();
+      draw();
+    },
+  },
 };
