@@ -161,8 +161,8 @@ pub mod testing;
 mod bake;
 
 pub use bake::{
-    BakeReport, Baked, Prepared, ProbeCount, StageTime, bake, compute, distributed, kept, prepare,
-    relight, split_junctions, write,
+    BakeReport, Baked, Prepared, ProbeCount, StageTime, bake, compute, distributed, incremental,
+    kept, prepare, relight, split_junctions, write,
 };
 pub use build::{BuildReport, Manifest, build};
 pub use config::BakeConfig;

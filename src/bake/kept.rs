@@ -1,14 +1,14 @@
 //! The kept transport, `<stem>.transport`: what `lightbake relight` needs to solve a bake again
 //! with other light and material values, without casting a ray ([`super::relight`]).
 //!
-//! ## Format (version 1)
+//! ## Format (version 2)
 //!
 //! Little-endian throughout; `vec3` is three `f32`.
 //!
 //! | bytes             | what                                                                 |
 //! |-------------------|----------------------------------------------------------------------|
 //! | 20                | magic `LIGHTBAKE-TRANSPORT\n`                                         |
-//! | u32               | format version (1)                                                   |
+//! | u32               | format version (2)                                                   |
 //! | 32                | scene hash: blake3 of the baked glTF (`.gltf` JSON then its `.bin`, or the `.glb`) and of the settings block |
 //! | u64               | body length in bytes                                                 |
 //! | body              | the sections below, in order                                         |
@@ -18,8 +18,10 @@
 //!
 //! 1. settings: u64 length + UTF-8 JSON ([`Settings`]): the settings the bake ran with (the
 //!    automatic choices applied: method, solver, rays, light samples, tolerance, density; a
-//!    kept bake casts the chosen rays at every texel), the glTF it belongs to, and the lights and materials by name with their
-//!    baked values (the relit values are relative to them).
+//!    kept bake casts the chosen rays at every texel), the glTF it belongs to, the lights and materials by name with their
+//!    baked values (the relit values are relative to them), and the input it was baked from
+//!    ([`super::incremental::InputRecord`]: a hash of everything but the node transforms, and
+//!    each node's transform as written), which `bake --since` compares the edited input with.
 //! 2. texels: u32 texel count `n`, u32 source count `S`, u32 page count, then per page
 //!    u32 width and height; then arrays of `n`: page (u32), x and y (2 × u32), position,
 //!    normal, du, dv, albedo, emission (vec3 each), material (u32, an index into the settings'
@@ -35,8 +37,15 @@
 //! 4. direct light by source: `n × S` vec3, texel-major ([`Transport::direct_terms`]): sources
 //!    are the scene's punctual lights, then its emissive materials
 //!    ([`crate::transport::Sources`]). The sky's part is `π · sky · escape`.
-//! 5. seams: u32 count, then per sample u32 page × 2 and f32 uv × 4 (the seam samples the
+//! 5. direct light as the bake summed it: `n` vec3 (`Transport::direct`, sky included). The
+//!    sum of the terms of section 4 rounds differently; `bake --since` reuses a row unchanged
+//!    only if it reuses its direct light bit for bit, so an unchanged scene re-bakes to the
+//!    same bytes.
+//! 6. seams: u32 count, then per sample u32 page × 2 and f32 uv × 4 (the seam samples the
 //!    stitching reads, found from the scene and atlas at bake time).
+//!
+//! Version 1 files (no input record, no direct light sums) are refused with the advice to bake
+//! again; they held nothing an incremental bake could trust.
 //!
 //! Reading refuses, naming the file: another kind of file (magic), another format version, a
 //! truncated or damaged file (lengths and body hash), and a stale or foreign one (the scene
@@ -57,7 +66,7 @@ use crate::{Error, Result};
 
 const MAGIC: &[u8; 20] = b"LIGHTBAKE-TRANSPORT\n";
 /// The format version this lightbake writes and reads.
-pub(crate) const VERSION: u32 = 1;
+pub(crate) const VERSION: u32 = 2;
 
 /// The settings block: how the bake ran, and the lights and materials it was baked with.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
@@ -99,6 +108,13 @@ pub struct Settings {
     pub(crate) preview_exposure: f32,
     pub(crate) rgbm: bool,
     pub(crate) seams: bool,
+    /// Monte Carlo rows held as ray counts (`--rows counts`, or the planner's memory choice).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub(crate) count_rows: bool,
+    /// The input the bake read, for `bake --since` ([`super::incremental`]); set when the
+    /// transport is kept.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub(crate) input: Option<super::incremental::InputRecord>,
     /// The scene's punctual lights, in scene order (sources `0..lights.len()`).
     pub(crate) lights: Vec<LightEntry>,
     /// The scene's materials, in scene order.
@@ -191,6 +207,8 @@ impl Settings {
             preview_exposure: o.preview_exposure,
             rgbm: o.rgbm,
             seams: o.seams,
+            count_rows: t.count_rows,
+            input: None,
             lights,
             materials,
             emissive: Sources::new(scene).emissive,
@@ -227,6 +245,7 @@ impl Settings {
         t.seed = self.seed;
         t.validity = self.validity;
         t.denoise = self.denoise;
+        t.count_rows = self.count_rows;
         c.solve.tolerance = self.tolerance;
         c.solve.max_iterations = self.max_iterations;
         let o = &mut c.output;
@@ -251,6 +270,8 @@ pub struct Kept {
     pub(crate) material: Vec<u32>,
     /// Rows, escape fractions, direct light by source (`direct` is empty: relight makes it).
     pub(crate) transport: Transport,
+    /// Per texel, direct light as the bake summed it (section 5).
+    pub(crate) direct: Vec<Vec3>,
     /// Seam samples only (`edges` is empty).
     pub(crate) seams: Seams,
 }
@@ -285,7 +306,10 @@ pub(crate) fn encode(
 ) -> Result<Vec<u8>> {
     let n = texels.len();
     let sources = transport.sources.len();
-    if transport.direct_terms.len() != n * sources || transport.len() != n {
+    if transport.direct_terms.len() != n * sources
+        || transport.len() != n
+        || transport.escape.len() != n
+    {
         return Err(Error::Internal(
             "the transport holds no direct light by source: it cannot be kept".to_string(),
         ));
@@ -326,6 +350,7 @@ pub(crate) fn encode(
         }
     }
     transport.direct_terms.iter().for_each(|&v| w.vec3(v));
+    transport.direct.iter().for_each(|&v| w.vec3(v));
     w.u32(seams.samples.len() as u32);
     for s in &seams.samples {
         s.page.iter().for_each(|&p| w.u32(p));
@@ -495,6 +520,7 @@ fn decode<'a>(r: &mut Reader<'a>) -> std::result::Result<(Kept, &'a [u8]), Strin
         return Err("a row names a texel out of range".to_string());
     }
     transport.direct_terms = r.vec3s(n * sources)?;
+    let direct = r.vec3s(n)?;
     transport.sources = Sources {
         lights: settings.lights.len(),
         emissive: settings.emissive.clone(),
@@ -524,6 +550,7 @@ fn decode<'a>(r: &mut Reader<'a>) -> std::result::Result<(Kept, &'a [u8]), Strin
         texels,
         material,
         transport,
+        direct,
         seams,
     };
     Ok((kept, json))

@@ -5,6 +5,7 @@
 //! solution through the one dispatch of [`light`], denoise, pages), then [`write`].
 
 pub mod distributed;
+pub mod incremental;
 pub mod kept;
 pub(crate) mod light;
 pub(crate) mod memory;
@@ -67,6 +68,9 @@ pub struct BakeReport {
     pub stages: Vec<StageTime>,
     /// The files written, the glTF first.
     pub files: Vec<PathBuf>,
+    /// What an incremental bake (`bake --since`, [`incremental`]) re-traced and reused
+    /// (`None` for a plain bake).
+    pub incremental: Option<incremental::Incremental>,
 }
 
 impl BakeReport {
@@ -122,8 +126,12 @@ impl BakeReport {
                 p.rays as f64 * 1e-6
             )
         });
+        let incremental = self
+            .incremental
+            .as_ref()
+            .map_or(String::new(), |i| format!("; {}", i.brief()));
         format!(
-            "{} texels ({} moved out of geometry, {} invalid, {} divided by a wall) on {} page(s), {} triangles, {:.2} M rays, {} iterations, residual {:.1e}{}{}{junctions}{sharing}{directional}{probes}{plan}; {} (total {:.2}s{overhead})",
+            "{} texels ({} moved out of geometry, {} invalid, {} divided by a wall) on {} page(s), {} triangles, {:.2} M rays, {} iterations, residual {:.1e}{}{}{junctions}{sharing}{directional}{probes}{plan}{incremental}; {} (total {:.2}s{overhead})",
             self.texels,
             self.validity.moved,
             self.validity.invalid,
@@ -282,6 +290,7 @@ fn pass_through(
         probes: None,
         stages,
         files,
+        incremental: None,
     })
 }
 
@@ -971,6 +980,7 @@ pub fn write(
         probes: baked.probes.as_ref().map(ProbeCount::of),
         stages: baked.stages,
         files,
+        incremental: None,
     })
 }
 
@@ -1014,7 +1024,11 @@ fn keep_with_gltf(
         false => format!("{stem}.gltf"),
     };
     let config = &baked.config;
-    let settings = kept::Settings::new(&baked.scene, config, &name);
+    let mut settings = kept::Settings::new(&baked.scene, config, &name);
+    if config.output.keep_transport {
+        // What `bake --since` compares an edited input with.
+        settings.input = Some(incremental::input_record(input)?);
+    }
     if !layer_files.is_empty() {
         let gltf = staging.read(&name)?;
         let edited = output::gltf_edit::edit_gltf(&gltf, input, |json| {

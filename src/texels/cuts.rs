@@ -67,6 +67,11 @@ impl Cuts {
     pub(crate) fn len(&self) -> usize {
         self.cells.len()
     }
+    /// Texel `id`'s cell map, `None` when no surface divides it.
+    pub(crate) fn cells(&self, id: usize) -> Option<&[u32; CELLS * CELLS]> {
+        let slot = *self.slot.get(id)?;
+        (slot != super::NO_TEXEL).then(|| &self.cells[slot as usize])
+    }
     /// The texel serving position `frac ∈ [0,1)²` within texel `id`'s square.
     #[inline]
     pub(crate) fn resolve(&self, id: u32, frac: Vec2) -> u32 {
