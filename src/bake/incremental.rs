@@ -50,7 +50,7 @@
 use std::ops::Range;
 use std::path::Path;
 use std::sync::Mutex;
-use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 use std::time::Instant;
 
 use glam::{Vec2, Vec3};
@@ -136,7 +136,8 @@ pub struct Incremental {
     pub flagged_rays: u64,
     /// The rows re-traced or patched, ascending.
     pub touched_rows: Vec<u32>,
-    /// Rays this bake cast (validity pass included) and what a full trace of every row casts.
+    /// Rays the transport cast: the rows traced whole, and the flagged rays twice (old and new
+    /// scene).
     pub rays: u64,
     /// Rays a full trace of every row casts.
     pub full_rays: u64,
@@ -355,9 +356,16 @@ fn plan(
     if retrace == Retrace::All {
         changed.iter_mut().for_each(|c| *c = true);
     }
+    // A ray that meets no moved bounds hits the same triangle at the same point, and the same
+    // texel there, unless that texel's cell map changed (a moved surface now divides it, or no
+    // longer does: `texels::Cuts`); such a texel lies within its own size of the moved surface,
+    // so the bounds grow by the largest of them.
     let margin = (0..new_texels.len())
-        .filter(|&i| changed[i])
-        .map(|i| new_texels.du[i].length() + new_texels.dv[i].length())
+        .filter(|&i| old.texels.cuts.cells(i) != new_texels.cuts.cells(i))
+        .map(|i| {
+            let size = |t: &Texels| t.du[i].length() + t.dv[i].length();
+            size(&old.texels).max(size(&new_texels))
+        })
         .fold(0.0f32, f32::max)
         + 8.0 * tracer.epsilon;
     let mut boxes = Vec::new();
@@ -393,6 +401,8 @@ fn plan(
             count_rows: config.transport.count_rows,
             touched: Mutex::new(Vec::new()),
             flagged: AtomicUsize::new(0),
+            busy: AtomicU64::new(0),
+            traced_busy: AtomicU64::new(0),
         };
         let mut transport =
             rows::build(n, montecarlo::CHUNK, "transport", progress, |range, out| {
@@ -416,12 +426,18 @@ fn plan(
         let per_row = u64::from(k) + if emitters.is_empty() { 0 } else { u64::from(l) } + lights;
         let full_rays = n as u64 * per_row;
         let (retraced, patched, flagged_rays) = counted;
-        let traced_rays = retraced as u64 * per_row;
-        // The transport saved, at the rate this bake traced: the whole rows it traced set the
-        // rate (the flagged rays' drawing and tracing is the overhead counted in `seconds`).
-        let rate = match traced_rays {
-            0 => 0.0,
-            r => seconds / r as f64,
+        // The transport time saved, estimated: the rows traced whole cost `traced_busy` thread
+        // time, so every row would have cost about `n / retraced` times that; the thread time
+        // of all chunks against the wall time gives the parallel speed-up. Unknown (0) when no
+        // row was traced whole.
+        let busy = rebuild.busy.load(Ordering::Relaxed) as f64 * 1e-9;
+        let traced_busy = rebuild.traced_busy.load(Ordering::Relaxed) as f64 * 1e-9;
+        let seconds_saved = match (retraced, busy > 0.0) {
+            (0, _) | (_, false) => 0.0,
+            (r, true) => {
+                let full_wall = traced_busy * n as f64 / r as f64 * seconds / busy;
+                (full_wall - seconds).max(0.0)
+            }
         };
         let incremental = Incremental {
             full: None,
@@ -433,7 +449,7 @@ fn plan(
             touched_rows,
             rays: transport.rays,
             full_rays,
-            seconds_saved: (rate * full_rays as f64 - seconds).max(0.0),
+            seconds_saved,
         };
         (transport, incremental)
     };
@@ -692,15 +708,22 @@ struct Rebuild<'a> {
     /// The rows re-traced (`true`) or patched (`false`), in no order.
     touched: Mutex<Vec<(u32, bool)>>,
     flagged: AtomicUsize,
+    /// Thread time (ns) of all chunks, and of the rows traced whole (the time-saved estimate).
+    busy: AtomicU64,
+    traced_busy: AtomicU64,
 }
 
 impl Rebuild<'_> {
     fn rows(&self, range: Range<usize>, out: &mut ChunkRows) {
+        let chunk = Instant::now();
         let mut hits = Vec::new();
         let mut flagged = Vec::new();
         for i in range {
             if self.changed[i] {
+                let t = Instant::now();
                 self.new.texel_row(i, &mut hits, out);
+                let ns = t.elapsed().as_nanos() as u64;
+                self.traced_busy.fetch_add(ns, Ordering::Relaxed);
                 self.touched.lock().unwrap().push((i as u32, true));
                 continue;
             }
@@ -712,6 +735,8 @@ impl Rebuild<'_> {
             });
             self.row(i, &flagged, (k, l), out);
         }
+        let ns = chunk.elapsed().as_nanos() as u64;
+        self.busy.fetch_add(ns, Ordering::Relaxed);
     }
 
     /// Whether `ray` can end differently: its line meets a moved node's old or new bounds.
