@@ -9,7 +9,8 @@
 //! Defaults: `fixtures/furnished_interior.glb`, node `chair_0_0`, moved `0.5` m along x,
 //! `medium`. Steps: bake the scene with `--keep-transport` (`OUT/old`); move the node
 //! (`OUT/edited/<name>`); bake the edited scene in full with the same options (`OUT/full`) and
-//! incrementally from the old bake (`OUT/incremental`); with a reference, compute the point
+//! incrementally from the old bake (`OUT/incremental`), alternating, twice each (the machine's
+//! load changes between runs: each round's ratio is reported); with a reference, compute the point
 //! reference of the edited scene (1024 points, to 1% noise or 2048 paths, at most 300 s;
 //! `OUT/reference.csv`, reused when present) and compare both bakes as a renderer reads them
 //! (`points::compare`, the reference's noise taken out). Prints a Markdown table and writes
@@ -22,6 +23,9 @@ use lightbake::reference::ReferenceParams;
 use lightbake::reference::points::{self, PointReference};
 use lightbake::render::RenderScene;
 use lightbake::{BakeConfig, NoProgress, bake, incremental};
+
+/// Full and incremental bakes of the edited scene, alternating.
+const ROUNDS: usize = 2;
 use serde_json::Value;
 
 fn main() {
@@ -59,33 +63,62 @@ fn main() {
     std::fs::create_dir_all(edited.parent().unwrap()).unwrap();
     move_node(&scene, &edited, node, dx);
 
+    // Full and incremental bakes alternate, `ROUNDS` times each: on a shared machine the load
+    // changes between runs, and the ratio of neighbours is what it measures.
     let full = out.join("full");
-    let _ = std::fs::remove_dir_all(&full);
-    let t = Instant::now();
-    let full_report = bake(&edited, &full, &config, &NoProgress).expect("full bake");
-    let full_seconds = t.elapsed().as_secs_f64();
-    eprintln!("full bake: {full_seconds:.1}s; {}", full_report.summary());
-
     let inc = out.join("incremental");
-    let _ = std::fs::remove_dir_all(&inc);
     let since = old.join(&name);
-    let t = Instant::now();
-    let inc_report = incremental::bake_since(&edited, &since, &inc, &config, &NoProgress)
-        .expect("incremental bake");
-    let inc_seconds = t.elapsed().as_secs_f64();
-    eprintln!(
-        "incremental bake: {inc_seconds:.1}s; {}",
-        inc_report.summary()
-    );
-    let figures = inc_report.incremental.clone().expect("incremental report");
+    let (mut full_times, mut inc_times) = (Vec::new(), Vec::new());
+    let mut figures = None;
+    for round in 0..ROUNDS {
+        let _ = std::fs::remove_dir_all(&full);
+        let t = Instant::now();
+        let full_report = bake(&edited, &full, &config, &NoProgress).expect("full bake");
+        full_times.push(t.elapsed().as_secs_f64());
+        eprintln!(
+            "round {round}, full bake: {:.1}s; {}",
+            full_times[round],
+            full_report.summary()
+        );
 
+        let _ = std::fs::remove_dir_all(&inc);
+        let t = Instant::now();
+        let inc_report = incremental::bake_since(&edited, &since, &inc, &config, &NoProgress)
+            .expect("incremental bake");
+        inc_times.push(t.elapsed().as_secs_f64());
+        eprintln!(
+            "round {round}, incremental bake: {:.1}s; {}",
+            inc_times[round],
+            inc_report.summary()
+        );
+        figures = inc_report.incremental;
+    }
+    let figures = figures.expect("an incremental report");
+    let ratios: Vec<f64> = inc_times
+        .iter()
+        .zip(&full_times)
+        .map(|(i, f)| i / f)
+        .collect();
+    let full_seconds = full_times.iter().sum::<f64>() / ROUNDS as f64;
+    let inc_seconds = inc_times.iter().sum::<f64>() / ROUNDS as f64;
+    eprintln!("incremental / full per round: {ratios:.3?}");
+
+    // Point errors: the full and the incremental bake against a reference of the edited
+    // scene, and the old bake (whose plan the incremental one keeps) against one of the
+    // unedited scene.
+    let error = |dir: &Path, reference: &PointReference| {
+        let render = RenderScene::load(&dir.join(&name)).expect("load the bake");
+        let c = points::compare(&render, reference);
+        (c.rmse_without_noise, c.noise)
+    };
     let errors = (!no_reference).then(|| {
         let reference = point_reference(&edited, &out.join("reference.csv"));
-        [&full, &inc].map(|dir| {
-            let render = RenderScene::load(&dir.join(&name)).expect("load the bake");
-            let c = points::compare(&render, &reference);
-            (c.rmse_without_noise, c.noise)
-        })
+        let unedited = point_reference(&scene, &out.join("reference_unedited.csv"));
+        [
+            error(&full, &reference),
+            error(&inc, &reference),
+            error(&old, &unedited),
+        ]
     });
 
     println!(
@@ -104,13 +137,17 @@ fn main() {
         n = figures.rows
     );
     println!(
-        "| incremental | {inc_seconds:.1} | {:.3} | {} of {} | {} | {:.1} M | {} |",
-        inc_seconds / full_seconds,
+        "| incremental | {inc_seconds:.1} | {:.3?} | {} of {} | {} | {:.1} M | {} |",
+        ratios,
         figures.retraced,
         figures.rows,
         figures.patched,
         figures.rays as f64 * 1e-6,
         point(1)
+    );
+    println!(
+        "| old bake, unedited scene (the plan kept) | {old_seconds:.1} | - | - | - | - | {} |",
+        point(2)
     );
     if let Some(why) = &figures.full {
         println!("(the incremental bake baked in full: {why})");

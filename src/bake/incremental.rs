@@ -317,7 +317,13 @@ fn plan(
         Ok(m) => m,
         Err(why) => return Ok(Err(why)),
     };
-    let old = super::prepare_loaded(old_loaded, old_source, input, &config, &Alone, progress, t)?;
+    let old = match &kept.atlas {
+        Some(atlas) => match lay_out_again(old_loaded, old_source, atlas, &config, progress, t)? {
+            Ok(old) => old,
+            Err(why) => return Ok(Err(why)),
+        },
+        None => super::prepare_loaded(old_loaded, old_source, input, &config, &Alone, progress, t)?,
+    };
     if let Some(why) = differs(&old.texels, &kept.texels) {
         return Ok(Err(format!(
             "the previous bake's texels could not be laid out again ({why}: another lightbake, or other settings)"
@@ -495,6 +501,62 @@ fn plan(
         prepared,
         incremental,
         lighting,
+    }))
+}
+
+/// The old bake's scene laid out again on its kept `atlas` (what `prepare_loaded` does with
+/// the fixed settings `config`, without unwrapping): the junction split, the tracer, the texels
+/// and their validity pass. `Err` when the atlas does not fit the split scene.
+fn lay_out_again(
+    loaded: Scene,
+    source: scene::Source,
+    atlas: &crate::atlas::Atlas,
+    config: &BakeConfig,
+    progress: &dyn Progress,
+    load_start: Instant,
+) -> Result<Fallback<Prepared>> {
+    let mut stages = Vec::new();
+    timed(&mut stages, "load", load_start);
+    let t = Instant::now();
+    let (scene, junctions) = super::split_junctions(loaded, &source, config);
+    if junctions.is_some() {
+        timed(&mut stages, "junctions", t);
+    }
+    let fits = atlas.instances.len() == scene.instances.len()
+        && (scene.instances.iter().zip(&atlas.instances)).all(|(inst, uv)| {
+            let vertices = inst.vertices.len() as u32;
+            uv.triangles.len() == inst.triangles.len()
+                && uv.triangle_page.len() == uv.triangles.len()
+                && uv.xref.len() == uv.uv.len()
+                && uv.xref.iter().all(|&x| x < vertices)
+        });
+    if !fits {
+        return Ok(Err(
+            "the kept atlas does not fit the scene laid out again".to_string()
+        ));
+    }
+    let t = Instant::now();
+    let tracer = Tracer::new(&scene);
+    timed(&mut stages, "bvh", t);
+    let t = Instant::now();
+    let mut texels = texels::build(&scene, atlas)?;
+    timed(&mut stages, "texels", t);
+    let t = Instant::now();
+    let validity = super::fix_validity(&mut texels, &scene, &tracer, config, &Alone, progress)?;
+    timed(&mut stages, "validity", t);
+    Ok(Ok(Prepared {
+        scene,
+        source,
+        tracer,
+        atlas: atlas.clone(),
+        texels,
+        validity,
+        config: config.clone(),
+        plan: None,
+        density_noise: None,
+        junctions,
+        stages,
+        processes: 1,
     }))
 }
 

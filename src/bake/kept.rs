@@ -43,6 +43,12 @@
 //!    same bytes.
 //! 6. seams: u32 count, then per sample u32 page × 2 and f32 uv × 4 (the seam samples the
 //!    stitching reads, found from the scene and atlas at bake time).
+//! 7. atlas: u32 0 (not kept: `--instancing share`), or 1 then f32 texels per unit, u32 page
+//!    count and per page width and height, u32 instance count and per instance u32 vertex
+//!    count, `xref` (u32 each), `uv` (2 × f32 each), u32 triangle count, `triangles`
+//!    (3 × u32 each) and `triangle_page` (u32 each) ([`crate::atlas::InstanceUv`]). An
+//!    incremental bake lays the old scene out again without unwrapping it (xatlas is most of
+//!    that time); the kept texels check the result.
 //!
 //! Version 1 files (no input record, no direct light sums) are refused with the advice to bake
 //! again; they held nothing an incremental bake could trust.
@@ -56,7 +62,7 @@ use std::path::{Path, PathBuf};
 use glam::{Vec2, Vec3};
 use serde::{Deserialize, Serialize};
 
-use crate::atlas::PageSize;
+use crate::atlas::{Atlas, InstanceUv, PageSize};
 use crate::config::{BakeConfig, Technique, UvMode};
 use crate::lightmap::seams::{SeamSample, Seams};
 use crate::scene::Scene;
@@ -274,6 +280,8 @@ pub struct Kept {
     pub(crate) direct: Vec<Vec3>,
     /// Seam samples only (`edges` is empty).
     pub(crate) seams: Seams,
+    /// The bake's lightmap layout (section 7; `None` with shared meshes).
+    pub(crate) atlas: Option<Atlas>,
 }
 
 /// Per texel: the material of its main triangle.
@@ -303,6 +311,7 @@ pub(crate) fn encode(
     material: &[u32],
     transport: &Transport,
     seams: &Seams,
+    atlas: &Atlas,
 ) -> Result<Vec<u8>> {
     let n = texels.len();
     let sources = transport.sources.len();
@@ -358,6 +367,29 @@ pub(crate) fn encode(
             w.f32(uv.x);
             w.f32(uv.y);
         });
+    }
+    if atlas.shared.is_empty() && !atlas.reused_input_uvs {
+        w.u32(1);
+        w.f32(atlas.texels_per_unit);
+        w.u32(atlas.pages.len() as u32);
+        for p in &atlas.pages {
+            w.u32(p.width);
+            w.u32(p.height);
+        }
+        w.u32(atlas.instances.len() as u32);
+        for inst in &atlas.instances {
+            w.u32(inst.xref.len() as u32);
+            inst.xref.iter().for_each(|&x| w.u32(x));
+            inst.uv.iter().for_each(|uv| {
+                w.f32(uv.x);
+                w.f32(uv.y);
+            });
+            w.u32(inst.triangles.len() as u32);
+            inst.triangles.iter().flatten().for_each(|&v| w.u32(v));
+            inst.triangle_page.iter().for_each(|&p| w.u32(p));
+        }
+    } else {
+        w.u32(0);
     }
     let body = w.0;
     let mut out = Vec::with_capacity(body.len() + 100);
@@ -539,6 +571,53 @@ fn decode<'a>(r: &mut Reader<'a>) -> std::result::Result<(Kept, &'a [u8]), Strin
             uv: [Vec2::new(v[0], v[1]), Vec2::new(v[2], v[3])],
         });
     }
+    let atlas = match r.u32()? {
+        0 => None,
+        _ => {
+            let texels_per_unit = r.f32s(1)?[0];
+            let pages = r.u32()? as usize;
+            let sizes = r.u32s(2 * pages)?;
+            let pages: Vec<PageSize> = sizes
+                .chunks(2)
+                .map(|c| PageSize {
+                    width: c[0],
+                    height: c[1],
+                })
+                .collect();
+            let count = r.u32()? as usize;
+            let mut instances = Vec::with_capacity(count.min(1 << 20));
+            for _ in 0..count {
+                let verts = r.u32()? as usize;
+                let xref = r.u32s(verts)?;
+                let uv = r.f32s(2 * verts)?;
+                let uv = uv.chunks(2).map(|c| Vec2::new(c[0], c[1])).collect();
+                let tris = r.u32()? as usize;
+                let corners = r.u32s(3 * tris)?;
+                let triangles: Vec<[u32; 3]> =
+                    corners.chunks(3).map(|c| [c[0], c[1], c[2]]).collect();
+                if triangles.iter().flatten().any(|&v| v as usize >= verts) {
+                    return Err("an atlas triangle names a vertex out of range".to_string());
+                }
+                let triangle_page = r.u32s(tris)?;
+                if triangle_page.iter().any(|&p| p as usize >= pages.len()) {
+                    return Err("an atlas triangle's page is out of range".to_string());
+                }
+                instances.push(InstanceUv {
+                    xref,
+                    uv,
+                    triangles,
+                    triangle_page,
+                });
+            }
+            Some(Atlas {
+                pages,
+                instances,
+                texels_per_unit,
+                reused_input_uvs: false,
+                shared: Vec::new(),
+            })
+        }
+    };
     if r.at != r.bytes.len() {
         return Err(format!(
             "{} bytes after the last section",
@@ -552,6 +631,7 @@ fn decode<'a>(r: &mut Reader<'a>) -> std::result::Result<(Kept, &'a [u8]), Strin
         transport,
         direct,
         seams,
+        atlas,
     };
     Ok((kept, json))
 }

@@ -1058,6 +1058,7 @@ fn keep_with_gltf(
         &material,
         &baked.transport,
         &seams,
+        &baked.atlas,
     )?;
     staging.write(&format!("{stem}.transport"), &bytes)
 }
