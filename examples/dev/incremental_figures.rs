@@ -122,7 +122,7 @@ fn main() {
     });
 
     println!(
-        "| bake | wall s | ratio | rows re-traced | rows patched | rays | point RMSE (noise out) |"
+        "| bake | wall s (mean of {ROUNDS}) | ratio (per round) | rows re-traced | rows patched | rays | point RMSE (noise out) |"
     );
     println!("|---|---:|---:|---:|---:|---:|---:|");
     let point = |k: usize| {
@@ -185,7 +185,7 @@ fn move_node(scene: &Path, to: &Path, node: &str, dx: f32) {
     t[0] += f64::from(dx);
     n["translation"] = serde_json::json!(t);
     let mut text = serde_json::to_vec(&json).unwrap();
-    while text.len() % 4 != 0 {
+    while !text.len().is_multiple_of(4) {
         text.push(b' ');
     }
     let mut glb = Vec::new();

@@ -8,7 +8,7 @@
 //! seed and the scene: its rays' origins and directions come from a stream seeded by
 //! (seed, texel) and the texel's footprint, and only where each ray *ends* reads the geometry.
 //! So the rays need not be stored: they are drawn again, with no tracing, exactly as the bake
-//! drew them ([`row_rays`]). A ray whose line (gathering rays: the half-line; light samples and
+//! drew them (`row_rays`). A ray whose line (gathering rays: the half-line; light samples and
 //! punctual shadow rays: the segment to the light) meets neither the old nor the new bounds of
 //! a moved node ends where it ended before: nothing else moved. Only the rays that meet those
 //! bounds (the *flagged* rays) are traced again, once in the old scene (what they added to the
