@@ -300,7 +300,54 @@ fn build_rebakes_a_moved_node_incrementally_and_says_so() {
     let validator = jsonschema::validator_for(&schema).unwrap();
     assert!(validator.is_valid(&report), "{report}");
 
-    // The record written after the incremental bake vouches for its outputs.
+    // Moved again: incremental from the incremental bake's outputs.
+    two_rooms_with_box(&levels, 1.4);
     let third = build(&load(), &NoProgress);
-    assert_eq!(third.scenes[0].status, Status::Skipped, "{third:?}");
+    assert_eq!(third.scenes[0].status, Status::Incremental, "{third:?}");
+
+    // The record written after an incremental bake vouches for its outputs.
+    let fourth = build(&load(), &NoProgress);
+    assert_eq!(fourth.scenes[0].status, Status::Skipped, "{fourth:?}");
+}
+
+#[test]
+fn an_incremental_bake_starts_from_an_incremental_bake() {
+    let dir = scratch();
+    let config = kept_config();
+    let first = dir.path().join("first");
+    bake(
+        &two_rooms_with_box(&dir.path().join("a"), -1.0),
+        &first,
+        &config,
+        &NoProgress,
+    )
+    .unwrap();
+    // Moved once: the second bake keeps the first one's layout and records it.
+    let second = dir.path().join("second");
+    let moved = two_rooms_with_box(&dir.path().join("b"), 1.0);
+    let report = bake_since(
+        &moved,
+        &first.join("two_rooms.gltf"),
+        &second,
+        &config,
+        &NoProgress,
+    )
+    .unwrap();
+    assert_eq!(report.incremental.unwrap().full, None);
+    // Moved again, from the incremental bake: still incremental, and as a full re-trace.
+    let again = two_rooms_with_box(&dir.path().join("c"), 1.4);
+    let since = second.join("two_rooms.gltf");
+    let (inc_baked, inc) =
+        incremental(compute_since(&again, &since, &config, Retrace::Edited, &NoProgress).unwrap());
+    let (all_baked, _) =
+        incremental(compute_since(&again, &since, &config, Retrace::All, &NoProgress).unwrap());
+    assert!(
+        inc.retraced > 0 && inc.retraced < inc.rows / 4,
+        "{}",
+        inc.brief()
+    );
+    let worst = (inc_baked.lightmap.iter().zip(&all_baked.lightmap))
+        .map(|(a, b)| (*a - *b).abs().max_element() / (b.max_element() + 1e-3))
+        .fold(0.0f32, f32::max);
+    assert!(worst < 1e-4, "worst relative texel difference {worst:.2e}");
 }

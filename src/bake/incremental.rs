@@ -84,6 +84,11 @@ pub struct InputRecord {
     /// Per glTF node: its `matrix`, `translation`, `rotation` and `scale` as written (an
     /// object holding those present).
     pub(crate) nodes: Vec<Value>,
+    /// The node transforms the bake's layout (junction cuts, atlas) was made with, when not
+    /// `nodes`: an incremental bake keeps the layout of the bake it started from, so the next
+    /// one lays that out again.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub(crate) layout: Option<Vec<Value>>,
 }
 
 /// The record of the input at `path`.
@@ -116,6 +121,7 @@ pub(crate) fn input_record(path: &Path) -> Result<InputRecord> {
     Ok(InputRecord {
         hash: h.finalize().to_hex().to_string(),
         nodes,
+        layout: None,
     })
 }
 
@@ -235,10 +241,12 @@ pub fn compute_since(
             prepared,
             incremental,
             lighting,
-        }) => Since::Incremental(
-            Box::new(super::finish(prepared, lighting, progress)?),
-            incremental,
-        ),
+            layout_nodes,
+        }) => {
+            let mut baked = super::finish(prepared, lighting, progress)?;
+            baked.layout_nodes = Some(layout_nodes);
+            Since::Incremental(Box::new(baked), incremental)
+        }
         Err(why) => Since::Full(why),
     })
 }
@@ -248,6 +256,8 @@ struct Planned {
     prepared: Prepared,
     incremental: Incremental,
     lighting: Lighting,
+    /// The node transforms of the layout kept.
+    layout_nodes: Vec<Value>,
 }
 
 /// Why an incremental bake cannot run (the outer `Ok(Err(..))`).
@@ -295,34 +305,71 @@ fn plan(
         .map(|k| k as u32)
         .collect();
 
-    // The old scene: the input with the old transforms put back, laid out with the old
-    // settings. Deterministic, so it is the old bake's layout; checked against the kept texels.
+    // The layout: the input with the transforms the previous bake's layout was made with put
+    // back (the previous bake's own, or those an incremental bake kept), laid out again with
+    // the old settings. Deterministic, so it is the old layout; the previous scene is that
+    // layout with the nodes moved since placed as the previous bake had them, checked against
+    // the kept texels.
     let t = Instant::now();
-    let put_back = |json: &mut Value| {
-        let Some(list) = json.get_mut("nodes").and_then(Value::as_array_mut) else {
-            return;
-        };
-        for (node, t) in list.iter_mut().zip(&old.nodes) {
-            if let (Some(obj), Some(t)) = (node.as_object_mut(), t.as_object()) {
-                TRANSFORM_KEYS.iter().for_each(|k| {
-                    obj.remove(*k);
-                });
-                obj.extend(t.iter().map(|(k, v)| (k.clone(), v.clone())));
+    let layout_nodes = old.layout.clone().unwrap_or_else(|| old.nodes.clone());
+    let put_back = |nodes: &[Value]| {
+        let nodes = nodes.to_vec();
+        move |json: &mut Value| {
+            let Some(list) = json.get_mut("nodes").and_then(Value::as_array_mut) else {
+                return;
+            };
+            for (node, t) in list.iter_mut().zip(&nodes) {
+                if let (Some(obj), Some(t)) = (node.as_object_mut(), t.as_object()) {
+                    TRANSFORM_KEYS.iter().for_each(|k| {
+                        obj.remove(*k);
+                    });
+                    obj.extend(t.iter().map(|(k, v)| (k.clone(), v.clone())));
+                }
             }
         }
     };
-    let (old_loaded, old_source) = scene::load_edited(input, &put_back)?;
+    let (layout_loaded, layout_source) = scene::load_edited(input, &put_back(&layout_nodes))?;
+    let (prev_loaded, _) = scene::load_edited(input, &put_back(&old.nodes))?;
     let (new_loaded, new_source) = super::load(input, progress)?;
-    let moved = match moved_instances(&old_loaded, &new_loaded) {
-        Ok(m) => m,
-        Err(why) => return Ok(Err(why)),
+    let moves = (
+        moved_instances(&layout_loaded, &prev_loaded),
+        moved_instances(&layout_loaded, &new_loaded),
+        moved_instances(&prev_loaded, &new_loaded),
+    );
+    let (moved_before, moved_now, moved) = match moves {
+        (Ok(a), Ok(b), Ok(c)) => (a, b, c),
+        (Err(why), _, _) | (_, Err(why), _) | (_, _, Err(why)) => return Ok(Err(why)),
     };
-    let old = match &kept.atlas {
-        Some(atlas) => match lay_out_again(old_loaded, old_source, atlas, &config, progress, t)? {
-            Ok(old) => old,
-            Err(why) => return Ok(Err(why)),
-        },
-        None => super::prepare_loaded(old_loaded, old_source, input, &config, &Alone, progress, t)?,
+    let layout = match &kept.atlas {
+        Some(atlas) => {
+            match lay_out_again(layout_loaded, layout_source, atlas, &config, progress, t)? {
+                Ok(layout) => layout,
+                Err(why) => return Ok(Err(why)),
+            }
+        }
+        None => super::prepare_loaded(
+            layout_loaded,
+            layout_source,
+            input,
+            &config,
+            &Alone,
+            progress,
+            t,
+        )?,
+    };
+    let old = if moved_before.is_empty() {
+        layout
+    } else {
+        let t = Instant::now();
+        let mut old = layout;
+        old.scene = place(&old.scene, &prev_loaded, &moved_before);
+        old.tracer = Tracer::new(&old.scene);
+        old.texels = texels::build(&old.scene, &old.atlas)?;
+        let (scene, tracer) = (&old.scene, &old.tracer);
+        old.validity =
+            super::fix_validity(&mut old.texels, scene, tracer, &config, &Alone, progress)?;
+        timed(&mut old.stages, "previous scene", t);
+        old
     };
     if let Some(why) = differs(&old.texels, &kept.texels) {
         return Ok(Err(format!(
@@ -333,7 +380,12 @@ fn plan(
 
     // The new scene: the old one (cuts and all) with the moved instances' vertices placed anew.
     let t = Instant::now();
-    let new_scene = place(&old.scene, &new_loaded, &moved);
+    // Every instance placed away from the layout, before or now, takes its place now (one
+    // moved back to where the layout has it included).
+    let mut away: Vec<usize> = moved_before.iter().chain(&moved_now).copied().collect();
+    away.sort_unstable();
+    away.dedup();
+    let new_scene = place(&old.scene, &new_loaded, &away);
     let tracer = Tracer::new(&new_scene);
     if tracer.epsilon != old.tracer.epsilon {
         return Ok(Err(
@@ -501,6 +553,7 @@ fn plan(
         prepared,
         incremental,
         lighting,
+        layout_nodes,
     }))
 }
 

@@ -218,6 +218,10 @@ pub struct Baked {
     pub layers: Vec<relight::LayerPages>,
     /// Wall time per stage, in pipeline order.
     pub stages: Vec<StageTime>,
+    /// The node transforms the layout was made with, when they are not the input's (an
+    /// incremental bake keeps the previous layout: [`incremental`]); recorded in a kept
+    /// transport.
+    pub(crate) layout_nodes: Option<Vec<serde_json::Value>>,
 }
 
 /// Bakes `input` (.gltf or .glb) into `out_dir`: `<stem>.gltf` + `<stem>.bin` (or `<stem>.glb`),
@@ -837,6 +841,7 @@ pub(crate) fn finish(prepared: Prepared, lit: Lighting, progress: &dyn Progress)
         junctions,
         layers,
         stages,
+        layout_nodes: None,
     })
 }
 
@@ -1027,7 +1032,11 @@ fn keep_with_gltf(
     let mut settings = kept::Settings::new(&baked.scene, config, &name);
     if config.output.keep_transport {
         // What `bake --since` compares an edited input with.
-        settings.input = Some(incremental::input_record(input)?);
+        let mut record = incremental::input_record(input)?;
+        // Recorded only where it is not the input's own (so an unmoved re-bake writes the
+        // same file).
+        record.layout = (baked.layout_nodes.clone()).filter(|nodes| *nodes != record.nodes);
+        settings.input = Some(record);
     }
     if !layer_files.is_empty() {
         let gltf = staging.read(&name)?;
