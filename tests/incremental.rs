@@ -351,3 +351,46 @@ fn an_incremental_bake_starts_from_an_incremental_bake() {
         .fold(0.0f32, f32::max);
     assert!(worst < 1e-4, "worst relative texel difference {worst:.2e}");
 }
+
+#[test]
+fn cli_bake_since_says_incremental() {
+    let dir = scratch();
+    let before = two_rooms_with_box(&dir.path().join("a"), -1.0);
+    let old = dir.path().join("old");
+    let bin = env!("CARGO_BIN_EXE_lightbake");
+    let run = |args: &[&std::ffi::OsStr]| {
+        let out = std::process::Command::new(bin).args(args).output().unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        String::from_utf8(out.stdout).unwrap()
+    };
+    let os = |s: &str| std::ffi::OsString::from(s);
+    run(&[
+        &os("bake"),
+        before.as_os_str(),
+        &os("-o"),
+        old.as_os_str(),
+        &os("--quality"),
+        &os("draft"),
+        &os("--keep-transport"),
+    ]);
+    let after = two_rooms_with_box(&dir.path().join("b"), 1.0);
+    let since = old.join("two_rooms.gltf");
+    let new = dir.path().join("new");
+    let stdout = run(&[
+        &os("bake"),
+        after.as_os_str(),
+        &os("-o"),
+        new.as_os_str(),
+        &os("--since"),
+        since.as_os_str(),
+    ]);
+    assert!(
+        stdout.contains("incremental: 1 node(s) moved") && stdout.contains("rows re-traced"),
+        "{stdout}"
+    );
+    assert!(new.join("two_rooms_lightmap0.exr").exists());
+}
