@@ -843,6 +843,11 @@ impl Rebuild<'_> {
                 continue;
             }
             flagged.clear();
+            if self.faces_away(i) {
+                // No ray of this row can reach a moved node: reuse the row as kept.
+                self.row(i, &flagged, self.ray_counts(), out);
+                continue;
+            }
             let (k, l) = row_rays(self.new, i, |ray| {
                 if self.flags(ray) {
                     flagged.push(ray);
@@ -852,6 +857,30 @@ impl Rebuild<'_> {
         }
         let ns = chunk.elapsed().as_nanos() as u64;
         self.busy.fetch_add(ns, Ordering::Relaxed);
+    }
+
+    /// Whether every moved bounds lies below texel `i`'s plane, beyond its footprint: a row's
+    /// rays start within `|du| + |dv|` of the texel's position (its footprint, lifted by the ray
+    /// epsilon) and only those going up its hemisphere count (gathering rays by construction,
+    /// light samples and punctual lights are zero when `cos_i ≤ 0`), so none reaches such bounds.
+    fn faces_away(&self, i: usize) -> bool {
+        let t = self.new.surfaces.texels;
+        let (p, n) = (t.position[i], t.normal[i]);
+        let reach = t.du[i].length() + t.dv[i].length() + 4.0 * self.new.surfaces.tracer.epsilon;
+        self.boxes.iter().all(|&(lo, hi)| {
+            let (centre, half) = ((lo + hi) * 0.5, (hi - lo) * 0.5);
+            (centre - p).dot(n) + half.dot(n.abs()) < -reach
+        })
+    }
+
+    /// The row's gathering rays and light samples, as `row_rays` counts them.
+    fn ray_counts(&self) -> (u32, u32) {
+        let p = self.new.params;
+        let l = match self.new.emitters.is_empty() {
+            true => 0,
+            false => p.light_samples,
+        };
+        (p.gather_rays.max(1), l)
     }
 
     /// Whether `ray` can end differently: its line meets a moved node's old or new bounds.
