@@ -341,12 +341,10 @@ fn plan(
         (Err(why), _, _) | (_, Err(why), _) | (_, _, Err(why)) => return Ok(Err(why)),
     };
     let layout = match &kept.atlas {
-        Some(atlas) => {
-            match lay_out_again(layout_loaded, layout_source, atlas, &config, progress, t)? {
-                Ok(layout) => layout,
-                Err(why) => return Ok(Err(why)),
-            }
-        }
+        Some(atlas) => match lay_out_again(layout_loaded, layout_source, atlas, &config, t)? {
+            Ok(layout) => layout,
+            Err(why) => return Ok(Err(why)),
+        },
         None => super::prepare_loaded(
             layout_loaded,
             layout_source,
@@ -357,7 +355,7 @@ fn plan(
             t,
         )?,
     };
-    let old = if moved_before.is_empty() {
+    let mut old = if moved_before.is_empty() {
         layout
     } else {
         let t = Instant::now();
@@ -365,12 +363,18 @@ fn plan(
         old.scene = place(&old.scene, &prev_loaded, &moved_before);
         old.tracer = Tracer::new(&old.scene);
         old.texels = texels::build(&old.scene, &old.atlas)?;
-        let (scene, tracer) = (&old.scene, &old.tracer);
-        old.validity =
-            super::fix_validity(&mut old.texels, scene, tracer, &config, &Alone, progress)?;
         timed(&mut old.stages, "previous scene", t);
         old
     };
+    // The validity pass's results are the previous bake's, as kept (sample points, jitter,
+    // invalid texels, cell maps): what its rows were traced from. The raster's own values
+    // (normals, texel steps, albedo, emission) check the layout below.
+    if kept.atlas.is_some() && old.texels.len() == kept.texels.len() {
+        old.texels.position = kept.texels.position.clone();
+        old.texels.jitter = kept.jitter.clone();
+        old.texels.invalid = kept.texels.invalid.clone();
+        old.texels.cuts = kept.cuts.clone();
+    }
     if let Some(why) = differs(&old.texels, &kept.texels) {
         return Ok(Err(format!(
             "the previous bake's texels could not be laid out again ({why}: another lightbake, or other settings)"
@@ -558,14 +562,14 @@ fn plan(
 }
 
 /// The old bake's scene laid out again on its kept `atlas` (what `prepare_loaded` does with
-/// the fixed settings `config`, without unwrapping): the junction split, the tracer, the texels
-/// and their validity pass. `Err` when the atlas does not fit the split scene.
+/// the fixed settings `config`, without unwrapping): the junction split, the tracer and the
+/// texels, before the validity pass (whose results the kept file holds). `Err` when the atlas
+/// does not fit the split scene.
 fn lay_out_again(
     loaded: Scene,
     source: scene::Source,
     atlas: &crate::atlas::Atlas,
     config: &BakeConfig,
-    progress: &dyn Progress,
     load_start: Instant,
 ) -> Result<Fallback<Prepared>> {
     let mut stages = Vec::new();
@@ -592,18 +596,15 @@ fn lay_out_again(
     let tracer = Tracer::new(&scene);
     timed(&mut stages, "bvh", t);
     let t = Instant::now();
-    let mut texels = texels::build(&scene, atlas)?;
+    let texels = texels::build(&scene, atlas)?;
     timed(&mut stages, "texels", t);
-    let t = Instant::now();
-    let validity = super::fix_validity(&mut texels, &scene, &tracer, config, &Alone, progress)?;
-    timed(&mut stages, "validity", t);
     Ok(Ok(Prepared {
         scene,
         source,
         tracer,
         atlas: atlas.clone(),
         texels,
-        validity,
+        validity: Default::default(),
         config: config.clone(),
         plan: None,
         density_noise: None,

@@ -49,6 +49,10 @@
 //!    (3 × u32 each) and `triangle_page` (u32 each) ([`crate::atlas::InstanceUv`]). An
 //!    incremental bake lays the old scene out again without unwrapping it (xatlas is most of
 //!    that time); the kept texels check the result.
+//! 8. what the validity pass left besides positions: `n` jitter fractions (f32), then u32
+//!    count and per divided texel its id (u32) and cell map (64 × u32) ([`crate::texels`]'s
+//!    cuts). With the positions and invalid texels above, an incremental bake has the old
+//!    texels without running the old scene's validity pass again.
 //!
 //! Version 1 files (no input record, no direct light sums) are refused with the advice to bake
 //! again; they held nothing an incremental bake could trust.
@@ -282,6 +286,10 @@ pub struct Kept {
     pub(crate) seams: Seams,
     /// The bake's lightmap layout (section 7; `None` with shared meshes).
     pub(crate) atlas: Option<Atlas>,
+    /// Per texel, the validity pass's jitter fraction (section 8; `texels.jitter` stays empty).
+    pub(crate) jitter: Vec<f32>,
+    /// The divided texels' cell maps (section 8; `texels.cuts` stays empty).
+    pub(crate) cuts: crate::texels::Cuts,
 }
 
 /// Per texel: the material of its main triangle.
@@ -390,6 +398,13 @@ pub(crate) fn encode(
         }
     } else {
         w.u32(0);
+    }
+    (0..n).for_each(|i| w.f32(texels.jitter.get(i).copied().unwrap_or(1.0)));
+    let divided: Vec<_> = texels.cuts.entries().collect();
+    w.u32(divided.len() as u32);
+    for (i, map) in divided {
+        w.u32(i);
+        map.iter().for_each(|&j| w.u32(j));
     }
     let body = w.0;
     let mut out = Vec::with_capacity(body.len() + 100);
@@ -618,6 +633,19 @@ fn decode<'a>(r: &mut Reader<'a>) -> std::result::Result<(Kept, &'a [u8]), Strin
             })
         }
     };
+    let jitter = r.f32s(n)?;
+    let divided = r.u32()? as usize;
+    let mut entries = Vec::with_capacity(divided.min(n));
+    for _ in 0..divided {
+        let i = r.u32()?;
+        let cells = r.u32s(64)?;
+        let prior = entries.last().map(|e: &(u32, [u32; 64])| e.0);
+        if i as usize >= n || cells.iter().any(|&j| j as usize >= n) || prior >= Some(i) {
+            return Err("a divided texel's cell map is out of range or order".to_string());
+        }
+        entries.push((i, cells.try_into().unwrap()));
+    }
+    let cuts = crate::texels::Cuts::from_entries(n, entries);
     if r.at != r.bytes.len() {
         return Err(format!(
             "{} bytes after the last section",
@@ -632,6 +660,8 @@ fn decode<'a>(r: &mut Reader<'a>) -> std::result::Result<(Kept, &'a [u8]), Strin
         direct,
         seams,
         atlas,
+        jitter,
+        cuts,
     };
     Ok((kept, json))
 }
