@@ -22,6 +22,9 @@
 //! everything but node transforms, and each node's transform: [`InputRecord`]), the rows as
 //! hit counts (already kept: `f · K` is exact in f32), and the direct light as the bake summed
 //! it (so reused rows are reused bit for bit; the kept per-source terms round differently).
+//! Two more sections only save time: the atlas (the old scene is laid out again without
+//! unwrapping) and the validity pass's jitter and cell maps (the old texels are the kept ones,
+//! with no validity pass over the old scene).
 //!
 //! ## What stays, and when it bakes in full instead
 //!
