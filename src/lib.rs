@@ -71,7 +71,8 @@
 //!
 //! [`bake`] chains the stages ([`prepare`], [`compute`], [`write()`]); build tools that want the
 //! intermediate data call them directly. [`build()`] bakes the scenes of a [`Manifest`] that
-//! changed since their last bake ([`mod@build`]). Stages call only downwards:
+//! changed since their last bake ([`mod@build`]), incrementally ([`incremental`]) where only
+//! node transforms changed. Stages call only downwards:
 //!
 //! ```text
 //!   error, progress, sampling        below everything
@@ -97,6 +98,10 @@
 //!                                    `kept`: the kept transport's file (`--keep-transport`);
 //!                                    `relight`: a kept bake solved again with other light and
 //!                                    material values, and per-light layers;
+//!                                    `incremental`: a kept bake re-baked after nodes moved
+//!                                    (`bake --since`): the old layout made again, only the
+//!                                    rays that meet a moved node's old or new bounds traced
+//!                                    again (drawn from their seeds, nothing per ray kept);
 //!                                    `distributed`: the same bake over several processes
 //!                                    (timely dataflow): every transport's rows (pilots' and
 //!                                    final) sharded, the radiosity vector exchanged every
@@ -167,8 +172,8 @@ pub mod testing;
 mod bake;
 
 pub use bake::{
-    BakeReport, Baked, Prepared, ProbeCount, StageTime, bake, compute, distributed, kept, prepare,
-    relight, split_junctions, write,
+    BakeReport, Baked, Prepared, ProbeCount, StageTime, bake, compute, distributed, incremental,
+    kept, prepare, relight, split_junctions, write,
 };
 pub use build::{BuildReport, Manifest, build};
 pub use config::BakeConfig;

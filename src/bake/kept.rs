@@ -1,14 +1,14 @@
 //! The kept transport, `<stem>.transport`: what `lightbake relight` needs to solve a bake again
 //! with other light and material values, without casting a ray ([`super::relight`]).
 //!
-//! ## Format (version 1)
+//! ## Format (version 2)
 //!
 //! Little-endian throughout; `vec3` is three `f32`.
 //!
 //! | bytes             | what                                                                 |
 //! |-------------------|----------------------------------------------------------------------|
 //! | 20                | magic `LIGHTBAKE-TRANSPORT\n`                                         |
-//! | u32               | format version (1)                                                   |
+//! | u32               | format version (2)                                                   |
 //! | 32                | scene hash: blake3 of the baked glTF (`.gltf` JSON then its `.bin`, or the `.glb`) and of the settings block |
 //! | u64               | body length in bytes                                                 |
 //! | body              | the sections below, in order                                         |
@@ -18,8 +18,10 @@
 //!
 //! 1. settings: u64 length + UTF-8 JSON ([`Settings`]): the settings the bake ran with (the
 //!    automatic choices applied: method, solver, rays, light samples, tolerance, density; a
-//!    kept bake casts the chosen rays at every texel), the glTF it belongs to, and the lights and materials by name with their
-//!    baked values (the relit values are relative to them).
+//!    kept bake casts the chosen rays at every texel), the glTF it belongs to, the lights and materials by name with their
+//!    baked values (the relit values are relative to them), and the input it was baked from
+//!    ([`super::incremental::InputRecord`]: a hash of everything but the node transforms, and
+//!    each node's transform as written), which `bake --since` compares the edited input with.
 //! 2. texels: u32 texel count `n`, u32 source count `S`, u32 page count, then per page
 //!    u32 width and height; then arrays of `n`: page (u32), x and y (2 × u32), position,
 //!    normal, du, dv, albedo, emission (vec3 each), material (u32, an index into the settings'
@@ -35,8 +37,25 @@
 //! 4. direct light by source: `n × S` vec3, texel-major ([`Transport::direct_terms`]): sources
 //!    are the scene's punctual lights, then its emissive materials
 //!    ([`crate::transport::Sources`]). The sky's part is `π · sky · escape`.
-//! 5. seams: u32 count, then per sample u32 page × 2 and f32 uv × 4 (the seam samples the
+//! 5. direct light as the bake summed it: `n` vec3 (`Transport::direct`, sky included). The
+//!    sum of the terms of section 4 rounds differently; `bake --since` reuses a row unchanged
+//!    only if it reuses its direct light bit for bit, so an unchanged scene re-bakes to the
+//!    same bytes.
+//! 6. seams: u32 count, then per sample u32 page × 2 and f32 uv × 4 (the seam samples the
 //!    stitching reads, found from the scene and atlas at bake time).
+//! 7. atlas: u32 0 (not kept: `--instancing share`), or 1 then f32 texels per unit, u32 page
+//!    count and per page width and height, u32 instance count and per instance u32 vertex
+//!    count, `xref` (u32 each), `uv` (2 × f32 each), u32 triangle count, `triangles`
+//!    (3 × u32 each) and `triangle_page` (u32 each) ([`crate::atlas::InstanceUv`]). An
+//!    incremental bake lays the old scene out again without unwrapping it (xatlas is most of
+//!    that time); the kept texels check the result.
+//! 8. what the validity pass left besides positions: `n` jitter fractions (f32), then u32
+//!    count and per divided texel its id (u32) and cell map (64 × u32) ([`crate::texels`]'s
+//!    cuts). With the positions and invalid texels above, an incremental bake has the old
+//!    texels without running the old scene's validity pass again.
+//!
+//! Version 1 files (no input record, no direct light sums) are refused with the advice to bake
+//! again; they held nothing an incremental bake could trust.
 //!
 //! Reading refuses, naming the file: another kind of file (magic), another format version, a
 //! truncated or damaged file (lengths and body hash), and a stale or foreign one (the scene
@@ -47,7 +66,7 @@ use std::path::{Path, PathBuf};
 use glam::{Vec2, Vec3};
 use serde::{Deserialize, Serialize};
 
-use crate::atlas::PageSize;
+use crate::atlas::{Atlas, InstanceUv, PageSize};
 use crate::config::{BakeConfig, Technique, UvMode};
 use crate::lightmap::seams::{SeamSample, Seams};
 use crate::scene::Scene;
@@ -57,7 +76,7 @@ use crate::{Error, Result};
 
 const MAGIC: &[u8; 20] = b"LIGHTBAKE-TRANSPORT\n";
 /// The format version this lightbake writes and reads.
-pub(crate) const VERSION: u32 = 1;
+pub(crate) const VERSION: u32 = 2;
 
 /// The settings block: how the bake ran, and the lights and materials it was baked with.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
@@ -99,6 +118,13 @@ pub struct Settings {
     pub(crate) preview_exposure: f32,
     pub(crate) rgbm: bool,
     pub(crate) seams: bool,
+    /// Monte Carlo rows held as ray counts (`--rows counts`, or the planner's memory choice).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub(crate) count_rows: bool,
+    /// The input the bake read, for `bake --since` ([`super::incremental`]); set when the
+    /// transport is kept.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub(crate) input: Option<super::incremental::InputRecord>,
     /// The scene's punctual lights, in scene order (sources `0..lights.len()`).
     pub(crate) lights: Vec<LightEntry>,
     /// The scene's materials, in scene order.
@@ -191,6 +217,8 @@ impl Settings {
             preview_exposure: o.preview_exposure,
             rgbm: o.rgbm,
             seams: o.seams,
+            count_rows: t.count_rows,
+            input: None,
             lights,
             materials,
             emissive: Sources::new(scene).emissive,
@@ -227,6 +255,7 @@ impl Settings {
         t.seed = self.seed;
         t.validity = self.validity;
         t.denoise = self.denoise;
+        t.count_rows = self.count_rows;
         c.solve.tolerance = self.tolerance;
         c.solve.max_iterations = self.max_iterations;
         let o = &mut c.output;
@@ -251,8 +280,16 @@ pub struct Kept {
     pub(crate) material: Vec<u32>,
     /// Rows, escape fractions, direct light by source (`direct` is empty: relight makes it).
     pub(crate) transport: Transport,
+    /// Per texel, direct light as the bake summed it (section 5).
+    pub(crate) direct: Vec<Vec3>,
     /// Seam samples only (`edges` is empty).
     pub(crate) seams: Seams,
+    /// The bake's lightmap layout (section 7; `None` with shared meshes).
+    pub(crate) atlas: Option<Atlas>,
+    /// Per texel, the validity pass's jitter fraction (section 8; `texels.jitter` stays empty).
+    pub(crate) jitter: Vec<f32>,
+    /// The divided texels' cell maps (section 8; `texels.cuts` stays empty).
+    pub(crate) cuts: crate::texels::Cuts,
 }
 
 /// Per texel: the material of its main triangle.
@@ -282,10 +319,14 @@ pub(crate) fn encode(
     material: &[u32],
     transport: &Transport,
     seams: &Seams,
+    atlas: &Atlas,
 ) -> Result<Vec<u8>> {
     let n = texels.len();
     let sources = transport.sources.len();
-    if transport.direct_terms.len() != n * sources || transport.len() != n {
+    if transport.direct_terms.len() != n * sources
+        || transport.len() != n
+        || transport.escape.len() != n
+    {
         return Err(Error::Internal(
             "the transport holds no direct light by source: it cannot be kept".to_string(),
         ));
@@ -326,6 +367,7 @@ pub(crate) fn encode(
         }
     }
     transport.direct_terms.iter().for_each(|&v| w.vec3(v));
+    transport.direct.iter().for_each(|&v| w.vec3(v));
     w.u32(seams.samples.len() as u32);
     for s in &seams.samples {
         s.page.iter().for_each(|&p| w.u32(p));
@@ -333,6 +375,36 @@ pub(crate) fn encode(
             w.f32(uv.x);
             w.f32(uv.y);
         });
+    }
+    if atlas.shared.is_empty() && !atlas.reused_input_uvs {
+        w.u32(1);
+        w.f32(atlas.texels_per_unit);
+        w.u32(atlas.pages.len() as u32);
+        for p in &atlas.pages {
+            w.u32(p.width);
+            w.u32(p.height);
+        }
+        w.u32(atlas.instances.len() as u32);
+        for inst in &atlas.instances {
+            w.u32(inst.xref.len() as u32);
+            inst.xref.iter().for_each(|&x| w.u32(x));
+            inst.uv.iter().for_each(|uv| {
+                w.f32(uv.x);
+                w.f32(uv.y);
+            });
+            w.u32(inst.triangles.len() as u32);
+            inst.triangles.iter().flatten().for_each(|&v| w.u32(v));
+            inst.triangle_page.iter().for_each(|&p| w.u32(p));
+        }
+    } else {
+        w.u32(0);
+    }
+    (0..n).for_each(|i| w.f32(texels.jitter.get(i).copied().unwrap_or(1.0)));
+    let divided: Vec<_> = texels.cuts.entries().collect();
+    w.u32(divided.len() as u32);
+    for (i, map) in divided {
+        w.u32(i);
+        map.iter().for_each(|&j| w.u32(j));
     }
     let body = w.0;
     let mut out = Vec::with_capacity(body.len() + 100);
@@ -495,6 +567,7 @@ fn decode<'a>(r: &mut Reader<'a>) -> std::result::Result<(Kept, &'a [u8]), Strin
         return Err("a row names a texel out of range".to_string());
     }
     transport.direct_terms = r.vec3s(n * sources)?;
+    let direct = r.vec3s(n)?;
     transport.sources = Sources {
         lights: settings.lights.len(),
         emissive: settings.emissive.clone(),
@@ -513,6 +586,66 @@ fn decode<'a>(r: &mut Reader<'a>) -> std::result::Result<(Kept, &'a [u8]), Strin
             uv: [Vec2::new(v[0], v[1]), Vec2::new(v[2], v[3])],
         });
     }
+    let atlas = match r.u32()? {
+        0 => None,
+        _ => {
+            let texels_per_unit = r.f32s(1)?[0];
+            let pages = r.u32()? as usize;
+            let sizes = r.u32s(2 * pages)?;
+            let pages: Vec<PageSize> = sizes
+                .chunks(2)
+                .map(|c| PageSize {
+                    width: c[0],
+                    height: c[1],
+                })
+                .collect();
+            let count = r.u32()? as usize;
+            let mut instances = Vec::with_capacity(count.min(1 << 20));
+            for _ in 0..count {
+                let verts = r.u32()? as usize;
+                let xref = r.u32s(verts)?;
+                let uv = r.f32s(2 * verts)?;
+                let uv = uv.chunks(2).map(|c| Vec2::new(c[0], c[1])).collect();
+                let tris = r.u32()? as usize;
+                let corners = r.u32s(3 * tris)?;
+                let triangles: Vec<[u32; 3]> =
+                    corners.chunks(3).map(|c| [c[0], c[1], c[2]]).collect();
+                if triangles.iter().flatten().any(|&v| v as usize >= verts) {
+                    return Err("an atlas triangle names a vertex out of range".to_string());
+                }
+                let triangle_page = r.u32s(tris)?;
+                if triangle_page.iter().any(|&p| p as usize >= pages.len()) {
+                    return Err("an atlas triangle's page is out of range".to_string());
+                }
+                instances.push(InstanceUv {
+                    xref,
+                    uv,
+                    triangles,
+                    triangle_page,
+                });
+            }
+            Some(Atlas {
+                pages,
+                instances,
+                texels_per_unit,
+                reused_input_uvs: false,
+                shared: Vec::new(),
+            })
+        }
+    };
+    let jitter = r.f32s(n)?;
+    let divided = r.u32()? as usize;
+    let mut entries = Vec::with_capacity(divided.min(n));
+    for _ in 0..divided {
+        let i = r.u32()?;
+        let cells = r.u32s(64)?;
+        let prior = entries.last().map(|e: &(u32, [u32; 64])| e.0);
+        if i as usize >= n || cells.iter().any(|&j| j as usize >= n) || prior >= Some(i) {
+            return Err("a divided texel's cell map is out of range or order".to_string());
+        }
+        entries.push((i, cells.try_into().unwrap()));
+    }
+    let cuts = crate::texels::Cuts::from_entries(n, entries);
     if r.at != r.bytes.len() {
         return Err(format!(
             "{} bytes after the last section",
@@ -524,7 +657,11 @@ fn decode<'a>(r: &mut Reader<'a>) -> std::result::Result<(Kept, &'a [u8]), Strin
         texels,
         material,
         transport,
+        direct,
         seams,
+        atlas,
+        jitter,
+        cuts,
     };
     Ok((kept, json))
 }

@@ -5,6 +5,7 @@
 //! solution through the one dispatch of [`light`], denoise, pages), then [`write`].
 
 pub mod distributed;
+pub mod incremental;
 pub mod kept;
 pub(crate) mod light;
 pub(crate) mod memory;
@@ -67,6 +68,9 @@ pub struct BakeReport {
     pub stages: Vec<StageTime>,
     /// The files written, the glTF first.
     pub files: Vec<PathBuf>,
+    /// What an incremental bake (`bake --since`, [`incremental`]) re-traced and reused
+    /// (`None` for a plain bake).
+    pub incremental: Option<incremental::Incremental>,
 }
 
 impl BakeReport {
@@ -122,8 +126,12 @@ impl BakeReport {
                 p.rays as f64 * 1e-6
             )
         });
+        let incremental = self
+            .incremental
+            .as_ref()
+            .map_or(String::new(), |i| format!("; {}", i.brief()));
         format!(
-            "{} texels ({} moved out of geometry, {} invalid, {} divided by a wall) on {} page(s), {} triangles, {:.2} M rays, {} iterations, residual {:.1e}{}{}{junctions}{sharing}{directional}{probes}{plan}; {} (total {:.2}s{overhead})",
+            "{} texels ({} moved out of geometry, {} invalid, {} divided by a wall) on {} page(s), {} triangles, {:.2} M rays, {} iterations, residual {:.1e}{}{}{junctions}{sharing}{directional}{probes}{plan}{incremental}; {} (total {:.2}s{overhead})",
             self.texels,
             self.validity.moved,
             self.validity.invalid,
@@ -210,6 +218,10 @@ pub struct Baked {
     pub layers: Vec<relight::LayerPages>,
     /// Wall time per stage, in pipeline order.
     pub stages: Vec<StageTime>,
+    /// The node transforms the layout was made with, when they are not the input's (an
+    /// incremental bake keeps the previous layout: [`incremental`]); recorded in a kept
+    /// transport.
+    pub(crate) layout_nodes: Option<Vec<serde_json::Value>>,
 }
 
 /// Bakes `input` (.gltf or .glb) into `out_dir`: `<stem>.gltf` + `<stem>.bin` (or `<stem>.glb`),
@@ -282,6 +294,7 @@ fn pass_through(
         probes: None,
         stages,
         files,
+        incremental: None,
     })
 }
 
@@ -836,6 +849,7 @@ pub(crate) fn finish(prepared: Prepared, lit: Lighting, progress: &dyn Progress)
         junctions,
         layers,
         stages,
+        layout_nodes: None,
     })
 }
 
@@ -979,6 +993,7 @@ pub fn write(
         probes: baked.probes.as_ref().map(ProbeCount::of),
         stages: baked.stages,
         files,
+        incremental: None,
     })
 }
 
@@ -1035,7 +1050,15 @@ fn keep_with_gltf(
         false => format!("{stem}.gltf"),
     };
     let config = &baked.config;
-    let settings = kept::Settings::new(&baked.scene, config, &name);
+    let mut settings = kept::Settings::new(&baked.scene, config, &name);
+    if config.output.keep_transport {
+        // What `bake --since` compares an edited input with.
+        let mut record = incremental::input_record(input)?;
+        // Recorded only where it is not the input's own (so an unmoved re-bake writes the
+        // same file).
+        record.layout = (baked.layout_nodes.clone()).filter(|nodes| *nodes != record.nodes);
+        settings.input = Some(record);
+    }
     if !layer_files.is_empty() {
         let gltf = staging.read(&name)?;
         let edited = output::gltf_edit::edit_gltf(&gltf, input, |json| {
@@ -1065,6 +1088,7 @@ fn keep_with_gltf(
         &material,
         &baked.transport,
         &seams,
+        &baked.atlas,
     )?;
     staging.write(&format!("{stem}.transport"), &bytes)
 }

@@ -147,6 +147,7 @@ pub fn relight(
         material,
         mut transport,
         seams,
+        ..
     } = kept::read(gltf)?;
     let mut config = settings.config()?;
     config.output.layers = layers.map(<[LayerGroup]>::to_vec);

@@ -22,6 +22,11 @@ pub(crate) const RECORD: &str = "lightbake-build.json";
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub(super) struct Record {
     pub(crate) key: String,
+    /// The key without the input's bytes ([`options_key`]): a record whose `options` match but
+    /// whose `key` does not was made from another version of the input with the same options,
+    /// which an incremental bake can start from. Empty in records that predate it.
+    #[serde(default)]
+    pub(crate) options: String,
     /// Output files relative to the output directory, with their BLAKE3 hashes.
     pub(crate) files: Vec<(PathBuf, String)>,
     pub(crate) result: SceneResult,
@@ -43,6 +48,17 @@ pub(super) fn key(input: &Path, config: &BakeConfig) -> Result<String> {
     Ok(hasher.finalize().to_hex().to_string())
 }
 
+/// The cache key without the input's content: lightbake's version, the effective options and
+/// the input's file name.
+pub(super) fn options_key(input: &Path, config: &BakeConfig) -> String {
+    let mut hasher = blake3::Hasher::new();
+    hasher.update(concat!("lightbake ", env!("CARGO_PKG_VERSION"), "\n").as_bytes());
+    hasher.update(format!("{config:?}\n").as_bytes());
+    let name = input.file_name().unwrap_or_default().to_string_lossy();
+    hasher.update(format!("{name}\n").as_bytes());
+    hasher.finalize().to_hex().to_string()
+}
+
 fn hash_file(path: &Path) -> Result<String> {
     let mut hasher = blake3::Hasher::new();
     hasher
@@ -51,22 +67,21 @@ fn hash_file(path: &Path) -> Result<String> {
     Ok(hasher.finalize().to_hex().to_string())
 }
 
-/// The record in `output` if its key is `key` and every output it lists is as written.
-pub(super) fn hit(output: &Path, key: &str) -> Option<Record> {
+/// The record in `output` if every output it lists is as written (whatever its key).
+pub(super) fn intact(output: &Path) -> Option<Record> {
     let text = std::fs::read(output.join(RECORD)).ok()?;
     let record: Record = serde_json::from_slice(&text).ok()?;
-    let intact = record.key == key
-        && record
-            .files
-            .iter()
-            .all(|(file, hash)| hash_file(&output.join(file)).is_ok_and(|h| h == *hash));
+    let intact = record
+        .files
+        .iter()
+        .all(|(file, hash)| hash_file(&output.join(file)).is_ok_and(|h| h == *hash));
     intact.then_some(record)
 }
 
 /// Writes the record of a bake of `files` (below `output`) with `key`.
 pub(super) fn store(
     output: &Path,
-    key: &str,
+    (key, options): (&str, &str),
     files: &[PathBuf],
     result: &SceneResult,
 ) -> Result<()> {
@@ -79,6 +94,7 @@ pub(super) fn store(
         .collect::<Result<Vec<_>>>()?;
     let record = Record {
         key: key.to_string(),
+        options: options.to_string(),
         files,
         result: result.clone(),
     };

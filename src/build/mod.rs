@@ -54,6 +54,9 @@ pub struct ManifestScene {
 pub enum Status {
     /// The scene was baked and its outputs written.
     Baked,
+    /// The scene changed only by node transforms since its last bake (kept with
+    /// `keep-transport`): re-baked incrementally from it (`bake --since`), outputs written.
+    Incremental,
     /// The cache matched: the outputs were left as they were.
     Skipped,
     /// The bake failed (see [`SceneReport::error`]).
@@ -97,6 +100,22 @@ pub struct SceneReport {
     pub result: SceneResult,
     /// Why the scene failed.
     pub error: Option<String>,
+    /// What an incremental re-bake re-traced (`status: "incremental"` only).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub incremental: Option<IncrementalFigures>,
+}
+
+/// What an incremental re-bake of a scene re-traced, for the report.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct IncrementalFigures {
+    /// Rows (texels) of the bake.
+    pub rows: usize,
+    /// Rows traced again whole.
+    pub retraced: usize,
+    /// Rows patched (some rays traced again).
+    pub patched: usize,
+    /// The transport time saved against tracing every row, estimated at the bake's rate.
+    pub seconds_saved: f64,
 }
 
 /// What a build did, scene by scene in manifest order.
@@ -203,9 +222,10 @@ pub fn build(manifest: &Manifest, progress: &dyn Progress) -> BuildReport {
             Ok(Lookup::Hit(result)) => {
                 reports[k] = Some(scene_report(scene, start, Ok((Status::Skipped, result))))
             }
-            Ok(Lookup::Miss(key)) => pending.push(Pending {
+            Ok(Lookup::Miss(key, since)) => pending.push(Pending {
                 scene: k,
                 key,
+                since,
                 seconds: start.elapsed().as_secs_f64(),
             }),
             Err(e) => reports[k] = Some(scene_report(scene, start, Err(e))),
@@ -216,8 +236,13 @@ pub fn build(manifest: &Manifest, progress: &dyn Progress) -> BuildReport {
     let bake = |p: &Pending| {
         let start = Instant::now();
         let scene = &manifest.scenes[p.scene];
-        let result = bake_scene(scene, &configs[p.scene], &p.key, progress);
-        let mut report = scene_report(scene, start, result.map(|r| (Status::Baked, r)));
+        let result = bake_scene(scene, &configs[p.scene], &p.key, p.since.as_ref(), progress);
+        let (result, figures) = match result {
+            Ok((status, result, figures)) => (Ok((status, result)), figures),
+            Err(e) => (Err(e), None),
+        };
+        let mut report = scene_report(scene, start, result);
+        report.incremental = figures;
         report.seconds += p.seconds;
         report
     };
@@ -253,6 +278,8 @@ pub fn build(manifest: &Manifest, progress: &dyn Progress) -> BuildReport {
 struct Pending {
     scene: usize,
     key: String,
+    /// The previous bake to start from incrementally, and its record.
+    since: Option<(PathBuf, cache::Record)>,
     seconds: f64,
 }
 
@@ -345,6 +372,7 @@ fn scene_report(
         seconds: start.elapsed().as_secs_f64(),
         result,
         error,
+        incremental: None,
     }
 }
 
@@ -352,8 +380,9 @@ fn scene_report(
 enum Lookup {
     /// Up to date: the recorded figures.
     Hit(SceneResult),
-    /// To be baked: the key to record.
-    Miss(String),
+    /// To be baked: the key to record, and the previous bake an incremental bake can start
+    /// from (its glTF and record).
+    Miss(String, Option<(PathBuf, cache::Record)>),
 }
 
 fn look_up(scene: &ManifestScene, force: bool, progress: &dyn Progress) -> Result<Lookup> {
@@ -361,32 +390,79 @@ fn look_up(scene: &ManifestScene, force: bool, progress: &dyn Progress) -> Resul
         return Err(crate::Error::Aborted);
     }
     let key = cache::key(&scene.input, &scene.config)?;
-    match cache::hit(&scene.output, &key) {
-        Some(record) if !force => Ok(Lookup::Hit(record.result)),
-        _ => Ok(Lookup::Miss(key)),
+    let record = cache::intact(&scene.output);
+    match record {
+        Some(record) if !force && record.key == key => Ok(Lookup::Hit(record.result)),
+        Some(record) if !force => Ok(Lookup::Miss(key, since(scene, record))),
+        _ => Ok(Lookup::Miss(key, None)),
     }
 }
 
-/// Bakes `scene` with `config` (its own, the memory limit fixed) and records `key` with it.
+/// The previous bake of `scene` (intact, `record` its record) an incremental bake can start
+/// from: one made with the same options, the transport kept (`keep-transport`). Whether the
+/// input changed only by node transforms is for the incremental bake to find (it bakes in full
+/// otherwise).
+fn since(scene: &ManifestScene, record: cache::Record) -> Option<(PathBuf, cache::Record)> {
+    if !scene.config.output.keep_transport
+        || record.options != cache::options_key(&scene.input, &scene.config)
+    {
+        return None;
+    }
+    let stem = scene.input.file_stem()?.to_string_lossy().into_owned();
+    let listed = |name: &str| record.files.iter().any(|(f, _)| f.as_os_str() == name);
+    let gltf = [format!("{stem}.gltf"), format!("{stem}.glb")]
+        .into_iter()
+        .find(|g| listed(g))?;
+    listed(&format!("{stem}.transport")).then(|| (scene.output.join(gltf), record))
+}
+
+/// Bakes `scene` with `config` (its own, the memory limit fixed), incrementally from `since`
+/// when given, and records `key` with it.
 fn bake_scene(
     scene: &ManifestScene,
     config: &BakeConfig,
     key: &str,
+    since: Option<&(PathBuf, cache::Record)>,
     progress: &dyn Progress,
-) -> Result<SceneResult> {
+) -> Result<(Status, SceneResult, Option<IncrementalFigures>)> {
     if progress.aborted() {
         return Err(crate::Error::Aborted);
     }
-    // A record left from an earlier bake must not vouch for half-written new outputs.
+    // A record left from an earlier bake must not vouch for half-written new outputs: an
+    // interrupted bake (incremental or not) leaves no record, and the next build bakes in full.
+    // An incremental bake reads the old outputs before it writes any file.
     let _ = std::fs::remove_file(scene.output.join(cache::RECORD));
     let warnings = Warnings {
         inner: progress,
         seen: Mutex::default(),
     };
-    let report = crate::bake(&scene.input, &scene.output, config, &warnings)?;
-    let result = SceneResult::of(&report, warnings.seen.into_inner().unwrap_or_default());
-    cache::store(&scene.output, key, &report.files, &result)?;
-    Ok(result)
+    let report = match since {
+        Some((gltf, _)) => {
+            crate::incremental::bake_since(&scene.input, gltf, &scene.output, config, &warnings)?
+        }
+        None => crate::bake(&scene.input, &scene.output, config, &warnings)?,
+    };
+    let mut result = SceneResult::of(&report, warnings.seen.into_inner().unwrap_or_default());
+    let incremental = report.incremental.as_ref().filter(|i| i.full.is_none());
+    if let (Some(_), Some((_, record))) = (incremental, since) {
+        // The incremental bake runs with the previous bake's settings: its estimate stands.
+        result.estimated_error = record.result.estimated_error;
+    }
+    let options = cache::options_key(&scene.input, &scene.config);
+    cache::store(&scene.output, (key, &options), &report.files, &result)?;
+    Ok(match incremental {
+        Some(i) => (
+            Status::Incremental,
+            result,
+            Some(IncrementalFigures {
+                rows: i.rows,
+                retraced: i.retraced,
+                patched: i.patched,
+                seconds_saved: i.seconds_saved,
+            }),
+        ),
+        None => (Status::Baked, result, None),
+    })
 }
 
 /// Passes everything on to `inner` and keeps the warnings.

@@ -292,6 +292,13 @@ struct BakeArgs {
     /// this bake again with other light and material values without casting a ray.
     #[arg(long)]
     keep_transport: bool,
+    /// Re-bake incrementally from a previous bake of this scene (its .gltf/.glb, written with
+    /// --keep-transport): after an edit that only moved nodes, only the rays the moved nodes
+    /// can reach are traced again. Runs with the previous bake's settings (not this command's
+    /// quality options); bakes in full with this command's options, saying why, when the
+    /// edit was more than a move.
+    #[arg(long, value_name = "OLD_GLTF", conflicts_with = "processes")]
+    since: Option<PathBuf>,
     #[command(flatten)]
     layers: relight::LayerArgs,
     #[command(flatten)]
@@ -484,9 +491,21 @@ fn bake(args: &BakeArgs) -> Result<()> {
     let config = args.config()?;
     let bars = Bars::new(args.run.quiet);
     let failed = || format!("baking {} failed", args.scene.display());
-    let report = match args.cluster.cluster()? {
-        None => lightbake::bake(&args.scene, &args.output, &config, &bars).with_context(failed)?,
-        Some(cluster) => {
+    let report = match (args.cluster.cluster()?, &args.since) {
+        (None, Some(since)) => {
+            lightbake::incremental::bake_since(&args.scene, since, &args.output, &config, &bars)
+                .with_context(|| {
+                    format!(
+                        "baking {} incrementally from {} failed",
+                        args.scene.display(),
+                        since.display()
+                    )
+                })?
+        }
+        (None, None) => {
+            lightbake::bake(&args.scene, &args.output, &config, &bars).with_context(failed)?
+        }
+        (Some(cluster), _) => {
             distributed::quiet_timely_panics();
             let shared =
                 lightbake::distributed::bake(&args.scene, &args.output, &config, &cluster, &bars)

@@ -17,6 +17,7 @@
 //! 9. [Building many scenes](build).
 //! 10. [Baking on several machines](distributed).
 //! 11. [Accuracy and speed](performance).
+//! 12. [Incremental re-bake](incremental).
 
 /// The chapters' links by name, as rustdoc resolves them. The Markdown files define the same
 /// names as relative `.md` paths (for GitHub); in a Markdown document the first definition of
@@ -32,7 +33,8 @@ macro_rules! links {
          [relight]: crate::guide::relight\n\
          [build]: crate::guide::build\n\
          [distributed]: crate::guide::distributed\n\
-         [performance]: crate::guide::performance\n"
+         [performance]: crate::guide::performance\n\
+         [incremental]: crate::guide::incremental\n"
     };
 }
 
@@ -56,3 +58,4 @@ chapter!(relight, "relight.md");
 chapter!(build, "build.md");
 chapter!(distributed, "distributed.md");
 chapter!(performance, "performance.md");
+chapter!(incremental, "incremental.md");

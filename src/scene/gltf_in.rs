@@ -26,17 +26,17 @@ const SUPPORTED_REQUIRED_EXTENSIONS: &[&str] =
 /// Points and lines, skinned meshes and morphed primitives are skipped with a warning in
 /// `scene.stats`; so are undecodable images (treated as white).
 pub fn load(path: &Path) -> Result<(Scene, Source)> {
-    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-    let is_glb = bytes.starts_with(b"glTF");
-    let (json, blob) = if is_glb {
-        let glb = parse_glb(path, &bytes)?;
-        (
-            parse_json(path, &glb.json)?,
-            glb.bin.map(|bin| bin.into_owned()),
-        )
-    } else {
-        (parse_json(path, &bytes)?, None)
-    };
+    load_edited(path, &|_| {})
+}
+
+/// [`load`] with the document's JSON changed by `edit` before it is read: how an incremental
+/// bake (`bake::incremental`) places the nodes where the previous bake had them.
+pub(crate) fn load_edited(
+    path: &Path,
+    edit: &dyn Fn(&mut serde_json::Value),
+) -> Result<(Scene, Source)> {
+    let (mut json, blob, is_glb) = read_document(path)?;
+    edit(&mut json);
     check_version_and_extensions(path, &json)?;
     let files = Files {
         gltf_path: path,
@@ -134,6 +134,22 @@ impl Files<'_> {
             Ok(self.dir.join(percent_decode(uri)))
         }
     }
+}
+
+/// The glTF JSON of the file at `path`, a GLB's binary chunk, and whether it is a GLB.
+pub(crate) fn read_document(path: &Path) -> Result<(serde_json::Value, Option<Vec<u8>>, bool)> {
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let is_glb = bytes.starts_with(b"glTF");
+    Ok(if is_glb {
+        let glb = parse_glb(path, &bytes)?;
+        (
+            parse_json(path, &glb.json)?,
+            glb.bin.map(|bin| bin.into_owned()),
+            true,
+        )
+    } else {
+        (parse_json(path, &bytes)?, None, false)
+    })
 }
 
 /// The files besides `path` that a scene is read from: its external buffers, then its external

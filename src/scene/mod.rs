@@ -27,6 +27,7 @@ use glam::{Vec2, Vec3};
 
 pub use camera::{Camera, GltfCamera, select};
 pub use gltf_in::{external_files, load};
+pub(crate) use gltf_in::{load_edited, read_document};
 
 /// Reflectance is clamped to this: ρ = 1 (glTF's default white) in a closed room would make
 /// the radiosity series diverge; 0.99 keeps it convergent (about 100 bounces carry the light).

@@ -63,9 +63,34 @@ pub(crate) struct Cuts {
 }
 
 impl Cuts {
+    /// Every divided texel with its cell map, in texel order (a kept transport stores them).
+    pub(crate) fn entries(&self) -> impl Iterator<Item = (u32, &[u32; CELLS * CELLS])> + '_ {
+        (self.slot.iter().enumerate())
+            .filter(|(_, s)| **s != NO_TEXEL)
+            .map(|(i, &s)| (i as u32, &self.cells[s as usize]))
+    }
+
+    /// The cell maps `entries` (texel ids below `n`, ascending) of `n` texels.
+    pub(crate) fn from_entries(n: usize, entries: Vec<(u32, [u32; CELLS * CELLS])>) -> Cuts {
+        let mut cuts = Cuts::default();
+        for (i, map) in entries {
+            if cuts.slot.is_empty() {
+                cuts.slot = vec![NO_TEXEL; n];
+            }
+            cuts.slot[i as usize] = cuts.cells.len() as u32;
+            cuts.cells.push(map);
+        }
+        cuts
+    }
+
     /// Texels with a cell map.
     pub(crate) fn len(&self) -> usize {
         self.cells.len()
+    }
+    /// Texel `id`'s cell map, `None` when no surface divides it.
+    pub(crate) fn cells(&self, id: usize) -> Option<&[u32; CELLS * CELLS]> {
+        let slot = *self.slot.get(id)?;
+        (slot != super::NO_TEXEL).then(|| &self.cells[slot as usize])
     }
     /// The texel serving position `frac ∈ [0,1)²` within texel `id`'s square.
     #[inline]

@@ -33,7 +33,7 @@ use crate::{Progress, Result};
 /// Texels per parallel work item (one progress tick each).
 pub(crate) const CHUNK: usize = 128;
 /// Jittered points per texel for punctual lights.
-const PUNCTUAL_GRID: u32 = 2;
+pub(crate) const PUNCTUAL_GRID: u32 = 2;
 
 /// Monte Carlo rows for every texel; `texel_rays` as in [`super::build`].
 pub(crate) fn build(
@@ -92,7 +92,9 @@ impl Context<'_> {
         texels.footprint_point(i, u) + texels.normal[i] * tracer.epsilon
     }
 
-    /// Gathers row `i` into `out` (`hits` is scratch space).
+    /// Gathers row `i` into `out` (`hits` is scratch space). `bake::incremental` draws the
+    /// same rays again without tracing them (`row_rays`): a change to what is drawn here, or
+    /// in what order, must be made there too.
     pub(crate) fn texel_row(&self, i: usize, hits: &mut Vec<u32>, out: &mut ChunkRows) {
         let Surfaces {
             scene,

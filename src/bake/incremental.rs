@@ -1,0 +1,1059 @@
+//! Incremental re-bake (`bake --since OLD/x.gltf`): after an edit that only moves nodes,
+//! re-trace only the rays the moved nodes can have changed, reuse every other row of the
+//! previous bake's kept transport ([`super::kept`]), and solve again.
+//!
+//! ## What the previous bake must have kept, and why it is enough
+//!
+//! A Monte Carlo row (`transport::montecarlo`) is a deterministic function of the texel, the
+//! seed and the scene: its rays' origins and directions come from a stream seeded by
+//! (seed, texel) and the texel's footprint, and only where each ray *ends* reads the geometry.
+//! So the rays need not be stored: they are drawn again, with no tracing, exactly as the bake
+//! drew them (`row_rays`). A ray whose line (gathering rays: the half-line; light samples and
+//! punctual shadow rays: the segment to the light) meets neither the old nor the new bounds of
+//! a moved node ends where it ended before: nothing else moved. Only the rays that meet those
+//! bounds (the *flagged* rays) are traced again, once in the old scene (what they added to the
+//! kept row) and once in the new (what they add now), and the row is patched: the old hit's
+//! count down, the new hit's up, the escape count and the direct light moved by the
+//! difference. Rows of texels that changed themselves (on a moved node, or whose validity pass
+//! moved their sample point or divided them) are traced again whole. A conservative test is
+//! cheap to make exact: a flagged ray that ends where it did changes nothing.
+//!
+//! So the kept file needs no per-ray record, only: the input it was baked from (a hash of
+//! everything but node transforms, and each node's transform: [`InputRecord`]), the rows as
+//! hit counts (already kept: `f · K` is exact in f32), and the direct light as the bake summed
+//! it (so reused rows are reused bit for bit; the kept per-source terms round differently).
+//! Two more sections only save time: the atlas (the old scene is laid out again without
+//! unwrapping) and the validity pass's jitter and cell maps (the old texels are the kept ones,
+//! with no validity pass over the old scene).
+//!
+//! ## What stays, and when it bakes in full instead
+//!
+//! The atlas is **not** a function of each mesh alone: the junction split cuts a floor where a
+//! chair's legs meet it, and xatlas packs every chart of the scene together, so a fresh bake
+//! of the edited scene may lay out every chart elsewhere. The incremental bake therefore keeps
+//! the previous bake's geometry and layout: it lays the old scene out again (the old node
+//! transforms put back, the old bake's fixed settings: deterministic, and checked texel by
+//! texel against the kept texels), then moves the moved instances' vertices, cut vertices
+//! included, to their new places. Every chart keeps its page and texels. The cuts stay where
+//! the old bake made them: a moved chair's feet are not cut into the floor at their new place
+//! (its legs stand on whole floor texels there, which the validity pass handles as for an
+//! uncut scene) and the floor keeps the cuts where they stood. A plain `bake` cuts anew.
+//!
+//! It bakes in full (with the caller's settings, and says why) when the input changed in more
+//! than node transforms, when nodes were added or removed, when a moved node carries a light or
+//! an emissive material (every row's direct light would change), when the old bake cannot be
+//! laid out again to the same texels (another lightbake, other settings) or its technique
+//! keeps no Monte Carlo rows.
+//!
+//! The incremental bake runs with the previous bake's settings (`kept::Settings::config`, the
+//! automatic choices as they were made: no new plan), which a kept bake's single final run
+//! (no pilot runs mixed in, `bake::light`) makes exact. With nothing moved every row is reused
+//! and the output is the previous bake's, byte for byte.
+
+use std::ops::Range;
+use std::path::Path;
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
+use std::time::Instant;
+
+use glam::{Vec2, Vec3};
+use serde::{Deserialize, Serialize};
+use serde_json::Value;
+
+use super::kept::{self, Kept};
+use super::{BakeReport, Lighting, Prepared, pilot, timed};
+use crate::config::{BakeConfig, FormFactors, Technique};
+use crate::lights::{Emitters, punctual_irradiance, triangle_point};
+use crate::sampling::{Rng, cosine_hemisphere, frame, hammersley, power_weight};
+use crate::scene::{self, LightKind, Scene};
+use crate::shard::Alone;
+use crate::texels::{RayEnd, Texels};
+use crate::trace::Tracer;
+use crate::transport::montecarlo::{self, Context, PUNCTUAL_GRID};
+use crate::transport::rows::{self, ChunkRows};
+use crate::transport::{Sources, Surfaces};
+use crate::{Error, Progress, Result, solve, texels};
+
+/// The transform keys of a glTF node.
+const TRANSFORM_KEYS: [&str; 4] = ["matrix", "translation", "rotation", "scale"];
+
+/// The input a bake read, as `bake --since` compares it: a hash of everything but the nodes'
+/// transforms, and each node's transform as written.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct InputRecord {
+    /// blake3 (hex) of the glTF JSON with every node's transform keys removed, a GLB's binary
+    /// chunk and every external buffer and image.
+    pub(crate) hash: String,
+    /// Per glTF node: its `matrix`, `translation`, `rotation` and `scale` as written (an
+    /// object holding those present).
+    pub(crate) nodes: Vec<Value>,
+    /// The node transforms the bake's layout (junction cuts, atlas) was made with, when not
+    /// `nodes`: an incremental bake keeps the layout of the bake it started from, so the next
+    /// one lays that out again.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub(crate) layout: Option<Vec<Value>>,
+}
+
+/// The record of the input at `path`.
+pub(crate) fn input_record(path: &Path) -> Result<InputRecord> {
+    let (mut json, blob, _) = scene::read_document(path)?;
+    let mut nodes = Vec::new();
+    if let Some(list) = json.get_mut("nodes").and_then(Value::as_array_mut) {
+        for node in list {
+            let mut t = serde_json::Map::new();
+            if let Some(obj) = node.as_object_mut() {
+                for key in TRANSFORM_KEYS {
+                    if let Some(v) = obj.remove(key) {
+                        t.insert(key.to_string(), v);
+                    }
+                }
+            }
+            nodes.push(Value::Object(t));
+        }
+    }
+    let mut h = blake3::Hasher::new();
+    let mut part = |bytes: &[u8]| {
+        h.update(&(bytes.len() as u64).to_le_bytes());
+        h.update(bytes);
+    };
+    part(&serde_json::to_vec(&json).map_err(|e| Error::Internal(e.to_string()))?);
+    part(blob.as_deref().unwrap_or_default());
+    for file in scene::external_files(path)? {
+        part(&std::fs::read(&file).map_err(|e| Error::io(&file, e))?);
+    }
+    Ok(InputRecord {
+        hash: h.finalize().to_hex().to_string(),
+        nodes,
+        layout: None,
+    })
+}
+
+/// What an incremental bake did ([`BakeReport::incremental`]).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Incremental {
+    /// Why it baked in full instead (`None`: it re-traced only what the edit touched).
+    pub full: Option<String>,
+    /// glTF nodes whose transform changed.
+    pub moved_nodes: Vec<u32>,
+    /// Rows (texels) in the bake.
+    pub rows: usize,
+    /// Rows traced again whole (texels that changed).
+    pub retraced: usize,
+    /// Rows patched: some of their rays traced again in the old and the new scene.
+    pub patched: usize,
+    /// Rays of the patched rows traced again (each in both scenes).
+    pub flagged_rays: u64,
+    /// The rows re-traced or patched, ascending.
+    pub touched_rows: Vec<u32>,
+    /// Rays the transport cast: the rows traced whole, and the flagged rays twice (old and new
+    /// scene).
+    pub rays: u64,
+    /// Rays a full trace of every row casts.
+    pub full_rays: u64,
+    /// Seconds a full trace of every row would have taken at this bake's rate of the re-traced
+    /// rows, less what the incremental transport took: the transport time saved (an estimate).
+    pub seconds_saved: f64,
+}
+
+impl Incremental {
+    /// One phrase for the summary.
+    pub fn brief(&self) -> String {
+        if let Some(why) = &self.full {
+            return format!("incremental: baked in full ({why})");
+        }
+        format!(
+            "incremental: {} node(s) moved, {} of {} rows re-traced ({:.2}%) and {} patched ({} rays re-cast), {:.1}% of a full trace's rays, ~{:.1}s of transport saved",
+            self.moved_nodes.len(),
+            self.retraced,
+            self.rows,
+            100.0 * self.retraced as f64 / self.rows.max(1) as f64,
+            self.patched,
+            self.flagged_rays,
+            100.0 * self.rays as f64 / self.full_rays.max(1) as f64,
+            self.seconds_saved
+        )
+    }
+}
+
+/// Bakes `input` into `out_dir` as [`super::bake`] does, re-using the bake `since` (a
+/// `<stem>.gltf`/`.glb` written with `--keep-transport`) where the edit did not reach (see the
+/// module docs). The incremental bake runs with `since`'s settings and `config`'s output
+/// options; when it bakes in full it runs with `config`, and says why in the report.
+pub fn bake_since(
+    input: &Path,
+    since: &Path,
+    out_dir: &Path,
+    config: &BakeConfig,
+    progress: &dyn Progress,
+) -> Result<BakeReport> {
+    super::refuse_overwriting_input(input, out_dir)?;
+    config.validate()?;
+    match compute_since(input, since, config, Retrace::Edited, progress)? {
+        Since::Incremental(baked, incremental) => {
+            let out_config = baked.config.clone();
+            let mut report = super::write(*baked, input, out_dir, &out_config, progress)?;
+            report.incremental = Some(incremental);
+            Ok(report)
+        }
+        Since::Full(why) => {
+            progress.warn(&format!(
+                "{}: incremental bake not possible ({why}): baking in full",
+                input.display()
+            ));
+            let mut report = super::bake(input, out_dir, config, progress)?;
+            report.incremental = Some(Incremental {
+                full: Some(why),
+                ..Default::default()
+            });
+            Ok(report)
+        }
+    }
+}
+
+/// Which rows an incremental bake traces again.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Retrace {
+    /// The rows the edit can have changed (see the module docs).
+    Edited,
+    /// Every row, whole: a fresh bake on the previous bake's layout and seeds, the yardstick
+    /// of the incremental one (tests).
+    All,
+}
+
+/// An incremental bake in memory, or why it must bake in full.
+#[derive(Debug)]
+pub enum Since {
+    /// The bake, and what it re-traced.
+    Incremental(Box<super::Baked>, Incremental),
+    /// Why the incremental bake cannot run (a full bake is the answer).
+    Full(String),
+}
+
+/// Computes the incremental bake of `input` from the kept bake `since` (as [`bake_since`],
+/// nothing written), re-tracing what `retrace` says.
+pub fn compute_since(
+    input: &Path,
+    since: &Path,
+    config: &BakeConfig,
+    retrace: Retrace,
+    progress: &dyn Progress,
+) -> Result<Since> {
+    let kept = kept::read(since)?;
+    Ok(match plan(input, &kept, config, retrace, progress)? {
+        Ok(Planned {
+            prepared,
+            incremental,
+            lighting,
+            layout_nodes,
+        }) => {
+            let mut baked = super::finish(prepared, lighting, progress)?;
+            baked.layout_nodes = Some(layout_nodes);
+            Since::Incremental(Box::new(baked), incremental)
+        }
+        Err(why) => Since::Full(why),
+    })
+}
+
+/// An incremental bake made ready for `finish`.
+struct Planned {
+    prepared: Prepared,
+    incremental: Incremental,
+    lighting: Lighting,
+    /// The node transforms of the layout kept.
+    layout_nodes: Vec<Value>,
+}
+
+/// Why an incremental bake cannot run (the outer `Ok(Err(..))`).
+type Fallback<T> = std::result::Result<T, String>;
+
+/// The incremental bake up to the solution, or why it must bake in full.
+fn plan(
+    input: &Path,
+    kept: &Kept,
+    out: &BakeConfig,
+    retrace: Retrace,
+    progress: &dyn Progress,
+) -> Result<Fallback<Planned>> {
+    let settings = &kept.settings;
+    let Some(old) = &settings.input else {
+        return Ok(Err("the kept transport records no input".to_string()));
+    };
+    let mut config = settings.config()?;
+    let Technique::Stored {
+        form_factors: FormFactors::MonteCarlo,
+        solver,
+    } = config.technique
+    else {
+        return Ok(Err(format!(
+            "the previous bake's {} technique keeps no Monte Carlo rows",
+            config.technique
+        )));
+    };
+    // The output options are the caller's; everything that shapes the light is the old bake's.
+    config.output = out.output.clone();
+    config.max_memory = out.max_memory;
+    config.transport.split_direct = true;
+    let now = input_record(input)?;
+    if now.hash != old.hash {
+        return Ok(Err(
+            "the input changed in more than node transforms (meshes, materials, lights, textures or nodes)"
+                .to_string(),
+        ));
+    }
+    if now.nodes.len() != old.nodes.len() {
+        return Ok(Err("nodes were added or removed".to_string()));
+    }
+    let moved_nodes: Vec<u32> = (0..now.nodes.len())
+        .filter(|&k| now.nodes[k] != old.nodes[k])
+        .map(|k| k as u32)
+        .collect();
+
+    // The layout: the input with the transforms the previous bake's layout was made with put
+    // back (the previous bake's own, or those an incremental bake kept), laid out again with
+    // the old settings. Deterministic, so it is the old layout; the previous scene is that
+    // layout with the nodes moved since placed as the previous bake had them, checked against
+    // the kept texels.
+    let t = Instant::now();
+    let layout_nodes = old.layout.clone().unwrap_or_else(|| old.nodes.clone());
+    let put_back = |nodes: &[Value]| {
+        let nodes = nodes.to_vec();
+        move |json: &mut Value| {
+            let Some(list) = json.get_mut("nodes").and_then(Value::as_array_mut) else {
+                return;
+            };
+            for (node, t) in list.iter_mut().zip(&nodes) {
+                if let (Some(obj), Some(t)) = (node.as_object_mut(), t.as_object()) {
+                    TRANSFORM_KEYS.iter().for_each(|k| {
+                        obj.remove(*k);
+                    });
+                    obj.extend(t.iter().map(|(k, v)| (k.clone(), v.clone())));
+                }
+            }
+        }
+    };
+    let (layout_loaded, layout_source) = scene::load_edited(input, &put_back(&layout_nodes))?;
+    let (prev_loaded, _) = scene::load_edited(input, &put_back(&old.nodes))?;
+    let (new_loaded, new_source) = super::load(input, progress)?;
+    let moves = (
+        moved_instances(&layout_loaded, &prev_loaded),
+        moved_instances(&layout_loaded, &new_loaded),
+        moved_instances(&prev_loaded, &new_loaded),
+    );
+    let (moved_before, moved_now, moved) = match moves {
+        (Ok(a), Ok(b), Ok(c)) => (a, b, c),
+        (Err(why), _, _) | (_, Err(why), _) | (_, _, Err(why)) => return Ok(Err(why)),
+    };
+    let layout = match &kept.atlas {
+        Some(atlas) => match lay_out_again(layout_loaded, layout_source, atlas, &config, t)? {
+            Ok(layout) => layout,
+            Err(why) => return Ok(Err(why)),
+        },
+        None => super::prepare_loaded(
+            layout_loaded,
+            layout_source,
+            input,
+            &config,
+            &Alone,
+            progress,
+            t,
+        )?,
+    };
+    let mut old = if moved_before.is_empty() {
+        layout
+    } else {
+        let t = Instant::now();
+        let mut old = layout;
+        old.scene = place(&old.scene, &prev_loaded, &moved_before);
+        old.tracer = Tracer::new(&old.scene);
+        old.texels = texels::build(&old.scene, &old.atlas)?;
+        timed(&mut old.stages, "previous scene", t);
+        old
+    };
+    // The validity pass's results are the previous bake's, as kept (sample points, jitter,
+    // invalid texels, cell maps): what its rows were traced from. The raster's own values
+    // (normals, texel steps, albedo, emission) check the layout below.
+    if kept.atlas.is_some() && old.texels.len() == kept.texels.len() {
+        old.texels.position = kept.texels.position.clone();
+        old.texels.jitter = kept.jitter.clone();
+        old.texels.invalid = kept.texels.invalid.clone();
+        old.texels.cuts = kept.cuts.clone();
+    }
+    if let Some(why) = differs(&old.texels, &kept.texels) {
+        return Ok(Err(format!(
+            "the previous bake's texels could not be laid out again ({why}: another lightbake, or other settings)"
+        )));
+    }
+    let mut stages = old.stages.clone();
+
+    // The new scene: the old one (cuts and all) with the moved instances' vertices placed anew.
+    let t = Instant::now();
+    // Every instance placed away from the layout, before or now, takes its place now (one
+    // moved back to where the layout has it included).
+    let mut away: Vec<usize> = moved_before.iter().chain(&moved_now).copied().collect();
+    away.sort_unstable();
+    away.dedup();
+    let new_scene = place(&old.scene, &new_loaded, &away);
+    let tracer = Tracer::new(&new_scene);
+    if tracer.epsilon != old.tracer.epsilon {
+        return Ok(Err(
+            "the scene's extent changed, and with it every ray's offset".to_string(),
+        ));
+    }
+    timed(&mut stages, "incremental bvh", t);
+    let t = Instant::now();
+    let mut new_texels = texels::build(&new_scene, &old.atlas)?;
+    let validity = super::fix_validity(
+        &mut new_texels,
+        &new_scene,
+        &tracer,
+        &config,
+        &Alone,
+        progress,
+    )?;
+    if new_texels.page != old.texels.page || new_texels.xy != old.texels.xy {
+        return Ok(Err("the moved nodes' texels changed places".to_string()));
+    }
+    timed(&mut stages, "incremental texels", t);
+
+    // Texels that changed (their rows are traced whole), and the bounds flagged rays meet.
+    let t = Instant::now();
+    let mut changed = changed_texels(&old.texels, &new_texels);
+    if retrace == Retrace::All {
+        changed.iter_mut().for_each(|c| *c = true);
+    }
+    // A ray that meets no moved bounds hits the same triangle at the same point, and the same
+    // texel there, unless that texel's cell map changed (a moved surface now divides it, or no
+    // longer does: `texels::Cuts`); such a texel lies within its own size of the moved surface,
+    // so the bounds grow by the largest of them.
+    let margin = (0..new_texels.len())
+        .filter(|&i| old.texels.cuts.cells(i) != new_texels.cuts.cells(i))
+        .map(|i| {
+            let size = |t: &Texels| t.du[i].length() + t.dv[i].length();
+            size(&old.texels).max(size(&new_texels))
+        })
+        .fold(0.0f32, f32::max)
+        + 8.0 * tracer.epsilon;
+    let mut boxes = Vec::new();
+    for &inst in &moved {
+        for s in [&old.scene, &new_scene] {
+            boxes.push(bounds(s, s.instances[inst].vertices.clone(), margin));
+        }
+    }
+    let n = new_texels.len();
+    let (k, l) = (config.transport.gather_rays, config.transport.light_samples);
+    // The rows, in a scope of their own: they borrow both scenes, which `Prepared` then takes.
+    let (transport, incremental) = {
+        let new_surfaces = Surfaces {
+            scene: &new_scene,
+            texels: &new_texels,
+            tracer: &tracer,
+        };
+        let emitters = Emitters::new(&new_scene, &new_texels);
+        let sources = Sources::new(&new_scene);
+        let ctx = Context {
+            surfaces: new_surfaces,
+            params: &config.transport,
+            emitters: &emitters,
+            texel_rays: None,
+            sources: Some(&sources),
+        };
+        let rebuild = Rebuild {
+            kept,
+            old: old.surfaces(),
+            new: &ctx,
+            changed: &changed,
+            boxes: &boxes,
+            count_rows: config.transport.count_rows,
+            touched: Mutex::new(Vec::new()),
+            flagged: AtomicUsize::new(0),
+            busy: AtomicU64::new(0),
+            traced_busy: AtomicU64::new(0),
+        };
+        let mut transport =
+            rows::build(n, montecarlo::CHUNK, "transport", progress, |range, out| {
+                rebuild.rows(range, out)
+            })?;
+        let mut touched = std::mem::take(&mut *rebuild.touched.lock().unwrap());
+        touched.sort_unstable();
+        let retraced = touched.iter().filter(|t| t.1).count();
+        let counted = (
+            retraced,
+            touched.len() - retraced,
+            rebuild.flagged.load(Ordering::Relaxed) as u64,
+        );
+        let touched_rows: Vec<u32> = touched.iter().map(|t| t.0).collect();
+        transport.sources = sources.clone();
+        #[cfg(debug_assertions)]
+        transport.validate();
+        let seconds = t.elapsed().as_secs_f64();
+        timed(&mut stages, "incremental transport", t);
+        let lights = new_scene.lights.len() as u64 * u64::from(PUNCTUAL_GRID * PUNCTUAL_GRID);
+        let per_row = u64::from(k) + if emitters.is_empty() { 0 } else { u64::from(l) } + lights;
+        let full_rays = n as u64 * per_row;
+        let (retraced, patched, flagged_rays) = counted;
+        // The transport time saved, estimated: the rows traced whole cost `traced_busy` thread
+        // time, so every row would have cost about `n / retraced` times that; the thread time
+        // of all chunks against the wall time gives the parallel speed-up. Unknown (0) when no
+        // row was traced whole.
+        let busy = rebuild.busy.load(Ordering::Relaxed) as f64 * 1e-9;
+        let traced_busy = rebuild.traced_busy.load(Ordering::Relaxed) as f64 * 1e-9;
+        let seconds_saved = match (retraced, busy > 0.0) {
+            (0, _) | (_, false) => 0.0,
+            (r, true) => {
+                let full_wall = traced_busy * n as f64 / r as f64 * seconds / busy;
+                (full_wall - seconds).max(0.0)
+            }
+        };
+        let incremental = Incremental {
+            full: None,
+            moved_nodes,
+            rows: n,
+            retraced,
+            patched,
+            flagged_rays,
+            touched_rows,
+            rays: transport.rays,
+            full_rays,
+            seconds_saved,
+        };
+        (transport, incremental)
+    };
+
+    let t = Instant::now();
+    let solution = solve::solve(&transport, &new_texels, solver, &config.solve, progress)?;
+    if !solution.converged {
+        progress.warn(&format!(
+            "the solver stopped on the iteration cap ({}) at residual {:.2e}, above the tolerance {:.1e}",
+            solution.history.len(),
+            solution.residual(),
+            config.solve.tolerance
+        ));
+    }
+    timed(&mut stages, "solve", t);
+    let prepared = Prepared {
+        scene: new_scene,
+        source: new_source,
+        tracer,
+        atlas: old.atlas,
+        texels: new_texels,
+        validity,
+        config: config.clone(),
+        plan: None,
+        density_noise: None,
+        junctions: old.junctions,
+        stages: Vec::new(),
+        processes: 1,
+    };
+    let lighting = Lighting {
+        config,
+        plan: None,
+        stages,
+        last: pilot::FinalBake {
+            transport,
+            solution,
+            gather_rays: k,
+            light_samples: l,
+            texel_gather_rays: vec![k as f32; n],
+        },
+    };
+    Ok(Ok(Planned {
+        prepared,
+        incremental,
+        lighting,
+        layout_nodes,
+    }))
+}
+
+/// The old bake's scene laid out again on its kept `atlas` (what `prepare_loaded` does with
+/// the fixed settings `config`, without unwrapping): the junction split, the tracer and the
+/// texels, before the validity pass (whose results the kept file holds). `Err` when the atlas
+/// does not fit the split scene.
+fn lay_out_again(
+    loaded: Scene,
+    source: scene::Source,
+    atlas: &crate::atlas::Atlas,
+    config: &BakeConfig,
+    load_start: Instant,
+) -> Result<Fallback<Prepared>> {
+    let mut stages = Vec::new();
+    timed(&mut stages, "load", load_start);
+    let t = Instant::now();
+    let (scene, junctions) = super::split_junctions(loaded, &source, config);
+    if junctions.is_some() {
+        timed(&mut stages, "junctions", t);
+    }
+    let fits = atlas.instances.len() == scene.instances.len()
+        && (scene.instances.iter().zip(&atlas.instances)).all(|(inst, uv)| {
+            let vertices = inst.vertices.len() as u32;
+            uv.triangles.len() == inst.triangles.len()
+                && uv.triangle_page.len() == uv.triangles.len()
+                && uv.xref.len() == uv.uv.len()
+                && uv.xref.iter().all(|&x| x < vertices)
+        });
+    if !fits {
+        return Ok(Err(
+            "the kept atlas does not fit the scene laid out again".to_string()
+        ));
+    }
+    let t = Instant::now();
+    let tracer = Tracer::new(&scene);
+    timed(&mut stages, "bvh", t);
+    let t = Instant::now();
+    let texels = texels::build(&scene, atlas)?;
+    timed(&mut stages, "texels", t);
+    Ok(Ok(Prepared {
+        scene,
+        source,
+        tracer,
+        atlas: atlas.clone(),
+        texels,
+        validity: Default::default(),
+        config: config.clone(),
+        plan: None,
+        density_noise: None,
+        junctions,
+        stages,
+        processes: 1,
+    }))
+}
+
+/// The instances whose vertices moved between the old and the new placement of the same input,
+/// or why the difference is more than a move.
+fn moved_instances(old: &Scene, new: &Scene) -> Fallback<Vec<usize>> {
+    if old.instances.len() != new.instances.len() || old.triangles != new.triangles {
+        return Err("a moved node's triangles changed (a mirroring transform?)".to_string());
+    }
+    let mut moved = Vec::new();
+    for (k, (a, b)) in old.instances.iter().zip(&new.instances).enumerate() {
+        let range = a.vertices.start as usize..a.vertices.end as usize;
+        if a.vertices != b.vertices || a.material != b.material {
+            return Err("the instances differ".to_string());
+        }
+        if old.positions[range.clone()] != new.positions[range.clone()]
+            || old.normals[range.clone()] != new.normals[range]
+        {
+            if old.materials[a.material as usize].emission.max_element() > 0.0 {
+                return Err("an emissive node moved".to_string());
+            }
+            moved.push(k);
+        }
+    }
+    if format!("{:?}", old.lights) != format!("{:?}", new.lights) {
+        return Err("a light moved".to_string());
+    }
+    Ok(moved)
+}
+
+/// `old` (the old bake's scene, cut by the junction split) with the `moved` instances'
+/// vertices taken from `new` (the input as loaded, uncut): a source vertex is the loaded one,
+/// a cut vertex the same blend of the loaded ones.
+fn place(old: &Scene, new: &Scene, moved: &[usize]) -> Scene {
+    let mut scene = old.clone();
+    for &k in moved {
+        let (cut, loaded) = (&old.instances[k], &new.instances[k]);
+        let src = loaded.vertices.start as usize;
+        let count = loaded.vertices.len();
+        let first = cut.vertices.start as usize;
+        for v in 0..count {
+            scene.positions[first + v] = new.positions[src + v];
+            scene.normals[first + v] = new.normals[src + v];
+        }
+        for (b, blend) in cut.split.blends.iter().enumerate() {
+            let (mut p, mut n) = (Vec3::ZERO, Vec3::ZERO);
+            for (&v, &w) in blend.vertices.iter().zip(&blend.weights) {
+                if w != 0.0 {
+                    p += new.positions[src + v as usize] * w;
+                    n += new.normals[src + v as usize] * w;
+                }
+            }
+            scene.positions[first + count + b] = p;
+            scene.normals[first + count + b] = n.normalize_or_zero();
+        }
+    }
+    scene
+}
+
+/// What differs between the laid-out texels `a` and the kept texels `b` (the fields the kept
+/// file holds), or `None`.
+fn differs(a: &Texels, b: &Texels) -> Option<&'static str> {
+    if a.len() != b.len() || a.pages != b.pages || a.page != b.page || a.xy != b.xy {
+        return Some("texel count or places");
+    }
+    let fields = [
+        (&a.position, &b.position),
+        (&a.normal, &b.normal),
+        (&a.du, &b.du),
+        (&a.dv, &b.dv),
+        (&a.albedo, &b.albedo),
+        (&a.emission, &b.emission),
+    ];
+    if fields.iter().any(|(x, y)| bits(x) != bits(y)) {
+        return Some("texel values");
+    }
+    (a.invalid != b.invalid).then_some("invalid texels")
+}
+
+fn bits(v: &[Vec3]) -> Vec<[u32; 3]> {
+    v.iter().map(|v| v.to_array().map(f32::to_bits)).collect()
+}
+
+/// Per texel: whether anything its row reads of itself differs between `old` and `new`.
+fn changed_texels(old: &Texels, new: &Texels) -> Vec<bool> {
+    let (old_valid, new_valid) = (old.valid_mask(), new.valid_mask());
+    let same3 = |a: Vec3, b: Vec3| a.to_array().map(f32::to_bits) == b.to_array().map(f32::to_bits);
+    let jitter = |t: &Texels, i: usize| t.jitter.get(i).copied().unwrap_or(1.0).to_bits();
+    (0..new.len())
+        .map(|i| {
+            !(same3(old.position[i], new.position[i])
+                && same3(old.normal[i], new.normal[i])
+                && same3(old.du[i], new.du[i])
+                && same3(old.dv[i], new.dv[i])
+                && same3(old.albedo[i], new.albedo[i])
+                && same3(old.emission[i], new.emission[i])
+                && old.area[i].to_bits() == new.area[i].to_bits()
+                && old.triangle[i] == new.triangle[i]
+                && jitter(old, i) == jitter(new, i)
+                && old_valid[i] == new_valid[i]
+                && old.cuts.cells(i) == new.cuts.cells(i))
+        })
+        .collect()
+}
+
+/// Bounds of `scene`'s vertices `range`, grown by `margin`.
+fn bounds(scene: &Scene, range: Range<u32>, margin: f32) -> (Vec3, Vec3) {
+    let ps = &scene.positions[range.start as usize..range.end as usize];
+    let lo = ps.iter().fold(Vec3::INFINITY, |a, &p| a.min(p));
+    let hi = ps.iter().fold(Vec3::NEG_INFINITY, |a, &p| a.max(p));
+    (lo - Vec3::splat(margin), hi + Vec3::splat(margin))
+}
+
+/// Whether the segment `origin + t·dir`, `t ∈ [0, t_max]`, meets any of `boxes` (slab test).
+#[inline]
+fn meets(boxes: &[(Vec3, Vec3)], origin: Vec3, dir: Vec3, t_max: f32) -> bool {
+    let inv = dir.recip();
+    boxes.iter().any(|&(lo, hi)| {
+        let (a, b) = ((lo - origin) * inv, (hi - origin) * inv);
+        let (near, far) = (a.min(b), a.max(b));
+        // A NaN slab (0 · ∞: a ray in a box's face plane) is skipped by `max_element` and
+        // `min_element`, which only widens the test: conservative.
+        let t0 = near.max_element().max(0.0);
+        let t1 = far.min_element().min(t_max);
+        t0 <= t1
+    })
+}
+
+/// One ray of a texel's row, drawn as `Context::texel_row` draws it.
+#[derive(Clone, Copy)]
+enum RowRay {
+    /// A gathering ray; `cos` its cosine to the texel normal.
+    Gather { origin: Vec3, dir: Vec3, cos: f32 },
+    /// A light sample `u` from `origin`.
+    Light { origin: Vec3, u: Vec2 },
+    /// The shadow ray to punctual light `light` from `p`.
+    Punctual { p: Vec3, light: usize },
+}
+
+/// Draws texel `i`'s rays in `ctx` (the rays only: nothing is traced) and hands each to
+/// `visit`, with the ray counts `(K, L)`. This must draw the same numbers in the same order as
+/// `Context::texel_row`; `tests/incremental.rs` checks that every row a full trace changes is
+/// one this finds.
+fn row_rays(ctx: &Context, i: usize, mut visit: impl FnMut(RowRay)) -> (u32, u32) {
+    let texels = ctx.surfaces.texels;
+    let n = texels.normal[i];
+    let (tx, ty) = frame(n);
+    let p = ctx.params;
+    let k = p.gather_rays.max(1);
+    let l = if ctx.emitters.is_empty() || p.light_samples == 0 {
+        0
+    } else {
+        p.light_samples
+    };
+    let mut rng = Rng::new(p.seed, i as u64, 0);
+    let shift = rng.next_vec2();
+    for s in 0..k {
+        let local = cosine_hemisphere(hammersley(s, k, shift));
+        let dir = tx * local.x + ty * local.y + n * local.z;
+        let origin = ctx.footprint_point(i, rng.next_vec2());
+        visit(RowRay::Gather {
+            origin,
+            dir,
+            cos: local.z,
+        });
+    }
+    let light_shift = rng.next_vec2();
+    for s in 0..l {
+        let u = hammersley(s, l, light_shift);
+        let origin = ctx.footprint_point(i, rng.next_vec2());
+        visit(RowRay::Light { origin, u });
+    }
+    let lights = ctx.surfaces.scene.lights.len();
+    if lights > 0 {
+        let g = PUNCTUAL_GRID;
+        for s in 0..g * g {
+            let u = (Vec2::new((s % g) as f32, (s / g) as f32) + rng.next_vec2()) / g as f32;
+            let p = ctx.footprint_point(i, u);
+            for light in 0..lights {
+                visit(RowRay::Punctual { p, light });
+            }
+        }
+    }
+    (k, l)
+}
+
+/// Where one ray of a row ends, and the direct light it adds (to source `source`).
+#[derive(Clone, Copy, PartialEq)]
+struct Outcome {
+    texel: Option<u32>,
+    escaped: bool,
+    light: Vec3,
+    source: usize,
+}
+
+const NOTHING: Outcome = Outcome {
+    texel: None,
+    escaped: false,
+    light: Vec3::ZERO,
+    source: 0,
+};
+
+/// Rebuilds the rows: kept, patched or traced again.
+struct Rebuild<'a> {
+    kept: &'a Kept,
+    old: Surfaces<'a>,
+    new: &'a Context<'a>,
+    changed: &'a [bool],
+    boxes: &'a [(Vec3, Vec3)],
+    count_rows: bool,
+    /// The rows re-traced (`true`) or patched (`false`), in no order.
+    touched: Mutex<Vec<(u32, bool)>>,
+    flagged: AtomicUsize,
+    /// Thread time (ns) of all chunks, and of the rows traced whole (the time-saved estimate).
+    busy: AtomicU64,
+    traced_busy: AtomicU64,
+}
+
+impl Rebuild<'_> {
+    fn rows(&self, range: Range<usize>, out: &mut ChunkRows) {
+        let chunk = Instant::now();
+        let mut hits = Vec::new();
+        let mut flagged = Vec::new();
+        for i in range {
+            if self.changed[i] {
+                let t = Instant::now();
+                self.new.texel_row(i, &mut hits, out);
+                let ns = t.elapsed().as_nanos() as u64;
+                self.traced_busy.fetch_add(ns, Ordering::Relaxed);
+                self.touched.lock().unwrap().push((i as u32, true));
+                continue;
+            }
+            flagged.clear();
+            if self.faces_away(i) {
+                // No ray of this row can reach a moved node: reuse the row as kept.
+                self.row(i, &flagged, self.ray_counts(), out);
+                continue;
+            }
+            let (k, l) = row_rays(self.new, i, |ray| {
+                if self.flags(ray) {
+                    flagged.push(ray);
+                }
+            });
+            self.row(i, &flagged, (k, l), out);
+        }
+        let ns = chunk.elapsed().as_nanos() as u64;
+        self.busy.fetch_add(ns, Ordering::Relaxed);
+    }
+
+    /// Whether every moved bounds lies below texel `i`'s plane, beyond its footprint: a row's
+    /// rays start within `|du| + |dv|` of the texel's position (its footprint, lifted by the ray
+    /// epsilon) and only those going up its hemisphere count (gathering rays by construction,
+    /// light samples and punctual lights are zero when `cos_i ≤ 0`), so none reaches such bounds.
+    fn faces_away(&self, i: usize) -> bool {
+        let t = self.new.surfaces.texels;
+        let (p, n) = (t.position[i], t.normal[i]);
+        let reach = t.du[i].length() + t.dv[i].length() + 4.0 * self.new.surfaces.tracer.epsilon;
+        self.boxes.iter().all(|&(lo, hi)| {
+            let (centre, half) = ((lo + hi) * 0.5, (hi - lo) * 0.5);
+            (centre - p).dot(n) + half.dot(n.abs()) < -reach
+        })
+    }
+
+    /// The row's gathering rays and light samples, as `row_rays` counts them.
+    fn ray_counts(&self) -> (u32, u32) {
+        let p = self.new.params;
+        let l = match self.new.emitters.is_empty() {
+            true => 0,
+            false => p.light_samples,
+        };
+        (p.gather_rays.max(1), l)
+    }
+
+    /// Whether `ray` can end differently: its line meets a moved node's old or new bounds.
+    fn flags(&self, ray: RowRay) -> bool {
+        match ray {
+            RowRay::Gather { origin, dir, .. } => meets(self.boxes, origin, dir, f32::INFINITY),
+            RowRay::Light { origin, u } => {
+                let emitters = self.new.emitters;
+                let (tri, u0) = emitters.pick_stratified(u.x);
+                let bary = crate::sampling::triangle_point(Vec2::new(u0, u.y));
+                let (point, _) = triangle_point(self.new.surfaces.scene, tri, bary);
+                meets(self.boxes, origin, point - origin, 1.0)
+            }
+            RowRay::Punctual { p, light } => {
+                let light = &self.new.surfaces.scene.lights[light];
+                match light.kind {
+                    LightKind::Directional => meets(self.boxes, p, -light.direction, f32::INFINITY),
+                    _ => meets(self.boxes, p, light.position - p, 1.0),
+                }
+            }
+        }
+    }
+
+    /// Where `ray` of texel `i` ends in `surfaces`, with `(K, L)` for the MIS weights.
+    fn outcome(&self, surfaces: Surfaces, i: usize, ray: RowRay, (k, l): (u32, u32)) -> Outcome {
+        let Surfaces {
+            scene,
+            texels,
+            tracer,
+        } = surfaces;
+        let (kf, lf) = (k as f32, l as f32);
+        let emitters = self.new.emitters;
+        let sources = self.new.sources.expect("split sources");
+        let n = texels.normal[i];
+        match ray {
+            RowRay::Gather { origin, dir, cos } => match texels.ray_end(tracer, origin, dir) {
+                RayEnd::Escaped => Outcome {
+                    escaped: true,
+                    ..NOTHING
+                },
+                RayEnd::Absorbed => NOTHING,
+                RayEnd::Texel(hit, j) => {
+                    let le = texels.emission[j as usize];
+                    let mut light = Vec3::ZERO;
+                    if le.max_element() > 0.0 {
+                        let p_gather = cos / std::f32::consts::PI;
+                        let (_, n_l) = triangle_point(scene, hit.triangle, hit.bary);
+                        let p_light = emitters.pdf_toward(hit.triangle, n_l, dir, hit.t);
+                        light = le * (cos * power_weight(kf * p_gather, lf * p_light));
+                    }
+                    Outcome {
+                        texel: Some(j),
+                        escaped: false,
+                        light,
+                        source: if light == Vec3::ZERO {
+                            0
+                        } else {
+                            sources.of_texel(scene, texels, j)
+                        },
+                    }
+                }
+            },
+            RowRay::Light { origin, u } => {
+                let Some(x) = emitters.sample_from((scene, texels, tracer), origin, Some(n), u)
+                else {
+                    return NOTHING;
+                };
+                let p_gather = x.cos_i / std::f32::consts::PI;
+                Outcome {
+                    light: x.le * (x.cos_i * power_weight(lf * x.pdf_solid_angle(), kf * p_gather)),
+                    source: sources.of_texel(scene, texels, x.texel),
+                    ..NOTHING
+                }
+            }
+            RowRay::Punctual { p, light } => {
+                let g2 = (PUNCTUAL_GRID * PUNCTUAL_GRID) as f32;
+                Outcome {
+                    light: punctual_irradiance(&scene.lights[light], p, n, tracer) / g2,
+                    source: light,
+                    ..NOTHING
+                }
+            }
+        }
+    }
+
+    /// Row `i`: the kept row, patched by the `flagged` rays that end differently now.
+    fn row(&self, i: usize, flagged: &[RowRay], (k, l): (u32, u32), out: &mut ChunkRows) {
+        let kept = &self.kept.transport;
+        let count = kept.sources.len();
+        let terms = &kept.direct_terms[i * count..(i + 1) * count];
+        let kf = k as f32;
+        // The kept row as hit counts: `f = hits / K` in f32 gives the count back exactly.
+        let mut counts: Vec<(u32, i64)> = kept
+            .row(i)
+            .map(|(j, f)| (j, (f * kf).round() as i64))
+            .collect();
+        let mut escaped = (kept.escape[i] * kf).round() as i64;
+        let mut direct = self.kept.direct[i];
+        let mut new_terms = terms.to_vec();
+        let mut touched = false;
+        for &ray in flagged {
+            let before = self.outcome(self.old, i, ray, (k, l));
+            let after = self.outcome(self.new.surfaces, i, ray, (k, l));
+            if before == after {
+                continue;
+            }
+            touched = true;
+            for (o, sign) in [(before, -1i64), (after, 1)] {
+                if let Some(j) = o.texel {
+                    match counts.binary_search_by_key(&j, |e| e.0) {
+                        Ok(at) => counts[at].1 += sign,
+                        Err(at) => counts.insert(at, (j, sign)),
+                    }
+                }
+                escaped += sign * i64::from(o.escaped);
+                let e = o.light * sign as f32;
+                direct += e;
+                if o.light != Vec3::ZERO {
+                    new_terms[o.source] += e;
+                }
+            }
+        }
+        self.flagged.fetch_add(flagged.len(), Ordering::Relaxed);
+        let start = out.col.len();
+        if !touched {
+            // Bit for bit what the bake kept.
+            push_row(out, counts.iter().copied(), k, self.count_rows);
+            out.terms.extend_from_slice(terms);
+            out.end_row(start, kept.escape[i], direct);
+            out.rays += 2 * flagged.len() as u64;
+            return;
+        }
+        self.touched.lock().unwrap().push((i as u32, false));
+        // Rounding can leave a count off by one where a grazing ray ends differently in the
+        // laid-out-again old scene; a count never goes below zero.
+        counts.retain(|e| e.1 > 0);
+        let escaped = escaped.clamp(0, i64::from(k));
+        let escape_old = kept.escape[i];
+        let escape = escaped as f32 / kf;
+        let sky = self.new.params.sky * std::f32::consts::PI;
+        direct += sky * (escape - escape_old);
+        let direct = direct.max(Vec3::ZERO);
+        for t in &mut new_terms {
+            *t = t.max(Vec3::ZERO);
+        }
+        push_row(out, counts.iter().copied(), k, self.count_rows);
+        out.terms.extend_from_slice(&new_terms);
+        out.end_row(start, escape, direct);
+        out.rays += 2 * flagged.len() as u64;
+    }
+}
+
+/// Appends a row of `(texel, hits)` in texel order to `out`: `F = hits / K` as the bake stores
+/// it, as f32 weights or as ray counts.
+fn push_row(
+    out: &mut ChunkRows,
+    counts: impl Iterator<Item = (u32, i64)>,
+    k: u32,
+    count_rows: bool,
+) {
+    if count_rows {
+        let hits: Vec<u32> = counts
+            .flat_map(|(j, c)| std::iter::repeat_n(j, c.max(0) as usize))
+            .collect();
+        out.counts.push_row(&hits, k);
+    } else {
+        for (j, c) in counts {
+            out.col.push(j);
+            out.f.push(c as f32 / k as f32);
+        }
+    }
+}

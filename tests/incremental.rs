@@ -1,0 +1,396 @@
+//! Incremental re-bake (`bake --since`, `lightbake::incremental`).
+//!
+//! The yardstick of an incremental bake is the same bake with every row traced again on the
+//! previous bake's layout and seeds (`Retrace::All`): a row the edit can change and the
+//! incremental bake does not re-trace or patch shows up as a difference there. A fresh bake of
+//! the edited scene (its own junction cuts, so its own atlas) agrees within noise.
+
+use std::path::{Path, PathBuf};
+
+use base64::Engine;
+use glam::Vec3;
+use lightbake::incremental::{Incremental, Retrace, Since, bake_since, compute_since};
+use lightbake::{BakeConfig, Baked, NoProgress, bake, compute, kept};
+use serde_json::{Value, json};
+
+use crate::util::{fixture, list_files, quick, scratch};
+
+fn kept_config() -> BakeConfig {
+    let mut c = quick();
+    c.output.keep_transport = true;
+    c
+}
+
+/// A closed box `size` wide centred on x = z = 0, standing on y = 0 (24 vertices: flat
+/// normals), as glTF accessors in a data-URI buffer appended to `doc`; returns its mesh index.
+fn add_box(doc: &mut Value, size: f32, material: usize) -> usize {
+    let h = size / 2.0;
+    let faces: [(Vec3, Vec3, Vec3); 6] = [
+        (Vec3::X, Vec3::Y, Vec3::Z),
+        (Vec3::NEG_X, Vec3::Y, Vec3::NEG_Z),
+        (Vec3::Y, Vec3::Z, Vec3::X),
+        (Vec3::NEG_Y, Vec3::X, Vec3::Z),
+        (Vec3::Z, Vec3::X, Vec3::Y),
+        (Vec3::NEG_Z, Vec3::Y, Vec3::X),
+    ];
+    let (mut pos, mut nor, mut idx) = (Vec::new(), Vec::new(), Vec::<u16>::new());
+    for (n, a, b) in faces {
+        let base = pos.len() as u16;
+        for (s, t) in [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)] {
+            let p = n * h + a * (s * h) + b * (t * h) + Vec3::new(0.0, h, 0.0);
+            pos.push(p);
+            nor.push(n);
+        }
+        // Counter-clockwise seen from outside: a × b = n for every face above.
+        idx.extend([base, base + 1, base + 2, base, base + 2, base + 3]);
+    }
+    let mut bytes = Vec::new();
+    pos.iter()
+        .chain(&nor)
+        .flat_map(|v| v.to_array())
+        .for_each(|f| bytes.extend(f.to_le_bytes()));
+    idx.iter().for_each(|i| bytes.extend(i.to_le_bytes()));
+    let uri = format!(
+        "data:application/octet-stream;base64,{}",
+        base64::engine::general_purpose::STANDARD.encode(&bytes)
+    );
+    let buffers = doc["buffers"].as_array_mut().unwrap();
+    buffers.push(json!({"uri": uri, "byteLength": bytes.len()}));
+    let buffer = buffers.len() - 1;
+    let views = doc["bufferViews"].as_array_mut().unwrap();
+    let v0 = views.len();
+    let vlen = pos.len() * 12;
+    views.push(json!({"buffer": buffer, "byteOffset": 0, "byteLength": vlen}));
+    views.push(json!({"buffer": buffer, "byteOffset": vlen, "byteLength": vlen}));
+    views.push(json!({"buffer": buffer, "byteOffset": 2 * vlen, "byteLength": idx.len() * 2}));
+    let accessors = doc["accessors"].as_array_mut().unwrap();
+    let a0 = accessors.len();
+    accessors.push(
+        json!({"bufferView": v0, "componentType": 5126, "count": pos.len(), "type": "VEC3",
+        "min": [-h, 0.0, -h], "max": [h, size, h]}),
+    );
+    accessors.push(
+        json!({"bufferView": v0 + 1, "componentType": 5126, "count": nor.len(), "type": "VEC3"}),
+    );
+    accessors.push(
+        json!({"bufferView": v0 + 2, "componentType": 5123, "count": idx.len(), "type": "SCALAR"}),
+    );
+    let meshes = doc["meshes"].as_array_mut().unwrap();
+    meshes.push(
+        json!({"name": "box", "primitives": [{"attributes": {"POSITION": a0, "NORMAL": a0 + 1},
+        "indices": a0 + 2, "material": material}]}),
+    );
+    meshes.len() - 1
+}
+
+/// two_rooms.gltf with a 0.5 m box (node "box") standing at `x` (room A: x < 0, where the
+/// panel is; room B: x > 0), written to `dir/two_rooms.gltf`.
+fn two_rooms_with_box(dir: &Path, x: f32) -> PathBuf {
+    let mut doc: Value =
+        serde_json::from_slice(&std::fs::read(fixture("two_rooms.gltf")).unwrap()).unwrap();
+    let mesh = add_box(&mut doc, 0.5, 2);
+    let nodes = doc["nodes"].as_array_mut().unwrap();
+    nodes.push(json!({"name": "box", "mesh": mesh, "translation": [x, 0.0, 0.0]}));
+    let box_node = nodes.len() - 1;
+    doc["scenes"][0]["nodes"]
+        .as_array_mut()
+        .unwrap()
+        .push(json!(box_node));
+    std::fs::create_dir_all(dir).unwrap();
+    let path = dir.join("two_rooms.gltf");
+    std::fs::write(&path, serde_json::to_vec_pretty(&doc).unwrap()).unwrap();
+    path
+}
+
+/// Mean lightmap value (`H/π`, summed over RGB) of the upward-facing floor texels of `baked`
+/// in room A (x < 0) and room B (x > 0), away from the partition.
+fn room_floor_means(baked: &Baked) -> [f32; 2] {
+    let t = &baked.texels;
+    let mut sums = [(0.0f64, 0usize); 2];
+    for i in 0..t.len() {
+        let (p, n) = (t.position[i], t.normal[i]);
+        if p.y.abs() > 0.01 || n.y < 0.9 || p.x.abs() < 0.1 {
+            continue;
+        }
+        let room = usize::from(p.x > 0.0);
+        sums[room].0 += f64::from(baked.lightmap[i].element_sum());
+        sums[room].1 += 1;
+    }
+    sums.map(|(s, n)| (s / n.max(1) as f64) as f32)
+}
+
+fn incremental(since: Since) -> (Baked, Incremental) {
+    match since {
+        Since::Incremental(baked, inc) => (*baked, inc),
+        Since::Full(why) => panic!("baked in full: {why}"),
+    }
+}
+
+#[test]
+fn an_unmoved_scene_rebakes_to_the_same_bytes() {
+    let dir = scratch();
+    let input = two_rooms_with_box(&dir.path().join("in"), -1.0);
+    let config = kept_config();
+    let old = dir.path().join("old");
+    bake(&input, &old, &config, &NoProgress).unwrap();
+    let new = dir.path().join("new");
+    let report = bake_since(
+        &input,
+        &old.join("two_rooms.gltf"),
+        &new,
+        &config,
+        &NoProgress,
+    )
+    .unwrap();
+    let inc = report.incremental.expect("an incremental report");
+    assert_eq!(inc.full, None);
+    assert!(inc.moved_nodes.is_empty());
+    assert_eq!((inc.retraced, inc.patched), (0, 0), "{}", inc.brief());
+    let files = list_files(&old);
+    assert_eq!(files, list_files(&new));
+    assert!(files.iter().any(|f| f.ends_with(".exr")));
+    for f in &files {
+        let (a, b) = (
+            std::fs::read(old.join(f)).unwrap(),
+            std::fs::read(new.join(f)).unwrap(),
+        );
+        assert!(a == b, "{f} differs from the previous bake's");
+    }
+}
+
+#[test]
+fn a_box_moved_between_rooms_relights_both_as_a_full_retrace_does() {
+    let dir = scratch();
+    let config = kept_config();
+    let before = two_rooms_with_box(&dir.path().join("before"), -1.0);
+    let old = dir.path().join("old");
+    bake(&before, &old, &config, &NoProgress).unwrap();
+    let since = old.join("two_rooms.gltf");
+    let old_baked = compute(&before, &config, &NoProgress).unwrap();
+    let after = two_rooms_with_box(&dir.path().join("after"), 1.0);
+
+    let (inc_baked, inc) =
+        incremental(compute_since(&after, &since, &config, Retrace::Edited, &NoProgress).unwrap());
+    let (all_baked, all) =
+        incremental(compute_since(&after, &since, &config, Retrace::All, &NoProgress).unwrap());
+    assert_eq!(all.retraced, all.rows);
+    assert_eq!(inc.moved_nodes.len(), 1, "{}", inc.brief());
+    assert!(inc.retraced > 0 && inc.patched > 0, "{}", inc.brief());
+    // The box is a large object in a small scene: most rows have a ray through its bounds
+    // and are patched, but few are traced whole and fewer rays are cast than by a full trace.
+    assert!(
+        inc.retraced < inc.rows / 4 && inc.rays < inc.full_rays,
+        "{}",
+        inc.brief()
+    );
+
+    // Rows on both sides of the partition were traced again or patched.
+    let t = &inc_baked.texels;
+    let sides = inc.touched_rows.iter().fold([0, 0], |mut s, &i| {
+        let x = t.position[i as usize].x;
+        if x.abs() > 0.05 {
+            s[usize::from(x > 0.0)] += 1;
+        }
+        s
+    });
+    assert!(
+        sides[0] > 0 && sides[1] > 0,
+        "touched rows per room: {sides:?}"
+    );
+
+    // Same rows and seeds as tracing every row again: the same light, to float rounding. A row
+    // the edit changed and the incremental bake kept would differ by at least one ray's share.
+    assert_eq!(inc_baked.lightmap.len(), all_baked.lightmap.len());
+    let mut worst = 0.0f32;
+    for (a, b) in inc_baked.lightmap.iter().zip(&all_baked.lightmap) {
+        let d = (*a - *b).abs().max_element() / (b.max_element() + 1e-3);
+        worst = worst.max(d);
+    }
+    assert!(
+        worst < 1e-4,
+        "incremental vs every row re-traced: worst relative texel difference {worst:.2e}"
+    );
+
+    // Both rooms' floors changed, as in a fresh bake of the edited scene (its own cuts and
+    // atlas, the same fixed settings): within that bake's noise.
+    let fixed = kept::read(&since).unwrap().settings.config().unwrap();
+    let fresh = compute(&after, &fixed, &NoProgress).unwrap();
+    let [old_a, old_b] = room_floor_means(&old_baked);
+    let [inc_a, inc_b] = room_floor_means(&inc_baked);
+    let [fresh_a, fresh_b] = room_floor_means(&fresh);
+    let change = |from: f32, to: f32| (to - from) / from;
+    for (room, old, inc, fresh) in [("A", old_a, inc_a, fresh_a), ("B", old_b, inc_b, fresh_b)] {
+        assert!(
+            change(old, inc).abs() > 0.02,
+            "room {room}: floor mean {old} before, {inc} after the move: unchanged"
+        );
+        assert!(
+            (change(old, inc) - change(old, fresh)).abs() < 0.25 * change(old, fresh).abs(),
+            "room {room}: floor mean {old} before; incremental {inc}, fresh {fresh}"
+        );
+    }
+}
+
+#[test]
+fn an_edit_beyond_moves_bakes_in_full_and_says_why() {
+    let dir = scratch();
+    let config = kept_config();
+    let input = two_rooms_with_box(&dir.path().join("in"), -1.0);
+    let old = dir.path().join("old");
+    bake(&input, &old, &config, &NoProgress).unwrap();
+    // A material edit: not a move.
+    let mut doc: Value = serde_json::from_slice(&std::fs::read(&input).unwrap()).unwrap();
+    doc["materials"][0]["pbrMetallicRoughness"]["baseColorFactor"] = json!([0.3, 0.3, 0.3, 1.0]);
+    std::fs::write(&input, serde_json::to_vec(&doc).unwrap()).unwrap();
+    let report = bake_since(
+        &input,
+        &old.join("two_rooms.gltf"),
+        &dir.path().join("new"),
+        &config,
+        &NoProgress,
+    )
+    .unwrap();
+    let why = report.incremental.unwrap().full.expect("a full bake");
+    assert!(why.contains("more than node transforms"), "{why}");
+}
+
+#[test]
+fn a_version_1_transport_is_refused_with_advice() {
+    let dir = scratch();
+    let config = kept_config();
+    let old = dir.path().join("old");
+    bake(&fixture("two_rooms.gltf"), &old, &config, &NoProgress).unwrap();
+    let path = old.join("two_rooms.transport");
+    let mut bytes = std::fs::read(&path).unwrap();
+    bytes[20..24].copy_from_slice(&1u32.to_le_bytes());
+    std::fs::write(&path, &bytes).unwrap();
+    let err = kept::read(&old.join("two_rooms.gltf"))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("version 1") && err.contains("--keep-transport"),
+        "{err}"
+    );
+}
+
+#[test]
+fn build_rebakes_a_moved_node_incrementally_and_says_so() {
+    use lightbake::build::Status;
+    use lightbake::{Manifest, build};
+    let dir = scratch();
+    let levels = dir.path().join("levels");
+    two_rooms_with_box(&levels, -1.0);
+    let manifest = "[defaults]\nquality = \"draft\"\ntexels-per-unit = 8\nkeep-transport = true\n\n\
+                    [[scene]]\npath = \"levels/two_rooms.gltf\"\noutput = \"baked\"\n";
+    std::fs::write(dir.path().join("lightbake.toml"), manifest).unwrap();
+    let load = || Manifest::load(&dir.path().join("lightbake.toml")).unwrap();
+    let first = build(&load(), &NoProgress);
+    assert_eq!(first.scenes[0].status, Status::Baked, "{first:?}");
+
+    two_rooms_with_box(&levels, 1.0);
+    let second = build(&load(), &NoProgress);
+    let scene = &second.scenes[0];
+    assert_eq!(scene.status, Status::Incremental, "{second:?}");
+    let figures = scene.incremental.as_ref().expect("incremental figures");
+    assert!(figures.retraced > 0 && figures.retraced + figures.patched < figures.rows);
+    // The report still matches its schema.
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("src/build/report.schema.json");
+    let schema: Value = serde_json::from_slice(&std::fs::read(path).unwrap()).unwrap();
+    let report: Value = serde_json::from_str(&second.to_json()).unwrap();
+    let validator = jsonschema::validator_for(&schema).unwrap();
+    assert!(validator.is_valid(&report), "{report}");
+
+    // Moved again: incremental from the incremental bake's outputs.
+    two_rooms_with_box(&levels, 1.4);
+    let third = build(&load(), &NoProgress);
+    assert_eq!(third.scenes[0].status, Status::Incremental, "{third:?}");
+
+    // The record written after an incremental bake vouches for its outputs.
+    let fourth = build(&load(), &NoProgress);
+    assert_eq!(fourth.scenes[0].status, Status::Skipped, "{fourth:?}");
+}
+
+#[test]
+fn an_incremental_bake_starts_from_an_incremental_bake() {
+    let dir = scratch();
+    let config = kept_config();
+    let first = dir.path().join("first");
+    bake(
+        &two_rooms_with_box(&dir.path().join("a"), -1.0),
+        &first,
+        &config,
+        &NoProgress,
+    )
+    .unwrap();
+    // Moved once: the second bake keeps the first one's layout and records it.
+    let second = dir.path().join("second");
+    let moved = two_rooms_with_box(&dir.path().join("b"), 1.0);
+    let report = bake_since(
+        &moved,
+        &first.join("two_rooms.gltf"),
+        &second,
+        &config,
+        &NoProgress,
+    )
+    .unwrap();
+    assert_eq!(report.incremental.unwrap().full, None);
+    // Moved again, from the incremental bake: still incremental, and as a full re-trace.
+    let again = two_rooms_with_box(&dir.path().join("c"), 1.4);
+    let since = second.join("two_rooms.gltf");
+    let (inc_baked, inc) =
+        incremental(compute_since(&again, &since, &config, Retrace::Edited, &NoProgress).unwrap());
+    let (all_baked, _) =
+        incremental(compute_since(&again, &since, &config, Retrace::All, &NoProgress).unwrap());
+    assert!(
+        inc.retraced > 0 && inc.retraced < inc.rows / 4,
+        "{}",
+        inc.brief()
+    );
+    let worst = (inc_baked.lightmap.iter().zip(&all_baked.lightmap))
+        .map(|(a, b)| (*a - *b).abs().max_element() / (b.max_element() + 1e-3))
+        .fold(0.0f32, f32::max);
+    assert!(worst < 1e-4, "worst relative texel difference {worst:.2e}");
+}
+
+#[test]
+fn cli_bake_since_says_incremental() {
+    let dir = scratch();
+    let before = two_rooms_with_box(&dir.path().join("a"), -1.0);
+    let old = dir.path().join("old");
+    let bin = env!("CARGO_BIN_EXE_lightbake");
+    let run = |args: &[&std::ffi::OsStr]| {
+        let out = std::process::Command::new(bin).args(args).output().unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        String::from_utf8(out.stdout).unwrap()
+    };
+    let os = |s: &str| std::ffi::OsString::from(s);
+    run(&[
+        &os("bake"),
+        before.as_os_str(),
+        &os("-o"),
+        old.as_os_str(),
+        &os("--quality"),
+        &os("draft"),
+        &os("--keep-transport"),
+    ]);
+    let after = two_rooms_with_box(&dir.path().join("b"), 1.0);
+    let since = old.join("two_rooms.gltf");
+    let new = dir.path().join("new");
+    let stdout = run(&[
+        &os("bake"),
+        after.as_os_str(),
+        &os("-o"),
+        new.as_os_str(),
+        &os("--since"),
+        since.as_os_str(),
+    ]);
+    assert!(
+        stdout.contains("incremental: 1 node(s) moved") && stdout.contains("rows re-traced"),
+        "{stdout}"
+    );
+    assert!(new.join("two_rooms_lightmap0.exr").exists());
+}
