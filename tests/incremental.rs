@@ -175,6 +175,22 @@ fn a_box_moved_between_rooms_relights_both_as_a_full_retrace_does() {
         incremental(compute_since(&after, &since, &config, Retrace::All, &NoProgress).unwrap());
     assert_eq!(all.retraced, all.rows);
     assert_eq!(inc.moved_nodes.len(), 1, "{}", inc.brief());
+    // The validity pass ran only near the box, where it was and where it is: the texels are
+    // those of the full pass the yardstick ran, bit for bit.
+    let bits = |t: &lightbake::texels::Texels| -> (Vec<[u32; 3]>, Vec<u32>, Vec<u32>) {
+        (
+            t.position
+                .iter()
+                .map(|p| p.to_array().map(f32::to_bits))
+                .collect(),
+            t.jitter.iter().map(|j| j.to_bits()).collect(),
+            t.invalid.clone(),
+        )
+    };
+    assert!(
+        bits(&inc_baked.texels) == bits(&all_baked.texels),
+        "the validity pass near the box differs from a full one"
+    );
     assert!(inc.retraced > 0 && inc.patched > 0, "{}", inc.brief());
     // The box is a large object in a small scene: most rows have a ray through its bounds
     // and are patched, but few are traced whole and fewer rays are cast than by a full trace.

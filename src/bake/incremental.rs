@@ -24,7 +24,8 @@
 //! it (so reused rows are reused bit for bit; the kept per-source terms round differently).
 //! Two more sections only save time: the atlas (the old scene is laid out again without
 //! unwrapping) and the validity pass's jitter and cell maps (the old texels are the kept ones,
-//! with no validity pass over the old scene).
+//! with no validity pass over the old scene, and the new scene's pass runs only near what
+//! moved: `texels::validity::fix_near`).
 //!
 //! ## What stays, and when it bakes in full instead
 //!
@@ -402,14 +403,39 @@ fn plan(
     timed(&mut stages, "incremental bvh", t);
     let t = Instant::now();
     let mut new_texels = texels::build(&new_scene, &old.atlas)?;
-    let validity = super::fix_validity(
-        &mut new_texels,
-        &new_scene,
-        &tracer,
-        &config,
-        &Alone,
-        progress,
-    )?;
+    // The validity pass again only near what moved, where it was and where it is: elsewhere
+    // the previous pass's results hold (`validity::fix_near`). `Retrace::All`, the yardstick,
+    // runs the full pass.
+    let validity = if config.transport.validity && retrace == Retrace::Edited {
+        let near: Vec<(Vec3, Vec3)> = (moved.iter())
+            .flat_map(|&inst| {
+                [&old.scene, &new_scene].map(|s| bounds(s, s.instances[inst].vertices.clone(), 0.0))
+            })
+            .collect();
+        let params = texels::validity::ValidityParams {
+            seed: config.transport.seed,
+            ..Default::default()
+        };
+        texels::validity::fix_near(
+            &mut new_texels,
+            &old.texels,
+            &near,
+            &new_scene,
+            &tracer,
+            &params,
+            &Alone,
+            progress,
+        )?
+    } else {
+        super::fix_validity(
+            &mut new_texels,
+            &new_scene,
+            &tracer,
+            &config,
+            &Alone,
+            progress,
+        )?
+    };
     if new_texels.page != old.texels.page || new_texels.xy != old.texels.xy {
         return Ok(Err("the moved nodes' texels changed places".to_string()));
     }

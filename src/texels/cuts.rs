@@ -119,6 +119,20 @@ pub(crate) struct CutReport {
 /// pass moved, and narrows their jitter only where a wall crosses it). `grid` is the candidate
 /// grid per side.
 pub(crate) fn divide(texels: &mut Texels, scene: &Scene, tracer: &Tracer, grid: u32) -> CutReport {
+    divide_near(texels, scene, tracer, grid, None)
+}
+
+/// [`divide`] placing and mapping again only the texels `near` marks; the others keep their
+/// sample points as they are and `previous`'s cell maps (an earlier pass's over the same
+/// texels, where nothing within their reach changed). `None`: every texel.
+pub(crate) fn divide_near(
+    texels: &mut Texels,
+    scene: &Scene,
+    tracer: &Tracer,
+    grid: u32,
+    keep: Option<(&[bool], &Cuts)>,
+) -> CutReport {
+    let redo = |i: usize| keep.is_none_or(|(near, _)| near[i]);
     let n = texels.len();
     let mut invalid = vec![false; n];
     for &i in &texels.invalid {
@@ -135,7 +149,7 @@ pub(crate) fn divide(texels: &mut Texels, scene: &Scene, tracer: &Tracer, grid: 
     let placed: Vec<Option<(Vec3, f32)>> = (0..n)
         .into_par_iter()
         .map(|i| {
-            if invalid[i] {
+            if invalid[i] || !redo(i) {
                 return None;
             }
             probe.place(texels_ref, i, grid.max(1))
@@ -162,15 +176,27 @@ pub(crate) fn divide(texels: &mut Texels, scene: &Scene, tracer: &Tracer, grid: 
         .par_iter()
         .map(|&i| probe.cells(texels_ref, i as usize, &invalid))
         .collect();
+    // In texel order, the kept texels' maps among the new ones.
+    let mut mapped: Vec<(u32, [u32; CELLS * CELLS])> = crossed
+        .iter()
+        .zip(maps)
+        .filter_map(|(&i, map)| map.map(|m| (i, m)))
+        .collect();
+    if let Some((_, previous)) = keep {
+        mapped.extend(
+            (previous.entries())
+                .filter(|&(i, _)| !redo(i as usize))
+                .map(|(i, m)| (i, *m)),
+        );
+        mapped.sort_unstable_by_key(|&(i, _)| i);
+    }
     let mut cuts = Cuts::default();
-    for (&i, map) in crossed.iter().zip(maps) {
-        if let Some(map) = map {
-            if cuts.slot.is_empty() {
-                cuts.slot = vec![NO_TEXEL; n];
-            }
-            cuts.slot[i as usize] = cuts.cells.len() as u32;
-            cuts.cells.push(map);
+    for (i, map) in mapped {
+        if cuts.slot.is_empty() {
+            cuts.slot = vec![NO_TEXEL; n];
         }
+        cuts.slot[i as usize] = cuts.cells.len() as u32;
+        cuts.cells.push(map);
     }
     report.divided = cuts.len();
     texels.cuts = cuts;
