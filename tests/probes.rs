@@ -432,27 +432,7 @@ fn the_irradiance_volume_is_the_grid_as_bevy_samples_it() {
 /// A closed room lit by a ceiling panel, with `extra` nodes added (the probe nodes), written
 /// to `dir/room.gltf`.
 fn room_with(dir: &std::path::Path, extra: impl FnOnce(&mut GltfBuilder)) -> std::path::PathBuf {
-    let mut gltf = GltfBuilder::new("room");
-    let grey = gltf.add_material(Material::grey("grey", 0.7));
-    let panel = gltf.add_material(Material::grey("panel", 0.8).emitting([1.0; 3], 10.0));
-    let shell = Geometry::box_faces(
-        Vec3::new(-2.0, 0.0, -1.0),
-        Vec3::new(2.0, 2.0, 1.0),
-        &Face::ALL,
-        4,
-    )
-    .flipped();
-    let mesh = gltf.add_mesh("shell", shell, grey);
-    gltf.add_mesh_node("shell", mesh);
-    let light = Geometry::grid(
-        Vec3::new(-0.4, 1.99, -0.4),
-        Vec3::X * 0.8,
-        Vec3::Z * 0.8,
-        1,
-        1,
-    );
-    let mesh = gltf.add_mesh("panel", light, panel);
-    gltf.add_mesh_node("panel", mesh);
+    let (mut gltf, _) = crate::util::panel_room("room", Vec3::new(-0.4, 1.99, -0.4), Vec3::X * 0.8);
     extra(&mut gltf);
     let input = dir.join("room.gltf");
     std::fs::write(&input, gltf.to_gltf_bytes()).unwrap();

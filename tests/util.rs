@@ -57,3 +57,31 @@ pub fn texel_reference(baked: &lightbake::Baked, samples: u32) -> lightbake::ref
     )
     .unwrap()
 }
+
+/// A closed 4 × 2 × 2 m grey room (x ∈ [−2, 2], y ∈ [0, 2], z ∈ [−1, 1]) lit by a ceiling
+/// panel from `corner` along `across` and 0.8 m along z; returns the builder and the grey
+/// material, for tests to add to.
+pub fn panel_room(
+    name: &str,
+    corner: glam::Vec3,
+    across: glam::Vec3,
+) -> (lightbake::testing::GltfBuilder, usize) {
+    use glam::Vec3;
+    use lightbake::testing::{Face, Geometry, GltfBuilder, Material};
+    let mut gltf = GltfBuilder::new(name);
+    let grey = gltf.add_material(Material::grey("grey", 0.7));
+    let panel = gltf.add_material(Material::grey("panel", 0.8).emitting([1.0; 3], 10.0));
+    let shell = Geometry::box_faces(
+        Vec3::new(-2.0, 0.0, -1.0),
+        Vec3::new(2.0, 2.0, 1.0),
+        &Face::ALL,
+        4,
+    )
+    .flipped();
+    let mesh = gltf.add_mesh("shell", shell, grey);
+    gltf.add_mesh_node("shell", mesh);
+    let light = Geometry::grid(corner, across, Vec3::Z * 0.8, 1, 1);
+    let mesh = gltf.add_mesh("panel", light, panel);
+    gltf.add_mesh_node("panel", mesh);
+    (gltf, grey)
+}

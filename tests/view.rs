@@ -132,16 +132,46 @@ fn bake_and_render(dir: &Path, name: &str, extra: &[&str]) -> (PathBuf, PathBuf,
     (scene, baked, rendered)
 }
 
+/// What a browser test needs: playwright-core's `node_modules` (CI sets
+/// `LIGHTBAKE_BROWSER_TEST`; `None`, and the test skips, without it), the one browser at a
+/// time, a scratch directory and its `shots` folder.
+struct Browser {
+    node_path: std::ffi::OsString,
+    _one: std::sync::MutexGuard<'static, ()>,
+    dir: tempfile::TempDir,
+    shots: std::path::PathBuf,
+}
+
+impl Browser {
+    fn take() -> Option<Browser> {
+        let Some(node_path) = std::env::var_os("LIGHTBAKE_BROWSER_TEST") else {
+            eprintln!("skipped: set LIGHTBAKE_BROWSER_TEST to playwright-core's node_modules");
+            return None;
+        };
+        let one = ONE_BROWSER.lock().unwrap_or_else(|e| e.into_inner());
+        let dir = scratch();
+        let shots = dir.path().join("shots");
+        std::fs::create_dir(&shots).unwrap();
+        Some(Browser {
+            node_path,
+            _one: one,
+            dir,
+            shots,
+        })
+    }
+}
+
 #[test]
 fn viewer_page_in_chromium_matches_render_and_every_view_differs() {
-    let Some(node_path) = std::env::var_os("LIGHTBAKE_BROWSER_TEST") else {
-        eprintln!("skipped: set LIGHTBAKE_BROWSER_TEST to playwright-core's node_modules");
+    let Some(Browser {
+        node_path,
+        _one: _browser,
+        dir,
+        shots,
+    }) = Browser::take()
+    else {
         return;
     };
-    let _browser = ONE_BROWSER.lock().unwrap_or_else(|e| e.into_inner());
-    let dir = scratch();
-    let shots = dir.path().join("shots");
-    std::fs::create_dir(&shots).unwrap();
     let (scene, baked, rendered) = bake_and_render(dir.path(), "cornell_box.gltf", &[]);
 
     let points = dir.path().join("points.csv");
@@ -281,14 +311,15 @@ fn lit_vs_render(shots: &Path, rendered: &Path) -> f32 {
 /// its page rect in its node's extras; the page must apply the rect per node as `render` does.
 #[test]
 fn shared_meshes_in_chromium_match_render() {
-    let Some(node_path) = std::env::var_os("LIGHTBAKE_BROWSER_TEST") else {
-        eprintln!("skipped: set LIGHTBAKE_BROWSER_TEST to playwright-core's node_modules");
+    let Some(Browser {
+        node_path,
+        _one: _browser,
+        dir,
+        shots,
+    }) = Browser::take()
+    else {
         return;
     };
-    let _browser = ONE_BROWSER.lock().unwrap_or_else(|e| e.into_inner());
-    let dir = scratch();
-    let shots = dir.path().join("shots");
-    std::fs::create_dir(&shots).unwrap();
     let (scene, baked, rendered) =
         bake_and_render(dir.path(), "instanced.gltf", &["--instancing", "share"]);
     let scene_s = scene.to_str().unwrap();
@@ -312,19 +343,9 @@ fn shared_meshes_in_chromium_match_render() {
 /// Two rooms sealed from each other by a wall, a ceiling panel lighting room A (x < 0) and
 /// room B dark, a camera in room A: the scene of the probe sphere test.
 fn sealed_rooms() -> lightbake::testing::GltfBuilder {
-    use lightbake::testing::{Camera, Face, Geometry, GltfBuilder, Material};
-    let mut gltf = GltfBuilder::new("sealed_rooms");
-    let grey = gltf.add_material(Material::grey("grey", 0.7));
-    let panel = gltf.add_material(Material::grey("panel", 0.8).emitting([1.0; 3], 10.0));
-    let shell = Geometry::box_faces(
-        Vec3::new(-2.0, 0.0, -1.0),
-        Vec3::new(2.0, 2.0, 1.0),
-        &Face::ALL,
-        4,
-    )
-    .flipped();
-    let mesh = gltf.add_mesh("shell", shell, grey);
-    gltf.add_mesh_node("shell", mesh);
+    use lightbake::testing::{Camera, Face, Geometry};
+    let (mut gltf, grey) =
+        crate::util::panel_room("sealed_rooms", Vec3::new(-1.5, 1.99, -0.4), Vec3::X);
     let wall = Geometry::box_faces(
         Vec3::new(-0.05, 0.0, -1.0),
         Vec3::new(0.05, 2.0, 1.0),
@@ -333,9 +354,6 @@ fn sealed_rooms() -> lightbake::testing::GltfBuilder {
     );
     let mesh = gltf.add_mesh("wall", wall, grey);
     gltf.add_mesh_node("wall", mesh);
-    let light = Geometry::grid(Vec3::new(-1.5, 1.99, -0.4), Vec3::X, Vec3::Z * 0.8, 1, 1);
-    let mesh = gltf.add_mesh("panel", light, panel);
-    gltf.add_mesh_node("panel", mesh);
     gltf.add_camera_node(
         Camera::perspective("room A", 1.0, Some(1.0)),
         Vec3::new(-1.9, 1.6, 0.9),
@@ -350,14 +368,15 @@ fn sealed_rooms() -> lightbake::testing::GltfBuilder {
 /// black in the lit room, and black once moved into the sealed dark room.
 #[test]
 fn probe_sphere_in_chromium_is_lit_by_the_probes_where_it_is() {
-    let Some(node_path) = std::env::var_os("LIGHTBAKE_BROWSER_TEST") else {
-        eprintln!("skipped: set LIGHTBAKE_BROWSER_TEST to playwright-core's node_modules");
+    let Some(Browser {
+        node_path,
+        _one: _browser,
+        dir,
+        shots,
+    }) = Browser::take()
+    else {
         return;
     };
-    let _browser = ONE_BROWSER.lock().unwrap_or_else(|e| e.into_inner());
-    let dir = scratch();
-    let shots = dir.path().join("shots");
-    std::fs::create_dir(&shots).unwrap();
     let input = dir.path().join("sealed_rooms.gltf");
     std::fs::write(&input, sealed_rooms().to_gltf_bytes()).unwrap();
     let out = dir.path().join("out");

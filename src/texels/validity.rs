@@ -112,23 +112,8 @@ pub(crate) fn fix_sharded(
     shards: &dyn Shards,
     progress: &dyn Progress,
 ) -> Result<ValidityReport> {
-    let rays = params.rays.max(1);
     let grid = params.grid.max(1);
-    let limit = (MAX_BACK * rays as f32) as u32;
-    let texels_ref = &*texels;
-    let aborted = AtomicBool::new(false);
-    let outcome = shard::map(shards, texels.len(), |i| {
-        // Once per texel: a few dozen rays each, so the check costs nothing.
-        if aborted.load(Ordering::Relaxed) || progress.aborted() {
-            aborted.store(true, Ordering::Relaxed);
-            return Probed::default();
-        }
-        let (moved, invalid) = probe_texel(texels_ref, tracer, i, rays, grid, limit, params.seed);
-        Probed { moved, invalid }
-    })?;
-    if aborted.into_inner() {
-        return Err(Error::Aborted);
-    }
+    let outcome = probe(texels, tracer, params, None, shards, progress)?;
     let mut report = ValidityReport::default();
     texels.invalid.clear();
     for (i, Probed { moved, invalid }) in outcome.into_iter().enumerate() {
@@ -175,13 +160,11 @@ pub(crate) fn fix_near(
     progress: &dyn Progress,
 ) -> Result<ValidityReport> {
     let n = texels.len();
-    let (rays, grid) = (params.rays.max(1), params.grid.max(1));
-    let limit = (MAX_BACK * rays as f32) as u32;
+    let grid = params.grid.max(1);
     let near: Vec<bool> = (0..n)
         .map(|i| {
             let (du, dv) = (texels.du[i], texels.dv[i]);
-            let reach = (REACH * du.cross(dv).length().sqrt()).max(8.0 * tracer.epsilon);
-            let margin = reach + 4.0 * (du.length() + dv.length());
+            let margin = reach(texels, tracer, i) + 4.0 * (du.length() + dv.length());
             let p = texels.position[i];
             changed
                 .iter()
@@ -190,20 +173,7 @@ pub(crate) fn fix_near(
         .collect();
     let redo: Vec<usize> = (0..n).filter(|&i| near[i]).collect();
     let raw = texels.position.clone();
-    let texels_ref = &*texels;
-    let aborted = AtomicBool::new(false);
-    let outcome = shard::map(shards, redo.len(), |k| {
-        if aborted.load(Ordering::Relaxed) || progress.aborted() {
-            aborted.store(true, Ordering::Relaxed);
-            return Probed::default();
-        }
-        let i = redo[k];
-        let (moved, invalid) = probe_texel(texels_ref, tracer, i, rays, grid, limit, params.seed);
-        Probed { moved, invalid }
-    })?;
-    if aborted.into_inner() {
-        return Err(Error::Aborted);
-    }
+    let outcome = probe(texels, tracer, params, Some(&redo), shards, progress)?;
     let mut invalid = vec![false; n];
     for &i in &previous.invalid {
         invalid[i as usize] = !near[i as usize];
@@ -237,6 +207,42 @@ pub(crate) fn fix_near(
         invalid: texels.invalid.len(),
         divided: divided.divided,
     })
+}
+
+/// What the probes find at texels `ids` (all of them for `None`), divided among `shards`.
+fn probe(
+    texels: &Texels,
+    tracer: &Tracer,
+    params: &ValidityParams,
+    ids: Option<&[usize]>,
+    shards: &dyn Shards,
+    progress: &dyn Progress,
+) -> Result<Vec<Probed>> {
+    let (rays, grid) = (params.rays.max(1), params.grid.max(1));
+    let limit = (MAX_BACK * rays as f32) as u32;
+    let aborted = AtomicBool::new(false);
+    let count = ids.map_or(texels.len(), <[usize]>::len);
+    let outcome = shard::map(shards, count, |k| {
+        // Once per texel: a few dozen rays each, so the check costs nothing.
+        if aborted.load(Ordering::Relaxed) || progress.aborted() {
+            aborted.store(true, Ordering::Relaxed);
+            return Probed::default();
+        }
+        let i = ids.map_or(k, |ids| ids[k]);
+        let (moved, invalid) = probe_texel(texels, tracer, i, rays, grid, limit, params.seed);
+        Probed { moved, invalid }
+    })?;
+    if aborted.into_inner() {
+        return Err(Error::Aborted);
+    }
+    Ok(outcome)
+}
+
+/// How far texel `i`'s probe rays look for back faces: [`REACH`] texel sides, at least a few
+/// ray offsets.
+fn reach(texels: &Texels, tracer: &Tracer, i: usize) -> f32 {
+    let full = texels.du[i].cross(texels.dv[i]).length();
+    (REACH * full.sqrt()).max(8.0 * tracer.epsilon)
 }
 
 /// What the probes found at one texel.
@@ -281,7 +287,7 @@ fn probe_texel(
     let n = texels.normal[i];
     let (du, dv) = (texels.du[i], texels.dv[i]);
     let full = du.cross(dv).length();
-    let reach = (REACH * full.sqrt()).max(8.0 * tracer.epsilon);
+    let reach = reach(texels, tracer, i);
     let shift = Rng::new(seed, i as u64, PURPOSE).next_vec2();
     let back_hits = |p: Vec3| back_hits(tracer, p, n, rays, shift, reach);
 
