@@ -163,15 +163,8 @@ impl Browser {
 
 #[test]
 fn viewer_page_in_chromium_matches_render_and_every_view_differs() {
-    let Some(Browser {
-        node_path,
-        _one: _browser,
-        dir,
-        shots,
-    }) = Browser::take()
-    else {
-        return;
-    };
+    let Some(one) = Browser::take() else { return };
+    let (dir, shots, node_path) = (&one.dir, &one.shots, &one.node_path);
     let (scene, baked, rendered) = bake_and_render(dir.path(), "cornell_box.gltf", &[]);
 
     let points = dir.path().join("points.csv");
@@ -187,8 +180,8 @@ fn viewer_page_in_chromium_matches_render_and_every_view_differs() {
     ]);
 
     let (_server, url) = view(&baked, &points);
-    browser(&url, &shots, &node_path, &VIEWS);
-    let difference = lit_vs_render(&shots, &rendered);
+    browser(&url, shots, node_path, &VIEWS);
+    let difference = lit_vs_render(shots, &rendered);
     assert!(difference < TOLERANCE, "{difference}");
 
     // Each view draws another image than the one before it; the chart borders and the point
@@ -311,15 +304,8 @@ fn lit_vs_render(shots: &Path, rendered: &Path) -> f32 {
 /// its page rect in its node's extras; the page must apply the rect per node as `render` does.
 #[test]
 fn shared_meshes_in_chromium_match_render() {
-    let Some(Browser {
-        node_path,
-        _one: _browser,
-        dir,
-        shots,
-    }) = Browser::take()
-    else {
-        return;
-    };
+    let Some(one) = Browser::take() else { return };
+    let (dir, shots, node_path) = (&one.dir, &one.shots, &one.node_path);
     let (scene, baked, rendered) =
         bake_and_render(dir.path(), "instanced.gltf", &["--instancing", "share"]);
     let scene_s = scene.to_str().unwrap();
@@ -335,8 +321,8 @@ fn shared_meshes_in_chromium_match_render() {
         points.to_str().unwrap(),
     ]);
     let (_server, url) = view(&baked, &points);
-    browser(&url, &shots, &node_path, &["lit", "density"]);
-    let difference = lit_vs_render(&shots, &rendered);
+    browser(&url, shots, node_path, &["lit", "density"]);
+    let difference = lit_vs_render(shots, &rendered);
     assert!(difference < TOLERANCE, "{difference}");
 }
 
@@ -368,15 +354,8 @@ fn sealed_rooms() -> lightbake::testing::GltfBuilder {
 /// black in the lit room, and black once moved into the sealed dark room.
 #[test]
 fn probe_sphere_in_chromium_is_lit_by_the_probes_where_it_is() {
-    let Some(Browser {
-        node_path,
-        _one: _browser,
-        dir,
-        shots,
-    }) = Browser::take()
-    else {
-        return;
-    };
+    let Some(one) = Browser::take() else { return };
+    let (dir, shots, node_path) = (&one.dir, &one.shots, &one.node_path);
     let input = dir.path().join("sealed_rooms.gltf");
     std::fs::write(&input, sealed_rooms().to_gltf_bytes()).unwrap();
     let out = dir.path().join("out");
@@ -402,7 +381,7 @@ fn probe_sphere_in_chromium_is_lit_by_the_probes_where_it_is() {
             .map(|(s, e)| serde_json::json!({"sphere": s.to_array(), "eye": e.to_array()}))
             .collect::<Vec<_>>()
     );
-    browser_with(&url, &shots, &node_path, &["lit"], Some(&json.to_string()));
+    browser_with(&url, shots, node_path, &["lit"], Some(&json.to_string()));
 
     let result: serde_json::Value =
         serde_json::from_slice(&std::fs::read(shots.join("probes.json")).unwrap()).unwrap();
