@@ -44,7 +44,9 @@
 //!                                                     and smooth patches, shelf-packed by
 //!                                                     atlas::pack); ×⅛ on what nobody sees; the
 //!                                                     three stages above then run once with the
-//!                                                     factors (auto, adaptive)
+//!                                                     factors (auto, adaptive). A small scene is
+//!                                                     measured on the final uniform atlas, kept
+//!                                                     with its pilot pair when no factor is asked
 //!   (all of the above is `prepare`, shared by the bake and the reference)
 //!    ─ pilot runs + plan   ──▶ BakeConfig + pilot    rays for the target error after
 //!                                                     denoising, measured (auto); the lookup

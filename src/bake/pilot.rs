@@ -37,7 +37,7 @@ pub(crate) fn choose_transport(
     plan: &mut Plan,
     keep: &Keep,
     progress: &dyn Progress,
-    density: &Reused,
+    density: &mut Reused,
     processes: &dyn Processes,
 ) -> Result<Option<PilotRuns>> {
     let texels = surfaces.texels;
@@ -50,7 +50,7 @@ pub(crate) fn choose_transport(
     if monte_carlo && !keep.rays && n > 0 && lit(surfaces, &config.transport) {
         progress.begin("pilot", 2);
         let start = Instant::now();
-        let tolerance = (e / 10.0).min(1e-3);
+        let tolerance = pilot_tolerance(e);
         let bake = |k| {
             PilotRuns::bake(
                 surfaces,
@@ -64,10 +64,20 @@ pub(crate) fn choose_transport(
         let indirect_only = config.transport.indirect_only;
         let measured = density.noise.filter(|&n| n > 0.0 && n.is_finite());
         plan.noise_from_density_pilot = measured.is_some();
+        // The density pilot's pair, when it was baked on this atlas (the bake's own first).
+        let mut kept = density.pair.take();
+        let mut kept_seconds = 0.0;
+        let mut pair_at_pilot_rays = |kept: Option<KeptPair>| match kept {
+            Some(kept) => {
+                kept_seconds = kept.seconds;
+                Ok(kept.runs)
+            }
+            None => bake(PILOT_RAYS),
+        };
         let (mut first, mut runs) = match measured {
             Some(noise) => (noise, None),
             None => {
-                let runs = bake(PILOT_RAYS)?;
+                let runs = pair_at_pilot_rays(kept.take())?;
                 (runs.noise(texels, indirect_only), Some(runs))
             }
         };
@@ -78,6 +88,10 @@ pub(crate) fn choose_transport(
                 plan.discarded_rays += discarded.rays();
                 plan.overhead_seconds += start.elapsed().as_secs_f64();
             }
+            if let Some(discarded) = kept.take() {
+                plan.discarded_rays += discarded.runs.rays();
+                plan.overhead_seconds += discarded.seconds;
+            }
             let pair = bake(4 * PILOT_RAYS)?;
             second = Some(pair.noise(texels, indirect_only));
             runs = Some(pair);
@@ -87,7 +101,7 @@ pub(crate) fn choose_transport(
             None => {
                 // No second pilot: the pair at PILOT_RAYS on this atlas, reused by the final
                 // bake, and its noise rather than the density pilot's.
-                let pair = bake(PILOT_RAYS)?;
+                let pair = pair_at_pilot_rays(kept)?;
                 first = pair.noise(texels, indirect_only);
                 plan.noise_from_density_pilot = false;
                 pair
@@ -102,7 +116,7 @@ pub(crate) fn choose_transport(
         let rays = runs.rays();
         progress.advance(1);
         progress.end();
-        plan.pilot_seconds = start.elapsed().as_secs_f64();
+        plan.pilot_seconds = start.elapsed().as_secs_f64() + kept_seconds;
         plan.pilot_rays = rays;
         runs.enough = plan::choose_rays(config, plan, first, second);
         let [a, b] = runs.stored(config.transport.indirect_only);
@@ -176,6 +190,12 @@ pub(crate) fn choose_transport(
     Ok(pilot)
 }
 
+/// The pilot runs' solver tolerance for the relative error `target`: a tenth of it, at most
+/// 1e-3 (iterating further would not show beside the pilots' noise).
+fn pilot_tolerance(target: f32) -> f32 {
+    (target / 10.0).min(1e-3)
+}
+
 /// Whether any light source reaches the texels' transport (emitters, sky or punctual lights).
 fn lit(surfaces: Surfaces, transport: &TransportParams) -> bool {
     surfaces
@@ -193,6 +213,10 @@ fn lit(surfaces: Surfaces, transport: &TransportParams) -> bool {
 pub(crate) struct Density {
     pub(crate) triangle_factors: Option<Vec<f32>>,
     pub(crate) reused: Reused,
+    /// The pilot pair itself (none when nothing was measured). The caller keeps it as the
+    /// bake's first pair when the pilot measured the final atlas ([`Reused::pair`]), and
+    /// otherwise counts its rays as discarded.
+    pub(crate) pair: Option<KeptPair>,
 }
 
 /// What the density pilot measured that the transport plan reuses on the final atlas.
@@ -203,6 +227,18 @@ pub(crate) struct Reused {
     /// Its lookup-error sample's points and the light gathered there
     /// ([`GatheredSample::lights`]; empty without a sample).
     pub(crate) lights: Vec<PointLight>,
+    /// The pair itself, when it was baked on the final atlas: exactly the pair
+    /// [`choose_transport`] would bake first (same texels, rays, seeds and tolerance), so it is
+    /// taken instead of baked again.
+    pub(crate) pair: Option<KeptPair>,
+}
+
+/// A density pilot's pair at [`PILOT_RAYS`] and the seconds it took (the ray choice's time per
+/// ray counts them).
+#[derive(Clone, Debug)]
+pub(crate) struct KeptPair {
+    pub(crate) runs: PilotRuns,
+    pub(crate) seconds: f64,
 }
 
 /// Whether the density pilot can measure anything: Monte Carlo transport and some light.
@@ -211,8 +247,9 @@ pub(crate) fn density_measurable(scene: &crate::scene::Scene, config: &BakeConfi
         && (scene.has_light_sources() || config.transport.sky.max_element() > 0.0)
 }
 
-/// Step 1b of the automatic choice, on the density pilot's own atlas (`surfaces`, uniform at
-/// `config`'s density; `crate::atlas::build_quick`): a pilot pair at [`PILOT_RAYS`], its lookup
+/// Step 1b of the automatic choice, on the density pilot's uniform atlas (`surfaces`, at
+/// `config`'s density: its own from `crate::atlas::build_quick`, or the final atlas that the
+/// bake keeps, with the pair, when no factor is asked): a pilot pair at [`PILOT_RAYS`], its lookup
 /// error at random surface points, and the density per region that asks for
 /// ([`plan::density`]) at `tpu`, the preset's density. Its rays and time go to the plan's
 /// overhead: none of it is in the result.
@@ -227,11 +264,15 @@ pub(crate) fn measure_density(
     let mut density = Density {
         triangle_factors: None,
         reused: Reused::default(),
+        pair: None,
     };
     if surfaces.texels.is_empty() || !lit(surfaces, &config.transport) {
         return Ok(density);
     }
-    let tolerance = (plan.target_error / 10.0).min(1e-3);
+    // The same tolerance as `choose_transport`'s pair, so a pair kept for the final atlas is
+    // the one it would bake.
+    let tolerance = pilot_tolerance(plan.target_error);
+    let start = Instant::now();
     let runs = PilotRuns::bake(
         surfaces,
         &config.transport,
@@ -240,6 +281,7 @@ pub(crate) fn measure_density(
         processes,
         progress,
     )?;
+    let seconds = start.elapsed().as_secs_f64();
     let [a, b] = runs.stored(config.transport.indirect_only);
     let (stored, budget) = ([a.as_slice(), b.as_slice()], runs.rays() / 2);
     let target = plan.target_error;
@@ -258,10 +300,11 @@ pub(crate) fn measure_density(
         plan::density::choose_region_density(scene, texels, stored, g, densities, plan)
     });
     density.reused.noise = Some(metrics::relative_noise(&a, &b, &texels.invalid));
-    plan.discarded_rays += runs.rays() + samples.gathered.as_ref().map_or(0, |g| g.rays);
+    plan.discarded_rays += samples.gathered.as_ref().map_or(0, |g| g.rays);
     if let Some(g) = samples.gathered {
         density.reused.lights = g.lights;
     }
+    density.pair = Some(KeptPair { runs, seconds });
     Ok(density)
 }
 
@@ -419,6 +462,7 @@ fn gathered_sample(
 
 /// Two Monte Carlo bakes of the same texels with independent seeds: their difference measures
 /// the noise, and their mean is kept for the final bake ([`final_bake`]).
+#[derive(Clone, Debug)]
 pub(crate) struct PilotRuns {
     /// Gathering rays (and light samples) of each run.
     pub(crate) gather_rays: u32,
@@ -515,7 +559,7 @@ impl PilotRuns {
         })
     }
 
-    fn rays(&self) -> u64 {
+    pub(crate) fn rays(&self) -> u64 {
         self.runs.iter().map(|r| r.transport.rays).sum()
     }
 
@@ -709,6 +753,48 @@ mod tests {
         .expect("samples")
         .gathered
         .expect("a gathered sample")
+    }
+
+    #[test]
+    fn the_density_pilots_pair_is_the_pair_the_ray_choice_would_bake() {
+        // The bake keeps the density pilot's pair when it measured the final atlas: that is
+        // only right if it is, bit for bit, the pair `choose_transport` bakes first.
+        let input = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/cornell_box.gltf");
+        let config = BakeConfig {
+            auto: None,
+            ..BakeConfig::default()
+        };
+        let p = crate::prepare(&input, &config, &NoProgress).expect("prepares");
+        let mut plan = Plan {
+            target_error: 0.04,
+            ..Default::default()
+        };
+        let tpu = config.atlas.texels_per_unit;
+        let density = measure_density(p.surfaces(), &config, tpu, &mut plan, &Alone, &NoProgress)
+            .expect("measures");
+        let kept = density.pair.expect("a pair on a lit scene");
+        let tolerance = pilot_tolerance(plan.target_error);
+        let baked = PilotRuns::bake(
+            p.surfaces(),
+            &config.transport,
+            PILOT_RAYS,
+            tolerance,
+            &Alone,
+            &NoProgress,
+        )
+        .expect("bakes");
+        let bits = |r: &PilotRuns| -> Vec<u32> {
+            r.runs
+                .iter()
+                .flat_map(|run| run.solution.irradiance.iter().chain(&run.transport.direct))
+                .flat_map(|v| v.to_array().map(f32::to_bits))
+                .collect()
+        };
+        assert_eq!(bits(&kept.runs), bits(&baked));
+        assert_eq!(kept.runs.rays(), baked.rays());
+        // Its rays are the caller's to count: only the sample's are discarded here.
+        let sample_rays = plan.discarded_rays;
+        assert!(sample_rays > 0 && sample_rays < kept.runs.rays() * 100);
     }
 
     #[test]

@@ -24,8 +24,12 @@
 //! distinct densities: few xatlas meshes, a stable choice), with a floor of
 //! `MIN_REGION_TEXELS` texels for every seen, lit region.
 //!
-//! **The pilot's atlas** is its own: uniform, charted quickly (`crate::atlas::build_quick`), at
-//! the preset's density or, when that would pass `PILOT_TEXELS` texels, coarser; mean
+//! **The pilot's atlas** is uniform. A scene of at most `MEASURE_ON_FINAL_TRIANGLES` triangles
+//! whose preset atlas stays within `PILOT_TEXELS` is measured on the final atlas itself (charted
+//! in full; `crate::bake`), which the bake keeps, with the pilot's pair, when the measurement
+//! asks for no factor. Any other scene's pilot atlas is its own, charted quickly
+//! (`crate::atlas::build_quick`), at the preset's density or, when that would pass
+//! `PILOT_TEXELS` texels, coarser; mean
 //! squares measured there are carried to the preset's density by `PILOT_EXPONENT` (a pilot
 //! at half the density on every preset was tried: it carried too little error at `medium`,
 //! 110k texels and 4.19% against a 4% target, and too much at `high`, 1.25 M texels).
