@@ -56,8 +56,11 @@ use crate::texels::validity::{self, MAX_BACK, PROBE_RAYS};
 use crate::texels::{RayEnd, Texels};
 use crate::trace::Tracer;
 
-/// Random surface points are drawn in batches of this many ...
+/// Random surface points are drawn in batches of this many (the first one smaller when the
+/// budget would not pay for it, down to [`MIN_BATCH`]) ...
 pub(crate) const BATCH: usize = 4096;
+/// The smallest first batch.
+pub(crate) const MIN_BATCH: usize = 512;
 /// ... until the mean square's two standard errors are within this share of it ...
 pub(crate) const PRECISION: f64 = 0.4;
 /// ... or the error is clearly small next to the target (its upper bound below this share of
@@ -264,8 +267,15 @@ impl GatheredSample {
         // Points whose light an earlier sample gathered are read first, all of them (they
         // cost no ray); past them a batch is cast only while the budget holds it whole.
         let free = runs.reuse.len();
+        // A first batch costs no more rays than the budget (the pilot bake it measures, on a
+        // small scene fewer rays than a whole batch), down to `MIN_BATCH` points.
+        let first = (runs.budget_rays / per_point).clamp(MIN_BATCH as u64, BATCH as u64) as usize;
         while drawn < MAX_POINTS {
-            let size = if drawn < free { free - drawn } else { BATCH };
+            let size = match drawn {
+                0 if free == 0 => first,
+                _ if drawn < free => free - drawn,
+                _ => BATCH,
+            };
             let batch = shard::map(shards, size, |k| drawer.draw(drawn + k))?;
             drawn += size;
             for d in batch {
