@@ -29,10 +29,12 @@
 //! out.
 //!
 //! **Cost.** Per point, 16 probe rays, 2 runs × ([`GATHER_RAYS`] + [`LIGHT_SAMPLES`]) and one
-//! shadow ray per punctual light; [`BATCH`] points at least, more while the estimate is not
-//! precise and the sample has cast less than its budget (the bake gives it half the pilot's
-//! rays). Measured (the guide, `src/guide/performance.md`): 0.1–0.3 s for the first batch, as much as
-//! a sub-second bake; 9% of the furnished interior's draft bake and 4% of its medium one.
+//! shadow ray per punctual light; a first batch of [`BATCH`] points, or as many as the budget
+//! pays for (the bake gives it half the pilot's rays) down to [`MIN_BATCH`], then more while
+//! the estimate is not precise and the sample has cast less than its budget. Measured (the
+//! guide, `src/guide/performance.md`): 0.1–0.3 s for a whole first batch, as much as a
+//! sub-second bake, hence the smaller first batch there; 9% of the furnished interior's draft
+//! bake and 4% of its medium one.
 //!
 //! **Gathered once.** A point's light does not depend on the atlas its lookup reads (apart
 //! from the second bounce at the gathering run's texel resolution), so the sample on the final
