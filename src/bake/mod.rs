@@ -595,11 +595,26 @@ fn fix_validity(
     shards: &dyn Shards,
     progress: &dyn Progress,
 ) -> Result<texels::validity::ValidityReport> {
+    let grid = texels::validity::GRID;
+    fix_validity_on_grid(texels, scene, tracer, config, grid, shards, progress)
+}
+
+/// [`fix_validity`] with `grid × grid` candidate points per buried texel.
+fn fix_validity_on_grid(
+    texels: &mut texels::Texels,
+    scene: &scene::Scene,
+    tracer: &Tracer,
+    config: &BakeConfig,
+    grid: u32,
+    shards: &dyn Shards,
+    progress: &dyn Progress,
+) -> Result<texels::validity::ValidityReport> {
     if !config.transport.validity {
         return Ok(Default::default());
     }
     let params = texels::validity::ValidityParams {
         seed: config.transport.seed,
+        grid,
         ..Default::default()
     };
     texels::validity::fix_sharded(texels, scene, tracer, &params, shards, progress)
@@ -632,6 +647,12 @@ impl Layout {
     }
 }
 
+/// Candidate points per side of a buried texel's footprint in the density pilot's validity
+/// pass: 2 × 2 rather than the bake's [`texels::validity::GRID`], so that a texel buried in a
+/// solid costs 5 probe sets rather than 17. The pilot only needs to tell buried from seen
+/// surfaces and where contacts darken texels, not the best point within a texel.
+const PILOT_VALIDITY_GRID: u32 = 2;
+
 /// The density pilot's texels: a quickly charted atlas (`atlas::build_quick`) and its validity
 /// pass.
 fn pilot_layout(
@@ -645,7 +666,8 @@ fn pilot_layout(
     let atlas = atlas::build_quick(scene, source, &config.atlas, progress)?;
     check_aborted(progress)?;
     let mut texels = texels::build(scene, &atlas)?;
-    fix_validity(&mut texels, scene, tracer, config, shards, progress)?;
+    let grid = PILOT_VALIDITY_GRID;
+    fix_validity_on_grid(&mut texels, scene, tracer, config, grid, shards, progress)?;
     Ok(texels)
 }
 

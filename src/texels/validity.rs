@@ -56,6 +56,8 @@ pub(crate) const MAX_BACK: f32 = 0.25;
 /// Probe rays per point: the validity pass's default, and what the point samples of the planner
 /// and the point reference cast to tell a visible point from one inside geometry.
 pub(crate) const PROBE_RAYS: u32 = 16;
+/// Candidate points per side of a footprint (the module docs' `G`).
+pub(crate) const GRID: u32 = 4;
 /// Probe length in texel sides.
 pub(crate) const REACH: f32 = 8.0;
 /// Neighbours whose normals differ by more than this (cosine of 60°) do not fill each other.
@@ -73,7 +75,7 @@ impl Default for ValidityParams {
     fn default() -> Self {
         ValidityParams {
             rays: PROBE_RAYS,
-            grid: 4,
+            grid: GRID,
             seed: 0,
         }
     }
