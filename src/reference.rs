@@ -431,7 +431,9 @@ pub fn compute(
     progress: &dyn Progress,
 ) -> Result<Computed> {
     params.validate()?;
-    let p = prepare(input, config, progress)?;
+    let mut p = prepare(input, config, progress)?;
+    // A bake's pilot pair kept from the density pilot is no use to a path tracer.
+    p.density.pair = None;
     let reference = trace(&p.scene, &p.texels, &p.tracer, params, progress)?;
     Ok(Computed {
         scene: p.scene,

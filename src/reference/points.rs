@@ -381,7 +381,9 @@ pub fn compute_in(
     progress: &dyn Progress,
 ) -> Result<(PointReference, Reference)> {
     params.validate()?;
-    let p = super::prepare(input, config, progress)?;
+    let mut p = super::prepare(input, config, progress)?;
+    // A bake's pilot pair kept from the density pilot is no use to a path tracer.
+    p.density.pair = None;
     let set = draw_in(&p.scene, &p.tracer, n, params.seed, strip)?;
     let traced = trace(
         &p.scene,
