@@ -51,7 +51,9 @@
 //!   density; the total rises (up to ×4 and the preset's budget) when the sample is sure the
 //!   error is above what the target leaves beside the noise. The atlas, texels and validity
 //!   are then laid out once, and the pilot's noise at `PILOT_RAYS` is the transport plan's
-//!   first measurement (its pair is not cast again on the new atlas).
+//!   first measurement (its pair is not cast again on the new atlas). A small scene is
+//!   measured on its final atlas, uniform at the preset's density; when no factor is asked,
+//!   that atlas and the pilot's pair are the bake's own (`bake::pilot::Reused::pair`).
 //! - **Resolution error** is predicted (`predict_resolution`): what a renderer shows
 //!   between texel centres, where it blends four texels bilinearly, differs from the light at
 //!   that point where the light changes within a texel.
