@@ -718,7 +718,6 @@ mod tests {
 
     use super::*;
     use crate::NoProgress;
-    use crate::plan::gathered::BATCH;
     use crate::shard::Alone;
 
     /// The Cornell box's lookup-error sample on a uniform atlas at `tpu` texels per metre, with
@@ -748,16 +747,7 @@ mod tests {
             runs.irradiance(),
             [&a, &b],
             0.04,
-            // A fresh sample's budget pays for one whole batch (96 rays a point: probes, and
-            // 32 rays and 8 light samples per run); a reading one casts nothing.
-            (
-                if reuse.is_empty() {
-                    96 * BATCH as u64
-                } else {
-                    0
-                },
-                reuse,
-            ),
+            (0, reuse),
             &Alone,
         )
         .expect("samples")
@@ -836,17 +826,7 @@ mod tests {
         // lookup error as gathering there afresh, within the two estimates' standard errors.
         let finer = cornell_sample(32.0, &[]);
         let read = cornell_sample(32.0, &fresh.lights);
-        // Only points the earlier sample skipped (its atlas found no valid texel to read) are
-        // gathered afresh.
-        let skipped = fresh
-            .lights
-            .iter()
-            .filter(|l| matches!(l, PointLight::Redraw));
-        assert!(
-            read.rays <= 96 * skipped.count() as u64,
-            "{} rays",
-            read.rays
-        );
+        assert_eq!(read.rays, 0);
         let ((m_fresh, se_fresh), (m_read, se_read)) =
             (finer.mean_square_total(), read.mean_square_total());
         assert!(

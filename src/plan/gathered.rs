@@ -29,12 +29,10 @@
 //! out.
 //!
 //! **Cost.** Per point, 16 probe rays, 2 runs × ([`GATHER_RAYS`] + [`LIGHT_SAMPLES`]) and one
-//! shadow ray per punctual light; a first batch of [`BATCH`] points, or as many as the budget
-//! pays for (the bake gives it half the pilot's rays) down to [`MIN_BATCH`], then more while
-//! the estimate is not precise and the sample has cast less than its budget. Measured (the
-//! guide, `src/guide/performance.md`): 0.1–0.3 s for a whole first batch, as much as a
-//! sub-second bake, hence the smaller first batch there; 9% of the furnished interior's draft
-//! bake and 4% of its medium one.
+//! shadow ray per punctual light; [`BATCH`] points at least, more while the estimate is not
+//! precise and the sample has cast less than its budget (the bake gives it half the pilot's
+//! rays). Measured (the guide, `src/guide/performance.md`): 0.1–0.3 s for the first batch, as much as
+//! a sub-second bake; 9% of the furnished interior's draft bake and 4% of its medium one.
 //!
 //! **Gathered once.** A point's light does not depend on the atlas its lookup reads (apart
 //! from the second bounce at the gathering run's texel resolution), so the sample on the final
@@ -58,11 +56,8 @@ use crate::texels::validity::{self, MAX_BACK, PROBE_RAYS};
 use crate::texels::{RayEnd, Texels};
 use crate::trace::Tracer;
 
-/// Random surface points are drawn in batches of this many (the first one smaller when the
-/// budget would not pay for it, down to [`MIN_BATCH`]) ...
+/// Random surface points are drawn in batches of this many ...
 pub(crate) const BATCH: usize = 4096;
-/// The smallest first batch.
-pub(crate) const MIN_BATCH: usize = 512;
 /// ... until the mean square's two standard errors are within this share of it ...
 pub(crate) const PRECISION: f64 = 0.4;
 /// ... or the error is clearly small next to the target (its upper bound below this share of
@@ -269,15 +264,8 @@ impl GatheredSample {
         // Points whose light an earlier sample gathered are read first, all of them (they
         // cost no ray); past them a batch is cast only while the budget holds it whole.
         let free = runs.reuse.len();
-        // A first batch costs no more rays than the budget (the pilot bake it measures, on a
-        // small scene fewer rays than a whole batch), down to `MIN_BATCH` points.
-        let first = (runs.budget_rays / per_point).clamp(MIN_BATCH as u64, BATCH as u64) as usize;
         while drawn < MAX_POINTS {
-            let size = match drawn {
-                0 if free == 0 => first,
-                _ if drawn < free => free - drawn,
-                _ => BATCH,
-            };
+            let size = if drawn < free { free - drawn } else { BATCH };
             let batch = shard::map(shards, size, |k| drawer.draw(drawn + k))?;
             drawn += size;
             for d in batch {
