@@ -448,12 +448,8 @@ fn prepare_loaded(
     let tracer = Tracer::new(&scene);
     timed(&mut stages, "bvh", t);
 
-    // Adaptive density: a pilot on a uniform atlas of its own, charted quickly and at most
-    // `plan::density::PILOT_TEXELS` texels, chooses a density per region (`plan::density`);
-    // the atlas is then laid out at those densities. A scene small enough that its pilot atlas
-    // is at the preset's density and whose charting is cheap is measured on the final atlas
-    // itself (`MEASURE_ON_FINAL_TRIANGLES`): when the density stays uniform, that atlas, its
-    // validity pass and its pilot pair are the bake's, and the pilot cost nothing but its sample.
+    // Adaptive density (`density_pilot`): a density per region, and on a small scene perhaps
+    // the final layout itself.
     let mut reused = pilot::Reused::default();
     let mut kept_layout = None;
     if let (Some(plan), Some(auto)) = (&mut plan, config.auto)
@@ -461,71 +457,9 @@ fn prepare_loaded(
         && !atlas::reuses_input_uvs(&scene, &source, &config.atlas)
         && pilot::density_measurable(&scene, &config)
     {
-        let t = Instant::now();
-        let tpu = config.atlas.texels_per_unit;
-        let uniform = plan::surface_area(&scene) * f64::from(tpu).powi(2);
-        let scale = (plan::density::PILOT_TEXELS / uniform.max(1.0))
-            .sqrt()
-            .min(1.0);
-        let on_final = scale >= 1.0 && scene.triangles.len() <= MEASURE_ON_FINAL_TRIANGLES;
-        let mut coarse = config.clone();
-        coarse.atlas.texels_per_unit = tpu * scale as f32;
-        let mut layout_stages = Vec::new();
-        let layout = if on_final {
-            let layout = lay_out(
-                &scene,
-                &source,
-                &tracer,
-                &config,
-                processes,
-                progress,
-                &mut layout_stages,
-            )?;
-            Layout::Final(layout)
-        } else {
-            Layout::Pilot(pilot_layout(
-                &scene, &source, &tracer, &coarse, processes, progress,
-            )?)
-        };
-        let laid_out = t.elapsed().as_secs_f64();
-        let surfaces = Surfaces {
-            scene: &scene,
-            texels: layout.texels(),
-            tracer: &tracer,
-        };
-        let density = pilot::measure_density(surfaces, &coarse, tpu, plan, processes, progress)?;
-        reused = density.reused;
-        match (layout, density.triangle_factors) {
-            (Layout::Final(layout), None) => {
-                // The bake's own atlas, texels and pair: only the pilot's sample is overhead.
-                stages.extend(layout_stages);
-                let measuring = t.elapsed().as_secs_f64() - laid_out;
-                stages.push(StageTime {
-                    stage: "density pilot",
-                    seconds: measuring,
-                });
-                if let Some(pair) = &density.pair {
-                    plan.overhead_seconds += (measuring - pair.seconds).max(0.0);
-                }
-                reused.pair = density.pair;
-                plan.reasons.push(
-                    "atlas: the one the density pilot measured (uniform at the preset's \
-                     density, charted in full), kept with its validity pass and pilot pair"
-                        .into(),
-                );
-                kept_layout = Some(layout);
-            }
-            (_, factors) => {
-                if let Some(factors) = factors {
-                    config.atlas.triangle_density = factors;
-                }
-                if let Some(pair) = density.pair {
-                    plan.discarded_rays += pair.runs.rays();
-                }
-                timed(&mut stages, "density pilot", t);
-                plan.overhead_seconds += t.elapsed().as_secs_f64();
-            }
-        }
+        let inputs = (&scene, &source, &tracer);
+        (reused, kept_layout) =
+            density_pilot(inputs, &mut config, plan, processes, progress, &mut stages)?;
     }
     let (atlas, texels, validity) = match kept_layout {
         Some(layout) => layout,
@@ -556,6 +490,96 @@ fn prepare_loaded(
     })
 }
 
+/// An atlas, its texels and their validity pass.
+type LaidOut = (
+    atlas::Atlas,
+    texels::Texels,
+    texels::validity::ValidityReport,
+);
+
+/// The density pilot: a pilot on a uniform atlas of its own, charted quickly and at most
+/// `plan::density::PILOT_TEXELS` texels, chooses a density per region (`plan::density`) into
+/// `config`; the atlas is then laid out at those densities. A scene small enough that its
+/// pilot atlas is at the preset's density and whose charting is cheap is measured on the final
+/// atlas itself ([`MEASURE_ON_FINAL_TRIANGLES`]): when the density stays uniform, that layout
+/// is returned and its pilot pair is in the returned [`pilot::Reused`], so the pilot cost
+/// nothing but its sample.
+fn density_pilot(
+    (scene, source, tracer): (&scene::Scene, &scene::Source, &Tracer),
+    config: &mut BakeConfig,
+    plan: &mut Plan,
+    processes: &dyn Processes,
+    progress: &dyn Progress,
+    stages: &mut Vec<StageTime>,
+) -> Result<(pilot::Reused, Option<LaidOut>)> {
+    let t = Instant::now();
+    let tpu = config.atlas.texels_per_unit;
+    let uniform = plan::surface_area(scene) * f64::from(tpu).powi(2);
+    let scale = (plan::density::PILOT_TEXELS / uniform.max(1.0))
+        .sqrt()
+        .min(1.0);
+    let on_final = scale >= 1.0 && scene.triangles.len() <= MEASURE_ON_FINAL_TRIANGLES;
+    let mut coarse = config.clone();
+    coarse.atlas.texels_per_unit = tpu * scale as f32;
+    let mut layout_stages = Vec::new();
+    let layout = if on_final {
+        let layout = lay_out(
+            scene,
+            source,
+            tracer,
+            config,
+            processes,
+            progress,
+            &mut layout_stages,
+        )?;
+        Layout::Final(layout)
+    } else {
+        Layout::Pilot(pilot_layout(
+            scene, source, tracer, &coarse, processes, progress,
+        )?)
+    };
+    let laid_out = t.elapsed().as_secs_f64();
+    let surfaces = Surfaces {
+        scene,
+        texels: layout.texels(),
+        tracer,
+    };
+    let density = pilot::measure_density(surfaces, &coarse, tpu, plan, processes, progress)?;
+    let mut reused = density.reused;
+    match (layout, density.triangle_factors) {
+        (Layout::Final(layout), None) => {
+            // The bake's own atlas, texels and pair: only the pilot's sample is overhead.
+            stages.extend(layout_stages);
+            let measuring = t.elapsed().as_secs_f64() - laid_out;
+            stages.push(StageTime {
+                stage: "density pilot",
+                seconds: measuring,
+            });
+            if let Some(pair) = &density.pair {
+                plan.overhead_seconds += (measuring - pair.seconds).max(0.0);
+            }
+            reused.pair = density.pair;
+            plan.reasons.push(
+                "atlas: the one the density pilot measured (uniform at the preset's \
+                 density, charted in full), kept with its validity pass and pilot pair"
+                    .into(),
+            );
+            Ok((reused, Some(layout)))
+        }
+        (_, factors) => {
+            if let Some(factors) = factors {
+                config.atlas.triangle_density = factors;
+            }
+            if let Some(pair) = density.pair {
+                plan.discarded_rays += pair.runs.rays();
+            }
+            timed(stages, "density pilot", t);
+            plan.overhead_seconds += t.elapsed().as_secs_f64();
+            Ok((reused, None))
+        }
+    }
+}
+
 /// The atlas, its texels and their validity pass (each stage timed into `stages`).
 fn lay_out(
     scene: &scene::Scene,
@@ -565,11 +589,7 @@ fn lay_out(
     shards: &dyn Shards,
     progress: &dyn Progress,
     stages: &mut Vec<StageTime>,
-) -> Result<(
-    atlas::Atlas,
-    texels::Texels,
-    texels::validity::ValidityReport,
-)> {
+) -> Result<LaidOut> {
     let t = Instant::now();
     let atlas = atlas::build_with(scene, source, &config.atlas, progress)?;
     timed(stages, "atlas", t);
@@ -628,13 +648,7 @@ const MEASURE_ON_FINAL_TRIANGLES: usize = 20_000;
 
 /// The density pilot's layout: the final atlas at uniform density, or a quick one of its own.
 enum Layout {
-    Final(
-        (
-            atlas::Atlas,
-            texels::Texels,
-            texels::validity::ValidityReport,
-        ),
-    ),
+    Final(LaidOut),
     Pilot(texels::Texels),
 }
 
