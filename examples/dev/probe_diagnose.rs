@@ -28,6 +28,9 @@ use lightbake::reference::points::{self, Normals, Point};
 use lightbake::trace::Tracer;
 use lightbake::{BakeConfig, NoProgress};
 
+/// A point's distance to the nearest emitter texel and its (total, bake, interpolation) error.
+type Split = (f32, Vec3, Vec3, Vec3);
+
 /// Relative RMS of `d` with noise variance `v` taken out, over the mean `m`.
 fn rel(d: &[Vec3], v: &[Vec3], m: f64) -> (f64, f64) {
     let n = 3.0 * d.len() as f64;
@@ -239,7 +242,7 @@ fn main() {
         );
     }
     // Error against distance to the emitters.
-    let mut by_d: Vec<(f32, Vec3, Vec3, Vec3)> = Vec::new();
+    let mut by_d: Vec<Split> = Vec::new();
     let mut idx = 0;
     for k in 0..m {
         let p = at[k].0;
@@ -255,7 +258,7 @@ fn main() {
     }
     for (lo, hi) in [(0.0, 0.25), (0.25, 0.5), (0.5, 1.0), (1.0, 100.0)] {
         let sel: Vec<_> = by_d.iter().filter(|x| x.0 >= lo && x.0 < hi).collect();
-        let sq = |f: &dyn Fn(&(f32, Vec3, Vec3, Vec3)) -> Vec3| {
+        let sq = |f: &dyn Fn(&Split) -> Vec3| {
             sel.iter()
                 .map(|x| f(x).length_squared() as f64)
                 .sum::<f64>()

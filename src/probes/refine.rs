@@ -74,7 +74,7 @@ impl Refinement {
     #[inline]
     #[must_use]
     pub fn probe_at(&self, grid: &Grid, c: [u32; 3]) -> Option<usize> {
-        if c.iter().all(|&x| x % FACTOR == 0) {
+        if c.iter().all(|&x| x.is_multiple_of(FACTOR)) {
             return Some(grid.index(c.map(|x| x / FACTOR)));
         }
         (self.nodes.binary_search_by_key(&key(&c), key).ok()).map(|k| grid.len() + k)
@@ -87,7 +87,7 @@ impl Refinement {
         let mut nodes: Vec<[u32; 3]> = Vec::new();
         for base in cells {
             for_lattice(*base, |c| {
-                if c.iter().any(|&x| x % FACTOR != 0) {
+                if c.iter().any(|&x| !x.is_multiple_of(FACTOR)) {
                     nodes.push(c);
                 }
             });
@@ -130,7 +130,7 @@ fn for_cells_holding(grid: &Grid, c: [u32; 3], mut f: impl FnMut([u32; 3])) {
     let range = |a: usize| {
         let cells = grid.count[a] - 1;
         let lo = c[a] / FACTOR;
-        let on_plane = c[a] % FACTOR == 0;
+        let on_plane = c[a].is_multiple_of(FACTOR);
         let from = if on_plane { lo.saturating_sub(1) } else { lo };
         from..=lo.min(cells - 1)
     };
@@ -244,7 +244,7 @@ pub(crate) fn choose(grid: &Grid, valid: &[bool], sh: &[Sh2], budget: usize) -> 
     for &(_, base) in &scored {
         let mut new = Vec::new();
         for_lattice(base, |c| {
-            if c.iter().any(|&x| x % FACTOR != 0) && !nodes.contains(&key(&c)) {
+            if c.iter().any(|&x| !x.is_multiple_of(FACTOR)) && !nodes.contains(&key(&c)) {
                 new.push(key(&c));
             }
         });
@@ -355,7 +355,7 @@ mod tests {
         // face or edge, but for the faces at the grid's edge.
         assert_eq!(nodes.len(), ((FACTOR + 1).pow(3) - 8) as usize);
         for (c, base, coarse) in &nodes {
-            let inside = (0..3).all(|a| c[a] % FACTOR != 0);
+            let inside = (0..3).all(|a| !c[a].is_multiple_of(FACTOR));
             let shared = c[0] == FACTOR || c[0] == 2 * FACTOR || c[1] == FACTOR || c[2] == FACTOR;
             assert_eq!(*coarse, !inside && shared, "{c:?} in {base:?}");
         }
