@@ -60,7 +60,8 @@
 //!  ─ lightmap::directional ──▶ L1 SH per texel       with --directional: a final gather over
 //!                                                     the solution (pages like the lightmap's)
 //!           ─ probes::bake ──▶ Probes                with --probes: a grid of L2 SH light
-//!                                                     probes in the empty space (or where a
+//!                                                     probes in the empty space, its cells
+//!                                                     divided where light changes (or where a
 //!                                                     node says, --probes-from), buried ones
 //!                                                     marked, gathered from the solution
 //! ─ LightmapPages::from_texels ▶ LightmapPages         H/π per texel, dilated into the gutters

@@ -62,23 +62,30 @@ fn probe_error(baked: &Baked, at: &[(Vec3, Vec3)], samples: u32) -> (f32, f32) {
     (metrics::without_noise(rmse, noise), noise)
 }
 
-/// two_rooms at medium with the default probes (16 × 8 × 8, 25 cm apart), against the path
-/// tracer with random normals: at the probes themselves (SH truncation and gather noise) within
-/// 5% relative RMSE, the reference's noise taken out; at random free-space points between them
-/// (trilinear interpolation added) within 12%, and within 10% over whole cells (all eight
-/// probes valid and in sight). Measured: 2.2%, 9.2% and 7.0%; the interpolation error sits
-/// under the ceiling panel, where irradiance changes faster than the spacing (the worst tenth
-/// of the points holds nearly 90% of the squared error).
+/// two_rooms at medium with the default probes (a 12 × 6 × 6 grid, 33 cm apart, half the budget
+/// kept for refining the cells where light changes) against the path tracer with random
+/// normals: at the probes themselves (SH truncation and gather noise) within 5% relative RMSE,
+/// the reference's noise taken out; at 1000 random free-space points between them
+/// (interpolation added) within 7%, and within 7% over whole cells (all eight probes valid and
+/// in sight). The uniform grid of the whole budget (16 × 8 × 8, 25 cm apart, the first slice's)
+/// is worse at the same points by more than 15%: its error sits under the ceiling panel, where
+/// irradiance changes faster than its spacing. Measured: 3.7%, 6.1% and 5.9%; the uniform
+/// grid 8.0% and 8.9% (a few points beside the panel weigh most, so 300 points would not
+/// settle it).
 #[test]
 fn probes_match_the_path_tracer_in_two_rooms() {
-    let baked = lightbake::compute(
-        &fixture("two_rooms.gltf"),
-        &with_probes(BakeConfig::medium()),
-        &NoProgress,
-    )
-    .unwrap();
+    let bake = |refine: f32| {
+        let mut config = BakeConfig::medium();
+        config.output.probes = Some(probes::ProbeParams {
+            refine,
+            ..Default::default()
+        });
+        lightbake::compute(&fixture("two_rooms.gltf"), &config, &NoProgress).unwrap()
+    };
+    let (uniform, baked) = (bake(0.0), bake(probes::DEFAULT_REFINE));
     let probes = baked.probes.as_ref().unwrap();
-    assert_eq!((probes.len(), probes.valid_count()), (1024, 1024));
+    assert!(probes.len() <= 1024 && probes.valid_count() == probes.len());
+    assert!(!probes.refinement.is_empty(), "nothing refined");
     let tracer = Tracer::new(&baked.scene);
     // Every third probe, with a normal of its own.
     let at_probes: Vec<(Vec3, Vec3)> = (0..probes.len())
@@ -96,13 +103,15 @@ fn probes_match_the_path_tracer_in_two_rooms() {
             )
         })
         .collect();
-    let between = probes.points_between(&tracer, 300, 3, false);
-    let whole_cells = probes.points_between(&tracer, 300, 3, true);
-    assert_eq!((between.len(), whole_cells.len()), (300, 300));
+    // Points between the uniform grid's probes, the same for both bakes.
+    let first = uniform.probes.as_ref().unwrap();
+    let between = first.points_between(&tracer, 1000, 3, false);
+    let whole_cells = first.points_between(&tracer, 1000, 3, true);
+    assert_eq!((between.len(), whole_cells.len()), (1000, 1000));
     for (what, at, limit) in [
         ("at the probes", &at_probes, 0.05),
-        ("between probes", &between, 0.12),
-        ("whole cells", &whole_cells, 0.10),
+        ("between probes", &between, 0.07),
+        ("whole cells", &whole_cells, 0.07),
     ] {
         let (error, noise) = probe_error(&baked, at, 512);
         println!("two_rooms, {what}: {error:.4} (reference noise {noise:.4})");
@@ -111,6 +120,14 @@ fn probes_match_the_path_tracer_in_two_rooms() {
             error < limit,
             "{what}: probes vs path tracer {error} > {limit}"
         );
+        if what != "at the probes" {
+            let (old, _) = probe_error(&uniform, at, 512);
+            println!("two_rooms, {what}, uniform grid: {old:.4}");
+            assert!(
+                error < 0.85 * old,
+                "{what}: refined {error} is not 15% better than uniform {old}"
+            );
+        }
     }
 }
 
@@ -150,7 +167,7 @@ fn probes_are_never_buried_nor_lit_through_a_wall() {
     let buried = (0..probes.len())
         .filter(|&i| in_block(probes.position[i]))
         .count();
-    assert!(buried >= 20, "the grid puts probes in the block: {buried}");
+    assert!(buried >= 8, "the grid puts probes in the block: {buried}");
     for i in 0..probes.len() {
         let p = probes.position[i];
         if in_block(p) || in_wall(p) {
@@ -223,7 +240,7 @@ fn probes_are_deterministic_and_round_trip() {
     let read: Probes = probes::file::from_json(&one, std::path::Path::new("probes.json")).unwrap();
     let again = probes::file::to_json(&read).unwrap();
     assert!(again == one, "the file does not read back as written");
-    assert_eq!(read.len(), 1024);
+    assert!(read.len() <= 1024 && !read.refinement.is_empty());
 }
 
 /// A grid with an odd count along x puts a column of probes exactly in the plane of two_rooms'
@@ -233,8 +250,10 @@ fn probes_are_deterministic_and_round_trip() {
 #[test]
 fn probes_on_a_thin_wall_are_moved_off_it() {
     let mut config = BakeConfig::draft();
+    // The uniform grid of the whole budget (its count along x is odd).
     config.output.probes = Some(probes::ProbeParams {
         budget: 4096,
+        refine: 0.0,
         ..Default::default()
     });
     let baked = lightbake::compute(&fixture("two_rooms.gltf"), &config, &NoProgress).unwrap();
@@ -349,7 +368,8 @@ fn the_irradiance_volume_is_the_grid_as_bevy_samples_it() {
     let header = reader.header();
     let grid = probes.grid.expect("the automatic grid");
     let [rx, ry, rz] = grid.count;
-    assert_eq!([rx, ry, rz], [16, 8, 8]);
+    // Half the budget: the other half is kept for refinement, which the volume leaves out.
+    assert_eq!([rx, ry, rz], [12, 6, 6]);
     assert_eq!(header.format, Some(ktx2::Format::R16G16B16A16_SFLOAT));
     assert_eq!(
         (header.pixel_width, header.pixel_height, header.pixel_depth),
@@ -384,7 +404,8 @@ fn the_irradiance_volume_is_the_grid_as_bevy_samples_it() {
     ];
     let mut worst = 0.0f32;
     let (mut up, mut down) = (0.0f32, 0.0f32);
-    for i in 0..probes.len() {
+    // The grid's entries; probes a refinement adds are not in the volume.
+    for i in 0..grid.len() {
         let (x, y, z) = (i as u32 % rx, (i as u32 / rx) % ry, i as u32 / (rx * ry));
         for &(n, dt, dp) in &sides {
             let expected = probes::sh::irradiance_over_pi(&probes.sh[i], n);
@@ -542,8 +563,10 @@ fn probes_from_a_childless_node_fill_its_box() {
     let bytes = std::fs::read(out.join("room_probes.json")).unwrap();
     let read = probes::file::from_json(&bytes, std::path::Path::new("room_probes.json")).unwrap();
     let grid = read.grid.expect("a grid");
+    // Half the budget: the rest is kept for refinement.
     let n = grid.count.iter().product::<u32>();
-    assert!((32..=64).contains(&n), "{:?}", grid.count);
+    assert!((16..=32).contains(&n), "{:?}", grid.count);
+    assert!(read.len() <= 64);
     assert!(grid.rotation.angle_between(turn) < 1e-5);
     for i in 0..read.len() {
         let local = turn.inverse() * (read.position[i] - at) / size;

@@ -59,6 +59,8 @@ pub struct Options {
     pub probes_indirect_only: Option<bool>,
     /// Place the probes from this node of the scene: its children, or its box (implies probes).
     pub probes_from: Option<String>,
+    /// Share of the probe budget kept for refining cells where light changes (0 to 1).
+    pub probes_refine: Option<f32>,
     /// Keep receivers whole where other surfaces meet them.
     pub no_split_junctions: Option<bool>,
     /// Do not cut receivers along the hard shadow outlines of punctual lights.
@@ -181,8 +183,16 @@ impl Options {
             budget,
             indirect_only: self.probes_indirect_only.unwrap_or(false),
             from: self.probes_from.clone(),
+            refine: self.probes_refine.unwrap_or(crate::probes::DEFAULT_REFINE),
             ..Default::default()
         });
+        if let Some(share) = self.probes_refine
+            && !(0.0..=1.0).contains(&share)
+        {
+            return Err(Error::Option(format!(
+                "probes-refine {share}: a share of the budget, from 0 (a uniform grid) to 1"
+            )));
+        }
         if self.probes_indirect_only == Some(true) && budget.is_none() {
             return Err(Error::Option(
                 "probes-indirect-only needs probes: give probes or probes-from too".into(),
@@ -289,5 +299,22 @@ mod tests {
             ..Options::default()
         };
         assert!(bad.config().unwrap_err().to_string().contains("sideways"));
+    }
+
+    #[test]
+    fn the_probes_refine_share_is_kept_and_checked() {
+        let o = |share: Option<f32>| Options {
+            probes: Some(256),
+            probes_refine: share,
+            ..Options::default()
+        };
+        let refine = |c: BakeConfig| c.output.probes.unwrap().refine;
+        assert_eq!(
+            refine(o(None).config().unwrap()),
+            crate::probes::DEFAULT_REFINE
+        );
+        assert_eq!(refine(o(Some(0.0)).config().unwrap()), 0.0);
+        let err = o(Some(1.5)).config().unwrap_err().to_string();
+        assert!(err.contains("probes-refine 1.5"), "{err}");
     }
 }

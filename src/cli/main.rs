@@ -263,6 +263,10 @@ struct BakeArgs {
     /// Implies --probes.
     #[arg(long, value_name = "NODE")]
     probes_from: Option<String>,
+    /// Share of the probe budget kept for refining the grid's cells where light changes, 0 to 1
+    /// [default: 0.5]; 0 puts the whole budget on a uniform grid.
+    #[arg(long, value_name = "SHARE")]
+    probes_refine: Option<f32>,
     /// Keep texel sample points where they are even inside geometry (to measure leaks).
     #[arg(long)]
     no_validity: bool,
@@ -466,6 +470,7 @@ impl BakeArgs {
             probes: self.probes,
             probes_indirect_only: Some(self.probes_indirect_only),
             probes_from: self.probes_from.clone(),
+            probes_refine: self.probes_refine,
             no_validity: Some(self.no_validity),
             no_denoise: Some(self.no_denoise),
             no_seams: Some(self.no_seams),

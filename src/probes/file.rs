@@ -1,15 +1,18 @@
 //! `<stem>_probes.json`: the baked probes as an engine reads them (documented in the guide's
 //! output chapter, `src/guide/output.md`).
 //!
-//! One JSON object: `format` (`"lightbake-probes"`), `version` (1), `convention` (how to read
+//! One JSON object: `format` (`"lightbake-probes"`), `version` (2), `convention` (how to read
 //! the coefficients, in words), `indirectOnly`, `grid` (`origin`, `step`, `count`, `rotation`
 //! (the grid's axes, a unit quaternion `x, y, z, w`) and `order`: probe `(i, j, k)` is entry
 //! `i + nx·(j + ny·k)`, at `origin + rotation·(step ⊙ (i, j, k))`; `null` for probes placed one
-//! by one, from a node's children), then flat arrays per probe: `positions`
+//! by one, from a node's children), `refinement` (absent when no cell is refined: `factor`,
+//! `cells` (3 integers per refined cell: its lowest corner's grid coordinates) and `nodes` (3
+//! integers per added probe: its fine-lattice coordinates, `factor` × grid coordinates), see
+//! [`super::refine`]; the added probes follow the grid's entries), then flat arrays per probe: `positions`
 //! (3 floats each: where it was baked), `valid` (0 or 1) and `sh` (27 floats each: coefficient
 //! `m` of channel `c` at `27·probe + 3·m + c`). Floats are written in their shortest exact
 //! decimal form, so the file reads back bit for bit and its bytes do not depend on the thread
-//! count.
+//! count. Version 1 files (no refinement) read as before.
 
 use std::path::Path;
 
@@ -25,7 +28,7 @@ pub const EXTRAS_KEY: &str = "light_probes";
 /// The `format` field.
 pub const FORMAT: &str = "lightbake-probes";
 /// The `version` field.
-pub const VERSION: u32 = 1;
+pub const VERSION: u32 = 2;
 /// How to read the coefficients, as the file states it.
 pub const CONVENTION: &str = "sh: 9 RGB coefficients of incident radiance per probe, \
     c_m = integral of L(w) Y_m(w) dw, three.js SphericalHarmonics3 order and basis; \
@@ -40,9 +43,18 @@ struct ProbeFile {
     convention: String,
     indirect_only: bool,
     grid: Option<Grid>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    refinement: Option<Refinement>,
     positions: Vec<f32>,
     valid: Vec<u8>,
     sh: Vec<f32>,
+}
+
+#[derive(Serialize, Deserialize)]
+struct Refinement {
+    factor: u32,
+    cells: Vec<u32>,
+    nodes: Vec<u32>,
 }
 
 #[derive(Serialize, Deserialize)]
@@ -68,6 +80,11 @@ pub fn to_json(probes: &Probes) -> Result<Vec<u8>> {
             rotation: g.rotation.to_array(),
             order: "x fastest, then y, then z".into(),
         }),
+        refinement: (!probes.refinement.is_empty()).then(|| Refinement {
+            factor: super::refine::FACTOR,
+            cells: probes.refinement.cells.iter().flatten().copied().collect(),
+            nodes: probes.refinement.nodes.iter().flatten().copied().collect(),
+        }),
         positions: probes.position.iter().flat_map(|p| p.to_array()).collect(),
         valid: probes.valid.iter().map(|&v| u8::from(v)).collect(),
         sh: (probes.sh.iter())
@@ -81,11 +98,11 @@ pub fn to_json(probes: &Probes) -> Result<Vec<u8>> {
 pub fn from_json(bytes: &[u8], path: &Path) -> Result<Probes> {
     let file: ProbeFile = serde_json::from_slice(bytes)
         .map_err(|e| Error::invalid(path, format!("not a probe file: {e}")))?;
-    if file.format != FORMAT || file.version != VERSION {
+    if file.format != FORMAT || !(1..=VERSION).contains(&file.version) {
         return Err(Error::invalid(
             path,
             format!(
-                "format {:?} version {}, expected {FORMAT:?} version {VERSION}",
+                "format {:?} version {}, expected {FORMAT:?} version 1 to {VERSION}",
                 file.format, file.version
             ),
         ));
@@ -110,7 +127,8 @@ pub fn from_json(bytes: &[u8], path: &Path) -> Result<Probes> {
             let [nx, ny, nz] = g.count;
             let step = Vec3::from(g.step);
             let rotation = Quat::from_array(g.rotation);
-            if nx as usize * ny as usize * nz as usize != n
+            let added = file.refinement.as_ref().map_or(0, |r| r.nodes.len() / 3);
+            if nx as usize * ny as usize * nz as usize + added != n
                 || step.min_element().is_nan()
                 || step.min_element() <= 0.0
                 || !rotation.is_normalized()
@@ -131,9 +149,44 @@ pub fn from_json(bytes: &[u8], path: &Path) -> Result<Probes> {
             })
         }
     };
+    let triples = |v: &[u32]| v.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
+    let refinement = match (&file.refinement, &grid) {
+        (None, _) => super::Refinement::default(),
+        (Some(r), Some(g)) => {
+            let refinement = super::Refinement {
+                cells: triples(&r.cells),
+                nodes: triples(&r.nodes),
+            };
+            let whole = r.cells.len() % 3 == 0 && r.nodes.len() % 3 == 0;
+            if r.factor != super::refine::FACTOR
+                || !whole
+                || !super::refine::consistent(g, &refinement)
+            {
+                return Err(Error::invalid(
+                    path,
+                    format!(
+                        "a refinement of factor {} with {} cells and {} nodes that does not fit \
+                         its grid (factor {} expected, every refined cell's nodes listed once, sorted)",
+                        r.factor,
+                        r.cells.len() / 3,
+                        r.nodes.len() / 3,
+                        super::refine::FACTOR
+                    ),
+                ));
+            }
+            refinement
+        }
+        (Some(_), None) => {
+            return Err(Error::invalid(
+                path,
+                "a refinement without a grid".to_string(),
+            ));
+        }
+    };
     let vec3 = |v: &[f32]| Vec3::new(v[0], v[1], v[2]);
     Ok(Probes {
         grid,
+        refinement,
         position: file.positions.chunks_exact(3).map(vec3).collect(),
         valid: file.valid.iter().map(|&v| v != 0).collect(),
         sh: (file.sh.chunks_exact(27))

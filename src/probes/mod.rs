@@ -1,6 +1,7 @@
 //! Light probes: the bake's light at points in empty space, for what moves through the scene
 //! (characters, props placed at run time), as L2 spherical harmonics of the incident radiance on
-//! a regular grid (or at positions a node of the scene gives).
+//! a regular grid with its cells divided where light changes (or at positions a node of the
+//! scene gives).
 //!
 //! ## Pipeline stage
 //!
@@ -8,21 +9,31 @@
 //!
 //! ```text
 //!   Scene + Tracer ─ place::place ──▶ Placement      grid positions, buried ones marked
-//!   + Texels + solved H ─ gather ───▶ Probes          9 RGB SH coefficients per probe
+//!   + Texels + solved H ─ gather ───▶ grid probes     9 RGB SH coefficients per probe
+//!                     ─ refine ─────▶ Probes          cells where light changes divided,
+//!                                                     their added probes gathered
 //!                     ─ file ───────▶ <stem>_probes.json, named in the glTF's root extras
 //!                     ─ volume ─────▶ <stem>_probes.ktx2, Bevy's irradiance volume (grids)
 //! ```
 //!
-//! **Placement** (`place.rs`): a regular grid over the scene's bounds at the spacing the budget
-//! allows (`--probes N`, default [`DEFAULT_BUDGET`]), or where a node of the scene says
+//! **Placement** (`place.rs`): a regular grid over the scene's bounds at the spacing half the
+//! budget allows (`--probes N`, default [`DEFAULT_BUDGET`]; [`ProbeParams::refine`] keeps the
+//! other half for refinement), or where a node of the scene says
 //! (`--probes-from NODE`: its children's positions, or a grid filling its box, the unit cube
 //! under its transform, in the box's axes); probes buried in solids (or outside an
 //! interior's closed shell) are marked invalid, probes too close to a surface are moved off it.
-//! A regular grid was chosen over an adaptive octree or a tetrahedralisation for this first
-//! slice because every engine can read it without a mesh or a tree (Bevy's irradiance volume,
-//! Godot's and three.js's probe grids are regular), its lookup is a few lines of trilinear
-//! weights, and its error is measured below; density where light changes is left to a later
-//! slice (see the guide).
+//! The grid stays regular because every engine can read it without a mesh or a tree (Bevy's
+//! irradiance volume, Godot's and three.js's probe grids are regular) and its lookup is a few
+//! lines of trilinear weights.
+//!
+//! **Refinement** ([`refine`]): between probes the error is mostly that of interpolating the
+//! true light, not the probes' own, and it gathers where light changes within a spacing (beside
+//! emitters): a denser uniform grid spends its probes where light is even. So after the grid's
+//! probes are gathered, the cells whose corners disagree most (the spread of `E/π` at the six
+//! axis normals) are divided in two along each axis, best first, while their added probes fit
+//! in the rest of the budget. Nodes on a face or edge shared with an unrefined cell take that
+//! cell's interpolated value (they are not gathered), so the lookup does not jump at the
+//! boundary. The grid's entries come first in every list; Bevy's volume is the grid alone.
 //!
 //! **Gathering** (`Gatherer::gather`): per probe, `rays` directions stratified over the sphere
 //! (Hammersley, turned by the probe's own random stream `(seed, probe)`: the result does not
@@ -38,7 +49,8 @@
 //! that ignores the validity flags still reads plausible light.
 //!
 //! **Lookup** ([`Probes::sh_at`], [`Probes::irradiance_over_pi`]): trilinear weights of the
-//! eight probes around the point, invalid probes and probes the point cannot see (a shadow ray
+//! eight probes around the point (the corners of its sub-cell where its cell is refined),
+//! invalid probes and probes the point cannot see (a shadow ray
 //! from the point to the probe; only when a [`Tracer`] is given) dropped and the rest
 //! renormalised; with none left, inverse-square weights of the visible valid probes in the
 //! 4 × 4 × 4 block around it, then the nearest valid probe. The visibility test is what keeps
@@ -58,13 +70,17 @@
 //! | `rays`          | 256     | sphere rays per probe (+ as many emitter samples); noise ∝ 1/√rays |
 //! | `indirect_only` | false   | leave out punctual lights' direct light                       |
 //! | `from`          | none    | a node's children or box instead of the automatic grid        |
+//! | `refine`        | 0.5     | share of the budget kept for refining cells; 0: a uniform grid of the whole budget |
 //!
-//! Limits: the grid is uniform (no refinement near light changes); a probe inside a closed
-//! double-sided mesh is not found buried; trilinear interpolation blurs light that changes
-//! faster than the spacing (shadow edges, close to emitters).
+//! Limits: one level of refinement, by two along each axis; a probe inside a closed
+//! double-sided mesh is not found buried; trilinear interpolation still blurs light that
+//! changes faster than the finer spacing, and L2 SH cannot hold the sharp edge of an emitter a
+//! few centimetres away (at the probes themselves); points between the outermost probes and the
+//! bounds (half a spacing) read the nearest face of the grid.
 
 pub mod file;
 mod place;
+pub mod refine;
 pub mod sh;
 pub mod volume;
 
@@ -83,12 +99,15 @@ use crate::trace::Tracer;
 use crate::transport::Surfaces;
 use crate::{Error, Progress, Result};
 use place::{Placement, uniform_sphere};
+pub use refine::Refinement;
 pub use sh::Sh2;
 
 /// Probes placed when `--probes` gives no number.
 pub const DEFAULT_BUDGET: u32 = 1024;
 /// Sphere rays per probe.
 pub const DEFAULT_RAYS: u32 = 256;
+/// Share of the budget kept for refining cells where light changes.
+pub const DEFAULT_REFINE: f32 = 0.5;
 /// Probes per parallel work item (one progress tick each).
 const CHUNK: usize = 16;
 /// Mixed into the seed: the probes' streams differ from the texels' of the same index.
@@ -109,6 +128,18 @@ pub struct ProbeParams {
     /// its children's world positions, or, without children, on a grid within the budget
     /// filling its box (the unit cube centred on the node, side 1, under its transform).
     pub from: Option<String>,
+    /// Share of the budget kept for refining grid cells where light changes ([`refine`]); the
+    /// grid takes the rest. 0: a uniform grid of the whole budget.
+    pub refine: f32,
+}
+
+impl ProbeParams {
+    /// Probes the grid may take: the budget less the share kept for refinement (at least one).
+    #[must_use]
+    pub fn grid_budget(&self) -> u32 {
+        let kept = (self.budget as f32 * self.refine.clamp(0.0, 1.0)).floor() as u32;
+        self.budget.saturating_sub(kept).max(1)
+    }
 }
 
 impl Default for ProbeParams {
@@ -118,6 +149,7 @@ impl Default for ProbeParams {
             rays: DEFAULT_RAYS,
             indirect_only: false,
             from: None,
+            refine: DEFAULT_REFINE,
         }
     }
 }
@@ -166,7 +198,7 @@ impl Grid {
 
     /// Flat index of grid probe (i, j, k).
     #[inline]
-    fn index(&self, [i, j, k]: [u32; 3]) -> usize {
+    pub(crate) fn index(&self, [i, j, k]: [u32; 3]) -> usize {
         let [nx, ny, _] = self.count;
         (i + nx * (j + ny * k)) as usize
     }
@@ -178,6 +210,8 @@ impl Grid {
 pub struct Probes {
     /// The grid the probes are on, entry by entry; `None` for probes placed one by one.
     pub grid: Option<Grid>,
+    /// Grid cells divided where light changes; their added probes follow the grid's entries.
+    pub refinement: Refinement,
     /// Where each probe was baked: its grid (or given) position, or moved off a nearby surface
     /// (by at most four fifths of the clearance's step: up to four moves of at most a fifth).
     pub position: Vec<Vec3>,
@@ -226,36 +260,21 @@ impl Probes {
         let zero = [Vec3::ZERO; 9];
         let g = grid.local(p);
         let mut base = [0u32; 3];
-        let mut frac = [0.0f32; 3];
+        let mut x = Vec3::ZERO;
         for a in 0..3 {
             let last = grid.count[a].saturating_sub(1) as f32;
-            let x = g[a].clamp(0.0, last);
-            let i = (x.floor() as u32).min(grid.count[a].saturating_sub(2));
-            base[a] = i;
-            frac[a] = if grid.count[a] > 1 { x - i as f32 } else { 0.0 };
+            x[a] = g[a].clamp(0.0, last);
+            base[a] = (x[a].floor() as u32).min(grid.count[a].saturating_sub(2));
         }
-        // Trilinear over the cell's corners that are valid and visible.
+        // Trilinear over the corners of the cell, or of its sub-cell where it is refined, that
+        // are valid and visible.
+        let corners = self.corners(grid, base, x);
         let mut sum = zero;
         let mut total = 0.0f32;
-        for corner in 0..8u32 {
-            let mut w = 1.0;
-            let mut ijk = base;
-            for a in 0..3 {
-                let up = (corner >> a) & 1 == 1;
-                if up {
-                    if grid.count[a] < 2 {
-                        w = 0.0;
-                    }
-                    ijk[a] += 1;
-                    w *= frac[a];
-                } else {
-                    w *= 1.0 - frac[a];
-                }
-            }
+        for (q, w) in corners {
             if w <= 0.0 {
                 continue;
             }
-            let q = grid.index(ijk);
             if self.valid[q] && visible(self.position[q]) {
                 sum = sh::add(&sum, &sh::scaled(&self.sh[q], w));
                 total += w;
@@ -294,6 +313,34 @@ impl Probes {
             return sh::scaled(&sum, 1.0 / total);
         }
         self.nearest_valid(p).map_or(zero, |q| self.sh[q])
+    }
+
+    /// The probes around grid coordinates `x` (clamped to the grid) in the cell at `base` and
+    /// their trilinear weights: the cell's corners, or those of its sub-cell where the cell is
+    /// refined. An axis of one probe has weight 0 on its upper side.
+    fn corners(&self, grid: &Grid, base: [u32; 3], x: Vec3) -> [(usize, f32); 8] {
+        let flat = |ijk: [u32; 3], w: f32| {
+            let ijk: [u32; 3] = std::array::from_fn(|a| ijk[a].min(grid.count[a] - 1));
+            (grid.index(ijk), w)
+        };
+        let coarse = refine::trilinear(base, x).map(|(ijk, w)| flat(ijk, w));
+        if self.refinement.is_empty() || !self.refinement.is_refined(base) {
+            return coarse;
+        }
+        let f = refine::FACTOR;
+        let fine = x * f as f32;
+        let sub: [u32; 3] = std::array::from_fn(|a| {
+            (fine[a].floor() as u32).clamp(base[a] * f, base[a] * f + f - 1)
+        });
+        let mut out = coarse;
+        for (k, (c, w)) in refine::trilinear(sub, fine).into_iter().enumerate() {
+            match self.refinement.probe_at(grid, c) {
+                Some(q) => out[k] = (q, w),
+                // A refined cell lacking a node (not from a bake): the cell's own corners.
+                None => return coarse,
+            }
+        }
+        out
     }
 
     /// [`Probes::sh_at`] for probes placed one by one: the `NEAREST` nearest valid probes that
@@ -440,35 +487,61 @@ pub(crate) fn bake(
         seed: seed ^ SALT,
         sky,
     };
-    let n = placement.position.len();
-    progress.begin("probes", n as u64);
-    let mut out = vec![([Vec3::ZERO; 9], 0u64); n];
-    out.par_chunks_mut(CHUNK)
-        .enumerate()
-        .try_for_each(|(c, chunk)| {
-            if progress.aborted() {
-                return Err(Error::Aborted);
-            }
-            for (k, (sh, rays)) in chunk.iter_mut().enumerate() {
-                let i = c * CHUNK + k;
-                if placement.valid[i] {
-                    *rays = gatherer.gather(i, placement.position[i], sh);
-                }
-            }
-            progress.advance(chunk.len() as u64);
-            Ok(())
-        })?;
-    progress.end();
-    let mut sh: Vec<Sh2> = out.iter().map(|o| o.0).collect();
+    let (mut sh, mut rays) =
+        gatherer.gather_all(&placement.position, &placement.valid, 0, progress)?;
+    rays += placement.rays;
     fill_invalid(&placement, &mut sh);
+    let Placement {
+        grid,
+        mut position,
+        mut valid,
+        mut moved,
+        ..
+    } = placement;
+    // Denser where light changes: the grid's probes say where (`refine`).
+    let refinement = match grid {
+        Some(grid) => {
+            // With no share kept, the grid alone (whatever of the budget it leaves unused).
+            let left = match params.refine > 0.0 {
+                true => (params.budget as usize).saturating_sub(grid.len()),
+                false => 0,
+            };
+            refine::choose(&grid, &valid, &sh, left)
+        }
+        None => Refinement::default(),
+    };
+    if let (Some(grid), false) = (grid, refinement.is_empty()) {
+        let at = refine::positions(&grid, &refinement);
+        let fine_step = grid.step.min_element() / refine::FACTOR as f32;
+        let clearance = vec![place::CLEARANCE * fine_step; at.len()];
+        let added = place::settle_all(surfaces.tracer, &at, &clearance, seed ^ SALT, grid.len());
+        let constrained = refine::constrained(&grid, &refinement);
+        // Constrained nodes take their coarse cell's value: only the others are gathered.
+        let gathered: Vec<bool> = (added.valid.iter().zip(&constrained))
+            .map(|(&v, &c)| v && !c)
+            .collect();
+        let (fine, fine_rays) =
+            gatherer.gather_all(&added.position, &gathered, grid.len(), progress)?;
+        rays += added.rays + fine_rays;
+        moved += added.moved;
+        position.extend(added.position);
+        valid.extend(added.valid);
+        sh.extend(fine);
+        let probes = (&position[..], &mut valid[..], &mut sh[..]);
+        let tracer = surfaces.tracer;
+        refine::fill(&grid, &refinement, probes, &constrained, |a, b| {
+            !tracer.occluded(a, b)
+        });
+    }
     Ok(Probes {
-        grid: placement.grid,
-        position: placement.position,
-        valid: placement.valid,
+        grid,
+        refinement,
+        position,
+        valid,
         sh,
         indirect_only: params.indirect_only,
-        rays: placement.rays + out.iter().map(|o| o.1).sum::<u64>(),
-        moved: placement.moved,
+        rays,
+        moved,
     })
 }
 
@@ -483,6 +556,39 @@ struct Gatherer<'a> {
 }
 
 impl Gatherer<'_> {
+    /// Gathers the probes at `positions` that `gather` marks (entries `first..` of the probes,
+    /// for their random streams), in parallel chunks: their coefficients (zero where not
+    /// gathered) and the rays cast.
+    fn gather_all(
+        &self,
+        positions: &[Vec3],
+        gather: &[bool],
+        first: usize,
+        progress: &dyn Progress,
+    ) -> Result<(Vec<Sh2>, u64)> {
+        let n = positions.len();
+        progress.begin("probes", n as u64);
+        let mut out = vec![([Vec3::ZERO; 9], 0u64); n];
+        out.par_chunks_mut(CHUNK)
+            .enumerate()
+            .try_for_each(|(c, chunk)| {
+                if progress.aborted() {
+                    return Err(Error::Aborted);
+                }
+                for (k, (sh, rays)) in chunk.iter_mut().enumerate() {
+                    let i = c * CHUNK + k;
+                    if gather[i] {
+                        *rays = self.gather(first + i, positions[i], sh);
+                    }
+                }
+                progress.advance(chunk.len() as u64);
+                Ok(())
+            })?;
+        progress.end();
+        let rays = out.iter().map(|o| o.1).sum();
+        Ok((out.into_iter().map(|o| o.0).collect(), rays))
+    }
+
     /// Projects the incident radiance at `x` (probe `i`) into `c`; returns the rays cast.
     fn gather(&self, i: usize, x: Vec3, c: &mut Sh2) -> u64 {
         let Surfaces {

@@ -1,7 +1,8 @@
 //! Where probes go: a regular grid over the scene's bounds at the spacing the budget allows,
 //! probes buried in solids marked invalid, probes too close to a surface moved away from it.
 //!
-//! **Grid.** The spacing `s = ∛(V/N)` for the bounds' volume `V` and budget `N`; each axis gets
+//! **Grid.** The spacing `s = ∛(V/N)` for the bounds' volume `V` and the grid's share `N` of the
+//! budget (`ProbeParams::grid_budget`; the rest goes to refinement, `super::refine`); each axis gets
 //! `⌊extent/s⌋` probes (at least one) at the centres of equal cells, so probes sit half a cell
 //! from the bounds and the count never exceeds the budget.
 //!
@@ -24,7 +25,7 @@
 //! wall at grazing angles only, and a point beside the wall interpolates it. Interpolation
 //! keeps the probe's grid cell (each move is at most a fifth of a step, four moves at most).
 //! A probe placed one by one takes a fifth of the distance to its nearest neighbour as its
-//! step.
+//! step; a probe a refinement adds, the refined lattice's step.
 
 use std::path::Path;
 
@@ -41,7 +42,7 @@ use crate::{Error, Result};
 /// Rays per probe of the buried test.
 const TEST_RAYS: u32 = 64;
 /// Wanted distance from the nearest surface, as a fraction of the smallest grid step.
-const CLEARANCE: f32 = 0.2;
+pub(crate) const CLEARANCE: f32 = 0.2;
 /// Moves away from a surface at most.
 const NUDGES: u32 = 3;
 /// Random-stream purpose of the buried test (the gather uses its own).
@@ -75,9 +76,10 @@ pub(crate) enum Start {
 /// Where the probes of `params` start in `scene`: the automatic grid over the scene's bounds,
 /// or the node [`ProbeParams::from`] names (`input` names the glTF in errors).
 pub(crate) fn start(scene: &Scene, params: &ProbeParams, input: &Path) -> Result<Start> {
+    let budget = params.grid_budget();
     let Some(name) = &params.from else {
         let (lo, hi) = bounds(scene).unwrap_or((Vec3::ZERO, Vec3::ZERO));
-        let (origin, step, count) = grid(lo, hi, params.budget);
+        let (origin, step, count) = grid(lo, hi, budget);
         return Ok(Start::Grid(Grid {
             origin,
             step,
@@ -130,7 +132,7 @@ pub(crate) fn start(scene: &Scene, params: &ProbeParams, input: &Path) -> Result
             ),
         ));
     }
-    let (origin, step, count) = grid(-size * 0.5, size * 0.5, params.budget);
+    let (origin, step, count) = grid(-size * 0.5, size * 0.5, budget);
     Ok(Start::Grid(Grid {
         origin: translation + rotation * origin,
         step,
@@ -215,15 +217,29 @@ pub(crate) fn place(tracer: &Tracer, start: Start, seed: u64) -> Placement {
             (None, p, clearance)
         }
     };
+    let mut placement = settle_all(tracer, &positions, &clearance, seed, 0);
+    placement.grid = grid;
+    placement
+}
+
+/// Tests the probes at `positions` (entries `first..` of the probes: each probe's stream is
+/// seeded by `seed` and its index), each moved off surfaces to its `clearance`.
+pub(crate) fn settle_all(
+    tracer: &Tracer,
+    positions: &[Vec3],
+    clearance: &[f32],
+    seed: u64,
+    first: usize,
+) -> Placement {
     let tested: Vec<(Vec3, bool, bool, u64)> = (0..positions.len())
         .into_par_iter()
         .map(|i| {
-            let shift = Rng::new(seed, i as u64, PLACE).next_vec2();
+            let shift = Rng::new(seed, (first + i) as u64, PLACE).next_vec2();
             settle(tracer, positions[i], shift, clearance[i])
         })
         .collect();
     Placement {
-        grid,
+        grid: None,
         position: tested.iter().map(|t| t.0).collect(),
         valid: tested.iter().map(|t| t.1).collect(),
         moved: tested.iter().filter(|t| t.2).count(),

@@ -133,7 +133,8 @@ pub fn to_ktx2(probes: &Probes) -> Result<Vec<u8>> {
     let r = grid.count;
     let [w, h, d] = [r[0], 2 * r[1], 3 * r[2]];
     let texels = w as usize * h as usize * d as usize;
-    if texels == 0 || probes.sh.len() != r.iter().map(|&c| c as usize).product::<usize>() {
+    // The grid's entries come first; probes a refinement adds are not on the grid.
+    if texels == 0 || probes.sh.len() < grid.len() {
         return Err(Error::Internal(format!(
             "probes: {} probes for a {r:?} grid",
             probes.sh.len()
@@ -141,7 +142,7 @@ pub fn to_ktx2(probes: &Probes) -> Result<Vec<u8>> {
     }
     // The image: x fastest, then rows t, then slices p (KTX2's order, and wgpu's).
     let mut image = vec![0u8; texels * TEXEL];
-    for (i, c) in probes.sh.iter().enumerate() {
+    for (i, c) in probes.sh[..grid.len()].iter().enumerate() {
         let voxel = super::place::unflatten(i, r);
         for (side, e) in ambient_cube(c).into_iter().enumerate() {
             let [s, t, p] = texel(voxel, side, r);
