@@ -5,8 +5,11 @@
 //! the incremental bake, all against the same point reference.
 //!
 //! ```text
-//! cargo run --release --example incremental_noise -- OUT SEEDS REFERENCE.csv [EDITED.glb]
+//! cargo run --release --example incremental_noise -- OUT SEEDS REFERENCE.csv [EDITED.glb] [--fixed]
 //! ```
+//!
+//! With `--fixed` (after a run without, which bakes `OUT/old`): only full bakes of the edited
+//! scene with the old bake's kept settings (its plan) and each seed.
 //!
 //! `EDITED.glb` defaults to `OUT/../edited/furnished_interior.glb` as `incremental_figures`
 //! writes it; the unedited scene is `fixtures/furnished_interior.glb`. Prints one CSV line per
@@ -22,9 +25,11 @@ use lightbake::{NoProgress, bake, prepare};
 
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let out = PathBuf::from(&args[0]);
+    let fixed_only = args.iter().any(|a| a == "--fixed");
+    let args: Vec<&String> = args.iter().filter(|a| !a.starts_with("--")).collect();
+    let out = PathBuf::from(args[0]);
     let seeds: u64 = args[1].parse().expect("SEEDS");
-    let reference_csv = PathBuf::from(&args[2]);
+    let reference_csv = PathBuf::from(args[2]);
     let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/furnished_interior.glb");
     let edited = args.get(3).map_or_else(
         || out.join("../edited/furnished_interior.glb"),
@@ -48,6 +53,27 @@ fn main() {
         .expect("options")
     };
     println!("bake,seed,texels,seconds,point_rmse");
+    if fixed_only {
+        // Full bakes of the edited scene with the previous bake's settings (`OUT/old`, as
+        // kept: its density factors, rays and technique; no pilot), every seed: the spread of
+        // the bake at the plan the incremental bake keeps.
+        let kept = lightbake::kept::read(&out.join("old").join(name)).expect("OUT/old");
+        for seed in 0..seeds {
+            let mut fixed = kept.settings.config().expect("kept settings");
+            fixed.transport.seed = seed;
+            let dir = out.join(format!("fixed_{seed}"));
+            let _ = std::fs::remove_dir_all(&dir);
+            let t = Instant::now();
+            let r = bake(&edited, &dir, &fixed, &NoProgress).expect("fixed bake");
+            println!(
+                "full_edited_old_plan,{seed},{},{:.2},{}",
+                r.texels,
+                t.elapsed().as_secs_f64(),
+                error(&dir)
+            );
+        }
+        return;
+    }
 
     // The plans alone (density pilot and layout), both scenes, every seed.
     for seed in 0..seeds {
@@ -63,7 +89,11 @@ fn main() {
     let _ = std::fs::remove_dir_all(&old);
     let t = Instant::now();
     let r = bake(&scene, &old, &config(0), &NoProgress).expect("old bake");
-    println!("old_unedited,0,{},{:.2},", r.texels, t.elapsed().as_secs_f64());
+    println!(
+        "old_unedited,0,{},{:.2},",
+        r.texels,
+        t.elapsed().as_secs_f64()
+    );
     let since = old.join(name);
     let inc = out.join("incremental");
     let _ = std::fs::remove_dir_all(&inc);
