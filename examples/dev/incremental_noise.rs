@@ -8,8 +8,9 @@
 //! cargo run --release --example incremental_noise -- OUT SEEDS REFERENCE.csv [EDITED.glb] [--fixed]
 //! ```
 //!
-//! With `--fixed` (after a run without, which bakes `OUT/old`): only full bakes of the edited
-//! scene with the old bake's kept settings (its plan) and each seed.
+//! With `--fixed` (after a run without, which bakes `OUT/old`): only full bakes of the
+//! unedited scene with the old bake's kept settings (its plan) and each seed; REFERENCE is
+//! then the unedited scene's.
 //!
 //! `EDITED.glb` defaults to `OUT/../edited/furnished_interior.glb` as `incremental_figures`
 //! writes it; the unedited scene is `fixtures/furnished_interior.glb`. Prints one CSV line per
@@ -54,9 +55,10 @@ fn main() {
     };
     println!("bake,seed,texels,seconds,point_rmse");
     if fixed_only {
-        // Full bakes of the edited scene with the previous bake's settings (`OUT/old`, as
+        // Full bakes of the *unedited* scene with the previous bake's settings (`OUT/old`, as
         // kept: its density factors, rays and technique; no pilot), every seed: the spread of
-        // the bake at the plan the incremental bake keeps.
+        // the bake at the plan the incremental bake keeps. Not the edited scene: its junction
+        // cuts number the triangles otherwise, and the kept factors are per triangle.
         let kept = lightbake::kept::read(&out.join("old").join(name)).expect("OUT/old");
         for seed in 0..seeds {
             let mut fixed = kept.settings.config().expect("kept settings");
@@ -64,9 +66,9 @@ fn main() {
             let dir = out.join(format!("fixed_{seed}"));
             let _ = std::fs::remove_dir_all(&dir);
             let t = Instant::now();
-            let r = bake(&edited, &dir, &fixed, &NoProgress).expect("fixed bake");
+            let r = bake(&scene, &dir, &fixed, &NoProgress).expect("fixed bake");
             println!(
-                "full_edited_old_plan,{seed},{},{:.2},{}",
+                "full_unedited_old_plan,{seed},{},{:.2},{}",
                 r.texels,
                 t.elapsed().as_secs_f64(),
                 error(&dir)

@@ -1,6 +1,6 @@
-//! Incremental re-bake (`bake --since OLD/x.gltf`): after an edit that only moves nodes,
-//! re-trace only the rays the moved nodes can have changed, reuse every other row of the
-//! previous bake's kept transport ([`super::kept`]), and solve again.
+//! Incremental re-bake (`bake --since OLD/x.gltf`): after an edit that only moves or removes
+//! nodes, re-trace only the rays the edited nodes can have changed, reuse every other row of
+//! the previous bake's kept transport ([`super::kept`]), and solve again.
 //!
 //! ## What the previous bake must have kept, and why it is enough
 //!
@@ -17,6 +17,16 @@
 //! difference. Rows of texels that changed themselves (on a moved node, or whose validity pass
 //! moved their sample point or divided them) are traced again whole. A conservative test is
 //! cheap to make exact: a flagged ray that ends where it did changes nothing.
+//!
+//! A **removed** node is a moved one with no new place: its instances leave the BVH
+//! (`Tracer::without`) but keep their triangle ids and texels, so that every other texel,
+//! triangle and kept row keeps its index; rays meeting its old bounds are flagged as above;
+//! its texels are invalid with empty rows (black, solved to nothing), and the glTF is written
+//! from the input's instances only ([`super::Baked::written`]): no primitive reads them, their
+//! atlas space stays unused. The input's node graph is matched against the previous one
+//! (`InputRecord::graph`): the same nodes in order less the removed (renumbered), each kept
+//! node's children and each scene's roots those of before less the removed, and everything
+//! but the node graph unchanged (`InputRecord::content`).
 //!
 //! So the kept file needs no per-ray record, only: the input it was baked from (a hash of
 //! everything but node transforms, and each node's transform: [`InputRecord`]), the rows as
@@ -41,10 +51,12 @@
 //! uncut scene) and the floor keeps the cuts where they stood. A plain `bake` cuts anew.
 //!
 //! It bakes in full (with the caller's settings, and says why) when the input changed in more
-//! than node transforms, when nodes were added or removed, when a moved node carries a light or
-//! an emissive material (every row's direct light would change), when the old bake cannot be
-//! laid out again to the same texels (another lightbake, other settings) or its technique
-//! keeps no Monte Carlo rows.
+//! than node transforms and removals, when nodes were added, re-parented or changed, when a
+//! moved or removed node carries a light or an emissive material (every row's direct light
+//! would change), when the old bake cannot be laid out again to the same texels (another
+//! lightbake, other settings), when it was itself an incremental bake that removed nodes (its
+//! layout holds nodes its input no longer has), when a removal meets an atlas that shares
+//! meshes, or when its technique keeps no Monte Carlo rows.
 //!
 //! The incremental bake runs with the previous bake's settings (`kept::Settings::config`, the
 //! automatic choices as they were made: no new plan), which a kept bake's single final run
