@@ -544,3 +544,27 @@ fn a_removed_box_relights_its_room_as_a_full_retrace_does() {
     let why = report.incremental.unwrap().full.expect("a full bake");
     assert!(why.contains("removal"), "{why}");
 }
+
+#[test]
+fn build_rebakes_a_removed_node_incrementally_and_says_so() {
+    use lightbake::build::Status;
+    use lightbake::{Manifest, build};
+    let dir = scratch();
+    let levels = dir.path().join("levels");
+    two_rooms_box_first(&levels, Some(1.0));
+    let manifest = "[defaults]\nquality = \"draft\"\ntexels-per-unit = 8\nkeep-transport = true\n\n\
+                    [[scene]]\npath = \"levels/two_rooms.gltf\"\noutput = \"baked\"\n";
+    std::fs::write(dir.path().join("lightbake.toml"), manifest).unwrap();
+    let load = || Manifest::load(&dir.path().join("lightbake.toml")).unwrap();
+    let first = build(&load(), &NoProgress);
+    assert_eq!(first.scenes[0].status, Status::Baked, "{first:?}");
+
+    two_rooms_box_first(&levels, None);
+    let second = build(&load(), &NoProgress);
+    let scene = &second.scenes[0];
+    assert_eq!(scene.status, Status::Incremental, "{second:?}");
+    let figures = scene.incremental.as_ref().expect("incremental figures");
+    assert!(figures.patched > 0 && figures.retraced + figures.patched < figures.rows);
+    let fourth = build(&load(), &NoProgress);
+    assert_eq!(fourth.scenes[0].status, Status::Skipped, "{fourth:?}");
+}
