@@ -22,7 +22,7 @@
 //! (`Tracer::without`) but keep their triangle ids and texels, so that every other texel,
 //! triangle and kept row keeps its index; rays meeting its old bounds are flagged as above;
 //! its texels are invalid with empty rows (black, solved to nothing), and the glTF is written
-//! from the input's instances only ([`super::Baked::written`]): no primitive reads them, their
+//! from the input's instances only (`Baked::written`): no primitive reads them, their
 //! atlas space stays unused. The input's node graph is matched against the previous one
 //! (`InputRecord::graph`): the same nodes in order less the removed (renumbered), each kept
 //! node's children and each scene's roots those of before less the removed, and everything
