@@ -568,3 +568,45 @@ fn build_rebakes_a_removed_node_incrementally_and_says_so() {
     let fourth = build(&load(), &NoProgress);
     assert_eq!(fourth.scenes[0].status, Status::Skipped, "{fourth:?}");
 }
+
+#[test]
+fn a_removal_and_a_move_in_one_edit_match_a_full_retrace() {
+    // Two boxes: node 0 in room B, the last node in room A at `x`; `first` keeps node 0.
+    let scene = |dir: &Path, first: bool, x: f32| {
+        let path = two_rooms_box_first(dir, first.then_some(1.0));
+        let mut doc: Value = serde_json::from_slice(&std::fs::read(&path).unwrap()).unwrap();
+        let mesh = doc["meshes"].as_array().unwrap().len() - 1;
+        let nodes = doc["nodes"].as_array_mut().unwrap();
+        nodes.push(json!({"name": "box A", "mesh": mesh, "translation": [x, 0.0, 0.0]}));
+        let last = nodes.len() - 1;
+        doc["scenes"][0]["nodes"]
+            .as_array_mut()
+            .unwrap()
+            .push(json!(last));
+        std::fs::write(&path, serde_json::to_vec_pretty(&doc).unwrap()).unwrap();
+        path
+    };
+    let dir = scratch();
+    let config = kept_config();
+    let old = dir.path().join("old");
+    bake(
+        &scene(&dir.path().join("a"), true, -1.0),
+        &old,
+        &config,
+        &NoProgress,
+    )
+    .unwrap();
+    let since = old.join("two_rooms.gltf");
+    let after = scene(&dir.path().join("b"), false, -1.5);
+    let (inc_baked, inc) =
+        incremental(compute_since(&after, &since, &config, Retrace::Edited, &NoProgress).unwrap());
+    let (all_baked, _) =
+        incremental(compute_since(&after, &since, &config, Retrace::All, &NoProgress).unwrap());
+    assert_eq!(inc.removed_nodes, vec![0], "{}", inc.brief());
+    assert_eq!(inc.moved_nodes.len(), 1, "{}", inc.brief());
+    assert!(inc.retraced > 0 && inc.patched > 0, "{}", inc.brief());
+    let worst = (inc_baked.lightmap.iter().zip(&all_baked.lightmap))
+        .map(|(a, b)| (*a - *b).abs().max_element() / (b.max_element() + 1e-3))
+        .fold(0.0f32, f32::max);
+    assert!(worst < 1e-4, "worst relative texel difference {worst:.2e}");
+}
