@@ -75,7 +75,7 @@
 //! [`bake`] chains the stages ([`prepare`], [`compute`], [`write()`]); build tools that want the
 //! intermediate data call them directly. [`build()`] bakes the scenes of a [`Manifest`] that
 //! changed since their last bake ([`mod@build`]), incrementally ([`incremental`]) where only
-//! node transforms changed. Stages call only downwards:
+//! node transforms changed or nodes were removed. Stages call only downwards:
 //!
 //! ```text
 //!   error, progress, sampling        below everything
@@ -102,9 +102,11 @@
 //!                                    `relight`: a kept bake solved again with other light and
 //!                                    material values, and per-light layers;
 //!                                    `incremental`: a kept bake re-baked after nodes moved
-//!                                    (`bake --since`): the old layout made again, only the
-//!                                    rays that meet a moved node's old or new bounds traced
-//!                                    again (drawn from their seeds, nothing per ray kept);
+//!                                    or were removed (`bake --since`): the old layout made
+//!                                    again (a removed node's texels kept, unused), only the
+//!                                    rays that meet a moved node's old or new bounds or a
+//!                                    removed one's old bounds traced again (drawn from their
+//!                                    seeds, nothing per ray kept);
 //!                                    `distributed`: the same bake over several processes
 //!                                    (timely dataflow): every transport's rows (pilots' and
 //!                                    final) sharded, the radiosity vector exchanged every

@@ -175,10 +175,17 @@ pub struct Tracer {
 impl Tracer {
     /// Builds the BVH over the scene's triangles (front faces only; see the module docs).
     pub fn new(scene: &Scene) -> Tracer {
+        Tracer::without(scene, &[])
+    }
+
+    /// [`Tracer::new`] with the instances `absent` (ascending; a front instance takes its
+    /// back-face copy with it) left out of the BVH: a scene whose triangle and texel ids stay
+    /// those of a layout that held them (an incremental bake after a removal).
+    pub(crate) fn without(scene: &Scene, absent: &[usize]) -> Tracer {
         let mut back_copy = vec![u32::MAX; scene.triangles.len()];
         let mut ids = Vec::with_capacity(scene.triangles.len());
-        for inst in &scene.instances {
-            if inst.back_of.is_some() {
+        for (k, inst) in scene.instances.iter().enumerate() {
+            if inst.back_of.is_some() || absent.binary_search(&k).is_ok() {
                 continue;
             }
             if let Some(b) = inst.back {

@@ -410,3 +410,203 @@ fn cli_bake_since_says_incremental() {
     );
     assert!(new.join("two_rooms_lightmap0.exr").exists());
 }
+
+/// two_rooms.gltf with the box mesh of [`two_rooms_with_box`] and, when `x` is given, its node
+/// ("box") *first* among the nodes (every other node's index one up: a removal renumbers
+/// them), standing at `x`; without `x`, the same document with the box node deleted.
+fn two_rooms_box_first(dir: &Path, x: Option<f32>) -> PathBuf {
+    let path = two_rooms_with_box(dir, x.unwrap_or(0.0));
+    let mut doc: Value = serde_json::from_slice(&std::fs::read(&path).unwrap()).unwrap();
+    let nodes = doc["nodes"].as_array_mut().unwrap();
+    let node = nodes.pop().unwrap();
+    let box_index = nodes.len() as u64;
+    let shift = |v: &mut Value| *v = json!(v.as_u64().unwrap() + 1);
+    if x.is_some() {
+        for n in nodes.iter_mut() {
+            n.get_mut("children")
+                .and_then(Value::as_array_mut)
+                .into_iter()
+                .flatten()
+                .for_each(shift);
+        }
+        nodes.insert(0, node);
+    }
+    let roots = doc["scenes"][0]["nodes"].as_array_mut().unwrap();
+    roots.retain(|r| r.as_u64() != Some(box_index));
+    if x.is_some() {
+        roots.iter_mut().for_each(shift);
+        roots.push(json!(0));
+    }
+    std::fs::write(&path, serde_json::to_vec_pretty(&doc).unwrap()).unwrap();
+    path
+}
+
+#[test]
+fn a_removed_box_relights_its_room_as_a_full_retrace_does() {
+    let dir = scratch();
+    let config = kept_config();
+    let before = two_rooms_box_first(&dir.path().join("before"), Some(1.0));
+    let old = dir.path().join("old");
+    bake(&before, &old, &config, &NoProgress).unwrap();
+    let since = old.join("two_rooms.gltf");
+    let old_baked = compute(&before, &config, &NoProgress).unwrap();
+    let after = two_rooms_box_first(&dir.path().join("after"), None);
+
+    let (inc_baked, inc) =
+        incremental(compute_since(&after, &since, &config, Retrace::Edited, &NoProgress).unwrap());
+    let (all_baked, all) =
+        incremental(compute_since(&after, &since, &config, Retrace::All, &NoProgress).unwrap());
+    assert_eq!(inc.removed_nodes, vec![0], "{}", inc.brief());
+    assert!(inc.moved_nodes.is_empty(), "{}", inc.brief());
+    // Nothing moved: no row is traced whole; rows whose rays met the box are patched.
+    assert!(inc.patched > 0 && inc.rays < all.rays, "{}", inc.brief());
+
+    // The box's texels keep their places, unused: invalid, black, their rows empty.
+    let t = &inc_baked.texels;
+    let on_box = |p: Vec3, n: Vec3| {
+        let inside = (p - Vec3::new(1.0, 0.25, 0.0)).abs().max_element() < 0.27;
+        inside && !(n.y > 0.9 && p.y < 0.01) // the floor under it
+    };
+    let gone: Vec<usize> = (0..t.len())
+        .filter(|&i| on_box(t.position[i], t.normal[i]))
+        .collect();
+    assert!(!gone.is_empty());
+    let valid = t.valid_mask();
+    for &i in &gone {
+        assert!(!valid[i], "removed texel {i} valid");
+        assert_eq!(
+            inc_baked.transport.row(i).count(),
+            0,
+            "removed texel {i}'s row"
+        );
+    }
+
+    // As every row traced again on the same layout, to float rounding.
+    let worst = (inc_baked.lightmap.iter().zip(&all_baked.lightmap))
+        .map(|(a, b)| (*a - *b).abs().max_element() / (b.max_element() + 1e-3))
+        .fold(0.0f32, f32::max);
+    assert!(worst < 1e-4, "worst relative texel difference {worst:.2e}");
+
+    // The box stood in room B: its floor is lit where the box shadowed it, as in a fresh bake
+    // of the edited scene (its own cuts and atlas, the same settings).
+    let fixed = kept::read(&since).unwrap().settings.config().unwrap();
+    let fresh = compute(&after, &fixed, &NoProgress).unwrap();
+    let [old_a, old_b] = room_floor_means(&old_baked);
+    let [inc_a, inc_b] = room_floor_means(&inc_baked);
+    let [fresh_a, fresh_b] = room_floor_means(&fresh);
+    let change = |from: f32, to: f32| (to - from) / from;
+    eprintln!(
+        "floor changes: A {} (fresh {}), B {} (fresh {})",
+        change(old_a, inc_a),
+        change(old_a, fresh_a),
+        change(old_b, inc_b),
+        change(old_b, fresh_b)
+    );
+    assert!(
+        change(old_b, inc_b) > 0.02,
+        "room B: floor mean {old_b} before, {inc_b} after the removal: not brighter"
+    );
+    assert!(
+        (change(old_b, inc_b) - change(old_b, fresh_b)).abs() < 0.25 * change(old_b, fresh_b),
+        "room B: floor mean {old_b} before; incremental {inc_b}, fresh {fresh_b}"
+    );
+    // Room A sees little of the box (through the doorway): as little change as the fresh
+    // bake shows, within a percent.
+    assert!(
+        (change(old_a, inc_a) - change(old_a, fresh_a)).abs() < 0.01,
+        "room A: floor mean {old_a} before; incremental {inc_a}, fresh {fresh_a}"
+    );
+
+    // Written: the input's nodes (one fewer), every primitive with its lightmap; and the next
+    // bake from this one bakes in full, saying why (its layout holds the removed node).
+    let new = dir.path().join("new");
+    let report = bake_since(&after, &since, &new, &config, &NoProgress).unwrap();
+    assert_eq!(report.incremental.as_ref().unwrap().full, None);
+    let out: Value =
+        serde_json::from_slice(&std::fs::read(new.join("two_rooms.gltf")).unwrap()).unwrap();
+    let input: Value = serde_json::from_slice(&std::fs::read(&after).unwrap()).unwrap();
+    assert_eq!(
+        out["nodes"].as_array().unwrap().len(),
+        input["nodes"].as_array().unwrap().len()
+    );
+    let baked = lightbake::scene::load(&new.join("two_rooms.gltf"))
+        .unwrap()
+        .0;
+    assert!(baked.instances.iter().all(|i| i.lightmap.is_some()));
+    let report = bake_since(
+        &after,
+        &new.join("two_rooms.gltf"),
+        &dir.path().join("next"),
+        &config,
+        &NoProgress,
+    )
+    .unwrap();
+    let why = report.incremental.unwrap().full.expect("a full bake");
+    assert!(why.contains("removal"), "{why}");
+}
+
+#[test]
+fn build_rebakes_a_removed_node_incrementally_and_says_so() {
+    use lightbake::build::Status;
+    use lightbake::{Manifest, build};
+    let dir = scratch();
+    let levels = dir.path().join("levels");
+    two_rooms_box_first(&levels, Some(1.0));
+    let manifest = "[defaults]\nquality = \"draft\"\ntexels-per-unit = 8\nkeep-transport = true\n\n\
+                    [[scene]]\npath = \"levels/two_rooms.gltf\"\noutput = \"baked\"\n";
+    std::fs::write(dir.path().join("lightbake.toml"), manifest).unwrap();
+    let load = || Manifest::load(&dir.path().join("lightbake.toml")).unwrap();
+    let first = build(&load(), &NoProgress);
+    assert_eq!(first.scenes[0].status, Status::Baked, "{first:?}");
+
+    two_rooms_box_first(&levels, None);
+    let second = build(&load(), &NoProgress);
+    let scene = &second.scenes[0];
+    assert_eq!(scene.status, Status::Incremental, "{second:?}");
+    let figures = scene.incremental.as_ref().expect("incremental figures");
+    assert!(figures.patched > 0 && figures.retraced + figures.patched < figures.rows);
+    let fourth = build(&load(), &NoProgress);
+    assert_eq!(fourth.scenes[0].status, Status::Skipped, "{fourth:?}");
+}
+
+#[test]
+fn a_removal_and_a_move_in_one_edit_match_a_full_retrace() {
+    // Two boxes: node 0 in room B, the last node in room A at `x`; `first` keeps node 0.
+    let scene = |dir: &Path, first: bool, x: f32| {
+        let path = two_rooms_box_first(dir, first.then_some(1.0));
+        let mut doc: Value = serde_json::from_slice(&std::fs::read(&path).unwrap()).unwrap();
+        let mesh = doc["meshes"].as_array().unwrap().len() - 1;
+        let nodes = doc["nodes"].as_array_mut().unwrap();
+        nodes.push(json!({"name": "box A", "mesh": mesh, "translation": [x, 0.0, 0.0]}));
+        let last = nodes.len() - 1;
+        doc["scenes"][0]["nodes"]
+            .as_array_mut()
+            .unwrap()
+            .push(json!(last));
+        std::fs::write(&path, serde_json::to_vec_pretty(&doc).unwrap()).unwrap();
+        path
+    };
+    let dir = scratch();
+    let config = kept_config();
+    let old = dir.path().join("old");
+    bake(
+        &scene(&dir.path().join("a"), true, -1.0),
+        &old,
+        &config,
+        &NoProgress,
+    )
+    .unwrap();
+    let since = old.join("two_rooms.gltf");
+    let after = scene(&dir.path().join("b"), false, -1.5);
+    let (inc_baked, inc) =
+        incremental(compute_since(&after, &since, &config, Retrace::Edited, &NoProgress).unwrap());
+    let (all_baked, _) =
+        incremental(compute_since(&after, &since, &config, Retrace::All, &NoProgress).unwrap());
+    assert_eq!(inc.removed_nodes, vec![0], "{}", inc.brief());
+    assert_eq!(inc.moved_nodes.len(), 1, "{}", inc.brief());
+    assert!(inc.retraced > 0 && inc.patched > 0, "{}", inc.brief());
+    let worst = (inc_baked.lightmap.iter().zip(&all_baked.lightmap))
+        .map(|(a, b)| (*a - *b).abs().max_element() / (b.max_element() + 1e-3))
+        .fold(0.0f32, f32::max);
+    assert!(worst < 1e-4, "worst relative texel difference {worst:.2e}");
+}

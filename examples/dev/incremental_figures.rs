@@ -3,11 +3,12 @@
 //! reference of the edited scene.
 //!
 //! ```text
-//! cargo run --release --example incremental_figures -- OUT [SCENE.glb] [NODE] [DX] [QUALITY] [--no-reference]
+//! cargo run --release --example incremental_figures -- OUT [SCENE.glb] [NODE] [DX] [QUALITY] [--remove] [--no-reference]
 //! ```
 //!
 //! Defaults: `fixtures/furnished_interior.glb`, node `chair_0_0`, moved `0.5` m along x,
-//! `medium`. Steps: bake the scene with `--keep-transport` (`OUT/old`); move the node
+//! `medium`; with `--remove` the node is deleted from the document instead (the nodes after it
+//! renumbered; `DX` unused). Steps: bake the scene with `--keep-transport` (`OUT/old`); move the node
 //! (`OUT/edited/<name>`); bake the edited scene in full with the same options (`OUT/full`) and
 //! incrementally from the old bake (`OUT/incremental`), alternating, twice each (the machine's
 //! load changes between runs: each round's ratio is reported); with a reference, compute the point
@@ -31,9 +32,10 @@ use serde_json::Value;
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let no_reference = args.iter().any(|a| a == "--no-reference");
+    let remove = args.iter().any(|a| a == "--remove");
     let args: Vec<&String> = args.iter().filter(|a| !a.starts_with("--")).collect();
     let out = PathBuf::from(args.first().expect(
-        "usage: incremental_figures OUT [SCENE.glb] [NODE] [DX] [QUALITY] [--no-reference]",
+        "usage: incremental_figures OUT [SCENE.glb] [NODE] [DX] [QUALITY] [--remove] [--no-reference]",
     ));
     let scene = args.get(1).map_or_else(
         || Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/furnished_interior.glb"),
@@ -42,6 +44,11 @@ fn main() {
     let node = args.get(2).map_or("chair_0_0", |s| s.as_str());
     let dx: f32 = args.get(3).map_or(0.5, |s| s.parse().expect("DX"));
     let quality = args.get(4).map_or("medium", |s| s.as_str());
+    let edit = if remove {
+        "removed".to_string()
+    } else {
+        format!("moved {dx} m")
+    };
     // As `lightbake bake SCENE --quality Q --keep-transport` configures it (automatic choice).
     let options = lightbake::build::options::Options {
         quality: Some(quality.to_string()),
@@ -61,7 +68,11 @@ fn main() {
 
     let edited = out.join("edited").join(&name);
     std::fs::create_dir_all(edited.parent().unwrap()).unwrap();
-    move_node(&scene, &edited, node, dx);
+    if remove {
+        edit_glb(&scene, &edited, |json| remove_node(json, node));
+    } else {
+        edit_glb(&scene, &edited, |json| move_node(json, node, dx));
+    }
 
     // Full and incremental bakes alternate, `ROUNDS` times each: on a shared machine the load
     // changes between runs, and the ratio of neighbours is what it measures.
@@ -70,10 +81,13 @@ fn main() {
     let since = old.join(&name);
     let (mut full_times, mut inc_times) = (Vec::new(), Vec::new());
     let mut figures = None;
+    // The full bake's own texels: it plans the edited scene again.
+    let mut full_texels = 0;
     for round in 0..ROUNDS {
         let _ = std::fs::remove_dir_all(&full);
         let t = Instant::now();
         let full_report = bake(&edited, &full, &config, &NoProgress).expect("full bake");
+        full_texels = full_report.texels;
         full_times.push(t.elapsed().as_secs_f64());
         eprintln!(
             "round {round}, full bake: {:.1}s; {}",
@@ -131,10 +145,9 @@ fn main() {
             .unwrap_or_else(|| "-".to_string())
     };
     println!(
-        "| full ({quality}) | {full_seconds:.1} | 1 | {n} of {n} | 0 | {:.1} M | {} |",
-        figures.full_rays as f64 * 1e-6,
+        "| full ({quality}, planned again: {n} texels) | {full_seconds:.1} | 1 | {n} of {n} | 0 | (in its summary) | {} |",
         point(0),
-        n = figures.rows
+        n = full_texels
     );
     println!(
         "| incremental | {inc_seconds:.1} | {:.3?} | {} of {} | {} | {:.1} M | {} |",
@@ -153,37 +166,28 @@ fn main() {
         println!("(the incremental bake baked in full: {why})");
     }
     let csv = format!(
-        "scene,node,dx,quality,old_seconds,full_seconds,incremental_seconds,rows,retraced,patched,flagged_rays,incremental_rays,full_rays,full_point_rmse,incremental_point_rmse\n{stem},{node},{dx},{quality},{old_seconds:.2},{full_seconds:.2},{inc_seconds:.2},{},{},{},{},{},{},{},{}\n",
+        "scene,node,edit,quality,old_seconds,full_seconds,incremental_seconds,rows,retraced,patched,flagged_rays,incremental_rays,full_rays,full_texels,full_point_rmse,incremental_point_rmse\n{stem},{node},{edit},{quality},{old_seconds:.2},{full_seconds:.2},{inc_seconds:.2},{},{},{},{},{},{},{},{},{}\n",
         figures.rows,
         figures.retraced,
         figures.patched,
         figures.flagged_rays,
         figures.rays,
         figures.full_rays,
+        full_texels,
         errors.map_or(String::new(), |e| e[0].0.to_string()),
         errors.map_or(String::new(), |e| e[1].0.to_string()),
     );
     std::fs::write(out.join("incremental_figures.csv"), csv).expect("write the CSV");
 }
 
-/// Writes `scene` (a .glb) to `to` with node `node` moved by `dx` along x.
-fn move_node(scene: &Path, to: &Path, node: &str, dx: f32) {
+/// Writes `scene` (a .glb) to `to` with its JSON changed by `edit` (the binary chunk as it was).
+fn edit_glb(scene: &Path, to: &Path, edit: impl FnOnce(&mut Value)) {
     let bytes = std::fs::read(scene).expect("read the scene");
     assert!(bytes.starts_with(b"glTF"), "a .glb scene");
     let json_len = u32::from_le_bytes(bytes[12..16].try_into().unwrap()) as usize;
     let mut json: Value = serde_json::from_slice(&bytes[20..20 + json_len]).expect("JSON");
     let rest = &bytes[20 + json_len..];
-    let nodes = json["nodes"].as_array_mut().expect("nodes");
-    let n = nodes
-        .iter_mut()
-        .find(|n| n["name"] == node)
-        .unwrap_or_else(|| panic!("no node {node}"));
-    assert!(n.get("matrix").is_none(), "a node placed by TRS");
-    let mut t: Vec<f64> = (n.get("translation").and_then(Value::as_array))
-        .map(|a| a.iter().map(|v| v.as_f64().unwrap()).collect())
-        .unwrap_or_else(|| vec![0.0; 3]);
-    t[0] += f64::from(dx);
-    n["translation"] = serde_json::json!(t);
+    edit(&mut json);
     let mut text = serde_json::to_vec(&json).unwrap();
     while !text.len().is_multiple_of(4) {
         text.push(b' ');
@@ -197,6 +201,54 @@ fn move_node(scene: &Path, to: &Path, node: &str, dx: f32) {
     glb.extend(&text);
     glb.extend(rest); // the BIN chunk, as it was
     std::fs::write(to, glb).expect("write the edited scene");
+}
+
+/// Node `node` moved by `dx` along x.
+fn move_node(json: &mut Value, node: &str, dx: f32) {
+    let nodes = json["nodes"].as_array_mut().expect("nodes");
+    let n = nodes
+        .iter_mut()
+        .find(|n| n["name"] == node)
+        .unwrap_or_else(|| panic!("no node {node}"));
+    assert!(n.get("matrix").is_none(), "a node placed by TRS");
+    let mut t: Vec<f64> = (n.get("translation").and_then(Value::as_array))
+        .map(|a| a.iter().map(|v| v.as_f64().unwrap()).collect())
+        .unwrap_or_else(|| vec![0.0; 3]);
+    t[0] += f64::from(dx);
+    n["translation"] = serde_json::json!(t);
+}
+
+/// Node `node` (a leaf) deleted: dropped from its parent's children or the scenes' roots, the
+/// nodes after it renumbered, as an editor exports it.
+fn remove_node(json: &mut Value, node: &str) {
+    let nodes = json["nodes"].as_array_mut().expect("nodes");
+    let k = nodes
+        .iter()
+        .position(|n| n["name"] == node)
+        .unwrap_or_else(|| panic!("no node {node}"));
+    assert!(nodes[k].get("children").is_none(), "a leaf node");
+    nodes.remove(k);
+    let renumber = |list: &mut Value| {
+        if let Some(a) = list.as_array_mut() {
+            a.retain(|i| i.as_u64() != Some(k as u64));
+            for i in a.iter_mut() {
+                let v = i.as_u64().unwrap();
+                if v > k as u64 {
+                    *i = serde_json::json!(v - 1);
+                }
+            }
+        }
+    };
+    for n in json["nodes"].as_array_mut().unwrap() {
+        if let Some(c) = n.get_mut("children") {
+            renumber(c);
+        }
+    }
+    for s in json["scenes"].as_array_mut().expect("scenes") {
+        if let Some(roots) = s.get_mut("nodes") {
+            renumber(roots);
+        }
+    }
 }
 
 /// The stored point reference at `csv`, or a new one of `input` stored there.

@@ -1,6 +1,6 @@
-//! Incremental re-bake (`bake --since OLD/x.gltf`): after an edit that only moves nodes,
-//! re-trace only the rays the moved nodes can have changed, reuse every other row of the
-//! previous bake's kept transport ([`super::kept`]), and solve again.
+//! Incremental re-bake (`bake --since OLD/x.gltf`): after an edit that only moves or removes
+//! nodes, re-trace only the rays the edited nodes can have changed, reuse every other row of
+//! the previous bake's kept transport ([`super::kept`]), and solve again.
 //!
 //! ## What the previous bake must have kept, and why it is enough
 //!
@@ -17,6 +17,16 @@
 //! difference. Rows of texels that changed themselves (on a moved node, or whose validity pass
 //! moved their sample point or divided them) are traced again whole. A conservative test is
 //! cheap to make exact: a flagged ray that ends where it did changes nothing.
+//!
+//! A **removed** node is a moved one with no new place: its instances leave the BVH
+//! (`Tracer::without`) but keep their triangle ids and texels, so that every other texel,
+//! triangle and kept row keeps its index; rays meeting its old bounds are flagged as above;
+//! its texels are invalid with empty rows (black, solved to nothing), and the glTF is written
+//! from the input's instances only (`Baked::written`): no primitive reads them, their
+//! atlas space stays unused. The input's node graph is matched against the previous one
+//! (`InputRecord::graph`): the same nodes in order less the removed (renumbered), each kept
+//! node's children and each scene's roots those of before less the removed, and everything
+//! but the node graph unchanged (`InputRecord::content`).
 //!
 //! So the kept file needs no per-ray record, only: the input it was baked from (a hash of
 //! everything but node transforms, and each node's transform: [`InputRecord`]), the rows as
@@ -41,10 +51,12 @@
 //! uncut scene) and the floor keeps the cuts where they stood. A plain `bake` cuts anew.
 //!
 //! It bakes in full (with the caller's settings, and says why) when the input changed in more
-//! than node transforms, when nodes were added or removed, when a moved node carries a light or
-//! an emissive material (every row's direct light would change), when the old bake cannot be
-//! laid out again to the same texels (another lightbake, other settings) or its technique
-//! keeps no Monte Carlo rows.
+//! than node transforms and removals, when nodes were added, re-parented or changed, when a
+//! moved or removed node carries a light or an emissive material (every row's direct light
+//! would change), when the old bake cannot be laid out again to the same texels (another
+//! lightbake, other settings), when it was itself an incremental bake that removed nodes (its
+//! layout holds nodes its input no longer has), when a removal meets an atlas that shares
+//! meshes, or when its technique keeps no Monte Carlo rows.
 //!
 //! The incremental bake runs with the previous bake's settings (`kept::Settings::config`, the
 //! automatic choices as they were made: no new plan), which a kept bake's single final run
@@ -93,11 +105,34 @@ pub struct InputRecord {
     /// one lays that out again.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub(crate) layout: Option<Vec<Value>>,
+    /// blake3 (hex) of everything but the node graph (the glTF JSON without `nodes`, `scenes`
+    /// and `scene`, and the binary and external files, as `hash`): what must not change for an
+    /// edit that removes nodes to be baked incrementally. Absent in files that predate it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub(crate) content: Option<String>,
+    /// The node graph as read: `{"nodes": [..], "scenes": [..], "scene": n}` (nodes whole,
+    /// transforms included), so that the previous scene can be loaded again after nodes were
+    /// removed from the input.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub(crate) graph: Option<Value>,
 }
+
+/// The glTF keys of the node graph ([`InputRecord::graph`]).
+const GRAPH_KEYS: [&str; 3] = ["nodes", "scenes", "scene"];
 
 /// The record of the input at `path`.
 pub(crate) fn input_record(path: &Path) -> Result<InputRecord> {
     let (mut json, blob, _) = scene::read_document(path)?;
+    let graph: serde_json::Map<String, Value> = GRAPH_KEYS
+        .iter()
+        .filter_map(|&k| Some((k.to_string(), json.get(k)?.clone())))
+        .collect();
+    let mut rest = json.clone();
+    if let Some(obj) = rest.as_object_mut() {
+        GRAPH_KEYS.iter().for_each(|k| {
+            obj.remove(*k);
+        });
+    }
     let mut nodes = Vec::new();
     if let Some(list) = json.get_mut("nodes").and_then(Value::as_array_mut) {
         for node in list {
@@ -112,20 +147,26 @@ pub(crate) fn input_record(path: &Path) -> Result<InputRecord> {
             nodes.push(Value::Object(t));
         }
     }
-    let mut h = blake3::Hasher::new();
-    let mut part = |bytes: &[u8]| {
-        h.update(&(bytes.len() as u64).to_le_bytes());
-        h.update(bytes);
+    let files: Vec<Vec<u8>> = (scene::external_files(path)?.iter())
+        .map(|file| std::fs::read(file).map_err(|e| Error::io(file, e)))
+        .collect::<Result<_>>()?;
+    let hash = |json: &Value| -> Result<String> {
+        let mut h = blake3::Hasher::new();
+        let mut part = |bytes: &[u8]| {
+            h.update(&(bytes.len() as u64).to_le_bytes());
+            h.update(bytes);
+        };
+        part(&serde_json::to_vec(json).map_err(|e| Error::Internal(e.to_string()))?);
+        part(blob.as_deref().unwrap_or_default());
+        files.iter().for_each(|f| part(f));
+        Ok(h.finalize().to_hex().to_string())
     };
-    part(&serde_json::to_vec(&json).map_err(|e| Error::Internal(e.to_string()))?);
-    part(blob.as_deref().unwrap_or_default());
-    for file in scene::external_files(path)? {
-        part(&std::fs::read(&file).map_err(|e| Error::io(&file, e))?);
-    }
     Ok(InputRecord {
-        hash: h.finalize().to_hex().to_string(),
+        hash: hash(&json)?,
         nodes,
         layout: None,
+        content: Some(hash(&rest)?),
+        graph: Some(Value::Object(graph)),
     })
 }
 
@@ -134,8 +175,10 @@ pub(crate) fn input_record(path: &Path) -> Result<InputRecord> {
 pub struct Incremental {
     /// Why it baked in full instead (`None`: it re-traced only what the edit touched).
     pub full: Option<String>,
-    /// glTF nodes whose transform changed.
+    /// glTF nodes whose transform changed (the input's indices).
     pub moved_nodes: Vec<u32>,
+    /// glTF nodes of the previous bake's input that the input no longer has (its indices).
+    pub removed_nodes: Vec<u32>,
     /// Rows (texels) in the bake.
     pub rows: usize,
     /// Rows traced again whole (texels that changed).
@@ -163,8 +206,9 @@ impl Incremental {
             return format!("incremental: baked in full ({why})");
         }
         format!(
-            "incremental: {} node(s) moved, {} of {} rows re-traced ({:.2}%) and {} patched ({} rays re-cast), {:.1}% of a full trace's rays, ~{:.1}s of transport saved",
+            "incremental: {} node(s) moved, {} removed, {} of {} rows re-traced ({:.2}%) and {} patched ({} rays re-cast), {:.1}% of a full trace's rays, ~{:.1}s of transport saved",
             self.moved_nodes.len(),
+            self.removed_nodes.len(),
             self.retraced,
             self.rows,
             100.0 * self.retraced as f64 / self.rows.max(1) as f64,
@@ -246,9 +290,13 @@ pub fn compute_since(
             incremental,
             lighting,
             layout_nodes,
+            removed,
         }) => {
             let mut baked = super::finish(prepared, lighting, progress)?;
             baked.layout_nodes = Some(layout_nodes);
+            if let Some((instances, nodes, input)) = removed {
+                baked.written = Some(Box::new(drop_removed(&baked, &instances, &nodes, &input)));
+            }
             Since::Incremental(Box::new(baked), incremental)
         }
         Err(why) => Since::Full(why),
@@ -262,6 +310,9 @@ struct Planned {
     lighting: Lighting,
     /// The node transforms of the layout kept.
     layout_nodes: Vec<Value>,
+    /// After a removal: the removed instances, the node map and the input as loaded, for the
+    /// writer (`drop_removed`).
+    removed: Option<(Vec<usize>, NodeMap, Scene)>,
 }
 
 /// Why an incremental bake cannot run (the outer `Ok(Err(..))`).
@@ -295,30 +346,60 @@ fn plan(
     config.max_memory = out.max_memory;
     config.transport.split_direct = true;
     let now = input_record(input)?;
-    if now.hash != old.hash {
-        return Ok(Err(
-            "the input changed in more than node transforms (meshes, materials, lights, textures or nodes)"
-                .to_string(),
-        ));
-    }
-    if now.nodes.len() != old.nodes.len() {
-        return Ok(Err("nodes were added or removed".to_string()));
-    }
+    // The input's nodes in the previous bake's graph, and the nodes it no longer has.
+    let nodes = match (&old.content, &old.graph, &now.graph) {
+        (Some(content), Some(before), Some(after)) => {
+            if now.content.as_ref() != Some(content) {
+                return Ok(Err(
+                    "the input changed in more than node transforms and removals (meshes, materials, lights, textures or added nodes)"
+                        .to_string(),
+                ));
+            }
+            match match_nodes(before, after) {
+                Ok(map) => map,
+                Err(why) => return Ok(Err(why)),
+            }
+        }
+        // A record from before removals were baked incrementally: moves only.
+        _ if now.hash != old.hash || now.nodes.len() != old.nodes.len() => {
+            return Ok(Err(
+                "the input changed in more than node transforms (meshes, materials, lights, textures or nodes)"
+                    .to_string(),
+            ));
+        }
+        _ => NodeMap {
+            of_new: (0..now.nodes.len() as u32).collect(),
+            removed: Vec::new(),
+        },
+    };
     let moved_nodes: Vec<u32> = (0..now.nodes.len())
-        .filter(|&k| now.nodes[k] != old.nodes[k])
+        .filter(|&k| now.nodes[k] != old.nodes[nodes.of_new[k] as usize])
         .map(|k| k as u32)
         .collect();
 
-    // The layout: the input with the transforms the previous bake's layout was made with put
-    // back (the previous bake's own, or those an incremental bake kept), laid out again with
-    // the old settings. Deterministic, so it is the old layout; the previous scene is that
-    // layout with the nodes moved since placed as the previous bake had them, checked against
-    // the kept texels.
+    // The layout: the previous bake's node graph (the input's, when nothing was removed) with
+    // the transforms the previous bake's layout was made with put back (the previous bake's
+    // own, or those an incremental bake kept), laid out again with the old settings.
+    // Deterministic, so it is the old layout; the previous scene is that layout with the
+    // nodes moved since placed as the previous bake had them, checked against the kept texels.
     let t = Instant::now();
     let layout_nodes = old.layout.clone().unwrap_or_else(|| old.nodes.clone());
+    if layout_nodes.len() != old.nodes.len() {
+        return Ok(Err(
+            "the previous bake's layout holds nodes its input no longer had (an incremental bake after a removal)"
+                .to_string(),
+        ));
+    }
+    let graph = old.graph.clone();
     let put_back = |nodes: &[Value]| {
-        let nodes = nodes.to_vec();
+        let (nodes, graph) = (nodes.to_vec(), graph.clone());
         move |json: &mut Value| {
+            if let (Some(obj), Some(Value::Object(graph))) = (json.as_object_mut(), &graph) {
+                GRAPH_KEYS.iter().for_each(|k| {
+                    obj.remove(*k);
+                });
+                obj.extend(graph.iter().map(|(k, v)| (k.clone(), v.clone())));
+            }
             let Some(list) = json.get_mut("nodes").and_then(Value::as_array_mut) else {
                 return;
             };
@@ -335,15 +416,39 @@ fn plan(
     let (layout_loaded, layout_source) = scene::load_edited(input, &put_back(&layout_nodes))?;
     let (prev_loaded, _) = scene::load_edited(input, &put_back(&old.nodes))?;
     let (new_loaded, new_source) = super::load(input, progress)?;
+    // Per instance of the layout, the input's instance (`None`: its node was removed).
+    let now_of = match instance_map(&layout_loaded, &new_loaded, &nodes) {
+        Ok(map) => map,
+        Err(why) => return Ok(Err(why)),
+    };
+    let same: Vec<Option<usize>> = (0..layout_loaded.instances.len()).map(Some).collect();
+    let removed: Vec<usize> = (0..now_of.len()).filter(|&k| now_of[k].is_none()).collect();
+    if !removed.is_empty()
+        && let Some(atlas) = &kept.atlas
+        && !atlas.shared.is_empty()
+    {
+        return Ok(Err(
+            "nodes were removed from a bake whose atlas shares meshes".to_string(),
+        ));
+    }
     let moves = (
-        moved_instances(&layout_loaded, &prev_loaded),
-        moved_instances(&layout_loaded, &new_loaded),
-        moved_instances(&prev_loaded, &new_loaded),
+        moved_instances(&layout_loaded, &prev_loaded, &same),
+        moved_instances(&layout_loaded, &new_loaded, &now_of),
+        moved_instances(&prev_loaded, &new_loaded, &now_of),
     );
     let (moved_before, moved_now, moved) = match moves {
         (Ok(a), Ok(b), Ok(c)) => (a, b, c),
         (Err(why), _, _) | (_, Err(why), _) | (_, _, Err(why)) => return Ok(Err(why)),
     };
+    if let Some(&k) = removed.iter().find(|&&k| {
+        let m = layout_loaded.instances[k].material as usize;
+        layout_loaded.materials[m].emission.max_element() > 0.0
+    }) {
+        return Ok(Err(format!(
+            "an emissive node ({}) was removed",
+            layout_loaded.instances[k].node
+        )));
+    }
     let layout = match &kept.atlas {
         Some(atlas) => match lay_out_again(layout_loaded, layout_source, atlas, &config, t)? {
             Ok(layout) => layout,
@@ -364,7 +469,7 @@ fn plan(
     } else {
         let t = Instant::now();
         let mut old = layout;
-        old.scene = place(&old.scene, &prev_loaded, &moved_before);
+        old.scene = place(&old.scene, &prev_loaded, &same, &moved_before);
         old.tracer = Tracer::new(&old.scene);
         old.texels = texels::build(&old.scene, &old.atlas)?;
         timed(&mut old.stages, "previous scene", t);
@@ -393,8 +498,10 @@ fn plan(
     let mut away: Vec<usize> = moved_before.iter().chain(&moved_now).copied().collect();
     away.sort_unstable();
     away.dedup();
-    let new_scene = place(&old.scene, &new_loaded, &away);
-    let tracer = Tracer::new(&new_scene);
+    let new_scene = place(&old.scene, &new_loaded, &now_of, &away);
+    // A removed node's triangles keep their ids (and its texels their places) but leave the
+    // BVH: no ray meets them. The ray offset stays the layout's (its extent).
+    let tracer = Tracer::without(&new_scene, &removed);
     if tracer.epsilon != old.tracer.epsilon {
         return Ok(Err(
             "the scene's extent changed, and with it every ray's offset".to_string(),
@@ -411,6 +518,11 @@ fn plan(
             .flat_map(|&inst| {
                 [&old.scene, &new_scene].map(|s| bounds(s, s.instances[inst].vertices.clone(), 0.0))
             })
+            .chain(
+                (removed.iter()).map(|&inst| {
+                    bounds(&old.scene, old.scene.instances[inst].vertices.clone(), 0.0)
+                }),
+            )
             .collect();
         let params = texels::validity::ValidityParams {
             seed: config.transport.seed,
@@ -439,6 +551,14 @@ fn plan(
     if new_texels.page != old.texels.page || new_texels.xy != old.texels.xy {
         return Ok(Err("the moved nodes' texels changed places".to_string()));
     }
+    // A removed node's texels: unused (no primitive of the output reads them), invalid, and
+    // their rows empty (`Rebuild::rows`).
+    let gone = removed_texels(&new_scene, &new_texels, &removed);
+    if gone.iter().any(|&g| g) {
+        new_texels.invalid = (0..new_texels.len() as u32)
+            .filter(|&i| gone[i as usize] || new_texels.invalid.binary_search(&i).is_ok())
+            .collect();
+    }
     timed(&mut stages, "incremental texels", t);
 
     // Texels that changed (their rows are traced whole), and the bounds flagged rays meet.
@@ -465,6 +585,10 @@ fn plan(
             boxes.push(bounds(s, s.instances[inst].vertices.clone(), margin));
         }
     }
+    for &inst in &removed {
+        let s = &old.scene;
+        boxes.push(bounds(s, s.instances[inst].vertices.clone(), margin));
+    }
     let n = new_texels.len();
     let (k, l) = (config.transport.gather_rays, config.transport.light_samples);
     // The rows, in a scope of their own: they borrow both scenes, which `Prepared` then takes.
@@ -488,6 +612,7 @@ fn plan(
             old: old.surfaces(),
             new: &ctx,
             changed: &changed,
+            gone: &gone,
             boxes: &boxes,
             count_rows: config.transport.count_rows,
             touched: Mutex::new(Vec::new()),
@@ -533,6 +658,7 @@ fn plan(
         let incremental = Incremental {
             full: None,
             moved_nodes,
+            removed_nodes: nodes.removed.clone(),
             rows: n,
             retraced,
             patched,
@@ -582,11 +708,13 @@ fn plan(
             texel_gather_rays: vec![k as f32; n],
         },
     };
+    let removed = (!removed.is_empty()).then_some((removed, nodes, new_loaded));
     Ok(Ok(Planned {
         prepared,
         incremental,
         lighting,
         layout_nodes,
+        removed,
     }))
 }
 
@@ -643,20 +771,147 @@ fn lay_out_again(
     }))
 }
 
-/// The instances whose vertices moved between the old and the new placement of the same input,
-/// or why the difference is more than a move.
-fn moved_instances(old: &Scene, new: &Scene) -> Fallback<Vec<usize>> {
-    if old.instances.len() != new.instances.len() || old.triangles != new.triangles {
-        return Err("a moved node's triangles changed (a mirroring transform?)".to_string());
-    }
-    let mut moved = Vec::new();
-    for (k, (a, b)) in old.instances.iter().zip(&new.instances).enumerate() {
-        let range = a.vertices.start as usize..a.vertices.end as usize;
-        if a.vertices != b.vertices || a.material != b.material {
-            return Err("the instances differ".to_string());
+/// The input's nodes in the previous bake's node graph ([`InputRecord::graph`]).
+struct NodeMap {
+    /// Per node of the input, its index in the previous graph.
+    of_new: Vec<u32>,
+    /// The previous graph's nodes the input no longer has, ascending.
+    removed: Vec<u32>,
+}
+
+/// Matches the node graph `after` (the input's) against `before` (the previous bake's): the
+/// same nodes in the same order but for some removed (each node compared whole but for its
+/// transform and its children's indices, which a removal renumbers), each kept node's
+/// children and each scene's roots those of before less the removed, or why not.
+fn match_nodes(before: &Value, after: &Value) -> Fallback<NodeMap> {
+    let list = |g: &Value, key: &str| -> Vec<Value> {
+        g.get(key)
+            .and_then(Value::as_array)
+            .cloned()
+            .unwrap_or_default()
+    };
+    let (old_nodes, new_nodes) = (list(before, "nodes"), list(after, "nodes"));
+    let indices = |v: Option<&Value>| -> Vec<u64> {
+        v.and_then(Value::as_array)
+            .map(|a| a.iter().filter_map(Value::as_u64).collect())
+            .unwrap_or_default()
+    };
+    let bare = |node: &Value| {
+        let mut node = node.clone();
+        if let Some(obj) = node.as_object_mut() {
+            for key in TRANSFORM_KEYS.iter().chain(&["children"]) {
+                obj.remove(*key);
+            }
         }
-        if old.positions[range.clone()] != new.positions[range.clone()]
-            || old.normals[range.clone()] != new.normals[range]
+        node
+    };
+    let mut of_new = Vec::with_capacity(new_nodes.len());
+    let mut j = 0;
+    for node in &new_nodes {
+        let node = bare(node);
+        while j < old_nodes.len() && bare(&old_nodes[j]) != node {
+            j += 1;
+        }
+        if j == old_nodes.len() {
+            return Err("nodes were added or changed (not only moved or removed)".to_string());
+        }
+        of_new.push(j as u32);
+        j += 1;
+    }
+    let mut kept = vec![false; old_nodes.len()];
+    of_new.iter().for_each(|&k| kept[k as usize] = true);
+    let removed: Vec<u32> = (0..old_nodes.len() as u32)
+        .filter(|&k| !kept[k as usize])
+        .collect();
+    // Children and roots: the new ones, in the old graph's indices, must be the old ones
+    // less the removed (a node re-parented or a root dropped is not a removal).
+    let same = |new: Vec<u64>, old: Vec<u64>| -> bool {
+        let mapped: Option<Vec<u64>> = (new.iter())
+            .map(|&c| of_new.get(c as usize).map(|&k| u64::from(k)))
+            .collect();
+        let kept_old: Vec<u64> = (old.into_iter())
+            .filter(|&c| kept.get(c as usize).copied().unwrap_or(false))
+            .collect();
+        mapped == Some(kept_old)
+    };
+    let children = (new_nodes.iter().zip(&of_new)).all(|(n, &k)| {
+        same(
+            indices(n.get("children")),
+            indices(old_nodes[k as usize].get("children")),
+        )
+    });
+    let (old_scenes, new_scenes) = (list(before, "scenes"), list(after, "scenes"));
+    let scenes = old_scenes.len() == new_scenes.len()
+        && before.get("scene") == after.get("scene")
+        && (old_scenes.iter().zip(&new_scenes)).all(|(o, n)| {
+            let bare = |s: &Value| {
+                let mut s = s.clone();
+                s.as_object_mut().map(|o| o.remove("nodes"));
+                s
+            };
+            bare(o) == bare(n) && same(indices(n.get("nodes")), indices(o.get("nodes")))
+        });
+    if !(children && scenes) {
+        return Err("the node hierarchy changed (not only moves and removals)".to_string());
+    }
+    Ok(NodeMap { of_new, removed })
+}
+
+/// Per instance of `old` (the previous graph laid out), the instance of `new` (the input) that
+/// places the same primitive by the same node, in order; `None` where `old`'s node was removed.
+fn instance_map(old: &Scene, new: &Scene, nodes: &NodeMap) -> Fallback<Vec<Option<usize>>> {
+    let mut map = Vec::with_capacity(old.instances.len());
+    let mut next = 0;
+    for a in &old.instances {
+        if nodes.removed.binary_search(&a.node).is_ok() {
+            map.push(None);
+            continue;
+        }
+        let same = new.instances.get(next).is_some_and(|b| {
+            nodes.of_new.get(b.node as usize) == Some(&a.node)
+                && (b.mesh, b.primitive, b.back_of.is_some())
+                    == (a.mesh, a.primitive, a.back_of.is_some())
+        });
+        if !same {
+            return Err(
+                "the input's instances are not the previous ones less the removed".to_string(),
+            );
+        }
+        map.push(Some(next));
+        next += 1;
+    }
+    if next != new.instances.len() {
+        return Err("the input places primitives the previous bake did not".to_string());
+    }
+    Ok(map)
+}
+
+/// The instances whose vertices moved between `old` and `new` (`map`: `old`'s instances in
+/// `new`, `None` for a removed one), or why the difference is more than a move.
+fn moved_instances(old: &Scene, new: &Scene, map: &[Option<usize>]) -> Fallback<Vec<usize>> {
+    let mut moved = Vec::new();
+    for (k, a) in old.instances.iter().enumerate() {
+        let Some(b) = map[k].map(|m| &new.instances[m]) else {
+            continue;
+        };
+        let local = |s: &Scene, i: &scene::Instance| -> Vec<[u32; 3]> {
+            s.triangles[i.triangles.start as usize..i.triangles.end as usize]
+                .iter()
+                .map(|t| t.map(|v| v - i.vertices.start))
+                .collect()
+        };
+        if a.vertices.len() != b.vertices.len()
+            || a.material != b.material
+            || local(old, a) != local(new, b)
+        {
+            return Err("a moved node's triangles changed (a mirroring transform?)".to_string());
+        }
+        let (ra, rb) = (
+            a.vertices.start as usize..a.vertices.end as usize,
+            b.vertices.start as usize..b.vertices.end as usize,
+        );
+        if old.positions[ra.clone()] != new.positions[rb.clone()]
+            || old.normals[ra] != new.normals[rb]
         {
             if old.materials[a.material as usize].emission.max_element() > 0.0 {
                 return Err("an emissive node moved".to_string());
@@ -665,18 +920,19 @@ fn moved_instances(old: &Scene, new: &Scene) -> Fallback<Vec<usize>> {
         }
     }
     if format!("{:?}", old.lights) != format!("{:?}", new.lights) {
-        return Err("a light moved".to_string());
+        return Err("a light moved or was removed".to_string());
     }
     Ok(moved)
 }
 
 /// `old` (the old bake's scene, cut by the junction split) with the `moved` instances'
-/// vertices taken from `new` (the input as loaded, uncut): a source vertex is the loaded one,
-/// a cut vertex the same blend of the loaded ones.
-fn place(old: &Scene, new: &Scene, moved: &[usize]) -> Scene {
+/// vertices taken from their instance in `new` (`map`; the input as loaded, uncut): a source
+/// vertex is the loaded one, a cut vertex the same blend of the loaded ones.
+fn place(old: &Scene, new: &Scene, map: &[Option<usize>], moved: &[usize]) -> Scene {
     let mut scene = old.clone();
     for &k in moved {
-        let (cut, loaded) = (&old.instances[k], &new.instances[k]);
+        let Some(m) = map[k] else { continue };
+        let (cut, loaded) = (&old.instances[k], &new.instances[m]);
         let src = loaded.vertices.start as usize;
         let count = loaded.vertices.len();
         let first = cut.vertices.start as usize;
@@ -697,6 +953,60 @@ fn place(old: &Scene, new: &Scene, moved: &[usize]) -> Scene {
         }
     }
     scene
+}
+
+/// Per texel, whether it lies on one of the `removed` instances.
+fn removed_texels(scene: &Scene, texels: &Texels, removed: &[usize]) -> Vec<bool> {
+    (texels.triangle.iter())
+        .map(|&t| {
+            removed
+                .binary_search(&(scene.triangle_instance[t as usize] as usize))
+                .is_ok()
+        })
+        .collect()
+}
+
+/// The scene and atlas of `baked` as the glTF writer reads them after a removal
+/// ([`super::Baked::written`]): the `removed` instances (ascending) left out, the others naming
+/// their node in the input (`nodes`), and the input's node tree. Triangles keep their ids
+/// (the writer reads instances, not triangles); a removed one names no instance (`u32::MAX`).
+fn drop_removed(
+    baked: &super::Baked,
+    removed: &[usize],
+    nodes: &NodeMap,
+    input: &Scene,
+) -> (Scene, crate::atlas::Atlas) {
+    let mut node_now = vec![u32::MAX; nodes.of_new.len() + nodes.removed.len()];
+    for (n, &k) in nodes.of_new.iter().enumerate() {
+        node_now[k as usize] = n as u32;
+    }
+    let kept: Vec<usize> = (0..baked.scene.instances.len())
+        .filter(|k| removed.binary_search(k).is_err())
+        .collect();
+    let mut index_now = vec![u32::MAX; baked.scene.instances.len()];
+    kept.iter()
+        .enumerate()
+        .for_each(|(now, &k)| index_now[k] = now as u32);
+    let mut scene = baked.scene.clone();
+    scene.instances = (kept.iter())
+        .map(|&k| {
+            let mut inst = baked.scene.instances[k].clone();
+            inst.node = node_now[inst.node as usize];
+            inst.back = inst.back.map(|b| index_now[b as usize]);
+            inst.back_of = inst.back_of.map(|b| index_now[b as usize]);
+            inst
+        })
+        .collect();
+    for i in &mut scene.triangle_instance {
+        *i = index_now[*i as usize];
+    }
+    scene.nodes = input.nodes.clone();
+    scene.cameras = input.cameras.clone();
+    let mut atlas = baked.atlas.clone();
+    atlas.instances = (kept.iter())
+        .map(|&k| baked.atlas.instances[k].clone())
+        .collect();
+    (scene, atlas)
 }
 
 /// What differs between the laid-out texels `a` and the kept texels `b` (the fields the kept
@@ -848,6 +1158,8 @@ struct Rebuild<'a> {
     old: Surfaces<'a>,
     new: &'a Context<'a>,
     changed: &'a [bool],
+    /// Texels of removed nodes: their rows are empty.
+    gone: &'a [bool],
     boxes: &'a [(Vec3, Vec3)],
     count_rows: bool,
     /// The rows re-traced (`true`) or patched (`false`), in no order.
@@ -864,6 +1176,19 @@ impl Rebuild<'_> {
         let mut hits = Vec::new();
         let mut flagged = Vec::new();
         for i in range {
+            if self.gone[i] {
+                let start = out.col.len();
+                push_row(
+                    out,
+                    std::iter::empty(),
+                    self.ray_counts().0,
+                    self.count_rows,
+                );
+                let sources = self.kept.transport.sources.len();
+                out.terms.extend(std::iter::repeat_n(Vec3::ZERO, sources));
+                out.end_row(start, 0.0, Vec3::ZERO);
+                continue;
+            }
             if self.changed[i] {
                 let t = Instant::now();
                 self.new.texel_row(i, &mut hits, out);

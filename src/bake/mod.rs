@@ -222,6 +222,10 @@ pub struct Baked {
     /// incremental bake keeps the previous layout: [`incremental`]); recorded in a kept
     /// transport.
     pub(crate) layout_nodes: Option<Vec<serde_json::Value>>,
+    /// The scene and atlas the glTF is written from when they are not `scene` and `atlas`: an
+    /// incremental bake that removed nodes keeps their triangles and texels (unused) and
+    /// writes only the input's instances ([`incremental`]).
+    pub(crate) written: Option<Box<(scene::Scene, atlas::Atlas)>>,
 }
 
 /// Bakes `input` (.gltf or .glb) into `out_dir`: `<stem>.gltf` + `<stem>.bin` (or `<stem>.glb`),
@@ -964,6 +968,7 @@ pub(crate) fn finish(prepared: Prepared, lit: Lighting, progress: &dyn Progress)
         layers,
         stages,
         layout_nodes: None,
+        written: None,
     })
 }
 
@@ -1067,10 +1072,14 @@ pub fn write(
             &output::write_exr(page, false, input)?,
         )?;
     }
+    let (scene, atlas) = match &baked.written {
+        Some(written) => (&written.0, &written.1),
+        None => (&baked.scene, &baked.atlas),
+    };
     output::write_gltf(
-        &baked.scene,
+        scene,
         &baked.source,
-        &baked.atlas,
+        atlas,
         &page_files,
         &mut staging,
         &stem,
