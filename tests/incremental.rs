@@ -291,15 +291,12 @@ fn a_version_1_transport_is_refused_with_advice() {
 
 #[test]
 fn build_rebakes_a_moved_node_incrementally_and_says_so() {
+    use lightbake::build;
     use lightbake::build::Status;
-    use lightbake::{Manifest, build};
     let dir = scratch();
     let levels = dir.path().join("levels");
     two_rooms_with_box(&levels, -1.0);
-    let manifest = "[defaults]\nquality = \"draft\"\ntexels-per-unit = 8\nkeep-transport = true\n\n\
-                    [[scene]]\npath = \"levels/two_rooms.gltf\"\noutput = \"baked\"\n";
-    std::fs::write(dir.path().join("lightbake.toml"), manifest).unwrap();
-    let load = || Manifest::load(&dir.path().join("lightbake.toml")).unwrap();
+    let load = draft_manifest(dir.path());
     let first = build(&load(), &NoProgress);
     assert_eq!(first.scenes[0].status, Status::Baked, "{first:?}");
 
@@ -413,6 +410,16 @@ fn cli_bake_since_says_incremental() {
 
 /// two_rooms.gltf with the box mesh of [`two_rooms_with_box`] and, when `x` is given, its node
 /// ("box") *first* among the nodes (every other node's index one up: a removal renumbers
+/// A draft manifest in `dir` keeping the transport of `levels/two_rooms.gltf` (baked to
+/// `baked`), and how to load it again.
+fn draft_manifest(dir: &Path) -> impl Fn() -> lightbake::Manifest {
+    let manifest = "[defaults]\nquality = \"draft\"\ntexels-per-unit = 8\nkeep-transport = true\n\n\
+                    [[scene]]\npath = \"levels/two_rooms.gltf\"\noutput = \"baked\"\n";
+    let path = dir.join("lightbake.toml");
+    std::fs::write(&path, manifest).unwrap();
+    move || lightbake::Manifest::load(&path).unwrap()
+}
+
 /// them), standing at `x`; without `x`, the same document with the box node deleted.
 fn two_rooms_box_first(dir: &Path, x: Option<f32>) -> PathBuf {
     let path = two_rooms_with_box(dir, x.unwrap_or(0.0));
@@ -547,15 +554,12 @@ fn a_removed_box_relights_its_room_as_a_full_retrace_does() {
 
 #[test]
 fn build_rebakes_a_removed_node_incrementally_and_says_so() {
+    use lightbake::build;
     use lightbake::build::Status;
-    use lightbake::{Manifest, build};
     let dir = scratch();
     let levels = dir.path().join("levels");
     two_rooms_box_first(&levels, Some(1.0));
-    let manifest = "[defaults]\nquality = \"draft\"\ntexels-per-unit = 8\nkeep-transport = true\n\n\
-                    [[scene]]\npath = \"levels/two_rooms.gltf\"\noutput = \"baked\"\n";
-    std::fs::write(dir.path().join("lightbake.toml"), manifest).unwrap();
-    let load = || Manifest::load(&dir.path().join("lightbake.toml")).unwrap();
+    let load = draft_manifest(dir.path());
     let first = build(&load(), &NoProgress);
     assert_eq!(first.scenes[0].status, Status::Baked, "{first:?}");
 

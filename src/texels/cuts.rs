@@ -190,14 +190,7 @@ pub(crate) fn divide_near(
         );
         mapped.sort_unstable_by_key(|&(i, _)| i);
     }
-    let mut cuts = Cuts::default();
-    for (i, map) in mapped {
-        if cuts.slot.is_empty() {
-            cuts.slot = vec![NO_TEXEL; n];
-        }
-        cuts.slot[i as usize] = cuts.cells.len() as u32;
-        cuts.cells.push(map);
-    }
+    let cuts = Cuts::from_entries(n, mapped);
     report.divided = cuts.len();
     texels.cuts = cuts;
     report
