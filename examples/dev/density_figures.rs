@@ -6,10 +6,11 @@
 //! cargo run --release --example density_figures -- --from CSV CHART.png
 //! ```
 //!
-//! `QUALITIES` is a comma-separated list of presets (`draft,medium,high`). For each scene the
-//! point reference `REFS/<stem>.csv` is read (written by `lightbake reference SCENE --points N`);
-//! when missing it is computed (2048 points, to 1% noise or 4096 paths) and stored there. Each
-//! binary bakes with `bake SCENE --quality Q` under `/usr/bin/time` (wall seconds, peak resident
+//! `QUALITIES` is a comma-separated list of presets (`draft,medium,high`); `--seed N` bakes with
+//! that seed (the plan is drawn from it: run several to see a change beside the seed spread).
+//! For each scene the point reference `REFS/<stem>.csv` is read (written by `lightbake reference
+//! SCENE --points N`); when missing it is computed (2048 points, to 1% noise or 4096 paths) and
+//! stored there. Each binary bakes with `bake SCENE --quality Q` under `/usr/bin/time` (wall seconds, peak resident
 //! memory); the output is read as a renderer reads it and compared with the reference
 //! (`points::compare`): relative RMSE with the reference's noise taken out, p95, share of
 //! lookups touching black texels. A camera view is the other yardstick: NEW_BIN path-traces
@@ -51,7 +52,13 @@ struct Row {
 }
 
 fn main() {
-    let args: Vec<String> = std::env::args().skip(1).collect();
+    let mut args: Vec<String> = std::env::args().skip(1).collect();
+    // `--seed N` (anywhere): both binaries bake with that seed (their plans are drawn from it).
+    let seed = args.iter().position(|a| a == "--seed").map(|i| {
+        let n = args.remove(i + 1);
+        args.remove(i);
+        n
+    });
     if let [from, csv, png] = &args[..]
         && from == "--from"
     {
@@ -80,7 +87,7 @@ fn main() {
             for (binary, bin) in [("before", old), ("after", new)] {
                 let dir = out.join(format!("{stem}_{quality}_{binary}"));
                 let _ = std::fs::remove_dir_all(&dir);
-                let (seconds, peak_mb, planning) = bake(bin, input, &dir, quality);
+                let (seconds, peak_mb, planning) = bake(bin, input, &dir, quality, seed.as_deref());
                 let baked = baked_file(&dir, &stem);
                 let render = RenderScene::load(&baked).expect("load the bake");
                 let c = points::compare(&render, &reference);
@@ -240,13 +247,14 @@ fn run(command: &mut Command) -> String {
 /// Bakes with `bin` under `/usr/bin/time`; wall seconds, peak resident memory (MB) and the
 /// share of the bake spent planning (from the summary line, printed when not `--quiet`; NaN
 /// for a binary that does not print it).
-fn bake(bin: &str, input: &Path, dir: &Path, quality: &str) -> (f64, f64, f32) {
+fn bake(bin: &str, input: &Path, dir: &Path, quality: &str, seed: Option<&str>) -> (f64, f64, f32) {
     let output = Command::new("/usr/bin/time")
         .args(["-f", "%e %M", bin, "bake"])
         .arg(input)
         .arg("-o")
         .arg(dir)
         .args(["--quality", quality])
+        .args(seed.map(|s| ["--seed", s]).iter().flatten())
         .output()
         .expect("run the bake");
     let stderr = String::from_utf8_lossy(&output.stderr);

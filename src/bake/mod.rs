@@ -331,6 +331,11 @@ pub struct Prepared {
 }
 
 impl Prepared {
+    /// The automatic choice so far (the density and its reasons), when the config asks for one.
+    pub fn plan(&self) -> Option<&Plan> {
+        self.plan.as_ref()
+    }
+
     /// What light transport reads.
     pub(crate) fn surfaces(&self) -> Surfaces<'_> {
         Surfaces {

@@ -718,7 +718,9 @@ mod tests {
 
     use super::*;
     use crate::NoProgress;
+    use crate::plan::gathered::{BATCH, GATHER_RAYS, LIGHT_SAMPLES};
     use crate::shard::Alone;
+    use crate::texels::validity::PROBE_RAYS;
 
     /// The Cornell box's lookup-error sample on a uniform atlas at `tpu` texels per metre, with
     /// a pilot pair baked there, reading `reuse`'s light first.
@@ -795,6 +797,34 @@ mod tests {
     }
 
     #[test]
+    fn gathering_where_the_light_steps_keeps_the_mean_and_narrows_its_error() {
+        // Every one of 4096 drawn points gathered, weight 1 (an earlier sample's probability 1
+        // stands for each): the plain area-weighted sample.
+        let uniform = cornell_sample(16.0, &[PointLight::Redraw { accept: 1.0 }; BATCH]);
+        assert_eq!(uniform.drawn, BATCH);
+        assert!(uniform.points.iter().all(|p| p.weight == 1.0));
+        // The sample as the bake draws it, for about as many rays: points gathered where the
+        // light steps, weighed by one over their probability.
+        let weighted = cornell_sample(16.0, &[]);
+        assert!(weighted.points.iter().any(|p| p.weight > 1.0));
+        assert!(weighted.drawn > uniform.drawn, "{}", weighted.drawn);
+        let ((m_u, se_u), (m_w, se_w)) =
+            (uniform.mean_square_total(), weighted.mean_square_total());
+        let said = format!(
+            "uniform {m_u:.3e} ± {se_u:.1e} ({} rays), weighted {m_w:.3e} ± {se_w:.1e} ({} rays)",
+            uniform.rays, weighted.rays
+        );
+        assert!((m_u - m_w).abs() <= 3.0 * se_u.hypot(se_w), "{said}");
+        // The estimate's variance times the rays cast, at most half the uniform's (measured:
+        // 0.36).
+        let per_ray = |se: f64, rays: u64| se * se * rays as f64;
+        assert!(
+            per_ray(se_w, weighted.rays) < 0.5 * per_ray(se_u, uniform.rays),
+            "{said}"
+        );
+    }
+
+    #[test]
     fn a_sample_reads_an_earlier_samples_light_without_casting_a_ray() {
         let fresh = cornell_sample(16.0, &[]);
         assert!(fresh.rays > 0 && fresh.reused == 0 && fresh.points.len() > 1000);
@@ -821,9 +851,21 @@ mod tests {
 
         // Another atlas (twice the density): the earlier light gives the same mean square
         // lookup error as gathering there afresh, within the two estimates' standard errors.
+        // Rays go only to points the earlier atlas buried (never probed there), a few.
         let finer = cornell_sample(32.0, &[]);
         let read = cornell_sample(32.0, &fresh.lights);
-        assert_eq!(read.rays, 0);
+        let unknown = fresh
+            .lights
+            .iter()
+            .filter(|l| matches!(l, PointLight::Redraw { accept } if *accept == 0.0))
+            .count() as u64;
+        let per_point = u64::from(PROBE_RAYS + 2 * (GATHER_RAYS + LIGHT_SAMPLES));
+        assert!(
+            read.rays <= unknown * per_point && read.rays * 50 < fresh.rays,
+            "{} rays, {unknown} points unknown, {} rays fresh",
+            read.rays,
+            fresh.rays
+        );
         let ((m_fresh, se_fresh), (m_read, se_read)) =
             (finer.mean_square_total(), read.mean_square_total());
         assert!(
