@@ -1,6 +1,6 @@
-//! Incremental re-bake (`bake --since OLD/x.gltf`): after an edit that only moves or removes
-//! nodes, re-trace only the rays the edited nodes can have changed, reuse every other row of
-//! the previous bake's kept transport ([`super::kept`]), and solve again.
+//! Incremental re-bake (`bake --since OLD/x.gltf`): after an edit that only moves, removes or
+//! adds nodes, re-trace only the rays the edited nodes can have changed, reuse every other row
+//! of the previous bake's kept transport ([`super::kept`]), and solve again.
 //!
 //! ## What the previous bake must have kept, and why it is enough
 //!
@@ -28,6 +28,21 @@
 //! node's children and each scene's roots those of before less the removed, and everything
 //! but the node graph unchanged (`InputRecord::content`).
 //!
+//! An **added** node is the other way round: the node graphs are matched by their longest
+//! common run of nodes (each compared but for its transform and children), the input's others
+//! are added (their children added too, each kept node's children and each scene's roots those
+//! of before plus the added). The document may have grown with them: every array element of
+//! before (meshes, accessors, buffer views, materials, ...) the same and new ones appended,
+//! every binary file the old bytes and new ones after (`InputRecord::parts`). The added
+//! instances go after the old ones in the scene (uncut: the junction split would cut old
+//! receivers where they stand, and move old texels), so every old triangle keeps its id; they
+//! alone are unwrapped (`append_charts`: xatlas on a scene of them, at the old bake's uniform
+//! density, without per-region factors) onto pages after the old ones, and since texels are
+//! numbered by (page, y, x) every old texel keeps its id, page and place. Their rows are traced
+//! whole; rays of old rows that meet their bounds are flagged as above (before: what the old
+//! scene gave; now: what the new one gives); the validity pass runs again near them. The glTF
+//! is written in the input's instance order through `Baked::written`.
+//!
 //! So the kept file needs no per-ray record, only: the input it was baked from (a hash of
 //! everything but node transforms, and each node's transform: [`InputRecord`]), the rows as
 //! hit counts (already kept: `f · K` is exact in f32), and the direct light as the bake summed
@@ -51,12 +66,16 @@
 //! uncut scene) and the floor keeps the cuts where they stood. A plain `bake` cuts anew.
 //!
 //! It bakes in full (with the caller's settings, and says why) when the input changed in more
-//! than node transforms and removals, when nodes were added, re-parented or changed, when a
-//! moved or removed node carries a light or an emissive material (every row's direct light
-//! would change), when the old bake cannot be laid out again to the same texels (another
-//! lightbake, other settings), when it was itself an incremental bake that removed nodes (its
-//! layout holds nodes its input no longer has), when a removal meets an atlas that shares
-//! meshes, or when its technique keeps no Monte Carlo rows.
+//! than node transforms, removals and additions (a mesh, accessor or material of before
+//! changed, bytes changed rather than appended, a light), when nodes were re-parented, when a
+//! moved, removed or added node carries a light or an emissive material (every row's direct
+//! light would change), when the scene's extent changed (an added node beyond the old bounds:
+//! every ray's offset changes), when the old bake cannot be laid out again to the same texels
+//! (another lightbake, other settings), when it was itself an incremental bake that removed or
+//! added nodes (its layout is not its input's node graph), when a removal or an addition meets
+//! an atlas that shares meshes (an addition: or reuses the input's UVs), or when its technique
+//! keeps no Monte Carlo rows. A changed node (its mesh or name) is matched as one removed and
+//! one added.
 //!
 //! The incremental bake runs with the previous bake's settings (`kept::Settings::config`, the
 //! automatic choices as they were made: no new plan), which a kept bake's single final run
