@@ -632,7 +632,9 @@ fn two_rooms_with_boxes(dir: &Path, boxes: &[(f32, f32)]) -> PathBuf {
     for (k, &(x, size)) in boxes.iter().enumerate() {
         let mesh = add_box(&mut doc, size, 2);
         let nodes = doc["nodes"].as_array_mut().unwrap();
-        nodes.push(json!({"name": format!("added {k}"), "mesh": mesh, "translation": [x, 0.0, 0.0]}));
+        nodes.push(
+            json!({"name": format!("added {k}"), "mesh": mesh, "translation": [x, 0.0, 0.0]}),
+        );
         let node = nodes.len() - 1;
         doc["scenes"][0]["nodes"]
             .as_array_mut()
@@ -684,7 +686,11 @@ fn an_added_box_bakes_as_a_full_retrace_of_the_same_layout() {
     assert!((n_old..t.len()).all(|i| t.page[i] >= old_pages));
     // The box's rows traced whole, some old rows patched, far fewer rays than a full trace.
     assert!(inc.retraced >= t.len() - n_old, "{}", inc.brief());
-    assert!(inc.patched > 0 && inc.rays < inc.full_rays / 2, "{}", inc.brief());
+    assert!(
+        inc.patched > 0 && inc.rays < inc.full_rays / 2,
+        "{}",
+        inc.brief()
+    );
 
     // As every row traced again on the same layout and seeds, to float rounding.
     let worst = worst_difference(&inc_baked, &all_baked);
@@ -761,7 +767,10 @@ fn an_occluder_added_in_the_doorway_relights_both_rooms_as_a_full_bake_does() {
         }
         s
     });
-    assert!(sides[0] > 0 && sides[1] > 0, "touched rows per room: {sides:?}");
+    assert!(
+        sides[0] > 0 && sides[1] > 0,
+        "touched rows per room: {sides:?}"
+    );
 
     // The floor around the box, not under it: the fresh bake cuts the floor along the box's
     // footprint, the incremental one keeps the old floor's texels (the validity pass moves

@@ -78,7 +78,9 @@ fn main() {
     if remove {
         edit_glb(&scene, &edited, |json, _| remove_node(json, node));
     } else if add {
-        edit_glb(&scene, &edited, |json, bin| add_box(json, bin, node, 0.4, [0.0, 0.0, -1.5]));
+        edit_glb(&scene, &edited, |json, bin| {
+            add_box(json, bin, node, 0.4, [0.0, 0.0, -1.5])
+        });
     } else {
         edit_glb(&scene, &edited, |json, _| move_node(json, node, dx));
     }
@@ -268,16 +270,24 @@ fn add_box(json: &mut Value, bin: &mut Vec<u8>, name: &str, size: f32, at: [f32;
     views.push(json!({"buffer": 0, "byteOffset": start + 2 * vlen, "byteLength": idx.len() * 2}));
     let accessors = json["accessors"].as_array_mut().expect("accessors");
     let a0 = accessors.len();
-    accessors.push(json!({"bufferView": v0, "componentType": 5126, "count": pos.len(),
-        "type": "VEC3", "min": [-h, 0.0, -h], "max": [h, size, h]}));
-    accessors.push(json!({"bufferView": v0 + 1, "componentType": 5126, "count": nor.len(), "type": "VEC3"}));
-    accessors.push(json!({"bufferView": v0 + 2, "componentType": 5123, "count": idx.len(), "type": "SCALAR"}));
+    accessors.push(
+        json!({"bufferView": v0, "componentType": 5126, "count": pos.len(),
+        "type": "VEC3", "min": [-h, 0.0, -h], "max": [h, size, h]}),
+    );
+    accessors.push(
+        json!({"bufferView": v0 + 1, "componentType": 5126, "count": nor.len(), "type": "VEC3"}),
+    );
+    accessors.push(
+        json!({"bufferView": v0 + 2, "componentType": 5123, "count": idx.len(), "type": "SCALAR"}),
+    );
     let wood = (json["materials"].as_array().expect("materials").iter())
         .position(|m| m["name"] == "wood")
         .expect("a material `wood`");
     let meshes = json["meshes"].as_array_mut().expect("meshes");
-    meshes.push(json!({"name": name, "primitives": [{"attributes": {"POSITION": a0, "NORMAL": a0 + 1},
-        "indices": a0 + 2, "material": wood}]}));
+    meshes.push(
+        json!({"name": name, "primitives": [{"attributes": {"POSITION": a0, "NORMAL": a0 + 1},
+        "indices": a0 + 2, "material": wood}]}),
+    );
     let mesh = meshes.len() - 1;
     let nodes = json["nodes"].as_array_mut().expect("nodes");
     nodes.push(json!({"name": name, "mesh": mesh, "translation": at}));

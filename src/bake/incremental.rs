@@ -165,7 +165,10 @@ impl Parts {
         let Some(obj) = json.as_object() else {
             return Ok(parts);
         };
-        for (key, value) in obj.iter().filter(|(k, _)| !GRAPH_KEYS.contains(&k.as_str())) {
+        for (key, value) in obj
+            .iter()
+            .filter(|(k, _)| !GRAPH_KEYS.contains(&k.as_str()))
+        {
             match value.as_array() {
                 Some(list) => {
                     let hashes = (list.iter())
@@ -198,7 +201,11 @@ impl Parts {
         if now.values != self.values {
             let key = (self.values.iter())
                 .find(|(k, v)| now.values.get(*k) != Some(v))
-                .or_else(|| now.values.iter().find(|(k, _)| !self.values.contains_key(*k)))
+                .or_else(|| {
+                    now.values
+                        .iter()
+                        .find(|(k, _)| !self.values.contains_key(*k))
+                })
                 .map_or("", |(k, _)| k.as_str());
             return Ok(Err(format!("`{key}` changed")));
         }
@@ -245,8 +252,11 @@ pub(crate) fn input_record(path: &Path) -> Result<InputRecord> {
     record_of(json, blob.as_deref(), &files)
 }
 
-/// The glTF JSON at `path`, its GLB binary chunk and its external files' bytes.
-fn read_input(path: &Path) -> Result<(Value, Option<Vec<u8>>, Vec<Vec<u8>>)> {
+/// A glTF document as read: its JSON, its GLB binary chunk and its external files' bytes.
+type Document = (Value, Option<Vec<u8>>, Vec<Vec<u8>>);
+
+/// The document at `path`.
+fn read_input(path: &Path) -> Result<Document> {
     let (json, blob, _) = scene::read_document(path)?;
     let files: Vec<Vec<u8>> = (scene::external_files(path)?.iter())
         .map(|file| std::fs::read(file).map_err(|e| Error::io(file, e)))
@@ -491,7 +501,9 @@ fn plan(
             // appended, with nothing the previous bake read changed.
             if now.content.as_ref() != Some(content) {
                 let grown = match &old.parts {
-                    Some(parts) => parts.grown_into(&json, blob.as_deref().unwrap_or_default(), &files)?,
+                    Some(parts) => {
+                        parts.grown_into(&json, blob.as_deref().unwrap_or_default(), &files)?
+                    }
                     None => Err("the previous bake's record predates additions".to_string()),
                 };
                 if let Err(why) = grown {
@@ -688,7 +700,14 @@ fn plan(
         old.atlas.clone()
     } else {
         let t = Instant::now();
-        let atlas = append_charts(&old.atlas, &new_loaded, &new_source, &added, &config, progress)?;
+        let atlas = append_charts(
+            &old.atlas,
+            &new_loaded,
+            &new_source,
+            &added,
+            &config,
+            progress,
+        )?;
         timed(&mut stages, "incremental atlas", t);
         atlas
     };
@@ -698,19 +717,19 @@ fn plan(
     // the previous pass's results hold (`validity::fix_near`). `Retrace::All`, the yardstick,
     // runs the full pass.
     let validity = if config.transport.validity && retrace == Retrace::Edited {
-        let near: Vec<(Vec3, Vec3)> = (moved.iter())
-            .flat_map(|&inst| {
-                [&old.scene, &new_scene].map(|s| bounds(s, s.instances[inst].vertices.clone(), 0.0))
-            })
-            .chain(
-                (removed.iter()).map(|&inst| {
+        let near: Vec<(Vec3, Vec3)> =
+            (moved.iter())
+                .flat_map(|&inst| {
+                    [&old.scene, &new_scene]
+                        .map(|s| bounds(s, s.instances[inst].vertices.clone(), 0.0))
+                })
+                .chain((removed.iter()).map(|&inst| {
                     bounds(&old.scene, old.scene.instances[inst].vertices.clone(), 0.0)
-                }),
-            )
-            .chain((added_here.iter()).map(|&inst| {
-                bounds(&new_scene, new_scene.instances[inst].vertices.clone(), 0.0)
-            }))
-            .collect();
+                }))
+                .chain((added_here.iter()).map(|&inst| {
+                    bounds(&new_scene, new_scene.instances[inst].vertices.clone(), 0.0)
+                }))
+                .collect();
         let params = texels::validity::ValidityParams {
             seed: config.transport.seed,
             ..Default::default()
@@ -1031,9 +1050,7 @@ fn match_nodes(before: &Value, after: &Value) -> Fallback<NodeMap> {
         of_new[j] = Some(i as u32);
         kept[i] = true;
     }
-    let removed: Vec<u32> = (0..a.len() as u32)
-        .filter(|&k| !kept[k as usize])
-        .collect();
+    let removed: Vec<u32> = (0..a.len() as u32).filter(|&k| !kept[k as usize]).collect();
     let added: Vec<u32> = (0..b.len() as u32)
         .filter(|&k| of_new[k as usize].is_none())
         .collect();
@@ -1293,7 +1310,9 @@ fn append_instances(scene: &mut Scene, from: &Scene, which: &[usize]) -> usize {
             inst.vertices.start as usize..inst.vertices.end as usize,
             inst.triangles.start as usize..inst.triangles.end as usize,
         );
-        scene.positions.extend_from_slice(&from.positions[vs.clone()]);
+        scene
+            .positions
+            .extend_from_slice(&from.positions[vs.clone()]);
         scene.normals.extend_from_slice(&from.normals[vs.clone()]);
         scene.uv0.extend_from_slice(&from.uv0[vs.clone()]);
         scene.uv1.extend_from_slice(&from.uv1[vs]);
@@ -1389,16 +1408,16 @@ fn changed_texels(old: &Texels, new: &Texels) -> Vec<bool> {
         .map(|i| {
             i >= old.len()
                 || !(same3(old.position[i], new.position[i])
-                && same3(old.normal[i], new.normal[i])
-                && same3(old.du[i], new.du[i])
-                && same3(old.dv[i], new.dv[i])
-                && same3(old.albedo[i], new.albedo[i])
-                && same3(old.emission[i], new.emission[i])
-                && old.area[i].to_bits() == new.area[i].to_bits()
-                && old.triangle[i] == new.triangle[i]
-                && jitter(old, i) == jitter(new, i)
-                && old_valid[i] == new_valid[i]
-                && old.cuts.cells(i) == new.cuts.cells(i))
+                    && same3(old.normal[i], new.normal[i])
+                    && same3(old.du[i], new.du[i])
+                    && same3(old.dv[i], new.dv[i])
+                    && same3(old.albedo[i], new.albedo[i])
+                    && same3(old.emission[i], new.emission[i])
+                    && old.area[i].to_bits() == new.area[i].to_bits()
+                    && old.triangle[i] == new.triangle[i]
+                    && jitter(old, i) == jitter(new, i)
+                    && old_valid[i] == new_valid[i]
+                    && old.cuts.cells(i) == new.cuts.cells(i))
         })
         .collect()
 }
