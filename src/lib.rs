@@ -75,7 +75,7 @@
 //! [`bake`] chains the stages ([`prepare`], [`compute`], [`write()`]); build tools that want the
 //! intermediate data call them directly. [`build()`] bakes the scenes of a [`Manifest`] that
 //! changed since their last bake ([`mod@build`]), incrementally ([`incremental`]) where only
-//! node transforms changed or nodes were removed. Stages call only downwards:
+//! node transforms changed or nodes were removed or added. Stages call only downwards:
 //!
 //! ```text
 //!   error, progress, sampling        below everything
@@ -101,12 +101,14 @@
 //!                                    `kept`: the kept transport's file (`--keep-transport`);
 //!                                    `relight`: a kept bake solved again with other light and
 //!                                    material values, and per-light layers;
-//!                                    `incremental`: a kept bake re-baked after nodes moved
-//!                                    or were removed (`bake --since`): the old layout made
-//!                                    again (a removed node's texels kept, unused), only the
-//!                                    rays that meet a moved node's old or new bounds or a
-//!                                    removed one's old bounds traced again (drawn from their
-//!                                    seeds, nothing per ray kept);
+//!                                    `incremental`: a kept bake re-baked after nodes moved,
+//!                                    were removed or were added (`bake --since`): the old
+//!                                    layout made again (a removed node's texels kept, unused;
+//!                                    an added node's charts unwrapped onto pages after the
+//!                                    old ones, its rows traced whole), only the rays that meet
+//!                                    a moved node's old or new bounds, a removed one's old
+//!                                    bounds or an added one's bounds traced again (drawn from
+//!                                    their seeds, nothing per ray kept);
 //!                                    `distributed`: the same bake over several processes
 //!                                    (timely dataflow): every transport's rows (pilots' and
 //!                                    final) sharded, the radiosity vector exchanged every

@@ -3,12 +3,14 @@
 //! reference of the edited scene.
 //!
 //! ```text
-//! cargo run --release --example incremental_figures -- OUT [SCENE.glb] [NODE] [DX] [QUALITY] [--remove] [--no-reference]
+//! cargo run --release --example incremental_figures -- OUT [SCENE.glb] [NODE] [DX] [QUALITY] [--remove | --add] [--no-reference]
 //! ```
 //!
 //! Defaults: `fixtures/furnished_interior.glb`, node `chair_0_0`, moved `0.5` m along x,
 //! `medium`; with `--remove` the node is deleted from the document instead (the nodes after it
-//! renumbered; `DX` unused). Steps: bake the scene with `--keep-transport` (`OUT/old`); move the node
+//! renumbered; `DX` unused); with `--add` a 40 cm box (a mesh of its own, its bytes appended to
+//! the binary chunk, the `wood` material) is added on the floor at (0, 0, −1.5), between the
+//! tables, as a new root node `NODE` (`NODE` and `DX` otherwise unused). Steps: bake the scene with `--keep-transport` (`OUT/old`); move the node
 //! (`OUT/edited/<name>`); bake the edited scene in full with the same options (`OUT/full`) and
 //! incrementally from the old bake (`OUT/incremental`), alternating, twice each (the machine's
 //! load changes between runs: each round's ratio is reported); with a reference, compute the point
@@ -33,19 +35,24 @@ fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let no_reference = args.iter().any(|a| a == "--no-reference");
     let remove = args.iter().any(|a| a == "--remove");
+    let add = args.iter().any(|a| a == "--add");
     let args: Vec<&String> = args.iter().filter(|a| !a.starts_with("--")).collect();
     let out = PathBuf::from(args.first().expect(
-        "usage: incremental_figures OUT [SCENE.glb] [NODE] [DX] [QUALITY] [--remove] [--no-reference]",
+        "usage: incremental_figures OUT [SCENE.glb] [NODE] [DX] [QUALITY] [--remove | --add] [--no-reference]",
     ));
     let scene = args.get(1).map_or_else(
         || Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/furnished_interior.glb"),
         PathBuf::from,
     );
-    let node = args.get(2).map_or("chair_0_0", |s| s.as_str());
+    let node = args
+        .get(2)
+        .map_or(if add { "box" } else { "chair_0_0" }, |s| s.as_str());
     let dx: f32 = args.get(3).map_or(0.5, |s| s.parse().expect("DX"));
     let quality = args.get(4).map_or("medium", |s| s.as_str());
     let edit = if remove {
         "removed".to_string()
+    } else if add {
+        "added".to_string()
     } else {
         format!("moved {dx} m")
     };
@@ -69,9 +76,13 @@ fn main() {
     let edited = out.join("edited").join(&name);
     std::fs::create_dir_all(edited.parent().unwrap()).unwrap();
     if remove {
-        edit_glb(&scene, &edited, |json| remove_node(json, node));
+        edit_glb(&scene, &edited, |json, _| remove_node(json, node));
+    } else if add {
+        edit_glb(&scene, &edited, |json, bin| {
+            add_box(json, bin, node, 0.4, [0.0, 0.0, -1.5])
+        });
     } else {
-        edit_glb(&scene, &edited, |json| move_node(json, node, dx));
+        edit_glb(&scene, &edited, |json, _| move_node(json, node, dx));
     }
 
     // Full and incremental bakes alternate, `ROUNDS` times each: on a shared machine the load
@@ -180,14 +191,24 @@ fn main() {
     std::fs::write(out.join("incremental_figures.csv"), csv).expect("write the CSV");
 }
 
-/// Writes `scene` (a .glb) to `to` with its JSON changed by `edit` (the binary chunk as it was).
-fn edit_glb(scene: &Path, to: &Path, edit: impl FnOnce(&mut Value)) {
+/// Writes `scene` (a .glb) to `to` with its JSON and binary chunk changed by `edit` (which
+/// may append to the binary chunk: buffer 0's `byteLength` follows it).
+fn edit_glb(scene: &Path, to: &Path, edit: impl FnOnce(&mut Value, &mut Vec<u8>)) {
     let bytes = std::fs::read(scene).expect("read the scene");
     assert!(bytes.starts_with(b"glTF"), "a .glb scene");
     let json_len = u32::from_le_bytes(bytes[12..16].try_into().unwrap()) as usize;
     let mut json: Value = serde_json::from_slice(&bytes[20..20 + json_len]).expect("JSON");
     let rest = &bytes[20 + json_len..];
-    edit(&mut json);
+    let bin_len = u32::from_le_bytes(rest[0..4].try_into().unwrap()) as usize;
+    assert_eq!(&rest[4..8], b"BIN\0", "a binary chunk after the JSON");
+    let mut bin = rest[8..8 + bin_len].to_vec();
+    edit(&mut json, &mut bin);
+    while !bin.len().is_multiple_of(4) {
+        bin.push(0);
+    }
+    if bin.len() != bin_len {
+        json["buffers"][0]["byteLength"] = serde_json::json!(bin.len());
+    }
     let mut text = serde_json::to_vec(&json).unwrap();
     while !text.len().is_multiple_of(4) {
         text.push(b' ');
@@ -195,12 +216,86 @@ fn edit_glb(scene: &Path, to: &Path, edit: impl FnOnce(&mut Value)) {
     let mut glb = Vec::new();
     glb.extend(b"glTF");
     glb.extend(2u32.to_le_bytes());
-    glb.extend(((12 + 8 + text.len() + rest.len()) as u32).to_le_bytes());
+    glb.extend(((12 + 8 + text.len() + 8 + bin.len()) as u32).to_le_bytes());
     glb.extend((text.len() as u32).to_le_bytes());
     glb.extend(b"JSON");
     glb.extend(&text);
-    glb.extend(rest); // the BIN chunk, as it was
+    glb.extend((bin.len() as u32).to_le_bytes());
+    glb.extend(b"BIN\0");
+    glb.extend(&bin);
     std::fs::write(to, glb).expect("write the edited scene");
+}
+
+/// A closed box `size` wide standing on the floor at `at`, added as a new root node `name`:
+/// its positions, normals and indices appended to the binary chunk `bin` (after the old
+/// bytes, which stay where they were), three buffer views, three accessors and a mesh
+/// appended, material `wood`.
+fn add_box(json: &mut Value, bin: &mut Vec<u8>, name: &str, size: f32, at: [f32; 3]) {
+    use serde_json::json;
+    let h = size / 2.0;
+    // (normal, a, b) with a × b = normal: counter-clockwise seen from outside.
+    let faces: [([f32; 3], [f32; 3], [f32; 3]); 6] = [
+        ([1., 0., 0.], [0., 1., 0.], [0., 0., 1.]),
+        ([-1., 0., 0.], [0., 1., 0.], [0., 0., -1.]),
+        ([0., 1., 0.], [0., 0., 1.], [1., 0., 0.]),
+        ([0., -1., 0.], [1., 0., 0.], [0., 0., 1.]),
+        ([0., 0., 1.], [1., 0., 0.], [0., 1., 0.]),
+        ([0., 0., -1.], [0., 1., 0.], [1., 0., 0.]),
+    ];
+    let (mut pos, mut nor, mut idx) = (Vec::new(), Vec::new(), Vec::<u16>::new());
+    for (n, a, b) in faces {
+        let base = pos.len() as u16;
+        for (s, t) in [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)] {
+            let p: [f32; 3] =
+                std::array::from_fn(|k| (n[k] + a[k] * s + b[k] * t) * h + [0.0, h, 0.0][k]);
+            pos.push(p);
+            nor.push(n);
+        }
+        idx.extend([base, base + 1, base + 2, base, base + 2, base + 3]);
+    }
+    while !bin.len().is_multiple_of(4) {
+        bin.push(0);
+    }
+    let start = bin.len();
+    pos.iter()
+        .chain(&nor)
+        .flatten()
+        .for_each(|f| bin.extend(f.to_le_bytes()));
+    idx.iter().for_each(|i| bin.extend(i.to_le_bytes()));
+    let vlen = pos.len() * 12;
+    let views = json["bufferViews"].as_array_mut().expect("bufferViews");
+    let v0 = views.len();
+    views.push(json!({"buffer": 0, "byteOffset": start, "byteLength": vlen}));
+    views.push(json!({"buffer": 0, "byteOffset": start + vlen, "byteLength": vlen}));
+    views.push(json!({"buffer": 0, "byteOffset": start + 2 * vlen, "byteLength": idx.len() * 2}));
+    let accessors = json["accessors"].as_array_mut().expect("accessors");
+    let a0 = accessors.len();
+    accessors.push(
+        json!({"bufferView": v0, "componentType": 5126, "count": pos.len(),
+        "type": "VEC3", "min": [-h, 0.0, -h], "max": [h, size, h]}),
+    );
+    accessors.push(
+        json!({"bufferView": v0 + 1, "componentType": 5126, "count": nor.len(), "type": "VEC3"}),
+    );
+    accessors.push(
+        json!({"bufferView": v0 + 2, "componentType": 5123, "count": idx.len(), "type": "SCALAR"}),
+    );
+    let wood = (json["materials"].as_array().expect("materials").iter())
+        .position(|m| m["name"] == "wood")
+        .expect("a material `wood`");
+    let meshes = json["meshes"].as_array_mut().expect("meshes");
+    meshes.push(
+        json!({"name": name, "primitives": [{"attributes": {"POSITION": a0, "NORMAL": a0 + 1},
+        "indices": a0 + 2, "material": wood}]}),
+    );
+    let mesh = meshes.len() - 1;
+    let nodes = json["nodes"].as_array_mut().expect("nodes");
+    nodes.push(json!({"name": name, "mesh": mesh, "translation": at}));
+    let node = nodes.len() - 1;
+    json["scenes"][0]["nodes"]
+        .as_array_mut()
+        .expect("scene roots")
+        .push(json!(node));
 }
 
 /// Node `node` moved by `dx` along x.

@@ -1,6 +1,6 @@
-//! Incremental re-bake (`bake --since OLD/x.gltf`): after an edit that only moves or removes
-//! nodes, re-trace only the rays the edited nodes can have changed, reuse every other row of
-//! the previous bake's kept transport ([`super::kept`]), and solve again.
+//! Incremental re-bake (`bake --since OLD/x.gltf`): after an edit that only moves, removes or
+//! adds nodes, re-trace only the rays the edited nodes can have changed, reuse every other row
+//! of the previous bake's kept transport ([`super::kept`]), and solve again.
 //!
 //! ## What the previous bake must have kept, and why it is enough
 //!
@@ -28,6 +28,21 @@
 //! node's children and each scene's roots those of before less the removed, and everything
 //! but the node graph unchanged (`InputRecord::content`).
 //!
+//! An **added** node is the other way round: the node graphs are matched by their longest
+//! common run of nodes (each compared but for its transform and children), the input's others
+//! are added (their children added too, each kept node's children and each scene's roots those
+//! of before plus the added). The document may have grown with them: every array element of
+//! before (meshes, accessors, buffer views, materials, ...) the same and new ones appended,
+//! every binary file the old bytes and new ones after (`InputRecord::parts`). The added
+//! instances go after the old ones in the scene (uncut: the junction split would cut old
+//! receivers where they stand, and move old texels), so every old triangle keeps its id; they
+//! alone are unwrapped (`append_charts`: xatlas on a scene of them, at the old bake's uniform
+//! density, without per-region factors) onto pages after the old ones, and since texels are
+//! numbered by (page, y, x) every old texel keeps its id, page and place. Their rows are traced
+//! whole; rays of old rows that meet their bounds are flagged as above (before: what the old
+//! scene gave; now: what the new one gives); the validity pass runs again near them. The glTF
+//! is written in the input's instance order through `Baked::written`.
+//!
 //! So the kept file needs no per-ray record, only: the input it was baked from (a hash of
 //! everything but node transforms, and each node's transform: [`InputRecord`]), the rows as
 //! hit counts (already kept: `f · K` is exact in f32), and the direct light as the bake summed
@@ -51,18 +66,23 @@
 //! uncut scene) and the floor keeps the cuts where they stood. A plain `bake` cuts anew.
 //!
 //! It bakes in full (with the caller's settings, and says why) when the input changed in more
-//! than node transforms and removals, when nodes were added, re-parented or changed, when a
-//! moved or removed node carries a light or an emissive material (every row's direct light
-//! would change), when the old bake cannot be laid out again to the same texels (another
-//! lightbake, other settings), when it was itself an incremental bake that removed nodes (its
-//! layout holds nodes its input no longer has), when a removal meets an atlas that shares
-//! meshes, or when its technique keeps no Monte Carlo rows.
+//! than node transforms, removals and additions (a mesh, accessor or material of before
+//! changed, bytes changed rather than appended, a light), when nodes were re-parented, when a
+//! moved, removed or added node carries a light or an emissive material (every row's direct
+//! light would change), when the scene's extent changed (an added node beyond the old bounds:
+//! every ray's offset changes), when the old bake cannot be laid out again to the same texels
+//! (another lightbake, other settings), when it was itself an incremental bake that removed or
+//! added nodes (its layout is not its input's node graph), when a removal or an addition meets
+//! an atlas that shares meshes (an addition: or reuses the input's UVs), or when its technique
+//! keeps no Monte Carlo rows. A changed node (its mesh or name) is matched as one removed and
+//! one added.
 //!
 //! The incremental bake runs with the previous bake's settings (`kept::Settings::config`, the
 //! automatic choices as they were made: no new plan), which a kept bake's single final run
 //! (no pilot runs mixed in, `bake::light`) makes exact. With nothing moved every row is reused
 //! and the output is the previous bake's, byte for byte.
 
+use std::collections::BTreeMap;
 use std::ops::Range;
 use std::path::Path;
 use std::sync::Mutex;
@@ -115,6 +135,112 @@ pub struct InputRecord {
     /// removed from the input.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub(crate) graph: Option<Value>,
+    /// Everything but the node graph again, part by part ([`Parts`]): what an edit that adds
+    /// nodes may append to (meshes, accessors, buffer bytes, ...) without changing what was
+    /// there. Absent in files that predate it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub(crate) parts: Option<Parts>,
+}
+
+/// The input but its node graph, hashed part by part, so that an edit that only appends to it
+/// (the meshes, accessors, buffer views, materials and bytes of added nodes) is told from one
+/// that changes what the previous bake read ([`Parts::grown_into`]).
+#[derive(Clone, Debug, Default, Serialize, Deserialize, PartialEq)]
+pub(crate) struct Parts {
+    /// Per top-level array of the glTF JSON but the node graph: each element's hash (a
+    /// buffer's without its `byteLength`, which grows when bytes are appended to it).
+    lists: BTreeMap<String, Vec<String>>,
+    /// Per other top-level key but the node graph: its value's hash.
+    values: BTreeMap<String, String>,
+    /// The GLB binary chunk (empty when there is none), then every external file in document
+    /// order: its length in bytes and its hash.
+    files: Vec<(u64, String)>,
+}
+
+impl Parts {
+    /// The parts of the document `json` (graph keys included or not: they are skipped) with
+    /// its GLB chunk `blob` and external `files`.
+    fn of(json: &Value, blob: &[u8], files: &[Vec<u8>]) -> Result<Parts> {
+        let mut parts = Parts::default();
+        let Some(obj) = json.as_object() else {
+            return Ok(parts);
+        };
+        for (key, value) in obj
+            .iter()
+            .filter(|(k, _)| !GRAPH_KEYS.contains(&k.as_str()))
+        {
+            match value.as_array() {
+                Some(list) => {
+                    let hashes = (list.iter())
+                        .map(|v| {
+                            let mut v = v.clone();
+                            if key == "buffers" {
+                                v.as_object_mut().map(|o| o.remove("byteLength"));
+                            }
+                            json_hash(&v)
+                        })
+                        .collect::<Result<_>>()?;
+                    parts.lists.insert(key.clone(), hashes);
+                }
+                None => {
+                    parts.values.insert(key.clone(), json_hash(value)?);
+                }
+            }
+        }
+        parts.files = (std::iter::once(blob).chain(files.iter().map(Vec::as_slice)))
+            .map(|b| (b.len() as u64, hex_hash(b)))
+            .collect();
+        Ok(parts)
+    }
+
+    /// Whether the document `json` (with `blob` and `files`) only appends to what `self`
+    /// recorded: every array's elements those of before followed by new ones, every other
+    /// value the same, every binary file the old bytes followed by new ones, or what changed.
+    fn grown_into(&self, json: &Value, blob: &[u8], files: &[Vec<u8>]) -> Result<Fallback<()>> {
+        let now = Parts::of(json, blob, files)?;
+        if now.values != self.values {
+            let key = (self.values.iter())
+                .find(|(k, v)| now.values.get(*k) != Some(v))
+                .or_else(|| {
+                    now.values
+                        .iter()
+                        .find(|(k, _)| !self.values.contains_key(*k))
+                })
+                .map_or("", |(k, _)| k.as_str());
+            return Ok(Err(format!("`{key}` changed")));
+        }
+        for (key, before) in &self.lists {
+            let after = now.lists.get(key).map_or(&[][..], Vec::as_slice);
+            if !after.starts_with(before) {
+                return Ok(Err(format!("`{key}` changed, not only appended to")));
+            }
+        }
+        let all: Vec<&[u8]> = std::iter::once(blob)
+            .chain(files.iter().map(Vec::as_slice))
+            .collect();
+        if all.len() < self.files.len() {
+            return Ok(Err("a binary file was removed".to_string()));
+        }
+        for ((len, hash), bytes) in self.files.iter().zip(all) {
+            let len = *len as usize;
+            if bytes.len() < len || hex_hash(&bytes[..len]) != *hash {
+                return Ok(Err("binary data changed, not only appended to".to_string()));
+            }
+        }
+        Ok(Ok(()))
+    }
+}
+
+/// blake3 (hex) of `bytes`.
+fn hex_hash(bytes: &[u8]) -> String {
+    // 128 bits: the record holds one per array element.
+    blake3::hash(bytes).to_hex()[..32].to_string()
+}
+
+/// blake3 (hex) of `value` as JSON.
+fn json_hash(value: &Value) -> Result<String> {
+    let bytes = serde_json::to_vec(value).map_err(|e| Error::Internal(e.to_string()))?;
+    Ok(hex_hash(&bytes))
 }
 
 /// The glTF keys of the node graph ([`InputRecord::graph`]).
@@ -122,7 +248,25 @@ const GRAPH_KEYS: [&str; 3] = ["nodes", "scenes", "scene"];
 
 /// The record of the input at `path`.
 pub(crate) fn input_record(path: &Path) -> Result<InputRecord> {
-    let (mut json, blob, _) = scene::read_document(path)?;
+    let (json, blob, files) = read_input(path)?;
+    record_of(json, blob.as_deref(), &files)
+}
+
+/// A glTF document as read: its JSON, its GLB binary chunk and its external files' bytes.
+type Document = (Value, Option<Vec<u8>>, Vec<Vec<u8>>);
+
+/// The document at `path`.
+fn read_input(path: &Path) -> Result<Document> {
+    let (json, blob, _) = scene::read_document(path)?;
+    let files: Vec<Vec<u8>> = (scene::external_files(path)?.iter())
+        .map(|file| std::fs::read(file).map_err(|e| Error::io(file, e)))
+        .collect::<Result<_>>()?;
+    Ok((json, blob, files))
+}
+
+/// The record of the document `json` with its GLB chunk `blob` and external `files`.
+fn record_of(mut json: Value, blob: Option<&[u8]>, files: &[Vec<u8>]) -> Result<InputRecord> {
+    let parts = Parts::of(&json, blob.unwrap_or_default(), files)?;
     let graph: serde_json::Map<String, Value> = GRAPH_KEYS
         .iter()
         .filter_map(|&k| Some((k.to_string(), json.get(k)?.clone())))
@@ -147,9 +291,6 @@ pub(crate) fn input_record(path: &Path) -> Result<InputRecord> {
             nodes.push(Value::Object(t));
         }
     }
-    let files: Vec<Vec<u8>> = (scene::external_files(path)?.iter())
-        .map(|file| std::fs::read(file).map_err(|e| Error::io(file, e)))
-        .collect::<Result<_>>()?;
     let hash = |json: &Value| -> Result<String> {
         let mut h = blake3::Hasher::new();
         let mut part = |bytes: &[u8]| {
@@ -157,7 +298,7 @@ pub(crate) fn input_record(path: &Path) -> Result<InputRecord> {
             h.update(bytes);
         };
         part(&serde_json::to_vec(json).map_err(|e| Error::Internal(e.to_string()))?);
-        part(blob.as_deref().unwrap_or_default());
+        part(blob.unwrap_or_default());
         files.iter().for_each(|f| part(f));
         Ok(h.finalize().to_hex().to_string())
     };
@@ -167,6 +308,7 @@ pub(crate) fn input_record(path: &Path) -> Result<InputRecord> {
         layout: None,
         content: Some(hash(&rest)?),
         graph: Some(Value::Object(graph)),
+        parts: Some(parts),
     })
 }
 
@@ -179,6 +321,9 @@ pub struct Incremental {
     pub moved_nodes: Vec<u32>,
     /// glTF nodes of the previous bake's input that the input no longer has (its indices).
     pub removed_nodes: Vec<u32>,
+    /// glTF nodes of the input that the previous bake's input did not have (the input's
+    /// indices): their instances were unwrapped onto pages of their own.
+    pub added_nodes: Vec<u32>,
     /// Rows (texels) in the bake.
     pub rows: usize,
     /// Rows traced again whole (texels that changed).
@@ -206,9 +351,10 @@ impl Incremental {
             return format!("incremental: baked in full ({why})");
         }
         format!(
-            "incremental: {} node(s) moved, {} removed, {} of {} rows re-traced ({:.2}%) and {} patched ({} rays re-cast), {:.1}% of a full trace's rays, ~{:.1}s of transport saved",
+            "incremental: {} node(s) moved, {} removed, {} added, {} of {} rows re-traced ({:.2}%) and {} patched ({} rays re-cast), {:.1}% of a full trace's rays, ~{:.1}s of transport saved",
             self.moved_nodes.len(),
             self.removed_nodes.len(),
+            self.added_nodes.len(),
             self.retraced,
             self.rows,
             100.0 * self.retraced as f64 / self.rows.max(1) as f64,
@@ -290,12 +436,12 @@ pub fn compute_since(
             incremental,
             lighting,
             layout_nodes,
-            removed,
+            written,
         }) => {
             let mut baked = super::finish(prepared, lighting, progress)?;
             baked.layout_nodes = Some(layout_nodes);
-            if let Some((instances, nodes, input)) = removed {
-                baked.written = Some(Box::new(drop_removed(&baked, &instances, &nodes, &input)));
+            if let Some((of_input, input)) = written {
+                baked.written = Some(Box::new(written_for_input(&baked, &of_input, &input)));
             }
             Since::Incremental(Box::new(baked), incremental)
         }
@@ -310,9 +456,9 @@ struct Planned {
     lighting: Lighting,
     /// The node transforms of the layout kept.
     layout_nodes: Vec<Value>,
-    /// After a removal: the removed instances, the node map and the input as loaded, for the
-    /// writer (`drop_removed`).
-    removed: Option<(Vec<usize>, NodeMap, Scene)>,
+    /// After a removal or an addition: per instance of the input as loaded, the baked
+    /// instance, and the input as loaded, for the writer (`written_for_input`).
+    written: Option<(Vec<usize>, Scene)>,
 }
 
 /// Why an incremental bake cannot run (the outer `Ok(Err(..))`).
@@ -345,15 +491,26 @@ fn plan(
     config.output = out.output.clone();
     config.max_memory = out.max_memory;
     config.transport.split_direct = true;
-    let now = input_record(input)?;
-    // The input's nodes in the previous bake's graph, and the nodes it no longer has.
+    let (json, blob, files) = read_input(input)?;
+    let now = record_of(json.clone(), blob.as_deref(), &files)?;
+    // The input's nodes in the previous bake's graph, the nodes it no longer has and those it
+    // has anew.
     let nodes = match (&old.content, &old.graph, &now.graph) {
         (Some(content), Some(before), Some(after)) => {
+            // Added nodes may bring meshes, accessors, materials and bytes of their own:
+            // appended, with nothing the previous bake read changed.
             if now.content.as_ref() != Some(content) {
-                return Ok(Err(
-                    "the input changed in more than node transforms and removals (meshes, materials, lights, textures or added nodes)"
-                        .to_string(),
-                ));
+                let grown = match &old.parts {
+                    Some(parts) => {
+                        parts.grown_into(&json, blob.as_deref().unwrap_or_default(), &files)?
+                    }
+                    None => Err("the previous bake's record predates additions".to_string()),
+                };
+                if let Err(why) = grown {
+                    return Ok(Err(format!(
+                        "the input changed in more than node transforms, removals and additions ({why}: meshes, materials, lights or textures)"
+                    )));
+                }
             }
             match match_nodes(before, after) {
                 Ok(map) => map,
@@ -368,12 +525,13 @@ fn plan(
             ));
         }
         _ => NodeMap {
-            of_new: (0..now.nodes.len() as u32).collect(),
+            of_new: (0..now.nodes.len() as u32).map(Some).collect(),
             removed: Vec::new(),
+            added: Vec::new(),
         },
     };
     let moved_nodes: Vec<u32> = (0..now.nodes.len())
-        .filter(|&k| now.nodes[k] != old.nodes[nodes.of_new[k] as usize])
+        .filter(|&k| nodes.of_new[k].is_some_and(|o| now.nodes[k] != old.nodes[o as usize]))
         .map(|k| k as u32)
         .collect();
 
@@ -386,7 +544,7 @@ fn plan(
     let layout_nodes = old.layout.clone().unwrap_or_else(|| old.nodes.clone());
     if layout_nodes.len() != old.nodes.len() {
         return Ok(Err(
-            "the previous bake's layout holds nodes its input no longer had (an incremental bake after a removal)"
+            "the previous bake's layout is not its input's node graph (an incremental bake after a removal or an addition)"
                 .to_string(),
         ));
     }
@@ -416,8 +574,9 @@ fn plan(
     let (layout_loaded, layout_source) = scene::load_edited(input, &put_back(&layout_nodes))?;
     let (prev_loaded, _) = scene::load_edited(input, &put_back(&old.nodes))?;
     let (new_loaded, new_source) = super::load(input, progress)?;
-    // Per instance of the layout, the input's instance (`None`: its node was removed).
-    let now_of = match instance_map(&layout_loaded, &new_loaded, &nodes) {
+    // Per instance of the layout, the input's instance (`None`: its node was removed); the
+    // input's instances placed by added nodes.
+    let (now_of, added) = match instance_map(&layout_loaded, &new_loaded, &nodes) {
         Ok(map) => map,
         Err(why) => return Ok(Err(why)),
     };
@@ -430,6 +589,29 @@ fn plan(
         return Ok(Err(
             "nodes were removed from a bake whose atlas shares meshes".to_string(),
         ));
+    }
+    if !added.is_empty() {
+        // The added instances' charts go onto pages of their own, after the old ones.
+        if let Some(atlas) = &kept.atlas
+            && (atlas.reused_input_uvs || !atlas.shared.is_empty())
+        {
+            return Ok(Err(
+                "nodes were added to a bake whose atlas reuses the input's UVs or shares meshes"
+                    .to_string(),
+            ));
+        }
+        if let Some(&m) = added.iter().find(|&&m| {
+            let material = new_loaded.instances[m].material as usize;
+            new_loaded.materials[material].emission.max_element() > 0.0
+        }) {
+            return Ok(Err(format!(
+                "an emissive node ({}) was added",
+                new_loaded.instances[m].node
+            )));
+        }
+        if layout_loaded.materials.len() != new_loaded.materials.len() {
+            return Ok(Err("the materials changed".to_string()));
+        }
     }
     let moves = (
         moved_instances(&layout_loaded, &prev_loaded, &same),
@@ -491,14 +673,18 @@ fn plan(
     }
     let mut stages = old.stages.clone();
 
-    // The new scene: the old one (cuts and all) with the moved instances' vertices placed anew.
+    // The new scene: the old one (cuts and all) with the moved instances' vertices placed anew
+    // and the added instances after the old ones (uncut: cutting where they meet the old
+    // surfaces would move the old texels), so every old triangle keeps its id.
     let t = Instant::now();
     // Every instance placed away from the layout, before or now, takes its place now (one
     // moved back to where the layout has it included).
     let mut away: Vec<usize> = moved_before.iter().chain(&moved_now).copied().collect();
     away.sort_unstable();
     away.dedup();
-    let new_scene = place(&old.scene, &new_loaded, &now_of, &away);
+    let mut new_scene = place(&old.scene, &new_loaded, &now_of, &away);
+    let first_added = append_instances(&mut new_scene, &new_loaded, &added);
+    let added_here: Vec<usize> = (first_added..new_scene.instances.len()).collect();
     // A removed node's triangles keep their ids (and its texels their places) but leave the
     // BVH: no ray meets them. The ray offset stays the layout's (its extent).
     let tracer = Tracer::without(&new_scene, &removed);
@@ -508,22 +694,42 @@ fn plan(
         ));
     }
     timed(&mut stages, "incremental bvh", t);
+    // The added instances' charts, on pages after the old ones: the texels are ordered by
+    // page, so every old texel keeps its id.
+    let atlas = if added.is_empty() {
+        old.atlas.clone()
+    } else {
+        let t = Instant::now();
+        let atlas = append_charts(
+            &old.atlas,
+            &new_loaded,
+            &new_source,
+            &added,
+            &config,
+            progress,
+        )?;
+        timed(&mut stages, "incremental atlas", t);
+        atlas
+    };
     let t = Instant::now();
-    let mut new_texels = texels::build(&new_scene, &old.atlas)?;
+    let mut new_texels = texels::build(&new_scene, &atlas)?;
     // The validity pass again only near what moved, where it was and where it is: elsewhere
     // the previous pass's results hold (`validity::fix_near`). `Retrace::All`, the yardstick,
     // runs the full pass.
     let validity = if config.transport.validity && retrace == Retrace::Edited {
-        let near: Vec<(Vec3, Vec3)> = (moved.iter())
-            .flat_map(|&inst| {
-                [&old.scene, &new_scene].map(|s| bounds(s, s.instances[inst].vertices.clone(), 0.0))
-            })
-            .chain(
-                (removed.iter()).map(|&inst| {
+        let near: Vec<(Vec3, Vec3)> =
+            (moved.iter())
+                .flat_map(|&inst| {
+                    [&old.scene, &new_scene]
+                        .map(|s| bounds(s, s.instances[inst].vertices.clone(), 0.0))
+                })
+                .chain((removed.iter()).map(|&inst| {
                     bounds(&old.scene, old.scene.instances[inst].vertices.clone(), 0.0)
-                }),
-            )
-            .collect();
+                }))
+                .chain((added_here.iter()).map(|&inst| {
+                    bounds(&new_scene, new_scene.instances[inst].vertices.clone(), 0.0)
+                }))
+                .collect();
         let params = texels::validity::ValidityParams {
             seed: config.transport.seed,
             ..Default::default()
@@ -548,8 +754,12 @@ fn plan(
             progress,
         )?
     };
-    if new_texels.page != old.texels.page || new_texels.xy != old.texels.xy {
-        return Ok(Err("the moved nodes' texels changed places".to_string()));
+    let n_old = old.texels.len();
+    if new_texels.len() < n_old
+        || new_texels.page[..n_old] != old.texels.page[..]
+        || new_texels.xy[..n_old] != old.texels.xy[..]
+    {
+        return Ok(Err("the old texels changed places".to_string()));
     }
     // A removed node's texels: unused (no primitive of the output reads them), invalid, and
     // their rows empty (`Rebuild::rows`).
@@ -571,7 +781,7 @@ fn plan(
     // texel there, unless that texel's cell map changed (a moved surface now divides it, or no
     // longer does: `texels::Cuts`); such a texel lies within its own size of the moved surface,
     // so the bounds grow by the largest of them.
-    let margin = (0..new_texels.len())
+    let margin = (0..n_old)
         .filter(|&i| old.texels.cuts.cells(i) != new_texels.cuts.cells(i))
         .map(|i| {
             let size = |t: &Texels| t.du[i].length() + t.dv[i].length();
@@ -589,6 +799,11 @@ fn plan(
         let s = &old.scene;
         boxes.push(bounds(s, s.instances[inst].vertices.clone(), margin));
     }
+    // An added instance: rays of the old rows that meet its bounds may end on it now.
+    for &inst in &added_here {
+        let s = &new_scene;
+        boxes.push(bounds(s, s.instances[inst].vertices.clone(), margin));
+    }
     let n = new_texels.len();
     let (k, l) = (config.transport.gather_rays, config.transport.light_samples);
     // The rows, in a scope of their own: they borrow both scenes, which `Prepared` then takes.
@@ -600,6 +815,10 @@ fn plan(
         };
         let emitters = Emitters::new(&new_scene, &new_texels);
         let sources = Sources::new(&new_scene);
+        let was = &kept.transport.sources;
+        if (sources.lights, &sources.emissive) != (was.lights, &was.emissive) {
+            return Ok(Err("the light sources changed".to_string()));
+        }
         let ctx = Context {
             surfaces: new_surfaces,
             params: &config.transport,
@@ -659,6 +878,7 @@ fn plan(
             full: None,
             moved_nodes,
             removed_nodes: nodes.removed.clone(),
+            added_nodes: nodes.added.clone(),
             rows: n,
             retraced,
             patched,
@@ -686,7 +906,7 @@ fn plan(
         scene: new_scene,
         source: new_source,
         tracer,
-        atlas: old.atlas,
+        atlas,
         texels: new_texels,
         validity,
         config: config.clone(),
@@ -708,13 +928,22 @@ fn plan(
             texel_gather_rays: vec![k as f32; n],
         },
     };
-    let removed = (!removed.is_empty()).then_some((removed, nodes, new_loaded));
+    let written = (!removed.is_empty() || !added.is_empty()).then(|| {
+        let mut of_input = vec![usize::MAX; new_loaded.instances.len()];
+        (now_of.iter().enumerate()).for_each(|(k, m)| {
+            if let Some(m) = m {
+                of_input[*m] = k;
+            }
+        });
+        (added.iter().enumerate()).for_each(|(a, &m)| of_input[m] = first_added + a);
+        (of_input, new_loaded)
+    });
     Ok(Ok(Planned {
         prepared,
         incremental,
         lighting,
         layout_nodes,
-        removed,
+        written,
     }))
 }
 
@@ -773,16 +1002,20 @@ fn lay_out_again(
 
 /// The input's nodes in the previous bake's node graph ([`InputRecord::graph`]).
 struct NodeMap {
-    /// Per node of the input, its index in the previous graph.
-    of_new: Vec<u32>,
+    /// Per node of the input, its index in the previous graph (`None`: added).
+    of_new: Vec<Option<u32>>,
     /// The previous graph's nodes the input no longer has, ascending.
     removed: Vec<u32>,
+    /// The input's nodes the previous graph did not have, ascending.
+    added: Vec<u32>,
 }
 
 /// Matches the node graph `after` (the input's) against `before` (the previous bake's): the
-/// same nodes in the same order but for some removed (each node compared whole but for its
-/// transform and its children's indices, which a removal renumbers), each kept node's
-/// children and each scene's roots those of before less the removed, or why not.
+/// longest run of nodes the two share in order (each node compared whole but for its
+/// transform and its children's indices, which a removal or an addition renumbers) are the
+/// same nodes; the previous graph's others were removed, the input's others added. Each kept
+/// node's children and each scene's roots must be those of before less the removed (and
+/// plus the added), and an added node's children added ones, or it says why not.
 fn match_nodes(before: &Value, after: &Value) -> Fallback<NodeMap> {
     let list = |g: &Value, key: &str| -> Vec<Value> {
         g.get(key)
@@ -803,42 +1036,43 @@ fn match_nodes(before: &Value, after: &Value) -> Fallback<NodeMap> {
                 obj.remove(*key);
             }
         }
-        node
+        serde_json::to_string(&node).unwrap_or_default()
     };
-    let mut of_new = Vec::with_capacity(new_nodes.len());
-    let mut j = 0;
-    for node in &new_nodes {
-        let node = bare(node);
-        while j < old_nodes.len() && bare(&old_nodes[j]) != node {
-            j += 1;
-        }
-        if j == old_nodes.len() {
-            return Err("nodes were added or changed (not only moved or removed)".to_string());
-        }
-        of_new.push(j as u32);
-        j += 1;
+    let a: Vec<String> = old_nodes.iter().map(bare).collect();
+    let b: Vec<String> = new_nodes.iter().map(bare).collect();
+    let pairs = match common_subsequence(&a, &b) {
+        Some(pairs) => pairs,
+        None => return Err("too many nodes changed places to match them".to_string()),
+    };
+    let mut of_new = vec![None; b.len()];
+    let mut kept = vec![false; a.len()];
+    for (i, j) in pairs {
+        of_new[j] = Some(i as u32);
+        kept[i] = true;
     }
-    let mut kept = vec![false; old_nodes.len()];
-    of_new.iter().for_each(|&k| kept[k as usize] = true);
-    let removed: Vec<u32> = (0..old_nodes.len() as u32)
-        .filter(|&k| !kept[k as usize])
+    let removed: Vec<u32> = (0..a.len() as u32).filter(|&k| !kept[k as usize]).collect();
+    let added: Vec<u32> = (0..b.len() as u32)
+        .filter(|&k| of_new[k as usize].is_none())
         .collect();
-    // Children and roots: the new ones, in the old graph's indices, must be the old ones
-    // less the removed (a node re-parented or a root dropped is not a removal).
+    let is_added = |c: u64| of_new.get(c as usize).is_some_and(Option::is_none);
+    // Children and roots: the new ones but the added, in the old graph's indices, must be the
+    // old ones less the removed (a node re-parented or a root dropped is neither).
     let same = |new: Vec<u64>, old: Vec<u64>| -> bool {
         let mapped: Option<Vec<u64>> = (new.iter())
-            .map(|&c| of_new.get(c as usize).map(|&k| u64::from(k)))
+            .filter(|&&c| !is_added(c))
+            .map(|&c| of_new.get(c as usize).copied().flatten().map(u64::from))
             .collect();
         let kept_old: Vec<u64> = (old.into_iter())
             .filter(|&c| kept.get(c as usize).copied().unwrap_or(false))
             .collect();
         mapped == Some(kept_old)
     };
-    let children = (new_nodes.iter().zip(&of_new)).all(|(n, &k)| {
-        same(
+    let children = (new_nodes.iter().zip(&of_new)).all(|(n, k)| match k {
+        Some(k) => same(
             indices(n.get("children")),
-            indices(old_nodes[k as usize].get("children")),
-        )
+            indices(old_nodes[*k as usize].get("children")),
+        ),
+        None => indices(n.get("children")).into_iter().all(is_added),
     });
     let (old_scenes, new_scenes) = (list(before, "scenes"), list(after, "scenes"));
     let scenes = old_scenes.len() == new_scenes.len()
@@ -852,23 +1086,81 @@ fn match_nodes(before: &Value, after: &Value) -> Fallback<NodeMap> {
             bare(o) == bare(n) && same(indices(n.get("nodes")), indices(o.get("nodes")))
         });
     if !(children && scenes) {
-        return Err("the node hierarchy changed (not only moves and removals)".to_string());
+        return Err(
+            "the node hierarchy changed (not only moves, removals and additions)".to_string(),
+        );
     }
-    Ok(NodeMap { of_new, removed })
+    Ok(NodeMap {
+        of_new,
+        removed,
+        added,
+    })
+}
+
+/// A longest common subsequence of `a` and `b` as index pairs `(i, j)`, ascending: the common
+/// prefix and suffix matched directly, the rest by dynamic programming (`None` when that
+/// middle is too large to tabulate).
+fn common_subsequence<T: PartialEq>(a: &[T], b: &[T]) -> Option<Vec<(usize, usize)>> {
+    let prefix = a.iter().zip(b).take_while(|(x, y)| x == y).count();
+    let suffix = (a[prefix..].iter().rev())
+        .zip(b[prefix..].iter().rev())
+        .take_while(|(x, y)| x == y)
+        .count();
+    let (ma, mb) = (&a[prefix..a.len() - suffix], &b[prefix..b.len() - suffix]);
+    let (n, m) = (ma.len(), mb.len());
+    if (n + 1).saturating_mul(m + 1) > 1 << 26 {
+        return None;
+    }
+    // `len[i][j]`: the longest common subsequence of `ma[i..]` and `mb[j..]`.
+    let w = m + 1;
+    let mut len = vec![0u32; (n + 1) * w];
+    for i in (0..n).rev() {
+        for j in (0..m).rev() {
+            len[i * w + j] = match ma[i] == mb[j] {
+                true => len[(i + 1) * w + j + 1] + 1,
+                false => len[(i + 1) * w + j].max(len[i * w + j + 1]),
+            };
+        }
+    }
+    let mut pairs: Vec<(usize, usize)> = (0..prefix).map(|k| (k, k)).collect();
+    let (mut i, mut j) = (0, 0);
+    while i < n && j < m {
+        if ma[i] == mb[j] && len[i * w + j] == len[(i + 1) * w + j + 1] + 1 {
+            pairs.push((prefix + i, prefix + j));
+            (i, j) = (i + 1, j + 1);
+        } else if len[(i + 1) * w + j] >= len[i * w + j + 1] {
+            i += 1;
+        } else {
+            j += 1;
+        }
+    }
+    let (ea, eb) = (a.len() - suffix, b.len() - suffix);
+    pairs.extend((0..suffix).map(|k| (ea + k, eb + k)));
+    Some(pairs)
 }
 
 /// Per instance of `old` (the previous graph laid out), the instance of `new` (the input) that
 /// places the same primitive by the same node, in order; `None` where `old`'s node was removed.
-fn instance_map(old: &Scene, new: &Scene, nodes: &NodeMap) -> Fallback<Vec<Option<usize>>> {
+/// Then the instances of `new` placed by added nodes, ascending.
+type InstanceMap = (Vec<Option<usize>>, Vec<usize>);
+
+/// The [`InstanceMap`] of `old` and `new`, or why they do not match.
+fn instance_map(old: &Scene, new: &Scene, nodes: &NodeMap) -> Fallback<InstanceMap> {
+    let is_added = |b: &scene::Instance| nodes.added.binary_search(&b.node).is_ok();
+    let added: Vec<usize> = (0..new.instances.len())
+        .filter(|&m| is_added(&new.instances[m]))
+        .collect();
+    let mut from_before = (0..new.instances.len()).filter(|&m| !is_added(&new.instances[m]));
     let mut map = Vec::with_capacity(old.instances.len());
-    let mut next = 0;
     for a in &old.instances {
         if nodes.removed.binary_search(&a.node).is_ok() {
             map.push(None);
             continue;
         }
-        let same = new.instances.get(next).is_some_and(|b| {
-            nodes.of_new.get(b.node as usize) == Some(&a.node)
+        let next = from_before.next();
+        let same = next.is_some_and(|m| {
+            let b = &new.instances[m];
+            nodes.of_new.get(b.node as usize).copied().flatten() == Some(a.node)
                 && (b.mesh, b.primitive, b.back_of.is_some())
                     == (a.mesh, a.primitive, a.back_of.is_some())
         });
@@ -877,13 +1169,12 @@ fn instance_map(old: &Scene, new: &Scene, nodes: &NodeMap) -> Fallback<Vec<Optio
                 "the input's instances are not the previous ones less the removed".to_string(),
             );
         }
-        map.push(Some(next));
-        next += 1;
+        map.push(next);
     }
-    if next != new.instances.len() {
+    if from_before.next().is_some() {
         return Err("the input places primitives the previous bake did not".to_string());
     }
-    Ok(map)
+    Ok((map, added))
 }
 
 /// The instances whose vertices moved between `old` and `new` (`map`: `old`'s instances in
@@ -920,7 +1211,7 @@ fn moved_instances(old: &Scene, new: &Scene, map: &[Option<usize>]) -> Fallback<
         }
     }
     if format!("{:?}", old.lights) != format!("{:?}", new.lights) {
-        return Err("a light moved or was removed".to_string());
+        return Err("a light moved, was removed or was added".to_string());
     }
     Ok(moved)
 }
@@ -966,32 +1257,26 @@ fn removed_texels(scene: &Scene, texels: &Texels, removed: &[usize]) -> Vec<bool
         .collect()
 }
 
-/// The scene and atlas of `baked` as the glTF writer reads them after a removal
-/// ([`super::Baked::written`]): the `removed` instances (ascending) left out, the others naming
-/// their node in the input (`nodes`), and the input's node tree. Triangles keep their ids
-/// (the writer reads instances, not triangles); a removed one names no instance (`u32::MAX`).
-fn drop_removed(
+/// The scene and atlas of `baked` as the glTF writer reads them after a removal or an
+/// addition ([`super::Baked::written`]): per instance of the input as loaded (`input`), in its
+/// order, the baked instance `of_input` names, placed by the input's node; the removed
+/// instances left out, and the input's node tree. Triangles keep their ids (the writer reads
+/// instances, not triangles); a removed one names no instance (`u32::MAX`).
+fn written_for_input(
     baked: &super::Baked,
-    removed: &[usize],
-    nodes: &NodeMap,
+    of_input: &[usize],
     input: &Scene,
 ) -> (Scene, crate::atlas::Atlas) {
-    let mut node_now = vec![u32::MAX; nodes.of_new.len() + nodes.removed.len()];
-    for (n, &k) in nodes.of_new.iter().enumerate() {
-        node_now[k as usize] = n as u32;
-    }
-    let kept: Vec<usize> = (0..baked.scene.instances.len())
-        .filter(|k| removed.binary_search(k).is_err())
-        .collect();
     let mut index_now = vec![u32::MAX; baked.scene.instances.len()];
-    kept.iter()
+    of_input
+        .iter()
         .enumerate()
         .for_each(|(now, &k)| index_now[k] = now as u32);
     let mut scene = baked.scene.clone();
-    scene.instances = (kept.iter())
-        .map(|&k| {
+    scene.instances = (of_input.iter().zip(&input.instances))
+        .map(|(&k, placed)| {
             let mut inst = baked.scene.instances[k].clone();
-            inst.node = node_now[inst.node as usize];
+            inst.node = placed.node;
             inst.back = inst.back.map(|b| index_now[b as usize]);
             inst.back_of = inst.back_of.map(|b| index_now[b as usize]);
             inst
@@ -1003,10 +1288,90 @@ fn drop_removed(
     scene.nodes = input.nodes.clone();
     scene.cameras = input.cameras.clone();
     let mut atlas = baked.atlas.clone();
-    atlas.instances = (kept.iter())
+    atlas.instances = (of_input.iter())
         .map(|&k| baked.atlas.instances[k].clone())
         .collect();
     (scene, atlas)
+}
+
+/// `scene` with the instances `which` of `from` appended (their vertices, triangles and
+/// instances; materials are `scene`'s, which must be `from`'s). Returns the index of the first.
+fn append_instances(scene: &mut Scene, from: &Scene, which: &[usize]) -> usize {
+    let first = scene.instances.len();
+    let mut index = vec![u32::MAX; from.instances.len()];
+    which
+        .iter()
+        .enumerate()
+        .for_each(|(k, &m)| index[m] = (first + k) as u32);
+    for &m in which {
+        let mut inst = from.instances[m].clone();
+        let (v0, t0) = (scene.positions.len() as u32, scene.triangles.len() as u32);
+        let (vs, ts) = (
+            inst.vertices.start as usize..inst.vertices.end as usize,
+            inst.triangles.start as usize..inst.triangles.end as usize,
+        );
+        scene
+            .positions
+            .extend_from_slice(&from.positions[vs.clone()]);
+        scene.normals.extend_from_slice(&from.normals[vs.clone()]);
+        scene.uv0.extend_from_slice(&from.uv0[vs.clone()]);
+        scene.uv1.extend_from_slice(&from.uv1[vs]);
+        let shift = v0 as i64 - i64::from(inst.vertices.start);
+        scene.triangles.extend(
+            from.triangles[ts.clone()]
+                .iter()
+                .map(|t| t.map(|v| (i64::from(v) + shift) as u32)),
+        );
+        let k = scene.instances.len() as u32;
+        scene
+            .triangle_instance
+            .extend(std::iter::repeat_n(k, ts.len()));
+        inst.vertices = v0..v0 + inst.vertices.len() as u32;
+        inst.triangles = t0..t0 + ts.len() as u32;
+        // A front and its back-face copy are added together (the same node).
+        inst.back = inst.back.map(|b| index[b as usize]);
+        inst.back_of = inst.back_of.map(|b| index[b as usize]);
+        scene.instances.push(inst);
+    }
+    first
+}
+
+/// The atlas `old` with charts for the instances `which` of `from` (the input as loaded)
+/// appended, as [`append_instances`] appends them: unwrapped on their own at the old bake's
+/// uniform density (`config`'s texels per unit, no per-region factors) onto pages after the
+/// old ones, so that every old chart, page and texel stays where it was.
+fn append_charts(
+    old: &crate::atlas::Atlas,
+    from: &Scene,
+    source: &scene::Source,
+    which: &[usize],
+    config: &BakeConfig,
+    progress: &dyn Progress,
+) -> Result<crate::atlas::Atlas> {
+    let mut sub = Scene {
+        materials: from.materials.clone(),
+        textures: from.textures.clone(),
+        ..Default::default()
+    };
+    append_instances(&mut sub, from, which);
+    let params = crate::config::AtlasParams {
+        uv: crate::config::UvMode::Unwrap,
+        instancing: crate::config::Instancing::Duplicate,
+        instance_density: Vec::new(),
+        triangle_density: Vec::new(),
+        ..config.atlas.clone()
+    };
+    let added = crate::atlas::build_with(&sub, source, &params, progress)?;
+    let mut atlas = old.clone();
+    let first_page = old.pages.len() as u32;
+    atlas.pages.extend(added.pages);
+    atlas
+        .instances
+        .extend(added.instances.into_iter().map(|mut uv| {
+            uv.triangle_page.iter_mut().for_each(|p| *p += first_page);
+            uv
+        }));
+    Ok(atlas)
 }
 
 /// What differs between the laid-out texels `a` and the kept texels `b` (the fields the kept
@@ -1033,24 +1398,26 @@ fn bits(v: &[Vec3]) -> Vec<[u32; 3]> {
     v.iter().map(|v| v.to_array().map(f32::to_bits)).collect()
 }
 
-/// Per texel: whether anything its row reads of itself differs between `old` and `new`.
+/// Per texel: whether anything its row reads of itself differs between `old` and `new` (a
+/// texel `old` does not have, an added node's, is new).
 fn changed_texels(old: &Texels, new: &Texels) -> Vec<bool> {
     let (old_valid, new_valid) = (old.valid_mask(), new.valid_mask());
     let same3 = |a: Vec3, b: Vec3| a.to_array().map(f32::to_bits) == b.to_array().map(f32::to_bits);
     let jitter = |t: &Texels, i: usize| t.jitter.get(i).copied().unwrap_or(1.0).to_bits();
     (0..new.len())
         .map(|i| {
-            !(same3(old.position[i], new.position[i])
-                && same3(old.normal[i], new.normal[i])
-                && same3(old.du[i], new.du[i])
-                && same3(old.dv[i], new.dv[i])
-                && same3(old.albedo[i], new.albedo[i])
-                && same3(old.emission[i], new.emission[i])
-                && old.area[i].to_bits() == new.area[i].to_bits()
-                && old.triangle[i] == new.triangle[i]
-                && jitter(old, i) == jitter(new, i)
-                && old_valid[i] == new_valid[i]
-                && old.cuts.cells(i) == new.cuts.cells(i))
+            i >= old.len()
+                || !(same3(old.position[i], new.position[i])
+                    && same3(old.normal[i], new.normal[i])
+                    && same3(old.du[i], new.du[i])
+                    && same3(old.dv[i], new.dv[i])
+                    && same3(old.albedo[i], new.albedo[i])
+                    && same3(old.emission[i], new.emission[i])
+                    && old.area[i].to_bits() == new.area[i].to_bits()
+                    && old.triangle[i] == new.triangle[i]
+                    && jitter(old, i) == jitter(new, i)
+                    && old_valid[i] == new_valid[i]
+                    && old.cuts.cells(i) == new.cuts.cells(i))
         })
         .collect()
 }

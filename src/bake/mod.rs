@@ -223,8 +223,9 @@ pub struct Baked {
     /// transport.
     pub(crate) layout_nodes: Option<Vec<serde_json::Value>>,
     /// The scene and atlas the glTF is written from when they are not `scene` and `atlas`: an
-    /// incremental bake that removed nodes keeps their triangles and texels (unused) and
-    /// writes only the input's instances ([`incremental`]).
+    /// incremental bake that removed nodes keeps their triangles and texels (unused), one
+    /// that added nodes places their instances after the old ones; both write the input's
+    /// instances in the input's order ([`incremental`]).
     pub(crate) written: Option<Box<(scene::Scene, atlas::Atlas)>>,
 }
 

@@ -297,10 +297,10 @@ struct BakeArgs {
     #[arg(long)]
     keep_transport: bool,
     /// Re-bake incrementally from a previous bake of this scene (its .gltf/.glb, written with
-    /// --keep-transport): after an edit that only moved nodes, only the rays the moved nodes
-    /// can reach are traced again. Runs with the previous bake's settings (not this command's
-    /// quality options); bakes in full with this command's options, saying why, when the
-    /// edit was more than a move.
+    /// --keep-transport): after an edit that only moved, removed or added nodes, only the
+    /// rays the edited nodes can reach (and an added node's own rows) are traced again. Runs
+    /// with the previous bake's settings (not this command's quality options); bakes in full
+    /// with this command's options, saying why, when the edit was more than that.
     #[arg(long, value_name = "OLD_GLTF", conflicts_with = "processes")]
     since: Option<PathBuf>,
     #[command(flatten)]

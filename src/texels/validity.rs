@@ -149,7 +149,7 @@ pub(crate) fn fix_sharded(
 /// interior's 148,505 texels, a chair moved 1.5 m away; 7 of them invalid in one pass and not
 /// the other). Keeping the earlier result is as right, and re-traces fewer rows. `texels` are
 /// fresh from `texels::build`; the report counts as moved every texel whose sample point is
-/// not where the raster put it.
+/// not where the raster put it. Texels beyond `previous`'s (an added node's) are all probed.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn fix_near(
     texels: &mut Texels,
@@ -168,9 +168,11 @@ pub(crate) fn fix_near(
             let (du, dv) = (texels.du[i], texels.dv[i]);
             let margin = reach(texels, tracer, i) + 4.0 * (du.length() + dv.length());
             let p = texels.position[i];
-            changed
-                .iter()
-                .any(|&(lo, hi)| (lo - p).max(p - hi).max(Vec3::ZERO).length() <= margin)
+            // A texel `previous` does not have (an added node's, on a page of its own) is new.
+            i >= previous.len()
+                || changed
+                    .iter()
+                    .any(|&(lo, hi)| (lo - p).max(p - hi).max(Vec3::ZERO).length() <= margin)
         })
         .collect();
     let redo: Vec<usize> = (0..n).filter(|&i| near[i]).collect();
