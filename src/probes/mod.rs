@@ -79,6 +79,7 @@
 //! bounds (half a spacing) read the nearest face of the grid.
 
 pub mod file;
+pub mod measure;
 mod place;
 pub mod refine;
 pub mod sh;
