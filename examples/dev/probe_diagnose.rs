@@ -323,7 +323,12 @@ fn truncation(scene: &str, mut config: BakeConfig, rest: &[String]) {
     by_distance.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
     let far_from = by_distance.partition_point(|d| d.0 < near_field);
     let chosen: Vec<(f32, usize)> = (by_distance.iter().take(count.min(far_from)))
-        .chain(by_distance[far_from..].iter().step_by(((by_distance.len() - far_from) / count).max(1)).take(count))
+        .chain(
+            by_distance[far_from..]
+                .iter()
+                .step_by(((by_distance.len() - far_from) / count).max(1))
+                .take(count),
+        )
         .copied()
         .collect();
     // A Fibonacci set of normals, equal weights 4π/M.
@@ -453,7 +458,10 @@ fn truncation(scene: &str, mut config: BakeConfig, rest: &[String]) {
     }
     for (part, name) in [(0, "near"), (1, "far")] {
         let s = &sums[part];
-        let count = chosen.iter().filter(|c| usize::from(c.0 >= near_field) == part).count() as f64
+        let count = chosen
+            .iter()
+            .filter(|c| usize::from(c.0 >= near_field) == part)
+            .count() as f64
             * NORMALS as f64;
         if count == 0.0 {
             continue;

@@ -30,7 +30,9 @@ use lightbake::{BakeConfig, Baked, NoProgress};
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let [scene, rest @ ..] = &args[..] else {
-        panic!("usage: probe_figures SCENE [QUALITY] [BUDGET] [POINTS] [SAMPLES] [RAYS] [REFINE...]")
+        panic!(
+            "usage: probe_figures SCENE [QUALITY] [BUDGET] [POINTS] [SAMPLES] [RAYS] [REFINE...]"
+        )
     };
     let quality = rest.first().map_or("medium", String::as_str);
     let mut config = match quality {
@@ -111,7 +113,8 @@ fn main() {
         shared.len()
     );
     for (refine, _, probes) in &bakes {
-        // At the bake's own valid probes (no interpolation: SH truncation and gather noise).
+        // At the bake's own gathered probes (no interpolation: SH truncation, gather noise and
+        // the bake's own error).
         let at_probes = at_probes(probes, n);
         let own = trace(&at_probes);
         for (what, at, r) in [
@@ -123,11 +126,13 @@ fn main() {
     }
 }
 
-/// Up to `n` of the valid probes, each with a normal of its own.
+/// Up to `n` of the gathered probes (`Probes::gathered`), each with a normal of its own.
 fn at_probes(probes: &Probes, n: usize) -> Vec<(Vec3, Vec3)> {
+    let gathered = probes.gathered();
+    let count = gathered.iter().filter(|&&g| g).count();
     (0..probes.len())
-        .filter(|&i| probes.valid[i])
-        .step_by((probes.valid_count() / n).max(1))
+        .filter(|&i| gathered[i])
+        .step_by((count / n).max(1))
         .map(|i| {
             let u = (i as f32 * 0.618_034).fract();
             let v = (i as f32 * 0.414_214).fract();
@@ -184,6 +189,21 @@ fn report(
             g.cmplt(Vec3::ZERO).any() || g.cmpgt(last).any()
         })
         .collect();
+    // The far points inside the grid's box and in the slab, apart.
+    for (name, inside) in [("inside the grid's box", true), ("in the slab", false)] {
+        let skip: Vec<u32> = (0..at.len() as u32)
+            .filter(|k| {
+                near.binary_search(k).is_ok()
+                    || slab.binary_search(&(*k as usize)).is_ok() == inside
+            })
+            .collect();
+        let e = measure::split_error(&ours, &r.mean, &r.std_error, &skip);
+        println!(
+            "    far, {name}: {:.2}% ({} points)",
+            100.0 * e.far,
+            at.len() - skip.len()
+        );
+    }
     let near_sq: f32 = near.iter().map(|&k| sq[k as usize]).sum();
     let slab_sq: f32 = slab.iter().map(|&k| sq[k]).sum();
     println!(

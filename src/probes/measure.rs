@@ -34,12 +34,7 @@ const SALT: u64 = 0x4d45_4153_5552; // "MEASUR"
 /// docs); point `k` comes from its own random stream `(seed, k)`. Fewer when free space is
 /// almost nowhere in the bounds.
 #[must_use]
-pub fn free_space_points(
-    scene: &Scene,
-    tracer: &Tracer,
-    n: usize,
-    seed: u64,
-) -> Vec<(Vec3, Vec3)> {
+pub fn free_space_points(scene: &Scene, tracer: &Tracer, n: usize, seed: u64) -> Vec<(Vec3, Vec3)> {
     let Some((lo, hi)) = place::bounds(scene) else {
         return Vec::new();
     };

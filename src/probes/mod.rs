@@ -70,7 +70,7 @@
 //! | `rays`          | 256     | sphere rays per probe (+ as many emitter samples); noise ∝ 1/√rays |
 //! | `indirect_only` | false   | leave out punctual lights' direct light                       |
 //! | `from`          | none    | a node's children or box instead of the automatic grid        |
-//! | `refine`        | 0.5     | share of the budget kept for refining cells; 0: a uniform grid of the whole budget |
+//! | `refine`        | 0.25    | share of the budget kept for refining cells; 0: a uniform grid of the whole budget |
 //!
 //! Limits: one level of refinement, by two along each axis; a probe inside a closed
 //! double-sided mesh is not found buried; trilinear interpolation still blurs light that
@@ -108,7 +108,7 @@ pub const DEFAULT_BUDGET: u32 = 1024;
 /// Sphere rays per probe.
 pub const DEFAULT_RAYS: u32 = 256;
 /// Share of the budget kept for refining cells where light changes.
-pub const DEFAULT_REFINE: f32 = 0.5;
+pub const DEFAULT_REFINE: f32 = 0.25;
 /// Probes per parallel work item (one progress tick each).
 const CHUNK: usize = 16;
 /// Mixed into the seed: the probes' streams differ from the texels' of the same index.
@@ -242,6 +242,24 @@ impl Probes {
     /// Valid probes.
     pub fn valid_count(&self) -> usize {
         self.valid.iter().filter(|&&v| v).count()
+    }
+
+    /// Per probe, whether it holds light gathered at its position: valid, and not an added
+    /// probe constrained to its coarse cell's interpolated value ([`refine`]).
+    #[must_use]
+    pub fn gathered(&self) -> Vec<bool> {
+        let mut gathered = self.valid.clone();
+        if let (Some(grid), false) = (&self.grid, self.refinement.is_empty()) {
+            for (k, c) in refine::constrained(grid, &self.refinement)
+                .into_iter()
+                .enumerate()
+            {
+                if let Some(g) = gathered.get_mut(grid.len() + k) {
+                    *g &= !c;
+                }
+            }
+        }
+        gathered
     }
 
     /// The interpolated coefficients at `p` (see the module docs); `visible(q)` says whether

@@ -254,11 +254,19 @@ pub(crate) fn fit(tracer: &Tracer, (lo, hi): (Vec3, Vec3), budget: u32, seed: u6
 /// spacing gets one probe, at its middle.
 pub(crate) fn spanning(lo: Vec3, hi: Vec3, budget: u32) -> (Vec3, Vec3, [u32; 3]) {
     let extent = (hi - lo).max(Vec3::ZERO);
-    // The cell-centred grid's spacing, widened until the probes fit the budget.
-    let (_, start, _) = grid(lo, hi, budget);
-    let mut s = start.max_element().max(1e-6);
+    // From below the cell-centred grid's spacing, widened until the probes fit the budget.
+    let (_, start, cells) = grid(lo, hi, budget);
+    let finest = (0..3)
+        .filter(|&a| cells[a] > 1)
+        .map(|a| start[a])
+        .fold(f32::INFINITY, f32::min);
+    let mut s = match finest.is_finite() {
+        true => 0.8 * finest,
+        false => start.max_element(),
+    }
+    .max(1e-6);
     let (mut count, mut inner) = ([1u32; 3], extent);
-    for _ in 0..200 {
+    for _ in 0..1000 {
         inner = (extent - Vec3::splat(2.0 * CLEARANCE * s)).max(Vec3::ZERO);
         count = std::array::from_fn(|a| match extent[a] >= s {
             true => (inner[a] / s + 1e-3).floor() as u32 + 1,
@@ -267,7 +275,7 @@ pub(crate) fn spanning(lo: Vec3, hi: Vec3, budget: u32) -> (Vec3, Vec3, [u32; 3]
         if count.iter().map(|&c| u64::from(c)).product::<u64>() <= u64::from(budget.max(1)) {
             break;
         }
-        s *= 1.02;
+        s *= 1.01;
     }
     let step = Vec3::from(std::array::from_fn::<f32, 3, _>(|a| match count[a] {
         1 => s.max(extent[a]),
@@ -449,6 +457,34 @@ mod tests {
         }
         // A flat scene gets one layer, in its plane.
         let (origin, _, count) = grid(Vec3::ZERO, Vec3::new(4.0, 0.0, 4.0), 100);
+        assert_eq!(count[1], 1);
+        assert_eq!(origin.y, 0.0);
+    }
+
+    #[test]
+    fn the_spanning_grid_keeps_to_the_budget_and_reaches_the_faces() {
+        let (lo, hi) = (Vec3::new(-2.0, 0.0, -1.0), Vec3::new(2.0, 2.0, 1.0));
+        for budget in [100, 512, 1024, 4096] {
+            let (origin, step, count) = spanning(lo, hi, budget);
+            assert!(
+                count.iter().product::<u32>() <= budget,
+                "{budget}: {count:?}"
+            );
+            // Nearly all of the budget: one more probe along the longest axis would not fit.
+            let more = (count[0] + 1) * count[1] * count[2];
+            assert!(more > budget / 2, "{budget}: {count:?} wastes the budget");
+            let last = origin + step * Vec3::from(count.map(|c| (c - 1) as f32));
+            for a in 0..3 {
+                let (low, high) = (origin[a] - lo[a], hi[a] - last[a]);
+                assert!((low - high).abs() < 1e-4, "{budget}: not centred along {a}");
+                assert!(
+                    low > 0.0 && low <= CLEARANCE * step[a] + 1e-5,
+                    "{budget}: {low} from the face"
+                );
+            }
+        }
+        // A flat box gets one layer, in its plane.
+        let (origin, _, count) = spanning(Vec3::ZERO, Vec3::new(4.0, 0.0, 4.0), 100);
         assert_eq!(count[1], 1);
         assert_eq!(origin.y, 0.0);
     }
