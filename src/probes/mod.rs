@@ -16,9 +16,11 @@
 //!                     ─ volume ─────▶ <stem>_probes.ktx2, Bevy's irradiance volume (grids)
 //! ```
 //!
-//! **Placement** (`place.rs`): a regular grid over the scene's bounds at the spacing half the
-//! budget allows (`--probes N`, default [`DEFAULT_BUDGET`]; [`ProbeParams::refine`] keeps the
-//! other half for refinement), or where a node of the scene says
+//! **Placement** (`place.rs`): a regular grid spanning the scene's free space (found by a sketch
+//! grid: how far free probes see along the axes), its outermost probes a fifth of a spacing
+//! from the walls, at the spacing three quarters of the budget allow (`--probes N`, default
+//! [`DEFAULT_BUDGET`]; [`ProbeParams::refine`] keeps the rest for refinement), or where a node
+//! of the scene says
 //! (`--probes-from NODE`: its children's positions, or a grid filling its box, the unit cube
 //! under its transform, in the box's axes); probes buried in solids (or outside an
 //! interior's closed shell) are marked invalid, probes too close to a surface are moved off it.
@@ -74,9 +76,9 @@
 //!
 //! Limits: one level of refinement, by two along each axis; a probe inside a closed
 //! double-sided mesh is not found buried; trilinear interpolation still blurs light that
-//! changes faster than the finer spacing, and L2 SH cannot hold the sharp edge of an emitter a
-//! few centimetres away (at the probes themselves); points between the outermost probes and the
-//! bounds (half a spacing) read the nearest face of the grid.
+//! changes faster than the finer spacing (within centimetres of an emitter); points between the
+//! outermost probes and the walls (a fifth of a spacing) read the nearest face of the grid.
+//! [`measure`] says how the probes are measured against the path tracer.
 
 pub mod file;
 pub mod measure;

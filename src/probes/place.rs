@@ -1,15 +1,19 @@
 //! Where probes go: a regular grid over the scene's bounds at the spacing the budget allows,
 //! probes buried in solids marked invalid, probes too close to a surface moved away from it.
 //!
-//! **Grid.** The spacing `s = ∛(V/N)` for the bounds' volume `V` and the grid's share `N` of the
-//! budget (`ProbeParams::grid_budget`; the rest goes to refinement, `super::refine`); each axis gets
-//! `⌊extent/s⌋` probes (at least one) at the centres of equal cells, so probes sit half a cell
-//! from the bounds and the count never exceeds the budget.
+//! **Grid.** The automatic grid spans the free space's box ([`fit`]): a sketch grid of an
+//! eighth of the budget over the scene's bounds finds how far its free probes see along the
+//! axes. The grid's share `N` of the budget (`ProbeParams::grid_budget`; the rest goes to
+//! refinement, `super::refine`) sets the spacing `s`, the smallest for which `⌊(extent −
+//! 2·CLEARANCE·s)/s⌋ + 1` probes per axis fit in `N`; the outermost probes lie `CLEARANCE·s`
+//! inside the box's faces ([`spanning`]), so points beside a wall lie between probes. A node's
+//! box (below) is filled cell-centred ([`grid`]: `⌊extent/s⌋` probes per axis at the centres of
+//! equal cells, `s = ∛(V/N)`), so that Bevy's volume is the box.
 //!
 //! **From a node** (`--probes-from NODE`, [`start`]): the node's children's world positions,
 //! one probe each (the artist's placement: no budget, no grid); or, when the node has no
 //! children, its box — the unit cube centred on the node (side 1, Bevy's light-probe volume)
-//! under its world transform — filled with the grid above in the box's own axes.
+//! under its world transform — filled with the cell-centred grid in the box's own axes.
 //!
 //! **Buried.** From each probe `TEST_RAYS` rays go out over the sphere (a Hammersley set turned
 //! by the probe's own random stream). A probe is buried — inside a closed solid, or outside
