@@ -18,6 +18,17 @@
 //! corners (nothing dropped) beside it. Each term's relative RMSE is normalised by the mean
 //! reference, as `probe_figures` does, with its noise (the traced values' standard errors
 //! combined with the weights) taken out.
+//!
+//! ```text
+//! cargo run --release --example probe_diagnose -- SCENE QUALITY BUDGET PROBES SAMPLES truncation
+//! ```
+//!
+//! The probes' own error beside the emitters (the default refined bake): at up to `PROBES` valid
+//! probes closest to an emitter (and as many far ones), the path tracer's `H/π` about 256
+//! normals spread over the sphere (a Fibonacci set) is projected onto L2 SH by quadrature; that
+//! projection is what a perfect L2 probe would hold. The probe's error against the path tracer
+//! splits into the truncation (projection − path tracer) and the bake's own (probe −
+//! projection), over all normals and over the normals facing the nearest emitter.
 
 use std::path::Path;
 
@@ -50,6 +61,9 @@ fn main() {
         "high" => BakeConfig::high(),
         _ => BakeConfig::medium(),
     };
+    if rest.get(4).map(String::as_str) == Some("truncation") {
+        return truncation(scene, config, rest);
+    }
     // The uniform grid: the lookup below rebuilds its cells' corners.
     let mut params = ProbeParams {
         refine: 0.0,
@@ -270,6 +284,197 @@ fn main() {
             100.0 * sq(&|x| x.1) / (rel(&total, &[], 1.0).0.powi(2)),
             100.0 * sq(&|x| x.2) / (rel(&total, &[], 1.0).0.powi(2)),
             100.0 * sq(&|x| x.3) / (rel(&total, &[], 1.0).0.powi(2)),
+        );
+    }
+}
+
+/// Normals of the quadrature.
+const NORMALS: usize = 256;
+
+/// The `truncation` mode (see the module docs).
+fn truncation(scene: &str, mut config: BakeConfig, rest: &[String]) {
+    use lightbake::probes::{measure, sh};
+    let mut params = ProbeParams::default();
+    if let Some(b) = rest.get(1) {
+        params.budget = b.parse().expect("BUDGET");
+    }
+    let count: usize = rest.get(2).map_or(16, |s| s.parse().expect("PROBES"));
+    let samples: u32 = rest.get(3).map_or(1024, |s| s.parse().expect("SAMPLES"));
+    let budget = params.budget;
+    config.output.probes = Some(params);
+    let baked = lightbake::compute(Path::new(scene), &config, &NoProgress).expect("bake");
+    let probes = baked.probes.as_ref().expect("probes");
+    let tracer = Tracer::new(&baked.scene);
+    let near_field = measure::near_field(&baked.scene, budget);
+    // Valid probes by distance to the nearest emitter texel (with that texel).
+    let emitters: Vec<Vec3> = (0..baked.texels.position.len())
+        .filter(|&i| baked.texels.emission[i].max_element() > 0.0)
+        .map(|i| baked.texels.position[i])
+        .collect();
+    let nearest = |p: Vec3| {
+        (emitters.iter().copied())
+            .min_by(|a, b| a.distance(p).total_cmp(&b.distance(p)))
+            .unwrap_or(p)
+    };
+    let mut by_distance: Vec<(f32, usize)> = (0..probes.len())
+        .filter(|&q| probes.valid[q])
+        .map(|q| (nearest(probes.position[q]).distance(probes.position[q]), q))
+        .collect();
+    by_distance.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+    let far_from = by_distance.partition_point(|d| d.0 < near_field);
+    let chosen: Vec<(f32, usize)> = (by_distance.iter().take(count.min(far_from)))
+        .chain(
+            by_distance[far_from..]
+                .iter()
+                .step_by(((by_distance.len() - far_from) / count).max(1))
+                .take(count),
+        )
+        .copied()
+        .collect();
+    // A Fibonacci set of normals, equal weights 4π/M.
+    let golden = std::f32::consts::PI * (3.0 - 5f32.sqrt());
+    let normals: Vec<Vec3> = (0..NORMALS)
+        .map(|k| {
+            let z = 1.0 - (2.0 * k as f32 + 1.0) / NORMALS as f32;
+            let r = (1.0 - z * z).sqrt();
+            let phi = golden * k as f32;
+            Vec3::new(r * phi.cos(), r * phi.sin(), z)
+        })
+        .collect();
+    // Beside the emitter texels nearest to the four nearest probes: points 2, 5 and 10 cm off
+    // the emitter along its normal (no probe there: the truncation alone).
+    let texel_of = |p: Vec3| {
+        (0..baked.texels.position.len())
+            .filter(|&i| baked.texels.emission[i].max_element() > 0.0)
+            .min_by(|&a, &b| {
+                let da = baked.texels.position[a].distance(p);
+                da.total_cmp(&baked.texels.position[b].distance(p))
+            })
+            .expect("an emitter")
+    };
+    let close: Vec<(f32, Vec3)> = (chosen.iter().take(4))
+        .flat_map(|&(_, q)| {
+            let t = texel_of(probes.position[q]);
+            let (e, n) = (baked.texels.position[t], baked.texels.normal[t]);
+            [0.02f32, 0.05, 0.1].map(|d| (d, e + n * d))
+        })
+        .collect();
+    let sites: Vec<Vec3> = (chosen.iter().map(|&(_, q)| probes.position[q]))
+        .chain(close.iter().map(|c| c.1))
+        .collect();
+    let pts: Vec<Point> = (sites.iter())
+        .flat_map(|&position| {
+            normals.iter().map(move |&n| Point {
+                position,
+                normal: n,
+                shading_normal: n,
+            })
+        })
+        .collect();
+    let reference = ReferenceParams {
+        max_samples: samples,
+        seed: 7,
+        ..ReferenceParams::like(&baked.config)
+    };
+    let r = points::trace_about(
+        (&baked.scene, &baked.texels, &tracer),
+        &pts,
+        Normals::Shading,
+        &reference,
+        &NoProgress,
+    )
+    .expect("reference");
+    println!(
+        "{scene}: {} probes, near field {near_field:.3}; per probe, relative RMS over the normals (over their mean; all normals | facing the emitter): probe vs path tracer and L2 projection vs path tracer (truncation), both without the noise, probe vs projection (bake), noise",
+        probes.len()
+    );
+    // Sums over the near and the far probes: (probe−ref)², (proj−ref)², (probe−proj)², σ², ref.
+    let mut sums = [[0.0f64; 5]; 2];
+    for (c, &site) in sites.iter().enumerate() {
+        let (d, q) = match chosen.get(c) {
+            Some(&(d, q)) => (d, Some(q)),
+            None => (close[c - chosen.len()].0, None),
+        };
+        let e = &r.mean[c * NORMALS..(c + 1) * NORMALS];
+        let se = &r.std_error[c * NORMALS..(c + 1) * NORMALS];
+        // L2 projection of the irradiance: E_lm = 4π/M Σ E(n) Y_lm(n) (per channel).
+        let mut proj = [Vec3::ZERO; 9];
+        for (k, &n) in normals.iter().enumerate() {
+            let y = sh::basis(n);
+            for m in 0..9 {
+                proj[m] += e[k] * y[m] * (4.0 * std::f32::consts::PI / NORMALS as f32);
+            }
+        }
+        let projected = |n: Vec3| {
+            let y = sh::basis(n);
+            (0..9).fold(Vec3::ZERO, |s, m| s + proj[m] * y[m])
+        };
+        let toward = (nearest(site) - site).normalize_or_zero();
+        let mut row = [[0.0f64; 5]; 2];
+        for (k, &n) in normals.iter().enumerate() {
+            let p = projected(n);
+            let ours = q.map_or(p, |q| sh::irradiance_over_pi(&probes.sh[q], n));
+            let terms = [
+                (ours - e[k]).length_squared(),
+                (p - e[k]).length_squared(),
+                (ours - p).length_squared(),
+                se[k].length_squared(),
+                e[k].element_sum() / 3.0,
+            ];
+            for (part, keep) in [(0, true), (1, n.dot(toward) > 0.5)] {
+                if keep {
+                    for t in 0..5 {
+                        row[part][t] += terms[t] as f64;
+                    }
+                }
+            }
+        }
+        if q.is_some() {
+            let near = usize::from(d >= near_field);
+            for t in 0..5 {
+                sums[near][t] += row[0][t];
+            }
+        }
+        // Noise taken out of the terms against the path tracer.
+        let rel = |row: &[f64; 5], n: f64| {
+            let mean = row[4] / n;
+            let f = |t: usize| (row[t] / (3.0 * n)).sqrt() / mean;
+            let clean = |t: usize| 100.0 * (f(t) * f(t) - f(3) * f(3)).max(0.0).sqrt();
+            format!(
+                "{:5.1}% {:5.1}% {:5.1}% ±{:4.1}%",
+                clean(0),
+                clean(1),
+                100.0 * f(2),
+                100.0 * f(3)
+            )
+        };
+        let facing = normals.iter().filter(|n| n.dot(toward) > 0.5).count() as f64;
+        println!(
+            "  {} at {site:.3}, emitter {d:.3} away: {} | {}",
+            q.map_or("point     ".into(), |q| format!("probe {q:4}")),
+            rel(&row[0], NORMALS as f64),
+            rel(&row[1], facing)
+        );
+    }
+    for (part, name) in [(0, "near"), (1, "far")] {
+        let s = &sums[part];
+        let count = chosen
+            .iter()
+            .filter(|c| usize::from(c.0 >= near_field) == part)
+            .count() as f64
+            * NORMALS as f64;
+        if count == 0.0 {
+            continue;
+        }
+        let mean = s[4] / count;
+        let g = |t: usize| (s[t] / (3.0 * count)).sqrt() / mean;
+        let clean = |t: usize| 100.0 * (g(t) * g(t) - g(3) * g(3)).max(0.0).sqrt();
+        println!(
+            "{name} probes (noise taken out): probe vs path tracer {:.1}% (noise {:.1}%), truncation {:.1}%, bake vs projection {:.1}%",
+            clean(0),
+            100.0 * g(3),
+            clean(1),
+            100.0 * g(2)
         );
     }
 }

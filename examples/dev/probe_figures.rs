@@ -7,26 +7,32 @@
 //! Bakes `SCENE` at `QUALITY` (draft, medium or high; default medium) with `BUDGET` probes
 //! (default the library's) of `RAYS` rays each (default the library's), once per `REFINE` share
 //! of the budget kept for refinement (default: 0, the uniform grid, then the library's default).
-//! Then draws `POINTS` (default 500) random free-space points between the first bake's probes
-//! with random normals (`Probes::points_between`, over all cells and over whole cells) and
-//! path-traces `H/π` there about the normal with `SAMPLES` paths (default 1024): every bake is
-//! measured at the same points against the same reference. Prints the probe count, the probe
-//! stage's seconds against the bake's, and the relative RMSE of the interpolated probes with the
-//! reference's noise taken out, at each bake's own probes and at the shared points.
+//! Then draws `POINTS` (default 1000) random free-space points of the scene with random normals
+//! (`probes::measure::free_space_points`) and path-traces `H/π` there about the normal with
+//! `SAMPLES` paths (default 512): every bake is measured at the same points against the same
+//! reference. Prints the probe count, the probe stage's seconds against the bake's, and the
+//! relative RMSE of the interpolated probes with the reference's noise taken out, at each
+//! bake's own probes and at the shared points: over all of them, and apart over the points
+//! farther and closer than the budget's spacing from an emitter (`probes::measure`). Below
+//! that, where the squared error lies: the points in the slab between the bake's outermost
+//! probes and the bounds, and the worst points.
 
 use std::path::Path;
 
 use glam::Vec3;
+use lightbake::probes::measure::{self, SplitError};
 use lightbake::probes::{DEFAULT_REFINE, ProbeParams, Probes};
 use lightbake::reference::ReferenceParams;
 use lightbake::reference::points::{self, Normals, Point};
 use lightbake::trace::Tracer;
-use lightbake::{BakeConfig, NoProgress, metrics};
+use lightbake::{BakeConfig, Baked, NoProgress};
 
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let [scene, rest @ ..] = &args[..] else {
-        panic!("usage: probe_figures SCENE [QUALITY] [BUDGET] [POINTS] [SAMPLES] [RAYS]")
+        panic!(
+            "usage: probe_figures SCENE [QUALITY] [BUDGET] [POINTS] [SAMPLES] [RAYS] [REFINE...]"
+        )
     };
     let quality = rest.first().map_or("medium", String::as_str);
     let mut config = match quality {
@@ -38,8 +44,8 @@ fn main() {
     if let Some(b) = rest.get(1) {
         params.budget = b.parse().expect("BUDGET");
     }
-    let n: usize = rest.get(2).map_or(500, |s| s.parse().expect("POINTS"));
-    let samples: u32 = rest.get(3).map_or(1024, |s| s.parse().expect("SAMPLES"));
+    let n: usize = rest.get(2).map_or(1000, |s| s.parse().expect("POINTS"));
+    let samples: u32 = rest.get(3).map_or(512, |s| s.parse().expect("SAMPLES"));
     if let Some(r) = rest.get(4) {
         params.rays = r.parse().expect("RAYS");
     }
@@ -76,15 +82,7 @@ fn main() {
     }
     let baked = &bakes[0].1;
     let tracer = Tracer::new(&baked.scene);
-    let emitters: Vec<Vec3> = (0..baked.texels.position.len())
-        .filter(|&i| baked.texels.emission[i].max_element() > 0.0)
-        .map(|i| baked.texels.position[i])
-        .collect();
-    let reference = ReferenceParams {
-        max_samples: samples,
-        seed: 7,
-        ..ReferenceParams::like(&baked.config)
-    };
+    let near_field = measure::near_field(&baked.scene, params.budget);
     let trace = |at: &[(Vec3, Vec3)]| {
         let pts: Vec<Point> = (at.iter())
             .map(|&(position, normal)| Point {
@@ -93,6 +91,11 @@ fn main() {
                 shading_normal: normal,
             })
             .collect();
+        let reference = ReferenceParams {
+            max_samples: samples,
+            seed: 7,
+            ..ReferenceParams::like(&baked.config)
+        };
         points::trace_about(
             (&baked.scene, &baked.texels, &tracer),
             &pts,
@@ -102,31 +105,34 @@ fn main() {
         )
         .expect("reference")
     };
-    // Between the probes: the same points for every bake, from the first's cells.
-    let first = &bakes[0].2;
-    let shared: Vec<Vec<(Vec3, Vec3)>> = (1..3)
-        .map(|m| first.points_between(&tracer, n, 3, m == 2))
-        .collect();
-    let shared_ref: Vec<_> = shared.iter().map(|at| trace(at)).collect();
+    // The same free-space points for every bake.
+    let shared = measure::free_space_points(&baked.scene, &tracer, n, 3);
+    let shared_ref = trace(&shared);
+    println!(
+        "{} free-space points; near field: closer than {near_field:.3} to an emitter",
+        shared.len()
+    );
     for (refine, _, probes) in &bakes {
-        // At the bake's own valid probes (no interpolation: SH truncation and gather noise).
+        // At the bake's own gathered probes (no interpolation: SH truncation, gather noise and
+        // the bake's own error).
         let at_probes = at_probes(probes, n);
         let own = trace(&at_probes);
-        for mode in 0..3 {
-            let (at, r) = match mode {
-                0 => (&at_probes, &own),
-                m => (&shared[m - 1], &shared_ref[m - 1]),
-            };
-            report(*refine, mode, probes, (&tracer, &emitters), at, r);
+        for (what, at, r) in [
+            ("at the probes", &at_probes, &own),
+            ("free space", &shared, &shared_ref),
+        ] {
+            report(*refine, what, probes, (baked, &tracer, near_field), at, r);
         }
     }
 }
 
-/// Up to `n` of the valid probes, each with a normal of its own.
+/// Up to `n` of the gathered probes (`Probes::gathered`), each with a normal of its own.
 fn at_probes(probes: &Probes, n: usize) -> Vec<(Vec3, Vec3)> {
+    let gathered = probes.gathered();
+    let count = gathered.iter().filter(|&&g| g).count();
     (0..probes.len())
-        .filter(|&i| probes.valid[i])
-        .step_by((probes.valid_count() / n).max(1))
+        .filter(|&i| gathered[i])
+        .step_by((count / n).max(1))
         .map(|i| {
             let u = (i as f32 * 0.618_034).fract();
             let v = (i as f32 * 0.414_214).fract();
@@ -141,63 +147,82 @@ fn at_probes(probes: &Probes, n: usize) -> Vec<(Vec3, Vec3)> {
         .collect()
 }
 
-/// Points closer than this to an emissive texel are reported apart.
-const NEAR: f32 = 0.25;
-
 /// Prints the probes' error at `at` against the reference `r`.
 fn report(
     refine: f32,
-    mode: usize,
+    what: &str,
     probes: &Probes,
-    (tracer, emitters): (&Tracer, &[Vec3]),
+    (baked, tracer, near_field): (&Baked, &Tracer, f32),
     at: &[(Vec3, Vec3)],
     r: &lightbake::reference::Reference,
 ) {
     let ours: Vec<Vec3> = (at.iter())
         .map(|&(p, n)| probes.irradiance_over_pi(p, n, Some(tracer)))
         .collect();
-    let rmse = metrics::rmse_over_mean(&ours, &r.mean, &[]);
-    let noise = metrics::noise_over_mean(&r.std_error, &r.mean, &[]);
-    let bias = metrics::relative_bias(&ours, &r.mean, &[]);
+    let positions: Vec<Vec3> = at.iter().map(|a| a.0).collect();
+    let near = measure::near_emitters(&baked.scene, &baked.texels, &positions, near_field);
+    let SplitError {
+        all,
+        far,
+        near: near_error,
+        near_points,
+        noise,
+    } = measure::split_error(&ours, &r.mean, &r.std_error, &near);
     println!(
-        "  refine {refine}: {} points ({}): relative RMSE {:.2}% without the reference's noise ({:.2}% raw, noise {:.2}%), bias {:+.2}%",
+        "  refine {refine}, {what}: {} points: all {:.2}%, far {:.2}%, near {:.2}% ({near_points} points); reference noise {:.2}%",
         at.len(),
-        ["at the probes", "all free space", "whole cells"][mode],
-        100.0 * metrics::without_noise(rmse, noise),
-        100.0 * rmse,
+        100.0 * all,
+        100.0 * far,
+        100.0 * near_error,
         100.0 * noise,
-        100.0 * bias
     );
-    // The same without the points near an emitter (whose light is near-singular and dominates
-    // the squared error).
-    let near: Vec<u32> = (0..at.len() as u32)
+    // Where the squared error lies.
+    let sq: Vec<f32> = (0..at.len())
+        .map(|k| (ours[k] - r.mean[k]).length_squared())
+        .collect();
+    let all_sq: f32 = sq.iter().sum();
+    let grid = probes.grid.expect("a grid");
+    let last = Vec3::from(grid.count.map(|c| c.saturating_sub(1) as f32));
+    let slab: Vec<usize> = (0..at.len())
         .filter(|&k| {
-            let p = at[k as usize].0;
-            emitters.iter().any(|e| e.distance(p) < NEAR)
+            let g = grid.local(at[k].0);
+            g.cmplt(Vec3::ZERO).any() || g.cmpgt(last).any()
         })
         .collect();
-    let rmse = metrics::rmse_over_mean(&ours, &r.mean, &near);
-    let noise = metrics::noise_over_mean(&r.std_error, &r.mean, &near);
+    // The far points inside the grid's box and in the slab, apart.
+    for (name, inside) in [("inside the grid's box", true), ("in the slab", false)] {
+        let skip: Vec<u32> = (0..at.len() as u32)
+            .filter(|k| {
+                near.binary_search(k).is_ok()
+                    || slab.binary_search(&(*k as usize)).is_ok() == inside
+            })
+            .collect();
+        let e = measure::split_error(&ours, &r.mean, &r.std_error, &skip);
+        println!(
+            "    far, {name}: {:.2}% ({} points)",
+            100.0 * e.far,
+            at.len() - skip.len()
+        );
+    }
+    let near_sq: f32 = near.iter().map(|&k| sq[k as usize]).sum();
+    let slab_sq: f32 = slab.iter().map(|&k| sq[k]).sum();
     println!(
-        "    without the {} points within {NEAR} of an emitter texel: {:.2}% ({:.2}% raw)",
-        near.len(),
-        100.0 * metrics::without_noise(rmse, noise),
-        100.0 * rmse,
+        "    squared error: near {:.0}%, in the slab outside the grid {:.0}% ({} points)",
+        100.0 * near_sq / all_sq,
+        100.0 * slab_sq / all_sq,
+        slab.len()
     );
-    let mut worst: Vec<(f32, usize)> = (0..at.len())
-        .map(|k| ((ours[k] - r.mean[k]).length_squared(), k))
-        .collect();
+    let mut worst: Vec<(f32, usize)> = sq.iter().copied().zip(0..).collect();
     worst.sort_by(|a, b| b.0.total_cmp(&a.0));
-    let all: f32 = worst.iter().map(|w| w.0).sum();
-    let top: f32 = worst.iter().take(at.len() / 10).map(|w| w.0).sum();
-    println!(
-        "    worst tenth of the points: {:.0}% of the squared error",
-        100.0 * top / all
-    );
     for &(_, k) in worst.iter().take(3) {
         println!(
-            "    p {:.3} n {:.2}: probes {:.4}, reference {:.4} ± {:.4}",
-            at[k].0, at[k].1, ours[k].x, r.mean[k].x, r.std_error[k].x
+            "    p {:.3} n {:.2} (emitter {:.2} away): probes {:.4}, reference {:.4} ± {:.4}",
+            at[k].0,
+            at[k].1,
+            measure::emitter_distance(&baked.scene, &baked.texels, at[k].0),
+            ours[k].x,
+            r.mean[k].x,
+            r.std_error[k].x
         );
     }
 }

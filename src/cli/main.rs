@@ -264,7 +264,7 @@ struct BakeArgs {
     #[arg(long, value_name = "NODE")]
     probes_from: Option<String>,
     /// Share of the probe budget kept for refining the grid's cells where light changes, 0 to 1
-    /// [default: 0.5]; 0 puts the whole budget on a uniform grid.
+    /// [default: 0.25]; 0 puts the whole budget on a uniform grid.
     #[arg(long, value_name = "SHARE")]
     probes_refine: Option<f32>,
     /// Keep texel sample points where they are even inside geometry (to measure leaks).

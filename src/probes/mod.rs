@@ -16,9 +16,11 @@
 //!                     ─ volume ─────▶ <stem>_probes.ktx2, Bevy's irradiance volume (grids)
 //! ```
 //!
-//! **Placement** (`place.rs`): a regular grid over the scene's bounds at the spacing half the
-//! budget allows (`--probes N`, default [`DEFAULT_BUDGET`]; [`ProbeParams::refine`] keeps the
-//! other half for refinement), or where a node of the scene says
+//! **Placement** (`place.rs`): a regular grid spanning the scene's free space (found by a sketch
+//! grid: how far free probes see along the axes), its outermost probes a fifth of a spacing
+//! from the walls, at the spacing three quarters of the budget allow (`--probes N`, default
+//! [`DEFAULT_BUDGET`]; [`ProbeParams::refine`] keeps the rest for refinement), or where a node
+//! of the scene says
 //! (`--probes-from NODE`: its children's positions, or a grid filling its box, the unit cube
 //! under its transform, in the box's axes); probes buried in solids (or outside an
 //! interior's closed shell) are marked invalid, probes too close to a surface are moved off it.
@@ -70,15 +72,16 @@
 //! | `rays`          | 256     | sphere rays per probe (+ as many emitter samples); noise ∝ 1/√rays |
 //! | `indirect_only` | false   | leave out punctual lights' direct light                       |
 //! | `from`          | none    | a node's children or box instead of the automatic grid        |
-//! | `refine`        | 0.5     | share of the budget kept for refining cells; 0: a uniform grid of the whole budget |
+//! | `refine`        | 0.25    | share of the budget kept for refining cells; 0: a uniform grid of the whole budget |
 //!
 //! Limits: one level of refinement, by two along each axis; a probe inside a closed
 //! double-sided mesh is not found buried; trilinear interpolation still blurs light that
-//! changes faster than the finer spacing, and L2 SH cannot hold the sharp edge of an emitter a
-//! few centimetres away (at the probes themselves); points between the outermost probes and the
-//! bounds (half a spacing) read the nearest face of the grid.
+//! changes faster than the finer spacing (within centimetres of an emitter); points between the
+//! outermost probes and the walls (a fifth of a spacing) read the nearest face of the grid.
+//! [`measure`] says how the probes are measured against the path tracer.
 
 pub mod file;
+pub mod measure;
 mod place;
 pub mod refine;
 pub mod sh;
@@ -107,7 +110,7 @@ pub const DEFAULT_BUDGET: u32 = 1024;
 /// Sphere rays per probe.
 pub const DEFAULT_RAYS: u32 = 256;
 /// Share of the budget kept for refining cells where light changes.
-pub const DEFAULT_REFINE: f32 = 0.5;
+pub const DEFAULT_REFINE: f32 = 0.25;
 /// Probes per parallel work item (one progress tick each).
 const CHUNK: usize = 16;
 /// Mixed into the seed: the probes' streams differ from the texels' of the same index.
@@ -241,6 +244,24 @@ impl Probes {
     /// Valid probes.
     pub fn valid_count(&self) -> usize {
         self.valid.iter().filter(|&&v| v).count()
+    }
+
+    /// Per probe, whether it holds light gathered at its position: valid, and not an added
+    /// probe constrained to its coarse cell's interpolated value ([`refine`]).
+    #[must_use]
+    pub fn gathered(&self) -> Vec<bool> {
+        let mut gathered = self.valid.clone();
+        if let (Some(grid), false) = (&self.grid, self.refinement.is_empty()) {
+            for (k, c) in refine::constrained(grid, &self.refinement)
+                .into_iter()
+                .enumerate()
+            {
+                if let Some(g) = gathered.get_mut(grid.len() + k) {
+                    *g &= !c;
+                }
+            }
+        }
+        gathered
     }
 
     /// The interpolated coefficients at `p` (see the module docs); `visible(q)` says whether

@@ -1,15 +1,19 @@
 //! Where probes go: a regular grid over the scene's bounds at the spacing the budget allows,
 //! probes buried in solids marked invalid, probes too close to a surface moved away from it.
 //!
-//! **Grid.** The spacing `s = ∛(V/N)` for the bounds' volume `V` and the grid's share `N` of the
-//! budget (`ProbeParams::grid_budget`; the rest goes to refinement, `super::refine`); each axis gets
-//! `⌊extent/s⌋` probes (at least one) at the centres of equal cells, so probes sit half a cell
-//! from the bounds and the count never exceeds the budget.
+//! **Grid.** The automatic grid spans the free space's box ([`fit`]): a sketch grid of an
+//! eighth of the budget over the scene's bounds finds how far its free probes see along the
+//! axes. The grid's share `N` of the budget (`ProbeParams::grid_budget`; the rest goes to
+//! refinement, `super::refine`) sets the spacing `s`, the smallest for which `⌊(extent −
+//! 2·CLEARANCE·s)/s⌋ + 1` probes per axis fit in `N`; the outermost probes lie `CLEARANCE·s`
+//! inside the box's faces ([`spanning`]), so points beside a wall lie between probes. A node's
+//! box (below) is filled cell-centred ([`grid`]: `⌊extent/s⌋` probes per axis at the centres of
+//! equal cells, `s = ∛(V/N)`), so that Bevy's volume is the box.
 //!
 //! **From a node** (`--probes-from NODE`, [`start`]): the node's children's world positions,
 //! one probe each (the artist's placement: no budget, no grid); or, when the node has no
 //! children, its box — the unit cube centred on the node (side 1, Bevy's light-probe volume)
-//! under its world transform — filled with the grid above in the box's own axes.
+//! under its world transform — filled with the cell-centred grid in the box's own axes.
 //!
 //! **Buried.** From each probe `TEST_RAYS` rays go out over the sphere (a Hammersley set turned
 //! by the probe's own random stream). A probe is buried — inside a closed solid, or outside
@@ -47,6 +51,8 @@ pub(crate) const CLEARANCE: f32 = 0.2;
 const NUDGES: u32 = 3;
 /// Random-stream purpose of the buried test (the gather uses its own).
 const PLACE: u64 = 1;
+/// Random-stream purpose of the sketch grid's buried test ([`fit`]).
+const FIT: u64 = 3;
 
 /// The grid and what the tests found, before any light is gathered.
 #[derive(Clone, Debug)]
@@ -67,7 +73,10 @@ pub(crate) struct Placement {
 /// Where the probes start, before the tests.
 #[derive(Clone, Debug, PartialEq)]
 pub(crate) enum Start {
-    /// A grid (automatic, or filling a node's box).
+    /// The automatic grid of `budget` probes over the free space within the bounds `lo..hi`
+    /// ([`fit`]: the free space is found with the tracer).
+    Fit { lo: Vec3, hi: Vec3, budget: u32 },
+    /// A grid (filling a node's box).
     Grid(Grid),
     /// Positions given one by one (a node's children).
     Points(Vec<Vec3>),
@@ -79,13 +88,7 @@ pub(crate) fn start(scene: &Scene, params: &ProbeParams, input: &Path) -> Result
     let budget = params.grid_budget();
     let Some(name) = &params.from else {
         let (lo, hi) = bounds(scene).unwrap_or((Vec3::ZERO, Vec3::ZERO));
-        let (origin, step, count) = grid(lo, hi, budget);
-        return Ok(Start::Grid(Grid {
-            origin,
-            step,
-            count,
-            rotation: Quat::IDENTITY,
-        }));
+        return Ok(Start::Fit { lo, hi, budget });
     };
     let named: Vec<&SceneNode> = (scene.nodes.iter())
         .filter(|n| n.name.as_deref() == Some(name.as_str()))
@@ -190,10 +193,117 @@ pub(crate) fn grid(lo: Vec3, hi: Vec3, budget: u32) -> (Vec3, Vec3, [u32; 3]) {
     (lo + extent / cell * 0.5, step, count)
 }
 
+/// Probes of the sketch [`fit`] tests, as a share of the budget.
+const SKETCH: u32 = 8;
+
+/// The automatic grid for `budget` probes within the bounds `lo..hi`, and the rays cast: a
+/// sketch grid of an eighth of the budget finds the free space's box (from each of its
+/// probes that is not buried, a ray along each axis both ways; the box reaches the farthest
+/// surface any of them meets, or the bounds where a ray escapes), and the grid spans that box
+/// with its outermost probes a clearance from the box's faces ([`spanning`]). So a room whose
+/// walls are solids gets probes up to its inner faces, not in its walls, and points beside a
+/// wall or under a ceiling light lie between probes, not beyond the outermost ones.
+pub(crate) fn fit(tracer: &Tracer, (lo, hi): (Vec3, Vec3), budget: u32, seed: u64) -> (Grid, u64) {
+    let (origin, step, count) = grid(lo, hi, (budget / SKETCH).max(8));
+    let sketch = Grid {
+        origin,
+        step,
+        count,
+        rotation: Quat::IDENTITY,
+    };
+    let axes = [Vec3::X, Vec3::Y, Vec3::Z];
+    let found: Vec<Option<(Vec3, Vec3)>> = (0..sketch.len())
+        .into_par_iter()
+        .map(|i| {
+            let p = sketch.position(unflatten(i, count));
+            let shift = Rng::new(seed, i as u64, FIT).next_vec2();
+            if buried(tracer, p, shift) {
+                return None;
+            }
+            let (mut low, mut high) = (lo, hi);
+            for (a, &axis) in axes.iter().enumerate() {
+                if let Some(hit) = tracer.closest(p, axis, f32::INFINITY) {
+                    high[a] = (p[a] + hit.t).min(hi[a]);
+                }
+                if let Some(hit) = tracer.closest(p, -axis, f32::INFINITY) {
+                    low[a] = (p[a] - hit.t).max(lo[a]);
+                }
+            }
+            Some((low, high))
+        })
+        .collect();
+    let rays = sketch.len() as u64 * u64::from(TEST_RAYS + 6);
+    // The farthest any free probe sees along each axis (the bounds without any).
+    let (mut free_lo, mut free_hi) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
+    for (low, high) in found.iter().flatten() {
+        free_lo = free_lo.min(*low);
+        free_hi = free_hi.max(*high);
+    }
+    if !(free_lo.cmple(free_hi).all()) {
+        (free_lo, free_hi) = (lo, hi);
+    }
+    let (origin, step, count) = spanning(free_lo, free_hi, budget);
+    let grid = Grid {
+        origin,
+        step,
+        count,
+        rotation: Quat::IDENTITY,
+    };
+    (grid, rays)
+}
+
+/// The grid of at most `budget` probes spanning the box `lo..hi`: (origin, step, count). Its
+/// outermost probes lie `CLEARANCE` of the spacing inside the box's faces (what the
+/// clearance test would move them to), the others evenly between; an axis shorter than the
+/// spacing gets one probe, at its middle.
+pub(crate) fn spanning(lo: Vec3, hi: Vec3, budget: u32) -> (Vec3, Vec3, [u32; 3]) {
+    let extent = (hi - lo).max(Vec3::ZERO);
+    // From below the cell-centred grid's spacing, widened until the probes fit the budget.
+    let (_, start, cells) = grid(lo, hi, budget);
+    let finest = (0..3)
+        .filter(|&a| cells[a] > 1)
+        .map(|a| start[a])
+        .fold(f32::INFINITY, f32::min);
+    let mut s = match finest.is_finite() {
+        true => 0.8 * finest,
+        false => start.max_element(),
+    }
+    .max(1e-6);
+    let (mut count, mut inner) = ([1u32; 3], extent);
+    for _ in 0..1000 {
+        inner = (extent - Vec3::splat(2.0 * CLEARANCE * s)).max(Vec3::ZERO);
+        count = std::array::from_fn(|a| match extent[a] >= s {
+            true => (inner[a] / s + 1e-3).floor() as u32 + 1,
+            false => 1,
+        });
+        if count.iter().map(|&c| u64::from(c)).product::<u64>() <= u64::from(budget.max(1)) {
+            break;
+        }
+        s *= 1.01;
+    }
+    let step = Vec3::from(std::array::from_fn::<f32, 3, _>(|a| match count[a] {
+        1 => s.max(extent[a]),
+        c => inner[a] / (c - 1) as f32,
+    }));
+    let origin = Vec3::from(std::array::from_fn::<f32, 3, _>(|a| match count[a] {
+        1 => lo[a] + extent[a] * 0.5,
+        _ => lo[a] + (extent[a] - inner[a]) * 0.5,
+    }));
+    (origin, step, count)
+}
+
 /// Tests the probes from `start` (see the module docs), each probe's streams seeded by `seed`
 /// and its index.
 pub(crate) fn place(tracer: &Tracer, start: Start, seed: u64) -> Placement {
+    let (start, fit_rays) = match start {
+        Start::Fit { lo, hi, budget } => {
+            let (grid, rays) = fit(tracer, (lo, hi), budget, seed);
+            (Start::Grid(grid), rays)
+        }
+        other => (other, 0),
+    };
     let (grid, positions, clearance) = match start {
+        Start::Fit { .. } => unreachable!("fitted above"),
         Start::Grid(g) => {
             let positions = (0..g.len()).map(|i| g.position(unflatten(i, g.count)));
             let clearance = vec![CLEARANCE * g.step.min_element(); g.len()];
@@ -219,6 +329,7 @@ pub(crate) fn place(tracer: &Tracer, start: Start, seed: u64) -> Placement {
     };
     let mut placement = settle_all(tracer, &positions, &clearance, seed, 0);
     placement.grid = grid;
+    placement.rays += fit_rays;
     placement
 }
 
@@ -350,6 +461,34 @@ mod tests {
         }
         // A flat scene gets one layer, in its plane.
         let (origin, _, count) = grid(Vec3::ZERO, Vec3::new(4.0, 0.0, 4.0), 100);
+        assert_eq!(count[1], 1);
+        assert_eq!(origin.y, 0.0);
+    }
+
+    #[test]
+    fn the_spanning_grid_keeps_to_the_budget_and_reaches_the_faces() {
+        let (lo, hi) = (Vec3::new(-2.0, 0.0, -1.0), Vec3::new(2.0, 2.0, 1.0));
+        for budget in [100, 512, 1024, 4096] {
+            let (origin, step, count) = spanning(lo, hi, budget);
+            assert!(
+                count.iter().product::<u32>() <= budget,
+                "{budget}: {count:?}"
+            );
+            // Nearly all of the budget: one more probe along the longest axis would not fit.
+            let more = (count[0] + 1) * count[1] * count[2];
+            assert!(more > budget / 2, "{budget}: {count:?} wastes the budget");
+            let last = origin + step * Vec3::from(count.map(|c| (c - 1) as f32));
+            for a in 0..3 {
+                let (low, high) = (origin[a] - lo[a], hi[a] - last[a]);
+                assert!((low - high).abs() < 1e-4, "{budget}: not centred along {a}");
+                assert!(
+                    low > 0.0 && low <= CLEARANCE * step[a] + 1e-5,
+                    "{budget}: {low} from the face"
+                );
+            }
+        }
+        // A flat box gets one layer, in its plane.
+        let (origin, _, count) = spanning(Vec3::ZERO, Vec3::new(4.0, 0.0, 4.0), 100);
         assert_eq!(count[1], 1);
         assert_eq!(origin.y, 0.0);
     }

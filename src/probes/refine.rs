@@ -275,8 +275,10 @@ fn grid_point(grid: &Grid, c: [u32; 3]) -> Vec3 {
     grid.origin + grid.rotation * (grid.step * g)
 }
 
-/// Which added probes are constrained to a coarse cell's value (they are not gathered).
-pub(crate) fn constrained(grid: &Grid, refinement: &Refinement) -> Vec<bool> {
+/// Which added probes are constrained to a coarse cell's value (they are not gathered), in
+/// the order of `refinement.nodes`.
+#[must_use]
+pub fn constrained(grid: &Grid, refinement: &Refinement) -> Vec<bool> {
     (Refinement::nodes_of(grid, &refinement.cells).into_iter())
         .map(|(_, _, coarse)| coarse)
         .collect()
