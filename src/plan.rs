@@ -48,8 +48,10 @@
 //!   connected surface between creases: a wall, a cabinet door, a cup) a density factor, ∝ the
 //!   fourth root of its measured mean square error, within ×¼…×4; regions nobody sees (buried,
 //!   facing into geometry) or no light reaches get ×⅛. Seen regions keep at least the preset's
-//!   density; the total rises (up to ×4 and the preset's budget) when the sample is sure the
-//!   error is above what the target leaves beside the noise. The atlas, texels and validity
+//!   density, and only that while the sample's central estimate is within what the target
+//!   leaves beside the noise; above it, the regions with most error rise first until the
+//!   prediction meets it (up to ×4 and the preset's budget). The sample gathers its points
+//!   where the pilot's light steps, weighed by one over their chance (`gathered`). The atlas, texels and validity
 //!   are then laid out once, and the pilot's noise at `PILOT_RAYS` is the transport plan's
 //!   first measurement (its pair is not cast again on the new atlas). A small scene is
 //!   measured on its final atlas, uniform at the preset's density; when no factor is asked,
