@@ -22,7 +22,6 @@ use glam::Vec3;
 
 use super::place;
 use crate::metrics;
-use crate::sampling::Rng;
 use crate::scene::{LightKind, Scene};
 use crate::texels::Texels;
 use crate::trace::Tracer;
@@ -38,20 +37,7 @@ pub fn free_space_points(scene: &Scene, tracer: &Tracer, n: usize, seed: u64) ->
     let Some((lo, hi)) = place::bounds(scene) else {
         return Vec::new();
     };
-    let mut points = Vec::with_capacity(n);
-    for k in 0..(n as u64).saturating_mul(200) {
-        if points.len() == n {
-            break;
-        }
-        let mut rng = Rng::new(seed ^ SALT, k, 0);
-        let u = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32());
-        let p = lo + (hi - lo) * u;
-        let normal = place::uniform_sphere(rng.next_vec2());
-        if !place::buried(tracer, p, rng.next_vec2()) {
-            points.push((p, normal));
-        }
-    }
-    points
+    place::free_points(tracer, n, seed ^ SALT, |u| lo + (hi - lo) * u, |_| true)
 }
 
 /// The near-field distance for `budget` probes in `scene`: the spacing of a uniform grid of

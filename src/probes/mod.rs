@@ -438,33 +438,18 @@ impl Probes {
                 lo + (hi - lo) * u
             }
         };
-        let mut points = Vec::with_capacity(n);
-        for k in 0..(n as u64).saturating_mul(200) {
-            if points.len() == n {
-                break;
-            }
-            let mut rng = Rng::new(seed ^ SALT, k, 0);
-            let u = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32());
-            let p = in_box(u);
-            let normal = uniform_sphere(rng.next_vec2());
-            if place::buried(tracer, p, rng.next_vec2()) {
-                continue;
-            }
-            if let (true, Some(grid)) = (whole_cells, &self.grid) {
-                let (mut all, mut corners) = (true, 0);
-                self.sh_at(p, |q| {
-                    corners += 1;
-                    all &= !tracer.occluded(p, q);
-                    true
-                });
-                let every = corners == 1 << grid.count.iter().filter(|&&c| c > 1).count();
-                if !(all && every) {
-                    continue;
-                }
-            }
-            points.push((p, normal));
-        }
-        points
+        place::free_points(tracer, n, seed ^ SALT, in_box, |p| {
+            let (true, Some(grid)) = (whole_cells, &self.grid) else {
+                return true;
+            };
+            let (mut all, mut corners) = (true, 0);
+            self.sh_at(p, |q| {
+                corners += 1;
+                all &= !tracer.occluded(p, q);
+                true
+            });
+            all && corners == 1 << grid.count.iter().filter(|&&c| c > 1).count()
+        })
     }
 
     /// `E/π` at `p` about unit normal `n` from the interpolated coefficients, in the lightmaps'

@@ -398,6 +398,31 @@ fn settle(tracer: &Tracer, mut p: Vec3, shift: Vec2, clearance: f32) -> (Vec3, b
     (p, true, moved, rays)
 }
 
+/// Up to `n` random points with random unit normals: point `k` comes from its own stream
+/// `(salt, k)`, at `at(u)` for a point `u` of the unit cube, and is kept when it is not buried
+/// and `keep` accepts it; at most 200 draws per point asked.
+pub(crate) fn free_points(
+    tracer: &Tracer,
+    n: usize,
+    salt: u64,
+    at: impl Fn(Vec3) -> Vec3,
+    mut keep: impl FnMut(Vec3) -> bool,
+) -> Vec<(Vec3, Vec3)> {
+    let mut points = Vec::with_capacity(n);
+    for k in 0..(n as u64).saturating_mul(200) {
+        if points.len() == n {
+            break;
+        }
+        let mut rng = Rng::new(salt, k, 0);
+        let p = at(Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()));
+        let normal = uniform_sphere(rng.next_vec2());
+        if !buried(tracer, p, rng.next_vec2()) && keep(p) {
+            points.push((p, normal));
+        }
+    }
+    points
+}
+
 /// Whether the point `p` is buried (the probes' test, its rays turned by `shift`).
 pub(crate) fn buried(tracer: &Tracer, p: Vec3, shift: Vec2) -> bool {
     look_around(tracer, p, shift, 0.0).0 > (MAX_BACK * TEST_RAYS as f32) as u32
