@@ -282,9 +282,9 @@ fn solve_shared(
         "transport",
         progress,
         |range, out| {
-            let mut hits = Vec::with_capacity(params.gather_rays as usize);
+            let mut scratch = montecarlo::RowScratch::new(params.gather_rays);
             for i in range {
-                context.texel_row(mine.start + i, &mut hits, out);
+                context.texel_row(mine.start + i, &mut scratch, out);
             }
         },
     )?;

@@ -102,7 +102,7 @@ use crate::scene::{self, LightKind, Scene};
 use crate::shard::Alone;
 use crate::texels::{RayEnd, Texels};
 use crate::trace::Tracer;
-use crate::transport::montecarlo::{self, Context, PUNCTUAL_GRID};
+use crate::transport::montecarlo::{self, Context, PUNCTUAL_GRID, RowScratch};
 use crate::transport::rows::{self, ChunkRows};
 use crate::transport::{Sources, Surfaces};
 use crate::{Error, Progress, Result, solve, texels};
@@ -1540,7 +1540,7 @@ struct Rebuild<'a> {
 impl Rebuild<'_> {
     fn rows(&self, range: Range<usize>, out: &mut ChunkRows) {
         let chunk = Instant::now();
-        let mut hits = Vec::new();
+        let mut scratch = RowScratch::default();
         let mut flagged = Vec::new();
         for i in range {
             if self.gone[i] {
@@ -1558,7 +1558,7 @@ impl Rebuild<'_> {
             }
             if self.changed[i] {
                 let t = Instant::now();
-                self.new.texel_row(i, &mut hits, out);
+                self.new.texel_row(i, &mut scratch, out);
                 let ns = t.elapsed().as_nanos() as u64;
                 self.traced_busy.fetch_add(ns, Ordering::Relaxed);
                 self.touched.lock().unwrap().push((i as u32, true));

@@ -28,6 +28,7 @@ use crate::config::TransportParams;
 use crate::lights::{Emitters, punctual_irradiance, triangle_point};
 use crate::sampling::{Rng, cosine_hemisphere, frame, hammersley, power_weight};
 use crate::texels::RayEnd;
+use crate::trace::Hit;
 use crate::{Progress, Result};
 
 /// Texels per parallel work item (one progress tick each).
@@ -56,6 +57,30 @@ pub(crate) fn build(
     Ok(transport)
 }
 
+/// [`Context::texel_row`]'s working space, reused from row to row: no allocation per texel.
+#[derive(Default)]
+pub(crate) struct RowScratch {
+    /// The row's texel hits, sorted into its entries.
+    hits: Vec<u32>,
+    /// The gathering rays that hit a front face: the hit, the ray's direction and its cosine
+    /// to the texel's normal.
+    pending: Vec<(Hit, Vec3, f32)>,
+    /// Where each of `pending` ends.
+    ends: Vec<RayEnd>,
+}
+
+impl RowScratch {
+    /// Space for rows of up to `rays` gathering rays.
+    pub(crate) fn new(rays: u32) -> RowScratch {
+        let k = rays as usize;
+        RowScratch {
+            hits: Vec::with_capacity(k),
+            pending: Vec::with_capacity(k),
+            ends: Vec::with_capacity(k),
+        }
+    }
+}
+
 /// What gathering reads: the surfaces, the options, the emitters to sample and the per-texel
 /// rays.
 pub(crate) struct Context<'a> {
@@ -73,10 +98,10 @@ impl Context<'_> {
     pub(crate) fn rows(&self, progress: &dyn Progress, direct_only: bool) -> Result<Transport> {
         let n = self.surfaces.texels.len();
         rows::build(n, CHUNK, "transport", progress, |range, out| {
-            let mut hits: Vec<u32> = Vec::with_capacity(self.params.gather_rays as usize);
+            let mut scratch = RowScratch::new(self.params.gather_rays);
             for i in range {
                 let start = out.col.len();
-                self.texel_row(i, &mut hits, out);
+                self.texel_row(i, &mut scratch, out);
                 if direct_only {
                     out.forget_row(start);
                 }
@@ -92,10 +117,10 @@ impl Context<'_> {
         texels.footprint_point(i, u) + texels.normal[i] * tracer.epsilon
     }
 
-    /// Gathers row `i` into `out` (`hits` is scratch space). `bake::incremental` draws the
-    /// same rays again without tracing them (`row_rays`): a change to what is drawn here, or
-    /// in what order, must be made there too.
-    pub(crate) fn texel_row(&self, i: usize, hits: &mut Vec<u32>, out: &mut ChunkRows) {
+    /// Gathers row `i` into `out`. `bake::incremental` draws the same rays again without
+    /// tracing them (`row_rays`): a change to what is drawn here, or in what order, must be
+    /// made there too.
+    pub(crate) fn texel_row(&self, i: usize, scratch: &mut RowScratch, out: &mut ChunkRows) {
         let Surfaces {
             scene,
             texels,
@@ -118,7 +143,6 @@ impl Context<'_> {
         let shift = rng.next_vec2();
         let mut escaped = 0u32;
         let mut emitted = Vec3::ZERO;
-        hits.clear();
         // This texel's direct light by source, when split: each contribution is added to its
         // source's term as it is added to the total.
         let terms = out.terms.len();
@@ -132,26 +156,42 @@ impl Context<'_> {
         };
         let emitter_source = |j: u32| self.sources.map_or(0, |s| s.of_texel(scene, texels, j));
 
-        // Gathering rays: form factors, sky, and the gathering half of emitter MIS.
+        // Gathering rays: form factors, sky, and the gathering half of emitter MIS. All K rays
+        // are traced first and their texels looked up after, so the lookups' cache misses
+        // overlap instead of stalling one ray at a time (same rays, same sums, same order).
+        let RowScratch {
+            hits,
+            pending,
+            ends,
+        } = scratch;
+        hits.clear();
+        pending.clear();
         for s in 0..k {
             let local = cosine_hemisphere(hammersley(s, k, shift));
             let dir = tx * local.x + ty * local.y + n * local.z;
             let origin = self.footprint_point(i, rng.next_vec2());
-            let (hit, j) = match texels.ray_end(tracer, origin, dir) {
-                RayEnd::Texel(hit, j) => (hit, j),
-                RayEnd::Escaped => {
-                    escaped += 1;
-                    continue;
-                }
-                RayEnd::Absorbed => continue,
+            match texels.ray_hit(tracer, origin, dir) {
+                Ok(hit) => pending.push((hit, dir, local.z)),
+                Err(RayEnd::Escaped) => escaped += 1,
+                Err(_) => {}
+            }
+        }
+        for (hit, _, _) in pending.iter() {
+            texels.prefetch_texel(hit);
+        }
+        ends.clear();
+        ends.extend(pending.iter().map(|&(hit, _, _)| texels.hit_end(hit)));
+        for (&(_, dir, cos), end) in pending.iter().zip(ends.iter()) {
+            let RayEnd::Texel(hit, j) = *end else {
+                continue;
             };
             hits.push(j);
             let le = texels.emission[j as usize];
             if le.max_element() > 0.0 {
-                let p_gather = local.z / PI;
+                let p_gather = cos / PI;
                 let (_, n_l) = triangle_point(scene, hit.triangle, hit.bary);
                 let p_light = self.emitters.pdf_toward(hit.triangle, n_l, dir, hit.t);
-                let e = le * (local.z * power_weight(kf * p_gather, lf * p_light));
+                let e = le * (cos * power_weight(kf * p_gather, lf * p_light));
                 emitted += e;
                 add_term(out, emitter_source(j), e);
             }
