@@ -73,6 +73,9 @@ pub(crate) struct Emitters {
     /// Per scene triangle: probability of picking it divided by its area (area density of a
     /// light sample landing at a point on it), 0 for non-emitters.
     pub(crate) pdf_area: Vec<f32>,
+    /// One bit per texel: it emits (any emitter, large ones too). A gathering ray asks this of
+    /// every texel it hits; loading the texel's emission instead missed the cache on most hits.
+    emissive: Vec<u64>,
 }
 
 impl Emitters {
@@ -118,11 +121,26 @@ impl Emitters {
             pdf_area[t as usize] =
                 (p as f64 / total) as f32 / triangle_area(scene, &scene.triangles[t as usize]);
         }
+        let mut emissive = vec![0u64; texels.len().div_ceil(64)];
+        for (j, le) in texels.emission.iter().enumerate() {
+            if le.max_element() > 0.0 {
+                emissive[j / 64] |= 1 << (j % 64);
+            }
+        }
         Emitters {
             triangles,
             cdf,
             pdf_area,
+            emissive,
         }
+    }
+
+    /// Texel `j` emits.
+    #[inline]
+    pub(crate) fn emits(&self, j: u32) -> bool {
+        self.emissive
+            .get(j as usize / 64)
+            .is_some_and(|w| w & (1 << (j % 64)) != 0)
     }
 
     pub(crate) fn is_empty(&self) -> bool {

@@ -8,7 +8,11 @@
 use glam::Vec3;
 use rayon::prelude::*;
 
-use crate::transport::Transport;
+use crate::texels::prefetch;
+use crate::transport::{Rows, Transport};
+
+/// Row entries between a radiosity read and the prefetch that precedes it.
+const AHEAD: usize = 8;
 
 /// One sweep; returns (Σ|ΔH|, Σ|H|) over all texels and channels. `emitted` is `π·Le` per
 /// texel when the rows carry emission, else empty.
@@ -46,9 +50,25 @@ pub(crate) fn radiosity(h: &[Vec3], albedo: &[Vec3], emitted: &[Vec3]) -> Vec<Ve
 /// Inlined into the sweep's loop, as it was before rows had two storages (a call per row).
 #[inline(always)]
 pub(crate) fn gathered(t: &Transport, i: usize, radiosity: &[Vec3]) -> Vec3 {
-    let gathered = t
-        .row(i)
-        .fold(Vec3::ZERO, |acc, (j, f)| acc + radiosity[j as usize] * f);
+    let gathered = match &t.rows {
+        // Each entry's radiosity is a random read from a large vector: ask for the one
+        // `AHEAD` entries on while this one is summed (the same sum, in the same order).
+        Rows::Weights(w) => {
+            let r = w.row_start[i] as usize..w.row_start[i + 1] as usize;
+            let (col, f) = (&w.col[r.clone()], &w.f[r]);
+            let mut acc = Vec3::ZERO;
+            for (k, (&j, &f)) in col.iter().zip(f).enumerate() {
+                if let Some(v) = col.get(k + AHEAD).and_then(|&a| radiosity.get(a as usize)) {
+                    prefetch(v);
+                }
+                acc += radiosity[j as usize] * f;
+            }
+            acc
+        }
+        Rows::Counts(_) => t
+            .row(i)
+            .fold(Vec3::ZERO, |acc, (j, f)| acc + radiosity[j as usize] * f),
+    };
     t.direct[i] + gathered
 }
 

@@ -186,8 +186,8 @@ impl Context<'_> {
                 continue;
             };
             hits.push(j);
-            let le = texels.emission[j as usize];
-            if le.max_element() > 0.0 {
+            if self.emitters.emits(j) {
+                let le = texels.emission[j as usize];
                 let p_gather = cos / PI;
                 let (_, n_l) = triangle_point(scene, hit.triangle, hit.bary);
                 let p_light = self.emitters.pdf_toward(hit.triangle, n_l, dir, hit.t);
