@@ -563,7 +563,22 @@ fn bake(args: &BakeArgs) -> Result<()> {
 /// README and the guide with it.
 const PARSE_ONLY: &str = "LIGHTBAKE_PARSE_ONLY";
 
+/// glibc serves buffers above its mmap threshold from fresh mappings and returns them when
+/// freed, but it raises the threshold to the largest such buffer freed so far. A bake's stages
+/// allocate and free large arrays one after another, so after the first ones the rest come
+/// from the heap, where smaller live allocations pin their pages. Fixing the threshold at
+/// glibc's starting 128 KiB cut peak memory to 0.69–0.83× on the courtyard and lamp room
+/// at `high` and the furnished interior at `medium`, for about 2% more time (page faults).
+fn fixed_mmap_threshold() {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    // SAFETY: `mallopt` only sets an allocator parameter; no other thread runs yet.
+    unsafe {
+        libc::mallopt(libc::M_MMAP_THRESHOLD, 128 * 1024);
+    }
+}
+
 fn main() -> ExitCode {
+    fixed_mmap_threshold();
     let cli = Cli::parse();
     if std::env::var_os(PARSE_ONLY).is_some() {
         return ExitCode::SUCCESS;
