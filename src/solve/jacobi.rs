@@ -11,9 +11,6 @@ use rayon::prelude::*;
 use crate::texels::prefetch;
 use crate::transport::{Rows, Transport};
 
-/// Row entries between a radiosity read and the prefetch that precedes it.
-const AHEAD: usize = 8;
-
 /// One sweep; returns (Σ|ΔH|, Σ|H|) over all texels and channels. `emitted` is `π·Le` per
 /// texel when the rows carry emission, else empty.
 pub(crate) fn sweep(
@@ -51,16 +48,19 @@ pub(crate) fn radiosity(h: &[Vec3], albedo: &[Vec3], emitted: &[Vec3]) -> Vec<Ve
 #[inline(always)]
 pub(crate) fn gathered(t: &Transport, i: usize, radiosity: &[Vec3]) -> Vec3 {
     let gathered = match &t.rows {
-        // Each entry's radiosity is a random read from a large vector: ask for the one
-        // `AHEAD` entries on while this one is summed (the same sum, in the same order).
+        // Each entry's radiosity is a random read from a large vector, and a row is too short
+        // to ask for its own entries far enough ahead: ask for the next row's while this one
+        // is summed (the same sum, in the same order).
         Rows::Weights(w) => {
-            let r = w.row_start[i] as usize..w.row_start[i + 1] as usize;
-            let (col, f) = (&w.col[r.clone()], &w.f[r]);
-            let mut acc = Vec3::ZERO;
-            for (k, (&j, &f)) in col.iter().zip(f).enumerate() {
-                if let Some(v) = col.get(k + AHEAD).and_then(|&a| radiosity.get(a as usize)) {
+            let (start, end) = (w.row_start[i] as usize, w.row_start[i + 1] as usize);
+            let next = w.row_start.get(i + 2).map_or(end, |&e| e as usize);
+            for &a in &w.col[end..next] {
+                if let Some(v) = radiosity.get(a as usize) {
                     prefetch(v);
                 }
+            }
+            let mut acc = Vec3::ZERO;
+            for (&j, &f) in w.col[start..end].iter().zip(&w.f[start..end]) {
                 acc += radiosity[j as usize] * f;
             }
             acc
