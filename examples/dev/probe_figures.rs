@@ -83,7 +83,12 @@ fn main() {
             probes.len(),
             probes.valid_count(),
             probes.moved,
-            probes.refinement.cells.iter().map(Vec::len).collect::<Vec<_>>(),
+            probes
+                .refinement
+                .cells
+                .iter()
+                .map(Vec::len)
+                .collect::<Vec<_>>(),
             grid.count,
             grid.step.x,
             probes.rays as f64 * 1e-6,

@@ -279,7 +279,10 @@ mod tests {
         assert_eq!(r.remove("levels"), Some(1.into()));
         let flat: Vec<serde_json::Value> = r["cells"][0].as_array().unwrap().clone();
         r["cells"] = flat.into();
-        assert_eq!(from_json(&serde_json::to_vec(&v).unwrap(), path).unwrap(), one);
+        assert_eq!(
+            from_json(&serde_json::to_vec(&v).unwrap(), path).unwrap(),
+            one
+        );
         // Levels that do not match the cells, or a cell outside a divided one: refused.
         let mut bad: serde_json::Value = serde_json::from_slice(&bytes).unwrap();
         bad["refinement"]["levels"] = 3.into();

@@ -567,23 +567,24 @@ fn refine_all(
     let key = |c: &[u32; 3]| (c[2], c[1], c[0]);
     let (mut left, mut rays, mut moved, mut streams) = (budget, 0u64, 0usize, n);
     // The probes as they stand: the grid's, then the nodes in order, the ungathered filled.
-    let assemble = |refinement: &Refinement,
-                    nodes: &std::collections::BTreeMap<(u32, u32, u32), Node>,
-                    (position, valid, sh): (&mut Vec<Vec3>, &mut Vec<bool>, &mut Vec<Sh2>)| {
-        position.truncate(n);
-        valid.truncate(n);
-        sh.truncate(n);
-        for node in nodes.values() {
-            position.push(node.position);
-            valid.push(node.placed);
-            sh.push(node.sh.unwrap_or([Vec3::ZERO; 9]));
-        }
-        let ungathered: Vec<bool> = nodes.values().map(|v| v.sh.is_none()).collect();
-        let probes = (&position[..], &mut valid[..], &mut sh[..]);
-        refine::fill(grid, refinement, probes, &ungathered, |a, b| {
-            !tracer.occluded(a, b)
-        });
-    };
+    let assemble =
+        |refinement: &Refinement,
+         nodes: &std::collections::BTreeMap<(u32, u32, u32), Node>,
+         (position, valid, sh): (&mut Vec<Vec3>, &mut Vec<bool>, &mut Vec<Sh2>)| {
+            position.truncate(n);
+            valid.truncate(n);
+            sh.truncate(n);
+            for node in nodes.values() {
+                position.push(node.position);
+                valid.push(node.placed);
+                sh.push(node.sh.unwrap_or([Vec3::ZERO; 9]));
+            }
+            let ungathered: Vec<bool> = nodes.values().map(|v| v.sh.is_none()).collect();
+            let probes = (&position[..], &mut valid[..], &mut sh[..]);
+            refine::fill(grid, refinement, probes, &ungathered, |a, b| {
+                !tracer.occluded(a, b)
+            });
+        };
     for pass in 0..levels {
         assemble(builder.refinement(), &nodes, (position, valid, sh));
         let share = match pass + 1 == levels {
@@ -600,7 +601,8 @@ fn refine_all(
         let at: Vec<Vec3> = added.iter().map(|&c| builder.position(c)).collect();
         let clearance: Vec<f32> = (added.iter())
             .map(|&c| {
-                let step = grid.step.min_element() / refine::FACTOR.pow(builder.node_level(c)) as f32;
+                let step =
+                    grid.step.min_element() / refine::FACTOR.pow(builder.node_level(c)) as f32;
                 place::CLEARANCE * step
             })
             .collect();

@@ -241,12 +241,21 @@ fn for_lattice(base: [u32; 3], mut f: impl FnMut([u32; 3])) {
 /// Calls `f` with the lowest corner (on level `m`'s lattice) of every cell of level `m` of
 /// `grid` that holds finest node `c` of a refinement of `levels` levels (whether or not the
 /// cell is in the tree).
-fn for_cells_holding(grid: &Grid, (levels, m): (u32, u32), c: [u32; 3], mut f: impl FnMut([u32; 3])) {
+fn for_cells_holding(
+    grid: &Grid,
+    (levels, m): (u32, u32),
+    c: [u32; 3],
+    mut f: impl FnMut([u32; 3]),
+) {
     let s = FACTOR.pow(levels - m);
     let range = |a: usize| {
         let cells = (grid.count[a] - 1) * FACTOR.pow(m);
         let lo = c[a] / s;
-        let from = if c[a].is_multiple_of(s) { lo.saturating_sub(1) } else { lo };
+        let from = if c[a].is_multiple_of(s) {
+            lo.saturating_sub(1)
+        } else {
+            lo
+        };
         from..=lo.min(cells - 1)
     };
     for k in range(2) {
@@ -345,7 +354,11 @@ impl Builder {
     /// The cells to divide next, as `(level, lowest corner)`: the leaves that may still be
     /// divided, by the spread of their corners (`probes`: every probe of the refinement so far,
     /// filled), best first, while their new nodes number at most `budget`.
-    pub(crate) fn choose(&self, (valid, sh): (&[bool], &[Sh2]), budget: usize) -> Vec<(u32, [u32; 3])> {
+    pub(crate) fn choose(
+        &self,
+        (valid, sh): (&[bool], &[Sh2]),
+        budget: usize,
+    ) -> Vec<(u32, [u32; 3])> {
         let (grid, work) = (&self.grid, &self.work);
         let cube: Vec<[f32; 6]> = sh.iter().map(side_sums).collect();
         let spread = |corners: [(usize, f32); 8]| {
@@ -384,7 +397,11 @@ impl Builder {
         for level in 1..work.levels() {
             for parent in &work.cells[level as usize - 1] {
                 for child in 0..FACTOR.pow(3) {
-                    let d = [child % FACTOR, (child / FACTOR) % FACTOR, child / FACTOR / FACTOR];
+                    let d = [
+                        child % FACTOR,
+                        (child / FACTOR) % FACTOR,
+                        child / FACTOR / FACTOR,
+                    ];
                     score(level, std::array::from_fn(|a| parent[a] * FACTOR + d[a]));
                 }
             }
@@ -462,7 +479,11 @@ impl Builder {
     /// lattice).
     pub(crate) fn finish(self) -> Refinement {
         let mut work = self.work;
-        let used = work.cells.iter().rposition(|c| !c.is_empty()).map_or(0, |l| l + 1);
+        let used = work
+            .cells
+            .iter()
+            .rposition(|c| !c.is_empty())
+            .map_or(0, |l| l + 1);
         let drop = FACTOR.pow(work.levels() - used as u32);
         work.cells.truncate(used);
         for c in &mut work.nodes {
@@ -543,7 +564,11 @@ pub(crate) fn consistent(grid: &Grid, refinement: &Refinement) -> bool {
     for (l, cells) in refinement.cells.iter().enumerate() {
         let l = l as u32;
         let in_range = |b: &[u32; 3]| (0..3).all(|a| b[a] < (grid.count[a] - 1) * FACTOR.pow(l));
-        if !sorted(cells) || !cells.iter().all(|b| in_range(b) && refinement.exists(l, *b)) {
+        if !sorted(cells)
+            || !cells
+                .iter()
+                .all(|b| in_range(b) && refinement.exists(l, *b))
+        {
             return false;
         }
     }
@@ -599,8 +624,14 @@ mod tests {
         assert!(!at([7, 3, 3]));
         assert!(at([6, 3, 3]));
         // Not a child of a divided cell, or unsorted: not consistent.
-        assert!(!consistent(&g, &refinement(vec![vec![[1, 0, 0]], vec![[0, 0, 0]]])));
-        assert!(!consistent(&g, &refinement(vec![vec![[2, 0, 0], [1, 0, 0]]])));
+        assert!(!consistent(
+            &g,
+            &refinement(vec![vec![[1, 0, 0]], vec![[0, 0, 0]]])
+        ));
+        assert!(!consistent(
+            &g,
+            &refinement(vec![vec![[2, 0, 0], [1, 0, 0]]])
+        ));
         assert!(!consistent(&g, &refinement(vec![vec![[1, 0, 0]], vec![]])));
     }
 
@@ -634,7 +665,13 @@ mod tests {
         all_sh.resize(positions.len(), [Vec3::ZERO; 9]);
         all_valid.resize(positions.len(), true);
         let every = vec![true; r.nodes.len()];
-        fill(&g, &r, (&positions, &mut all_valid, &mut all_sh), &every, |_, _| true);
+        fill(
+            &g,
+            &r,
+            (&positions, &mut all_valid, &mut all_sh),
+            &every,
+            |_, _| true,
+        );
         let next = b.choose((&all_valid, &all_sh), 1000);
         assert_eq!(next[0], (1, [5, 3, 3]));
         let r = b.finish();
@@ -680,7 +717,8 @@ mod tests {
             moved: 0,
         };
         let at = |p: Vec3| probes.sh_at(p, |_| true);
-        let close = |a: &Sh2, b: &Sh2, e: f32| (0..9).all(|m| (a[m] - b[m]).abs().max_element() < e);
+        let close =
+            |a: &Sh2, b: &Sh2, e: f32| (0..9).all(|m| (a[m] - b[m]).abs().max_element() < e);
         // Exact at every node, gathered or constrained.
         for (i, &p) in position.iter().enumerate() {
             assert!(close(&at(p), &sh[i], 1e-4), "probe {i} at {p}");
