@@ -1,12 +1,13 @@
 //! Light probes against the path tracer: the figures of the guide's "Light probes" section.
 //!
 //! ```text
-//! cargo run --release --example probe_figures -- SCENE [QUALITY] [BUDGET] [POINTS] [SAMPLES] [RAYS] [REFINE...]
+//! cargo run --release --example probe_figures -- SCENE [QUALITY] [BUDGET] [POINTS] [SAMPLES] [RAYS] [REFINE[:LEVELS]...]
 //! ```
 //!
 //! Bakes `SCENE` at `QUALITY` (draft, medium or high; default medium) with `BUDGET` probes
 //! (default the library's) of `RAYS` rays each (default the library's), once per `REFINE` share
-//! of the budget kept for refinement (default: 0, the uniform grid, then the library's default).
+//! of the budget kept for refinement, divided over at most `LEVELS` levels (default the
+//! library's; default: 0, the uniform grid, then the library's default share).
 //! Then draws `POINTS` (default 1000) random free-space points of the scene with random normals
 //! (`probes::measure::free_space_points`) and path-traces `H/π` there about the normal with
 //! `SAMPLES` paths (default 512): every bake is measured at the same points against the same
@@ -31,7 +32,7 @@ fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let [scene, rest @ ..] = &args[..] else {
         panic!(
-            "usage: probe_figures SCENE [QUALITY] [BUDGET] [POINTS] [SAMPLES] [RAYS] [REFINE...]"
+            "usage: probe_figures SCENE [QUALITY] [BUDGET] [POINTS] [SAMPLES] [RAYS] [REFINE[:LEVELS]...]"
         )
     };
     let quality = rest.first().map_or("medium", String::as_str);
@@ -49,14 +50,24 @@ fn main() {
     if let Some(r) = rest.get(4) {
         params.rays = r.parse().expect("RAYS");
     }
-    let shares: Vec<f32> = match rest.get(5..) {
-        Some(r) if !r.is_empty() => r.iter().map(|s| s.parse().expect("REFINE")).collect(),
-        _ => vec![0.0, DEFAULT_REFINE],
+    let shares: Vec<(f32, u32)> = match rest.get(5..) {
+        Some(r) if !r.is_empty() => (r.iter())
+            .map(|s| {
+                let (share, levels) = s.split_once(':').unwrap_or((s, ""));
+                let levels = match levels {
+                    "" => params.levels,
+                    l => l.parse().expect("LEVELS"),
+                };
+                (share.parse().expect("REFINE"), levels)
+            })
+            .collect(),
+        _ => vec![(0.0, params.levels), (DEFAULT_REFINE, params.levels)],
     };
     let mut bakes = Vec::new();
-    for &refine in &shares {
+    for &(refine, levels) in &shares {
         config.output.probes = Some(ProbeParams {
             refine,
+            levels,
             ..params.clone()
         });
         let baked = lightbake::compute(Path::new(scene), &config, &NoProgress).expect("bake");
@@ -68,17 +79,22 @@ fn main() {
         let probes = baked.probes.clone().expect("probes");
         let grid = probes.grid.expect("the automatic grid");
         println!(
-            "{scene} ({quality}), refine {refine}: {} probes ({} valid, {} moved, {} refined cells), grid {:?} step {:.3}, {:.2} M rays; probes {probe_seconds:.2}s of {total:.2}s computing ({:.1}%)",
+            "{scene} ({quality}), refine {refine}:{levels}: {} probes ({} valid, {} moved, divided cells per level {:?}), grid {:?} step {:.3}, {:.2} M rays; probes {probe_seconds:.2}s of {total:.2}s computing ({:.1}%)",
             probes.len(),
             probes.valid_count(),
             probes.moved,
-            probes.refinement.cells.len(),
+            probes
+                .refinement
+                .cells
+                .iter()
+                .map(Vec::len)
+                .collect::<Vec<_>>(),
             grid.count,
             grid.step.x,
             probes.rays as f64 * 1e-6,
             100.0 * probe_seconds / total
         );
-        bakes.push((refine, baked, probes));
+        bakes.push((format!("{refine}:{levels}"), baked, probes));
     }
     let baked = &bakes[0].1;
     let tracer = Tracer::new(&baked.scene);
@@ -121,7 +137,7 @@ fn main() {
             ("at the probes", &at_probes, &own),
             ("free space", &shared, &shared_ref),
         ] {
-            report(*refine, what, probes, (baked, &tracer, near_field), at, r);
+            report(refine, what, probes, (baked, &tracer, near_field), at, r);
         }
     }
 }
@@ -149,7 +165,7 @@ fn at_probes(probes: &Probes, n: usize) -> Vec<(Vec3, Vec3)> {
 
 /// Prints the probes' error at `at` against the reference `r`.
 fn report(
-    refine: f32,
+    refine: &str,
     what: &str,
     probes: &Probes,
     (baked, tracer, near_field): (&Baked, &Tracer, f32),

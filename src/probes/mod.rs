@@ -33,9 +33,11 @@
 //! emitters): a denser uniform grid spends its probes where light is even. So after the grid's
 //! probes are gathered, the cells whose corners disagree most (the spread of `E/π` at the six
 //! axis normals) are divided in two along each axis, best first, while their added probes fit
-//! in the rest of the budget. Nodes on a face or edge shared with an unrefined cell take that
-//! cell's interpolated value (they are not gathered), so the lookup does not jump at the
-//! boundary. The grid's entries come first in every list; Bevy's volume is the grid alone.
+//! in a pass's share of the rest of the budget; the added probes are gathered, and the next pass
+//! scores the cells again, the new sub-cells among them, down to [`ProbeParams::levels`] levels.
+//! Nodes on a face or edge of a coarser undivided cell take that cell's interpolated value (they
+//! are not gathered), so the lookup does not jump at the boundary. The grid's entries come first
+//! in every list; Bevy's volume is the grid alone.
 //!
 //! **Gathering** (`Gatherer::gather`): per probe, `rays` directions stratified over the sphere
 //! (Hammersley, turned by the probe's own random stream `(seed, probe)`: the result does not
@@ -51,7 +53,8 @@
 //! that ignores the validity flags still reads plausible light.
 //!
 //! **Lookup** ([`Probes::sh_at`], [`Probes::irradiance_over_pi`]): trilinear weights of the
-//! eight probes around the point (the corners of its sub-cell where its cell is refined),
+//! eight probes around the point (the corners of the smallest cell holding it: from the grid
+//! cell, into the sub-cell holding the point while the cell is divided),
 //! invalid probes and probes the point cannot see (a shadow ray
 //! from the point to the probe; only when a [`Tracer`] is given) dropped and the rest
 //! renormalised; with none left, inverse-square weights of the visible valid probes in the
@@ -73,8 +76,9 @@
 //! | `indirect_only` | false   | leave out punctual lights' direct light                       |
 //! | `from`          | none    | a node's children or box instead of the automatic grid        |
 //! | `refine`        | 0.25    | share of the budget kept for refining cells; 0: a uniform grid of the whole budget |
+//! | `levels`        | 3       | levels of division (each halves the spacing); 1: grid cells halved once |
 //!
-//! Limits: one level of refinement, by two along each axis; a probe inside a closed
+//! Limits: a probe inside a closed
 //! double-sided mesh is not found buried; trilinear interpolation still blurs light that
 //! changes faster than the finer spacing (within centimetres of an emitter); points between the
 //! outermost probes and the walls (a fifth of a spacing) read the nearest face of the grid.
@@ -111,6 +115,8 @@ pub const DEFAULT_BUDGET: u32 = 1024;
 pub const DEFAULT_RAYS: u32 = 256;
 /// Share of the budget kept for refining cells where light changes.
 pub const DEFAULT_REFINE: f32 = 0.25;
+/// Levels of division refinement may use.
+pub const DEFAULT_LEVELS: u32 = 3;
 /// Probes per parallel work item (one progress tick each).
 const CHUNK: usize = 16;
 /// Mixed into the seed: the probes' streams differ from the texels' of the same index.
@@ -134,6 +140,9 @@ pub struct ProbeParams {
     /// Share of the budget kept for refining grid cells where light changes ([`refine`]); the
     /// grid takes the rest. 0: a uniform grid of the whole budget.
     pub refine: f32,
+    /// Levels of division refinement may use (1: grid cells halved once; at most
+    /// [`refine::MAX_LEVELS`]).
+    pub levels: u32,
 }
 
 impl ProbeParams {
@@ -153,6 +162,7 @@ impl Default for ProbeParams {
             indirect_only: false,
             from: None,
             refine: DEFAULT_REFINE,
+            levels: DEFAULT_LEVELS,
         }
     }
 }
@@ -213,7 +223,8 @@ impl Grid {
 pub struct Probes {
     /// The grid the probes are on, entry by entry; `None` for probes placed one by one.
     pub grid: Option<Grid>,
-    /// Grid cells divided where light changes; their added probes follow the grid's entries.
+    /// Cells divided where light changes, level by level; their added probes follow the grid's
+    /// entries.
     pub refinement: Refinement,
     /// Where each probe was baked: its grid (or given) position, or moved off a nearby surface
     /// (by at most four fifths of the clearance's step: up to four moves of at most a fifth).
@@ -345,23 +356,14 @@ impl Probes {
             (grid.index(ijk), w)
         };
         let coarse = refine::trilinear(base, x).map(|(ijk, w)| flat(ijk, w));
-        if self.refinement.is_empty() || !self.refinement.is_refined(base) {
+        if self.refinement.is_empty() {
             return coarse;
         }
-        let f = refine::FACTOR;
-        let fine = x * f as f32;
-        let sub: [u32; 3] = std::array::from_fn(|a| {
-            (fine[a].floor() as u32).clamp(base[a] * f, base[a] * f + f - 1)
-        });
-        let mut out = coarse;
-        for (k, (c, w)) in refine::trilinear(sub, fine).into_iter().enumerate() {
-            match self.refinement.probe_at(grid, c) {
-                Some(q) => out[k] = (q, w),
-                // A refined cell lacking a node (not from a bake): the cell's own corners.
-                None => return coarse,
-            }
+        match self.refinement.leaf(base, x) {
+            (0, _) => coarse,
+            // A divided cell lacking a node (not from a bake): the grid cell's own corners.
+            leaf => self.refinement.corners(grid, leaf, x).unwrap_or(coarse),
         }
-        out
     }
 
     /// [`Probes::sh_at`] for probes placed one by one: the `NEAREST` nearest valid probes that
@@ -494,7 +496,7 @@ pub(crate) fn bake(
         sky,
     };
     let (mut sh, mut rays) =
-        gatherer.gather_all(&placement.position, &placement.valid, 0, progress)?;
+        gatherer.gather_all(&placement.position, &placement.valid, |i| i, progress)?;
     rays += placement.rays;
     fill_invalid(&placement, &mut sh);
     let Placement {
@@ -506,39 +508,18 @@ pub(crate) fn bake(
     } = placement;
     // Denser where light changes: the grid's probes say where (`refine`).
     let refinement = match grid {
-        Some(grid) => {
-            // With no share kept, the grid alone (whatever of the budget it leaves unused).
-            let left = match params.refine > 0.0 {
-                true => (params.budget as usize).saturating_sub(grid.len()),
-                false => 0,
-            };
-            refine::choose(&grid, &valid, &sh, left)
+        // With no share kept, the grid alone (whatever of the budget it leaves unused).
+        Some(grid) if params.refine > 0.0 => {
+            let left = (params.budget as usize).saturating_sub(grid.len());
+            let probes = (&mut position, &mut valid, &mut sh);
+            let (refinement, added_rays, added_moved) =
+                refine_all(&gatherer, &grid, probes, left, progress)?;
+            rays += added_rays;
+            moved += added_moved;
+            refinement
         }
-        None => Refinement::default(),
+        _ => Refinement::default(),
     };
-    if let (Some(grid), false) = (grid, refinement.is_empty()) {
-        let at = refine::positions(&grid, &refinement);
-        let fine_step = grid.step.min_element() / refine::FACTOR as f32;
-        let clearance = vec![place::CLEARANCE * fine_step; at.len()];
-        let added = place::settle_all(surfaces.tracer, &at, &clearance, seed ^ SALT, grid.len());
-        let constrained = refine::constrained(&grid, &refinement);
-        // Constrained nodes take their coarse cell's value: only the others are gathered.
-        let gathered: Vec<bool> = (added.valid.iter().zip(&constrained))
-            .map(|(&v, &c)| v && !c)
-            .collect();
-        let (fine, fine_rays) =
-            gatherer.gather_all(&added.position, &gathered, grid.len(), progress)?;
-        rays += added.rays + fine_rays;
-        moved += added.moved;
-        position.extend(added.position);
-        valid.extend(added.valid);
-        sh.extend(fine);
-        let probes = (&position[..], &mut valid[..], &mut sh[..]);
-        let tracer = surfaces.tracer;
-        refine::fill(&grid, &refinement, probes, &constrained, |a, b| {
-            !tracer.occluded(a, b)
-        });
-    }
     Ok(Probes {
         grid,
         refinement,
@@ -549,6 +530,113 @@ pub(crate) fn bake(
         rays,
         moved,
     })
+}
+
+/// An added probe while refinement runs.
+struct Node {
+    /// Where it is baked.
+    position: Vec3,
+    /// Not buried.
+    placed: bool,
+    /// Its gathered light, once gathered.
+    sh: Option<Sh2>,
+    /// Its random streams' index.
+    stream: usize,
+}
+
+/// Refines `grid` in passes, one per level (`refine`): each pass divides the cells whose
+/// corners disagree most while their new nodes fit in its share of `budget`, places the new
+/// nodes and gathers those no coarser cell constrains; constrained and buried nodes are filled
+/// from the cells they hang on. `probes` holds the grid's probes on entry and all of them on
+/// return. Returns the refinement, the rays cast and the nodes moved off surfaces.
+fn refine_all(
+    gatherer: &Gatherer,
+    grid: &Grid,
+    (position, valid, sh): (&mut Vec<Vec3>, &mut Vec<bool>, &mut Vec<Sh2>),
+    budget: usize,
+    progress: &dyn Progress,
+) -> Result<(Refinement, u64, usize)> {
+    let params = gatherer.params;
+    let tracer = gatherer.surfaces.tracer;
+    let n = grid.len();
+    let levels = params.levels.clamp(1, refine::MAX_LEVELS);
+    let Some(mut builder) = refine::Builder::new(grid, levels, (&valid[..], &sh[..])) else {
+        return Ok((Refinement::default(), 0, 0));
+    };
+    let mut nodes: std::collections::BTreeMap<(u32, u32, u32), Node> = Default::default();
+    let key = |c: &[u32; 3]| (c[2], c[1], c[0]);
+    let (mut left, mut rays, mut moved, mut streams) = (budget, 0u64, 0usize, n);
+    // The probes as they stand: the grid's, then the nodes in order, the ungathered filled.
+    let assemble =
+        |refinement: &Refinement,
+         nodes: &std::collections::BTreeMap<(u32, u32, u32), Node>,
+         (position, valid, sh): (&mut Vec<Vec3>, &mut Vec<bool>, &mut Vec<Sh2>)| {
+            position.truncate(n);
+            valid.truncate(n);
+            sh.truncate(n);
+            for node in nodes.values() {
+                position.push(node.position);
+                valid.push(node.placed);
+                sh.push(node.sh.unwrap_or([Vec3::ZERO; 9]));
+            }
+            let ungathered: Vec<bool> = nodes.values().map(|v| v.sh.is_none()).collect();
+            let probes = (&position[..], &mut valid[..], &mut sh[..]);
+            refine::fill(grid, refinement, probes, &ungathered, |a, b| {
+                !tracer.occluded(a, b)
+            });
+        };
+    for pass in 0..levels {
+        assemble(builder.refinement(), &nodes, (position, valid, sh));
+        let share = match pass + 1 == levels {
+            true => left,
+            false => (left as f32 * refine::PASS_SHARE) as usize,
+        };
+        let cells = builder.choose((&valid[..], &sh[..]), share);
+        if cells.is_empty() {
+            continue;
+        }
+        let added = builder.divide(&cells);
+        left = left.saturating_sub(added.len());
+        // Placed as the grid's probes are, a fifth of their own level's step from surfaces.
+        let at: Vec<Vec3> = added.iter().map(|&c| builder.position(c)).collect();
+        let clearance: Vec<f32> = (added.iter())
+            .map(|&c| {
+                let step =
+                    grid.step.min_element() / refine::FACTOR.pow(builder.node_level(c)) as f32;
+                place::CLEARANCE * step
+            })
+            .collect();
+        let settled = place::settle_all(tracer, &at, &clearance, gatherer.seed, streams);
+        rays += settled.rays;
+        moved += settled.moved;
+        for (k, c) in added.iter().enumerate() {
+            let node = Node {
+                position: settled.position[k],
+                placed: settled.valid[k],
+                sh: None,
+                stream: streams + k,
+            };
+            nodes.insert(key(c), node);
+        }
+        streams += added.len();
+        // Gathered: every placed node no coarser leaf constrains that holds no light yet.
+        let constrained = refine::constrained(grid, builder.refinement());
+        let todo: Vec<(u32, u32, u32)> = (nodes.iter().zip(&constrained))
+            .filter(|((_, v), c)| v.placed && !**c && v.sh.is_none())
+            .map(|((k, _), _)| *k)
+            .collect();
+        let at: Vec<Vec3> = todo.iter().map(|k| nodes[k].position).collect();
+        let stream: Vec<usize> = todo.iter().map(|k| nodes[k].stream).collect();
+        let every = vec![true; at.len()];
+        let (got, gathered_rays) = gatherer.gather_all(&at, &every, |i| stream[i], progress)?;
+        rays += gathered_rays;
+        for (k, c) in todo.iter().zip(got) {
+            nodes.get_mut(k).expect("a node").sh = Some(c);
+        }
+    }
+    let refinement = builder.finish();
+    assemble(&refinement, &nodes, (position, valid, sh));
+    Ok((refinement, rays, moved))
 }
 
 /// The gather of incident radiance at probes.
@@ -562,14 +650,14 @@ struct Gatherer<'a> {
 }
 
 impl Gatherer<'_> {
-    /// Gathers the probes at `positions` that `gather` marks (entries `first..` of the probes,
-    /// for their random streams), in parallel chunks: their coefficients (zero where not
-    /// gathered) and the rays cast.
+    /// Gathers the probes at `positions` that `gather` marks (`stream(i)` the random stream of
+    /// entry `i`), in parallel chunks: their coefficients (zero where not gathered) and the rays
+    /// cast.
     fn gather_all(
         &self,
         positions: &[Vec3],
         gather: &[bool],
-        first: usize,
+        stream: impl Fn(usize) -> usize + Sync,
         progress: &dyn Progress,
     ) -> Result<(Vec<Sh2>, u64)> {
         let n = positions.len();
@@ -584,7 +672,7 @@ impl Gatherer<'_> {
                 for (k, (sh, rays)) in chunk.iter_mut().enumerate() {
                     let i = c * CHUNK + k;
                     if gather[i] {
-                        *rays = self.gather(first + i, positions[i], sh);
+                        *rays = self.gather(stream(i), positions[i], sh);
                     }
                 }
                 progress.advance(chunk.len() as u64);
