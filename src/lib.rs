@@ -61,8 +61,9 @@
 //!                                                     the solution (pages like the lightmap's)
 //!           ─ probes::bake ──▶ Probes                with --probes: a grid of L2 SH light
 //!                                                     probes in the empty space, its cells
-//!                                                     divided where light changes (or where a
-//!                                                     node says, --probes-from), buried ones
+//!                                                     divided where light changes, level by
+//!                                                     level (or where a node says,
+//!                                                     --probes-from), buried ones
 //!                                                     marked, gathered from the solution
 //! ─ LightmapPages::from_texels ▶ LightmapPages         H/π per texel, dilated into the gutters
 //!         ─ lightmap::seams ──▶ LightmapPages         UV seams stitched (least squares)
