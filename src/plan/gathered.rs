@@ -613,7 +613,7 @@ impl PointDrawer<'_> {
                 };
                 let rest = [0usize, 1].map(|r| {
                     let mut rng = Rng::new(seed ^ SALT, k as u64, 1 + r as u64);
-                    self.gather(origin, sp.n, runs.irradiance[r], &mut rng)
+                    self.gather(origin, (sp.n, sp.n_geo), runs.irradiance[r], &mut rng)
                 });
                 (rest, exact, true)
             }
@@ -648,8 +648,12 @@ impl PointDrawer<'_> {
     }
 
     /// The non-punctual light at a point, as transport estimates it at a texel, through a
-    /// run's solved irradiance `h`.
-    fn gather(&self, origin: Vec3, n: Vec3, h: &[Vec3], rng: &mut Rng) -> Vec3 {
+    /// run's solved irradiance `h`, about the shading normal `n`. Light from below the face
+    /// (`n_geo`) counts as zero, as the reference path tracer counts it: a ray the shading
+    /// normal tilts under the face passes into what lies below it. One such point on the
+    /// interior, where a tilted face meets a lamp, gathered 70× the path tracer's light
+    /// (8.3 for 0.11) and held 93% of a sample's mean square.
+    fn gather(&self, origin: Vec3, (n, n_geo): (Vec3, Vec3), h: &[Vec3], rng: &mut Rng) -> Vec3 {
         let (scene, texels, tracer, emitters) =
             (self.scene, self.texels, self.tracer, &self.emitters);
         let light_samples = self.light_samples;
@@ -660,6 +664,9 @@ impl PointDrawer<'_> {
         for s in 0..GATHER_RAYS {
             let local = cosine_hemisphere(hammersley(s, GATHER_RAYS, shift));
             let dir = tx * local.x + ty * local.y + n * local.z;
+            if n_geo.dot(dir) <= 0.0 {
+                continue;
+            }
             match texels.ray_end(tracer, origin, dir) {
                 RayEnd::Escaped => escaped += 1,
                 RayEnd::Absorbed => {}
@@ -681,6 +688,9 @@ impl PointDrawer<'_> {
             let Some(x) = emitters.sample_from((scene, texels, tracer), origin, Some(n), u) else {
                 continue;
             };
+            if n_geo.dot(x.point - origin) <= 0.0 {
+                continue;
+            }
             let p_gather = x.cos_i / PI;
             emitted += x.le * (x.cos_i * power_weight(lf * x.pdf_solid_angle(), kf * p_gather));
         }
