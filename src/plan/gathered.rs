@@ -650,9 +650,7 @@ impl PointDrawer<'_> {
     /// The non-punctual light at a point, as transport estimates it at a texel, through a
     /// run's solved irradiance `h`, about the shading normal `n`. Light from below the face
     /// (`n_geo`) counts as zero, as the reference path tracer counts it: a ray the shading
-    /// normal tilts under the face passes into what lies below it. One such point on the
-    /// interior, where a tilted face meets a lamp, gathered 70× the path tracer's light
-    /// (8.3 for 0.11) and held 93% of a sample's mean square.
+    /// normal tilts under the face would pass into what lies below it.
     fn gather(&self, origin: Vec3, (n, n_geo): (Vec3, Vec3), h: &[Vec3], rng: &mut Rng) -> Vec3 {
         let (scene, texels, tracer, emitters) =
             (self.scene, self.texels, self.tracer, &self.emitters);
