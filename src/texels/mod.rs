@@ -134,18 +134,22 @@ impl Texels {
 
     /// Where the ray from `origin` along `dir` ends: the sky, an absorbing surface, or a texel.
     /// Transport, gathering and the reference follow their rays through this one function
-    /// (or its two halves, [`Texels::ray_hit`] then [`Texels::hit_end`]).
+    /// (or its two halves, [`Texels::ray_hit`] then [`Texels::texel_at`]).
     #[inline]
     pub(crate) fn ray_end(&self, tracer: &Tracer, origin: Vec3, dir: Vec3) -> RayEnd {
-        match self.ray_hit(tracer, origin, dir) {
-            Ok(hit) => self.hit_end(hit),
-            Err(end) => end,
+        let hit = match self.ray_hit(tracer, origin, dir) {
+            Ok(hit) => hit,
+            Err(end) => return end,
+        };
+        match self.texel_at(hit.triangle, hit.bary) {
+            NO_TEXEL => RayEnd::Absorbed,
+            j => RayEnd::Texel(hit, j),
         }
     }
 
     /// The first half of [`Texels::ray_end`]: the front-face hit, or how the ray ended
     /// without one. It starts loading the hit triangle's lightmap UVs, so that a caller that
-    /// traces several rays before it looks their texels up ([`Texels::hit_end`]) waits for
+    /// traces several rays before it looks their texels up ([`Texels::texel_at`]) waits for
     /// memory once for all of them, not once per ray: the lookup's cache misses were a
     /// quarter of a bake's time (`perf`, the interior at `high`).
     #[inline]
@@ -164,15 +168,6 @@ impl Texels {
             prefetch(page);
         }
         Ok(hit)
-    }
-
-    /// The second half of [`Texels::ray_end`]: the texel a front-face hit lands in.
-    #[inline]
-    pub(crate) fn hit_end(&self, hit: Hit) -> RayEnd {
-        match self.texel_at(hit.triangle, hit.bary) {
-            NO_TEXEL => RayEnd::Absorbed,
-            j => RayEnd::Texel(hit, j),
-        }
     }
 
     /// A point of texel `i`'s footprint for `u ∈ [0,1)²`, on the surface. A partly covered

@@ -27,7 +27,7 @@ use super::{Sources, Surfaces, Transport};
 use crate::config::TransportParams;
 use crate::lights::{Emitters, punctual_irradiance, triangle_point};
 use crate::sampling::{Rng, cosine_hemisphere, frame, hammersley, power_weight};
-use crate::texels::RayEnd;
+use crate::texels::{NO_TEXEL, RayEnd};
 use crate::trace::Hit;
 use crate::{Progress, Result};
 
@@ -65,8 +65,8 @@ pub(crate) struct RowScratch {
     /// The gathering rays that hit a front face: the hit, the ray's direction and its cosine
     /// to the texel's normal.
     pending: Vec<(Hit, Vec3, f32)>,
-    /// Where each of `pending` ends.
-    ends: Vec<RayEnd>,
+    /// The texel each of `pending` lands in ([`crate::texels::NO_TEXEL`]: absorbed).
+    landed: Vec<u32>,
 }
 
 impl RowScratch {
@@ -76,7 +76,7 @@ impl RowScratch {
         RowScratch {
             hits: Vec::with_capacity(k),
             pending: Vec::with_capacity(k),
-            ends: Vec::with_capacity(k),
+            landed: Vec::with_capacity(k),
         }
     }
 }
@@ -162,7 +162,7 @@ impl Context<'_> {
         let RowScratch {
             hits,
             pending,
-            ends,
+            landed,
         } = scratch;
         hits.clear();
         pending.clear();
@@ -179,12 +179,16 @@ impl Context<'_> {
         for (hit, _, _) in pending.iter() {
             texels.prefetch_texel(hit);
         }
-        ends.clear();
-        ends.extend(pending.iter().map(|&(hit, _, _)| texels.hit_end(hit)));
-        for (&(_, dir, cos), end) in pending.iter().zip(ends.iter()) {
-            let RayEnd::Texel(hit, j) = *end else {
+        landed.clear();
+        landed.extend(
+            pending
+                .iter()
+                .map(|(hit, _, _)| texels.texel_at(hit.triangle, hit.bary)),
+        );
+        for (&(hit, dir, cos), &j) in pending.iter().zip(landed.iter()) {
+            if j == NO_TEXEL {
                 continue;
-            };
+            }
             hits.push(j);
             if self.emitters.emits(j) {
                 let le = texels.emission[j as usize];
