@@ -454,12 +454,16 @@ pub(crate) struct Paths<'a> {
 
 impl Paths<'_> {
     /// One path estimate of texel `i`'s `H/π`; its random stream depends only on
-    /// (seed, texel, sample), never on the thread that runs it.
+    /// (seed, texel, sample), never on the thread that runs it. A footprint point cut off from
+    /// the sample point starts its path at the sample point, as the bake reads lights there
+    /// ([`Texels::punctual_point`]).
     fn sample(&self, i: usize, sample: u32, rays: &mut u64) -> Vec3 {
         let t = self.texels;
         let mut rng = Rng::new(self.params.seed ^ SEED_SALT, i as u64, sample as u64);
         let n = t.normal[i];
         let x = footprint_point(t, i, rng.next_vec2()) + n * self.tracer.epsilon;
+        let x = t.punctual_point(self.tracer, i, x);
+        *rays += 1;
         self.reflected(x, n, None, &mut rng, rays)
     }
 

@@ -112,3 +112,61 @@ fn narrow_faces_read_at_most_one_and_a_half_times_their_light() {
         over.join("\n")
     );
 }
+
+/// A light sealed inside a thin closed solid lights nothing around it. The floor runs on under
+/// 24 posts 2.5 cm across (closed boxes, too narrow for the junction split to cut the floor
+/// around them), each with a point light inside 1 cm up. A 12.5 cm floor texel around a post
+/// reaches under it, and a punctual sample drawn there sees the light through no wall: before
+/// `Texels::punctual_point` the brightest floor texel read 253 (`H/π`) where no visible point
+/// sees any light. The interior fixture's lamp, its bulb inside the pole, made its shade's
+/// underside read 80× its light that way.
+#[test]
+fn lights_sealed_inside_thin_posts_light_nothing_around_them() {
+    use lightbake::testing::{Face, Geometry, GltfBuilder, Light, Material};
+    let mut gltf = GltfBuilder::new("sealed_light");
+    let grey = gltf.add_material(Material::grey("grey", 0.5));
+    let floor = Geometry::grid(
+        Vec3::new(-1.0, 0.0, 1.0),
+        Vec3::X * 2.0,
+        Vec3::NEG_Z * 2.0,
+        4,
+        4,
+    );
+    let floor = gltf.add_mesh("floor", floor, grey);
+    gltf.add_mesh_node("floor", floor);
+    // Posts a fifth of a texel across (too narrow for the junction split to cut the floor
+    // around), at offsets that walk across the texel grid, each with a light inside.
+    for k in 0..24 {
+        let (a, b) = ((k % 6) as f32, (k / 6) as f32);
+        let o = Vec3::new(
+            -0.85 + 0.3 * a + 0.021 * b,
+            0.0,
+            -0.85 + 0.4 * b + 0.017 * a,
+        );
+        let (min, max) = (o, o + Vec3::new(0.025, 0.5, 0.025));
+        let post = gltf.add_mesh("post", Geometry::box_faces(min, max, &Face::ALL, 1), grey);
+        gltf.add_mesh_node("post", post);
+        let light = o + Vec3::new(0.0125, 0.01, 0.0125);
+        gltf.add_light_node(Light::point("sealed", [1.0; 3], 1.0), light, Vec3::NEG_Y);
+    }
+    let dir = scratch();
+    let input = dir.path().join("sealed_light.gltf");
+    gltf.write_gltf(&input).expect("writes");
+    let mut config = BakeConfig::draft();
+    config.atlas.texels_per_unit = 8.0;
+    let baked = lightbake::compute(&input, &config, &NoProgress).expect("bakes");
+    let t = &baked.texels;
+    let brightest = (0..t.len())
+        .max_by(|&a, &b| {
+            let (la, lb) = (baked.lightmap[a], baked.lightmap[b]);
+            la.max_element().total_cmp(&lb.max_element())
+        })
+        .expect("texels");
+    let value = baked.lightmap[brightest].max_element();
+    assert!(
+        value < 1e-3,
+        "texel at {} (normal {}) reads {value}",
+        t.position[brightest],
+        t.normal[brightest]
+    );
+}

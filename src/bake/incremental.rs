@@ -1494,7 +1494,7 @@ fn row_rays(ctx: &Context, i: usize, mut visit: impl FnMut(RowRay)) -> (u32, u32
         let g = PUNCTUAL_GRID;
         for s in 0..g * g {
             let u = (Vec2::new((s % g) as f32, (s / g) as f32) + rng.next_vec2()) / g as f32;
-            let p = ctx.footprint_point(i, u);
+            let p = texels.punctual_point(ctx.surfaces.tracer, i, ctx.footprint_point(i, u));
             for light in 0..lights {
                 visit(RowRay::Punctual { p, light });
             }

@@ -249,7 +249,7 @@ impl<'a> Gatherer<'a> {
             let weight = 1.0 / (g * g) as f32;
             for s in 0..g * g {
                 let u = (Vec2::new((s % g) as f32, (s / g) as f32) + rng.next_vec2()) / g as f32;
-                let x = lift(u);
+                let x = texels.punctual_point(tracer, i, lift(u));
                 for light in &scene.lights {
                     let l = match light.kind {
                         LightKind::Directional => -light.direction,

@@ -85,8 +85,8 @@ impl PunctualSample {
         if scene.lights.is_empty() || texels.is_empty() {
             return Ok(None);
         }
-        let exact = |p: Vec3, n: Vec3| -> Vec3 {
-            let origin = p + n * tracer.epsilon;
+        // At `origin`, already lifted off its surface.
+        let exact = |origin: Vec3, n: Vec3| -> Vec3 {
             scene
                 .lights
                 .iter()
@@ -100,7 +100,8 @@ impl PunctualSample {
             for s in 0..GRID * GRID {
                 let cell = Vec2::new((s % GRID) as f32, (s / GRID) as f32);
                 let u = (cell + rng.next_vec2()) / GRID as f32;
-                sum += exact(texels.footprint_point(i, u), n);
+                let p = texels.footprint_point(i, u) + n * tracer.epsilon;
+                sum += exact(texels.punctual_point(tracer, i, p), n);
             }
             sum / (GRID * GRID) as f32
         })?;
@@ -123,7 +124,7 @@ impl PunctualSample {
             let lookup = bilinear(texels, &valid, page, uv)?;
             let read =
                 |v: &[Vec3]| -> Vec3 { lookup.0.iter().map(|&(j, w)| v[j as usize] * w).sum() };
-            let d = read(&texel) - exact(p, n);
+            let d = read(&texel) - exact(p + n * tracer.epsilon, n);
             Some(PointError {
                 square: (d * d).element_sum() / 3.0,
                 border: lookup.1,

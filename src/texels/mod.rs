@@ -191,6 +191,25 @@ impl Texels {
         self.position[i] + du * o.x + dv * o.y
     }
 
+    /// Where texel `i` reads a punctual light for the footprint point `p` (lifted off the
+    /// surface by the ray epsilon): `p` when the surface between the texel's sample point and
+    /// `p` is clear, else the sample point. A footprint can reach past a thin solid standing on
+    /// it — a lamp's pole under its shade, with the bulb inside the pole — and a point there
+    /// sees what the solid hides from every visible point of the texel: one such sample made a
+    /// shade texel read 80× its light. Gathering rays from such a point end on back faces
+    /// (absorbed), so only lights, which a shadow ray reaches from anywhere, need this.
+    #[inline]
+    pub(crate) fn punctual_point(&self, tracer: &Tracer, i: usize, p: Vec3) -> Vec3 {
+        let n = self.normal[i];
+        let lift = n * (cuts::LIFT - 1.0) * tracer.epsilon;
+        let sample = self.position[i] + n * tracer.epsilon;
+        if tracer.occluded(sample + lift, p + lift) {
+            sample
+        } else {
+            p
+        }
+    }
+
     /// Debug-build consistency check: finite values, areas positive, index consistent.
     #[cfg(debug_assertions)]
     pub(crate) fn validate(&self) {

@@ -109,7 +109,7 @@ fn row(
         let g = PUNCTUAL_GRID;
         for s in 0..g * g {
             let u = (Vec2::new((s % g) as f32, (s / g) as f32) + rng.next_vec2()) / g as f32;
-            let p = footprint.point(u) + normal * tracer.epsilon;
+            let p = texels.punctual_point(tracer, i, footprint.point(u) + normal * tracer.epsilon);
             for light in &scene.lights {
                 punctual += punctual_irradiance(light, p, normal, tracer);
             }

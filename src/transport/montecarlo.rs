@@ -227,7 +227,7 @@ impl Context<'_> {
             let g = PUNCTUAL_GRID;
             for s in 0..g * g {
                 let u = (Vec2::new((s % g) as f32, (s / g) as f32) + rng.next_vec2()) / g as f32;
-                let p = self.footprint_point(i, u);
+                let p = texels.punctual_point(tracer, i, self.footprint_point(i, u));
                 for (l, light) in scene.lights.iter().enumerate() {
                     let e = punctual_irradiance(light, p, n, tracer);
                     punctual += e;

@@ -209,7 +209,7 @@ fn texel_direct(
         let mut punctual = Vec3::ZERO;
         for s in 0..4u32 {
             let u = (Vec2::new((s % 2) as f32, (s / 2) as f32) + rng.next_vec2()) * 0.5;
-            let x = footprint_point(texels, tracer, i, u);
+            let x = texels.punctual_point(tracer, i, footprint_point(texels, tracer, i, u));
             for light in &scene.lights {
                 punctual += punctual_irradiance(light, x, n, tracer);
             }
