@@ -17,6 +17,11 @@
 //! farther and closer than the budget's spacing from an emitter (`probes::measure`). Below
 //! that, where the squared error lies: the points in the slab between the bake's outermost
 //! probes and the bounds, and the worst points.
+//!
+//! `PROBE_SEED=S` draws another set of points (default 3: the guide's figures); with
+//! `PROBE_DUMP=PREFIX` each bake's free-space points are written to `PREFIX_REFINE:LEVELS.csv`
+//! (position, normal, emitter distance, grid coordinates, then the red channel of the probes'
+//! value, the reference and its standard error), to see which points hold the error.
 
 use std::path::Path;
 
@@ -122,7 +127,8 @@ fn main() {
         .expect("reference")
     };
     // The same free-space points for every bake.
-    let shared = measure::free_space_points(&baked.scene, &tracer, n, 3);
+    let seed = std::env::var("PROBE_SEED").map_or(3, |s| s.parse().expect("PROBE_SEED"));
+    let shared = measure::free_space_points(&baked.scene, &tracer, n, seed);
     let shared_ref = trace(&shared);
     println!(
         "{} free-space points; near field: closer than {near_field:.3} to an emitter",
@@ -192,6 +198,33 @@ fn report(
         100.0 * near_error,
         100.0 * noise,
     );
+    if let (Ok(prefix), "free space") = (std::env::var("PROBE_DUMP"), what) {
+        use std::fmt::Write as _;
+        let mut out = String::from("k,x,y,z,nx,ny,nz,emitter,gx,gy,gz,ours,reference,std\n");
+        let grid = probes.grid.expect("a grid");
+        for k in 0..at.len() {
+            let (p, n) = at[k];
+            let g = grid.local(p);
+            let _ = writeln!(
+                out,
+                "{k},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+                p.x,
+                p.y,
+                p.z,
+                n.x,
+                n.y,
+                n.z,
+                measure::emitter_distance(&baked.scene, &baked.texels, p),
+                g.x,
+                g.y,
+                g.z,
+                ours[k].x,
+                r.mean[k].x,
+                r.std_error[k].x
+            );
+        }
+        std::fs::write(format!("{prefix}_{refine}.csv"), out).expect("dump");
+    }
     // Where the squared error lies.
     let sq: Vec<f32> = (0..at.len())
         .map(|k| (ours[k] - r.mean[k]).length_squared())
