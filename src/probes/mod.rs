@@ -58,7 +58,9 @@
 //! invalid probes and probes the point cannot see (a shadow ray
 //! from the point to the probe; only when a [`Tracer`] is given) dropped and the rest
 //! renormalised; with none left, inverse-square weights of the visible valid probes in the
-//! 4 × 4 × 4 block around it, then the nearest valid probe. The visibility test is what keeps
+//! 4 × 4 × 4 block around it, then the nearest valid probe. Beyond the grid's outermost probes
+//! (the slab between them and the walls) the outer cell's light is continued linearly, up to
+//! [`BEYOND`] of a spacing out. The visibility test is what keeps
 //! light from leaking through a wall thinner than the spacing; an engine without ray queries
 //! can precompute it per cell or accept the leak near walls. Probes placed one by one
 //! (`--probes-from` a node's children) have no cells: the eight nearest valid probes the point
@@ -80,8 +82,9 @@
 //!
 //! Limits: a probe inside a closed
 //! double-sided mesh is not found buried; trilinear interpolation still blurs light that
-//! changes faster than the finer spacing (within centimetres of an emitter); points between the
-//! outermost probes and the walls (a fifth of a spacing) read the nearest face of the grid.
+//! changes faster than the finer spacing (within centimetres of an emitter, above all beside an
+//! emitter's edge in its own plane); points between the outermost probes and the walls (a fifth
+//! of a spacing) read the outer cells' light continued, not probes there.
 //! [`measure`] says how the probes are measured against the path tracer.
 
 pub mod file;
