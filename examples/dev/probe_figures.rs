@@ -17,6 +17,14 @@
 //! farther and closer than the budget's spacing from an emitter (`probes::measure`). Below
 //! that, where the squared error lies: the points in the slab between the bake's outermost
 //! probes and the bounds, and the worst points.
+//!
+//! `PROBE_SEED=S` draws another set of points (default 3: the guide's figures). With
+//! `PROBE_HOLD=1` each free-space figure is also given for the lookup that held the face's
+//! value in the slab by the walls instead of continuing the outer cells' light. With
+//! `PROBE_DUMP=PREFIX` each bake's free-space points are written to `PREFIX_REFINE:LEVELS.csv`
+//! (position, normal, emitter distance, grid coordinates, then the red channel of the probes'
+//! value, the reference, its standard error and the held lookup's value, NaN without
+//! `PROBE_HOLD`), to see which points hold the error.
 
 use std::path::Path;
 
@@ -122,7 +130,8 @@ fn main() {
         .expect("reference")
     };
     // The same free-space points for every bake.
-    let shared = measure::free_space_points(&baked.scene, &tracer, n, 3);
+    let seed = std::env::var("PROBE_SEED").map_or(3, |s| s.parse().expect("PROBE_SEED"));
+    let shared = measure::free_space_points(&baked.scene, &tracer, n, seed);
     let shared_ref = trace(&shared);
     println!(
         "{} free-space points; near field: closer than {near_field:.3} to an emitter",
@@ -192,6 +201,58 @@ fn report(
         100.0 * near_error,
         100.0 * noise,
     );
+    let mut held_values = None;
+    if std::env::var("PROBE_HOLD").is_ok() {
+        // The lookup as it was before the slab's continuation: the point moved onto the box of
+        // the grid's positions, its visibility still tested from where it is.
+        let grid = probes.grid.expect("a grid");
+        let last = Vec3::from(grid.count.map(|c| c.saturating_sub(1) as f32));
+        let held: Vec<Vec3> = (at.iter())
+            .map(|&(p, n)| {
+                let x = grid.local(p).clamp(Vec3::ZERO, last);
+                let on_box = grid.origin + grid.rotation * (grid.step * x);
+                let from = p + n * tracer.epsilon;
+                let c = probes.sh_at(on_box, |q| !tracer.occluded(from, q));
+                lightbake::probes::sh::irradiance_over_pi(&c, n)
+            })
+            .collect();
+        let e = measure::split_error(&held, &r.mean, &r.std_error, &near);
+        println!(
+            "    the face's value held in the slab: all {:.2}%, far {:.2}%, near {:.2}%",
+            100.0 * e.all,
+            100.0 * e.far,
+            100.0 * e.near
+        );
+        held_values = Some(held);
+    }
+    if let (Ok(prefix), "free space") = (std::env::var("PROBE_DUMP"), what) {
+        use std::fmt::Write as _;
+        let mut out = String::from("k,x,y,z,nx,ny,nz,emitter,gx,gy,gz,ours,reference,std,held\n");
+        let grid = probes.grid.expect("a grid");
+        for k in 0..at.len() {
+            let (p, n) = at[k];
+            let g = grid.local(p);
+            let _ = writeln!(
+                out,
+                "{k},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+                p.x,
+                p.y,
+                p.z,
+                n.x,
+                n.y,
+                n.z,
+                measure::emitter_distance(&baked.scene, &baked.texels, p),
+                g.x,
+                g.y,
+                g.z,
+                ours[k].x,
+                r.mean[k].x,
+                r.std_error[k].x,
+                held_values.as_ref().map_or(f32::NAN, |h| h[k].x)
+            );
+        }
+        std::fs::write(format!("{prefix}_{refine}.csv"), out).expect("dump");
+    }
     // Where the squared error lies.
     let sq: Vec<f32> = (0..at.len())
         .map(|k| (ours[k] - r.mean[k]).length_squared())

@@ -58,7 +58,9 @@
 //! invalid probes and probes the point cannot see (a shadow ray
 //! from the point to the probe; only when a [`Tracer`] is given) dropped and the rest
 //! renormalised; with none left, inverse-square weights of the visible valid probes in the
-//! 4 × 4 × 4 block around it, then the nearest valid probe. The visibility test is what keeps
+//! 4 × 4 × 4 block around it, then the nearest valid probe. Beyond the grid's outermost probes
+//! (the slab between them and the walls) the outer cell's light is continued linearly, up to
+//! [`BEYOND`] of a spacing out. The visibility test is what keeps
 //! light from leaking through a wall thinner than the spacing; an engine without ray queries
 //! can precompute it per cell or accept the leak near walls. Probes placed one by one
 //! (`--probes-from` a node's children) have no cells: the eight nearest valid probes the point
@@ -80,8 +82,9 @@
 //!
 //! Limits: a probe inside a closed
 //! double-sided mesh is not found buried; trilinear interpolation still blurs light that
-//! changes faster than the finer spacing (within centimetres of an emitter); points between the
-//! outermost probes and the walls (a fifth of a spacing) read the nearest face of the grid.
+//! changes faster than the finer spacing (within centimetres of an emitter, above all beside an
+//! emitter's edge in its own plane); points between the outermost probes and the walls (a fifth
+//! of a spacing) read the outer cells' light continued, not probes there.
 //! [`measure`] says how the probes are measured against the path tracer.
 
 pub mod file;
@@ -123,6 +126,10 @@ const CHUNK: usize = 16;
 const SALT: u64 = 0x5052_4f42_4553; // "PROBES"
 /// Random-stream purpose of the gather (placement uses its own).
 const GATHER: u64 = 2;
+/// How far beyond the grid's outermost probes, in spacings along each axis, the lookup
+/// continues the outer cells' light linearly (the slab by the walls is a fifth of a spacing;
+/// half a spacing keeps the point it reads inside the outer cell).
+pub const BEYOND: f32 = 0.5;
 
 /// How probes are placed and baked.
 #[derive(Clone, Debug, PartialEq)]
@@ -287,8 +294,31 @@ impl Probes {
         }
     }
 
-    /// [`Probes::sh_at`] on a grid.
+    /// [`Probes::sh_at`] on a grid: inside the box of the grid's positions, the cell's (or
+    /// sub-cell's) corners; beyond a face of that box — the slab between the outermost probes
+    /// and the walls — the outer cell's light continued linearly, `2·v(x) − v(x − d)` for `x`
+    /// the nearest point of the box and `d` the step out (at most [`BEYOND`] of a spacing along
+    /// each axis, the value held farther out).
     fn sh_on_grid(&self, grid: &Grid, p: Vec3, mut visible: impl FnMut(Vec3) -> bool) -> Sh2 {
+        let g = grid.local(p);
+        let last = Vec3::from(grid.count.map(|c| c.saturating_sub(1) as f32));
+        let x = g.clamp(Vec3::ZERO, last);
+        let d = (g - x).clamp(Vec3::splat(-BEYOND), Vec3::splat(BEYOND));
+        if d == Vec3::ZERO {
+            return self.sh_in_box(grid, p, visible);
+        }
+        // Holding the face's value instead left the slab reading light from a fifth of a
+        // spacing in, where it is weaker beside an emitter and differs beside a wall.
+        let world = |l: Vec3| grid.origin + grid.rotation * (grid.step * l);
+        let face = self.sh_in_box(grid, world(x), &mut visible);
+        let inner = (x - d).clamp(Vec3::ZERO, last);
+        let inside = self.sh_in_box(grid, world(inner), &mut visible);
+        sh::add(&sh::scaled(&face, 2.0), &sh::scaled(&inside, -1.0))
+    }
+
+    /// [`Probes::sh_on_grid`] at a point `p` of the box of the grid's positions (held on its
+    /// faces beyond).
+    fn sh_in_box(&self, grid: &Grid, p: Vec3, mut visible: impl FnMut(Vec3) -> bool) -> Sh2 {
         let zero = [Vec3::ZERO; 9];
         let g = grid.local(p);
         let mut base = [0u32; 3];
@@ -813,5 +843,61 @@ fn fill_invalid(placement: &Placement, sh: &mut [Sh2]) {
             known[i] = true;
         }
         pending.retain(|&i| !known[i]);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Beyond the outermost probes (the slab by the walls) the lookup continues the outer
+    /// cells' light: a field linear in position is read exactly there, up to [`BEYOND`] of a
+    /// spacing out, and held farther.
+    #[test]
+    fn the_slab_beyond_the_outermost_probes_continues_the_outer_cells() {
+        let grid = Grid {
+            origin: Vec3::new(1.0, 0.0, -1.0),
+            step: Vec3::new(0.5, 0.25, 1.0),
+            count: [3, 4, 2],
+            rotation: Quat::from_rotation_y(0.3),
+        };
+        let field = |p: Vec3| {
+            let mut c = [Vec3::ZERO; 9];
+            c[0] = Vec3::new(2.0 + p.x, 3.0 - 2.0 * p.y, 1.5 + 0.5 * p.z);
+            c[2] = Vec3::splat(0.2 * p.y);
+            c
+        };
+        let position: Vec<Vec3> = (0..grid.len())
+            .map(|i| grid.position(place::unflatten(i, grid.count)))
+            .collect();
+        let probes = Probes {
+            grid: Some(grid),
+            refinement: Refinement::default(),
+            sh: position.iter().map(|&p| field(p)).collect(),
+            valid: vec![true; position.len()],
+            position,
+            indirect_only: false,
+            rays: 0,
+            moved: 0,
+        };
+        let world = |l: Vec3| grid.origin + grid.rotation * (grid.step * l);
+        let close = |a: &Sh2, b: &Sh2| (0..9).all(|m| (a[m] - b[m]).abs().max_element() < 1e-4);
+        // Inside, beyond a face, beyond an edge (two axes out), and beyond a corner.
+        for l in [
+            Vec3::new(1.3, 2.2, 0.6),
+            Vec3::new(-0.2, 1.5, 0.5),
+            Vec3::new(2.4, 3.1, 0.5),
+            Vec3::new(1.0, -0.15, 1.45),
+            Vec3::new(-0.5, 3.3, -0.2),
+        ] {
+            let p = world(l);
+            assert!(close(&probes.sh_at(p, |_| true), &field(p)), "at {l}");
+        }
+        // Farther out than BEYOND: the value at BEYOND.
+        let (far, held) = (Vec3::new(3.5, 1.0, 0.5), Vec3::new(2.0 + BEYOND, 1.0, 0.5));
+        assert!(close(
+            &probes.sh_at(world(far), |_| true),
+            &field(world(held))
+        ));
     }
 }
