@@ -119,7 +119,7 @@ fn narrow_faces_read_at_most_one_and_a_half_times_their_light() {
 /// reaches under it, and a punctual sample drawn there sees the light through no wall: before
 /// `Texels::punctual_point` the brightest floor texel read 253 (`H/π`) where no visible point
 /// sees any light. The interior fixture's lamp, its bulb inside the pole, made its shade's
-/// underside read 80× its light that way.
+/// underside read `ρ·H` ≈ 80 in one texel (0.4–0.6 beside it) that way.
 #[test]
 fn lights_sealed_inside_thin_posts_light_nothing_around_them() {
     use lightbake::testing::{Face, Geometry, GltfBuilder, Light, Material};
