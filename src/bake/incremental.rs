@@ -1452,8 +1452,10 @@ enum RowRay {
     Gather { origin: Vec3, dir: Vec3, cos: f32 },
     /// A light sample `u` from `origin`.
     Light { origin: Vec3, u: Vec2 },
-    /// The shadow ray to punctual light `light` from `p`.
-    Punctual { p: Vec3, light: usize },
+    /// The shadow ray to punctual light `light` from footprint point `footprint`, or from the
+    /// sample point where the surface between them is not clear (`Texels::punctual_point`,
+    /// decided in each scene: an edit can open or close that gap).
+    Punctual { footprint: Vec3, light: usize },
 }
 
 /// Draws texel `i`'s rays in `ctx` (the rays only: nothing is traced) and hands each to
@@ -1494,9 +1496,9 @@ fn row_rays(ctx: &Context, i: usize, mut visit: impl FnMut(RowRay)) -> (u32, u32
         let g = PUNCTUAL_GRID;
         for s in 0..g * g {
             let u = (Vec2::new((s % g) as f32, (s / g) as f32) + rng.next_vec2()) / g as f32;
-            let p = texels.punctual_point(ctx.surfaces.tracer, i, ctx.footprint_point(i, u));
+            let footprint = ctx.footprint_point(i, u);
             for light in 0..lights {
-                visit(RowRay::Punctual { p, light });
+                visit(RowRay::Punctual { footprint, light });
             }
         }
     }
@@ -1571,7 +1573,7 @@ impl Rebuild<'_> {
                 continue;
             }
             let (k, l) = row_rays(self.new, i, |ray| {
-                if self.flags(ray) {
+                if self.flags(i, ray) {
                     flagged.push(ray);
                 }
             });
@@ -1605,8 +1607,10 @@ impl Rebuild<'_> {
         (p.gather_rays.max(1), l)
     }
 
-    /// Whether `ray` can end differently: its line meets a moved node's old or new bounds.
-    fn flags(&self, ray: RowRay) -> bool {
+    /// Whether `ray` of texel `i` can end differently: its line meets a moved node's old or new
+    /// bounds (for a punctual light: the segment across the footprint, or the shadow ray from
+    /// either end of it).
+    fn flags(&self, i: usize, ray: RowRay) -> bool {
         match ray {
             RowRay::Gather { origin, dir, .. } => meets(self.boxes, origin, dir, f32::INFINITY),
             RowRay::Light { origin, u } => {
@@ -1616,12 +1620,19 @@ impl Rebuild<'_> {
                 let (point, _) = triangle_point(self.new.surfaces.scene, tri, bary);
                 meets(self.boxes, origin, point - origin, 1.0)
             }
-            RowRay::Punctual { p, light } => {
+            RowRay::Punctual { footprint, light } => {
+                let Surfaces { texels, tracer, .. } = self.new.surfaces;
+                let (a, b) = texels.punctual_segment(tracer, i, footprint);
                 let light = &self.new.surfaces.scene.lights[light];
-                match light.kind {
-                    LightKind::Directional => meets(self.boxes, p, -light.direction, f32::INFINITY),
-                    _ => meets(self.boxes, p, light.position - p, 1.0),
-                }
+                meets(self.boxes, a, b - a, 1.0)
+                    || [footprint, texels.sample_point(tracer, i)]
+                        .into_iter()
+                        .any(|p| match light.kind {
+                            LightKind::Directional => {
+                                meets(self.boxes, p, -light.direction, f32::INFINITY)
+                            }
+                            _ => meets(self.boxes, p, light.position - p, 1.0),
+                        })
             }
         }
     }
@@ -1677,7 +1688,8 @@ impl Rebuild<'_> {
                     ..NOTHING
                 }
             }
-            RowRay::Punctual { p, light } => {
+            RowRay::Punctual { footprint, light } => {
+                let p = texels.punctual_point(tracer, i, footprint);
                 let g2 = (PUNCTUAL_GRID * PUNCTUAL_GRID) as f32;
                 Outcome {
                     light: punctual_irradiance(&scene.lights[light], p, n, tracer) / g2,

@@ -201,14 +201,26 @@ impl Texels {
     /// anywhere, need this.
     #[inline]
     pub(crate) fn punctual_point(&self, tracer: &Tracer, i: usize, p: Vec3) -> Vec3 {
-        let n = self.normal[i];
-        let lift = n * (cuts::LIFT - 1.0) * tracer.epsilon;
-        let sample = self.position[i] + n * tracer.epsilon;
-        if tracer.occluded(sample + lift, p + lift) {
-            sample
+        let (a, b) = self.punctual_segment(tracer, i, p);
+        if tracer.occluded(a, b) {
+            self.sample_point(tracer, i)
         } else {
             p
         }
+    }
+
+    /// The segment [`Texels::punctual_point`] tests for footprint point `p`: from the sample
+    /// point to `p`, both lifted as the divided-texel probe lifts them (`cuts::LIFT`).
+    #[inline]
+    pub(crate) fn punctual_segment(&self, tracer: &Tracer, i: usize, p: Vec3) -> (Vec3, Vec3) {
+        let lift = self.normal[i] * (cuts::LIFT - 1.0) * tracer.epsilon;
+        (self.sample_point(tracer, i) + lift, p + lift)
+    }
+
+    /// Texel `i`'s sample point, lifted off the surface by the ray epsilon.
+    #[inline]
+    pub(crate) fn sample_point(&self, tracer: &Tracer, i: usize) -> Vec3 {
+        self.position[i] + self.normal[i] * tracer.epsilon
     }
 
     /// Debug-build consistency check: finite values, areas positive, index consistent.
