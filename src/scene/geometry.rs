@@ -22,28 +22,104 @@ impl Plane {
     }
 }
 
-/// Parameter intervals of segment `a → b` inside the triangles `corners` (plane coordinates),
-/// merged across gaps up to `snap`.
-pub(super) fn inside_intervals(
-    a: DVec2,
-    b: DVec2,
-    corners: &[[DVec2; 3]],
-    snap: f64,
-) -> Vec<[f64; 2]> {
-    let length = a.distance(b);
-    let mut inside: Vec<[f64; 2]> = corners
-        .iter()
-        .filter_map(|&c| clip_interval(a, b, c, 1e-9 * snap))
-        .collect();
-    inside.sort_by(|x, y| x[0].total_cmp(&y[0]));
-    let mut merged: Vec<[f64; 2]> = Vec::new();
-    for iv in inside {
-        match merged.last_mut() {
-            Some(m) if iv[0] <= m[1] + snap / length => m[1] = m[1].max(iv[1]),
-            _ => merged.push(iv),
+/// A patch's triangles in plane coordinates, each with its [`clip_box`]: a segment skips those
+/// it cannot meet.
+pub(super) struct Triangles2d {
+    pub(super) corners: Vec<[DVec2; 3]>,
+    boxes: Vec<Option<[DVec2; 2]>>,
+    /// The boxed triangles by their boxes' smaller `x`, and the widest box along `x`: a
+    /// segment scans only the stretch it can reach.
+    by_x: Vec<u32>,
+    span: f64,
+    /// Triangles without a box, clipped against every segment.
+    slivers: Vec<u32>,
+}
+
+/// Boxes are widened by this share of the snap distance. [`clip_interval`] widens each edge by
+/// `1e-9 · snap`, which moves a corner of angle `θ` out by `1e-9 · snap / sin(θ/2)`: at most
+/// `5e-4 · snap` for the corners [`clip_box`] gives a box (`sin θ ≥ 4e-6`).
+const BOX_MARGIN: f64 = 1e-3;
+
+/// The box outside which no segment has a piece in triangle `c` by [`clip_interval`] at
+/// `1e-9 · snap`; `None` for a sliver, whose widened edges may reach anywhere along it.
+pub(super) fn clip_box(c: [DVec2; 3], snap: f64) -> Option<[DVec2; 2]> {
+    let sliver = (0..3).any(|k| {
+        let (u, v) = (c[(k + 1) % 3] - c[k], c[(k + 2) % 3] - c[k]);
+        let scale = u.length() * v.length();
+        !(u.perp_dot(v).abs() >= 4e-6 * scale && scale > 0.0)
+    });
+    let margin = DVec2::splat(BOX_MARGIN * snap);
+    (!sliver).then(|| {
+        let (lo, hi) = (c[0].min(c[1]).min(c[2]), c[0].max(c[1]).max(c[2]));
+        [lo - margin, hi + margin]
+    })
+}
+
+/// Whether segment `a → b` may meet a triangle of [`clip_box`] `bounds`.
+pub(super) fn may_clip(bounds: Option<[DVec2; 2]>, a: DVec2, b: DVec2) -> bool {
+    bounds.is_none_or(|[lo, hi]| !(a.max(b).cmplt(lo).any() || a.min(b).cmpgt(hi).any()))
+}
+
+impl Triangles2d {
+    /// `corners` clipped at `1e-9 · snap` (as [`Triangles2d::inside_intervals`] does).
+    pub(super) fn new(corners: Vec<[DVec2; 3]>, snap: f64) -> Self {
+        let boxes: Vec<Option<[DVec2; 2]>> = corners.iter().map(|&c| clip_box(c, snap)).collect();
+        let (mut by_x, mut slivers) = (Vec::new(), Vec::new());
+        let mut span = 0.0f64;
+        for (t, b) in boxes.iter().enumerate() {
+            match b {
+                Some([lo, hi]) => {
+                    by_x.push(t as u32);
+                    span = span.max(hi.x - lo.x);
+                }
+                None => slivers.push(t as u32),
+            }
+        }
+        let low = |t: u32| boxes[t as usize].map_or(0.0, |b| b[0].x);
+        by_x.sort_by(|&i, &j| low(i).total_cmp(&low(j)));
+        Triangles2d {
+            corners,
+            boxes,
+            by_x,
+            span,
+            slivers,
         }
     }
-    merged
+
+    /// The box of every corner (empty: `INFINITY..NEG_INFINITY`).
+    pub(super) fn bounds(&self) -> [DVec2; 2] {
+        let (mut lo, mut hi) = (DVec2::INFINITY, DVec2::NEG_INFINITY);
+        for c in self.corners.iter().flatten() {
+            (lo, hi) = (lo.min(*c), hi.max(*c));
+        }
+        [lo, hi]
+    }
+
+    /// Parameter intervals of segment `a → b` inside the triangles, merged across gaps up to
+    /// `snap` (the snap they were boxed for).
+    pub(super) fn inside_intervals(&self, a: DVec2, b: DVec2, snap: f64) -> Vec<[f64; 2]> {
+        let length = a.distance(b);
+        let low = |t: u32| self.boxes[t as usize].map_or(0.0, |b| b[0].x);
+        let start = self
+            .by_x
+            .partition_point(|&t| low(t) < a.x.min(b.x) - self.span);
+        let boxed = (self.by_x[start..].iter())
+            .take_while(|&&t| low(t) <= a.x.max(b.x))
+            .filter(|&&t| may_clip(self.boxes[t as usize], a, b));
+        let mut inside: Vec<[f64; 2]> = (boxed.chain(&self.slivers))
+            .filter_map(|&t| clip_interval(a, b, self.corners[t as usize], 1e-9 * snap))
+            .collect();
+        // Merging is the same whatever order equal starts come in.
+        inside.sort_by(|x, y| x[0].total_cmp(&y[0]));
+        let mut merged: Vec<[f64; 2]> = Vec::new();
+        for iv in inside {
+            match merged.last_mut() {
+                Some(m) if iv[0] <= m[1] + snap / length => m[1] = m[1].max(iv[1]),
+                _ => merged.push(iv),
+            }
+        }
+        merged
+    }
 }
 
 /// The parameter interval of segment `a → b` inside the counter-clockwise triangle `c`
@@ -148,4 +224,73 @@ pub(super) fn weld(positions: &[Vec3]) -> Vec<u32> {
         }
     }
     weld
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sampling::Rng;
+
+    /// The box and sort by `x` only skip triangles a segment cannot meet: the same intervals
+    /// as clipping every triangle, slivers (a zero-length edge, a needle) and segments along
+    /// edges among them.
+    #[test]
+    fn boxed_triangles_give_the_intervals_of_clipping_them_all() {
+        let mut rng = Rng::new(7, 0, 0);
+        let mut point = || DVec2::new(rng.next_f32() as f64 * 4.0, rng.next_f32() as f64 * 4.0);
+        let mut corners: Vec<[DVec2; 3]> = (0..300)
+            .map(|_| {
+                let a = point();
+                let (b, c) = (a + (point() - 2.0) * 0.2, a + (point() - 2.0) * 0.2);
+                // Counter-clockwise, as patches give them.
+                if (b - a).perp_dot(c - a) >= 0.0 {
+                    [a, b, c]
+                } else {
+                    [a, c, b]
+                }
+            })
+            .collect();
+        let a = point();
+        corners.push([a, a, a + DVec2::X]); // a zero-length edge
+        corners.push([a, a + DVec2::X, a + DVec2::new(0.5, 1e-9)]); // a needle
+        let snap = 1e-3;
+        let boxed = Triangles2d::new(corners.clone(), snap);
+        let brute = |a: DVec2, b: DVec2| {
+            let length = a.distance(b);
+            let mut inside: Vec<[f64; 2]> = (corners.iter())
+                .filter_map(|&c| clip_interval(a, b, c, 1e-9 * snap))
+                .collect();
+            inside.sort_by(|x, y| x[0].total_cmp(&y[0]));
+            let mut merged: Vec<[f64; 2]> = Vec::new();
+            for iv in inside {
+                match merged.last_mut() {
+                    Some(m) if iv[0] <= m[1] + snap / length => m[1] = m[1].max(iv[1]),
+                    _ => merged.push(iv),
+                }
+            }
+            merged
+        };
+        let mut met = 0;
+        for k in 0..2000 {
+            let (a, b) = match k % 3 {
+                // Along a triangle's edge, a little beyond its ends.
+                0 => {
+                    let c = corners[k % corners.len()];
+                    (c[0].lerp(c[1], -0.1), c[0].lerp(c[1], 1.1))
+                }
+                _ => {
+                    let a = point();
+                    (a, a + (point() - 2.0) * 0.5)
+                }
+            };
+            let expected = brute(a, b);
+            met += usize::from(!expected.is_empty());
+            assert_eq!(
+                boxed.inside_intervals(a, b, snap),
+                expected,
+                "segment {a} → {b}"
+            );
+        }
+        assert!(met > 500, "only {met} segments met a triangle");
+    }
 }

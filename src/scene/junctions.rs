@@ -55,14 +55,14 @@
 //! replayed in that order afterwards, and an instance the parallel run served differently is
 //! cut again in order, so the result does not depend on the thread count.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, HashMap};
 use std::sync::atomic::AtomicUsize;
 
 use glam::{DVec2, DVec3, Vec2, Vec3};
 use rayon::prelude::*;
 use spade::{ConstrainedDelaunayTriangulation, Point2, Triangulation};
 
-use super::geometry::{BoxGrid, Plane, clip_interval, inside_intervals, weld};
+use super::geometry::{BoxGrid, Plane, Triangles2d, clip_box, clip_interval, may_clip, weld};
 use super::shadow_cuts::{Budget, MAX_SAMPLES, ShadowCutter, ShadowWork};
 use super::{Blend, Instance, Scene, Split};
 
@@ -560,31 +560,109 @@ struct Cuts {
 struct PatchEdges {
     edges: Vec<([DVec2; 2], bool)>,
     vertices: Vec<(DVec2, bool)>,
+    /// Vertices by `x` ascending, and edges by their smaller `x`: a query scans only the
+    /// stretch of `x` it can reach (cut points are placed one by one on patches of thousands
+    /// of vertices).
+    vertices_by_x: Vec<u32>,
+    edges_by_x: Vec<u32>,
+    /// The widest extent of an edge along `x`.
+    edge_span: f64,
 }
 
 impl PatchEdges {
-    /// The patch vertex nearest to `p` within `within`, else the nearest point of a patch edge
-    /// that close (only the border's when `border_only`), with its border flag.
-    fn nearest(&self, p: DVec2, within: f64, border_only: bool) -> Option<(DVec2, bool)> {
-        let vertex = self
-            .vertices
-            .iter()
-            .filter(|v| v.1 || !border_only)
-            .map(|&(v, border)| (v.distance(p), v, border))
-            .filter(|x| x.0 <= within)
-            .min_by(|x, y| x.0.total_cmp(&y.0));
-        let nearest = vertex.or_else(|| {
-            self.edges
-                .iter()
-                .filter(|e| e.1 || !border_only)
-                .map(|&([a, b], border)| {
-                    let (d, t) = distance_to_segment(p, a, b);
-                    (d, a.lerp(b, t), border)
-                })
-                .filter(|x| x.0 <= within)
-                .min_by(|x, y| x.0.total_cmp(&y.0))
+    fn new(edges: Vec<([DVec2; 2], bool)>, vertices: Vec<(DVec2, bool)>) -> Self {
+        let mut vertices_by_x: Vec<u32> = (0..vertices.len() as u32).collect();
+        vertices_by_x.sort_by(|&i, &j| {
+            vertices[i as usize]
+                .0
+                .x
+                .total_cmp(&vertices[j as usize].0.x)
         });
-        nearest.map(|(_, q, border)| (q, border))
+        let low = |i: u32| edges[i as usize].0[0].x.min(edges[i as usize].0[1].x);
+        let mut edges_by_x: Vec<u32> = (0..edges.len() as u32).collect();
+        edges_by_x.sort_by(|&i, &j| low(i).total_cmp(&low(j)));
+        let edge_span = (edges.iter())
+            .map(|e| (e.0[0].x - e.0[1].x).abs())
+            .fold(0.0, f64::max);
+        PatchEdges {
+            edges,
+            vertices,
+            vertices_by_x,
+            edges_by_x,
+            edge_span,
+        }
+    }
+
+    /// Whether segment `p → q` lies along the border: its ends, middle and quarters each
+    /// within `near` of a border edge.
+    fn along_border(&self, p: DVec2, q: DVec2, near: f64) -> bool {
+        let (lo, hi) = (p.min(q) - 2.0 * near, p.max(q) + 2.0 * near);
+        let start = self
+            .edges_by_x
+            .partition_point(|&i| self.low_x(i) < lo.x - self.edge_span);
+        let reach = self.edges_by_x[start..]
+            .iter()
+            .take_while(|&&i| self.low_x(i) <= hi.x)
+            .map(|&i| self.edges[i as usize])
+            .filter(|&([u, v], border)| {
+                border && !(u.max(v).cmplt(lo).any() || u.min(v).cmpgt(hi).any())
+            });
+        [0.0, 0.25, 0.5, 0.75, 1.0].iter().all(|&s| {
+            let x = p.lerp(q, s);
+            (reach.clone()).any(|([u, v], _)| distance_to_segment(x, u, v).0 <= near)
+        })
+    }
+
+    /// The smaller `x` of edge `i`.
+    fn low_x(&self, i: u32) -> f64 {
+        let [a, b] = self.edges[i as usize].0;
+        a.x.min(b.x)
+    }
+
+    /// The patch vertex nearest to `p` within `within`, else the nearest point of a patch edge
+    /// that close (only the border's when `border_only`), with its border flag. Ties go to
+    /// the first in the lists' order.
+    fn nearest(&self, p: DVec2, within: f64, border_only: bool) -> Option<(DVec2, bool)> {
+        // The closest by (distance, index) among `order[from..]` until `x` passes `to`.
+        fn closest<T>(
+            order: &[u32],
+            (from, to): (f64, f64),
+            x: impl Fn(u32) -> f64,
+            candidate: impl Fn(u32) -> Option<(f64, T)>,
+        ) -> Option<T> {
+            let start = order.partition_point(|&i| x(i) < from);
+            let mut best: Option<(f64, u32, T)> = None;
+            for &i in order[start..].iter().take_while(|&&i| x(i) <= to) {
+                if let Some((d, found)) = candidate(i)
+                    && best.as_ref().is_none_or(|b| (d, i) < (b.0, b.1))
+                {
+                    best = Some((d, i, found));
+                }
+            }
+            best.map(|b| b.2)
+        }
+        let vertex = closest(
+            &self.vertices_by_x,
+            (p.x - within, p.x + within),
+            |i| self.vertices[i as usize].0.x,
+            |i| {
+                let (v, border) = self.vertices[i as usize];
+                let d = v.distance(p);
+                ((border || !border_only) && d <= within).then_some((d, (v, border)))
+            },
+        );
+        vertex.or_else(|| {
+            closest(
+                &self.edges_by_x,
+                (p.x - within - self.edge_span, p.x + within),
+                |i| self.low_x(i),
+                |i| {
+                    let ([a, b], border) = self.edges[i as usize];
+                    let (d, t) = distance_to_segment(p, a, b);
+                    ((border || !border_only) && d <= within).then_some((d, (a.lerp(b, t), border)))
+                },
+            )
+        })
     }
 }
 
@@ -938,14 +1016,14 @@ impl InstanceCuts {
             for &t in &patch.triangles {
                 let tri = mesh.triangles[t as usize];
                 let corners = tri.map(|v| patch.plane.to_2d(mesh.pos(v)));
+                let bounds = clip_box(corners, snap);
                 let w = mesh.welded(t as usize);
                 for &([a, b], extension) in &cuts.segments {
-                    let Some(ends) = clip(
-                        cuts.points[a as usize],
-                        cuts.points[b as usize],
-                        corners,
-                        snap,
-                    ) else {
+                    let (a, b) = (cuts.points[a as usize], cuts.points[b as usize]);
+                    if !may_clip(bounds, a, b) {
+                        continue;
+                    }
+                    let Some(ends) = clip(a, b, corners, snap) else {
                         continue;
                     };
                     for end in ends {
@@ -1229,21 +1307,37 @@ impl Retriangulated {
 /// edge, where stitching pulls the lit and the shadowed side together (on the sphere's shadow a
 /// renderer read 0.35 against a reference 0.02).
 fn cut_bits_of(face: [DVec2; 3], cuts: &Cuts, snap: f64) -> [u8; 2] {
+    const AT: [f64; 5] = [0.0, 0.25, 0.5, 0.75, 1.0];
     let eps = 1e-3 * snap;
-    let on = |x: DVec2, junction: bool| {
-        cuts.segments.iter().any(|&([a, b], ext)| {
-            (!junction || !ext || cuts.shadow)
-                && distance_to_segment(x, cuts.points[a as usize], cuts.points[b as usize]).0 <= eps
-        })
-    };
+    let samples: [[DVec2; 5]; 3] =
+        std::array::from_fn(|k| AT.map(|s| face[k].lerp(face[(k + 1) % 3], s)));
+    // Per kind (junction cuts, any cut), per edge and sample: on such a cut. Only cuts whose
+    // box (widened past `eps`) meets the face's can hold a sample.
+    let mut on = [[[false; 5]; 3]; 2];
+    let margin = DVec2::splat(2.0 * eps);
+    let (lo, hi) = (
+        face[0].min(face[1]).min(face[2]),
+        face[0].max(face[1]).max(face[2]),
+    );
+    for &([a, b], ext) in &cuts.segments {
+        let (p, q) = (cuts.points[a as usize], cuts.points[b as usize]);
+        if p.min(q).cmpgt(hi + margin).any() || p.max(q).cmplt(lo - margin).any() {
+            continue;
+        }
+        let junction = !ext || cuts.shadow;
+        for (k, edge) in samples.iter().enumerate() {
+            for (j, &x) in edge.iter().enumerate() {
+                if distance_to_segment(x, p, q).0 <= eps {
+                    on[1][k][j] = true;
+                    on[0][k][j] |= junction;
+                }
+            }
+        }
+    }
     let mut bits = [0u8; 2];
-    for k in 0..3 {
-        let (p, q) = (face[k], face[(k + 1) % 3]);
-        for (kind, junction) in [(0, true), (1, false)] {
-            if [0.0, 0.25, 0.5, 0.75, 1.0]
-                .iter()
-                .all(|&s| on(p.lerp(q, s), junction))
-            {
+    for (kind, on) in on.iter().enumerate() {
+        for (k, edge) in on.iter().enumerate() {
+            if edge.iter().all(|&x| x) {
                 bits[kind] |= 1 << k;
             }
         }
@@ -1325,17 +1419,22 @@ fn patch_cuts_of(
             entry.0 += 1;
         }
     }
+    let corners2d = Triangles2d::new(corners2d, tol.snap);
     let edges: Vec<([DVec2; 2], bool)> = counted.values().map(|&(n, e)| (e, n == 1)).collect();
     let mut vertices: Vec<(DVec2, bool)> = Vec::new();
+    // Equal positions are one vertex (`+ 0.0`: -0 is 0), in the order edges first meet them.
+    let mut vertex_at: HashMap<[u64; 2], usize> = HashMap::new();
     for &([a, b], border) in &edges {
         for p in [a, b] {
-            match vertices.iter_mut().find(|(q, _)| *q == p) {
-                Some(v) => v.1 |= border,
-                None => vertices.push((p, border)),
-            }
+            let key = [(p.x + 0.0).to_bits(), (p.y + 0.0).to_bits()];
+            let k = *vertex_at.entry(key).or_insert_with(|| {
+                vertices.push((p, false));
+                vertices.len() - 1
+            });
+            vertices[k].1 |= border;
         }
     }
-    let patch_edges = PatchEdges { edges, vertices };
+    let patch_edges = PatchEdges::new(edges, vertices);
 
     // Segments where other triangles cross the plane or stand on it, clipped to the patch.
     let mut cuts = Cuts {
@@ -1359,7 +1458,7 @@ fn patch_cuts_of(
         if length <= tol.snap {
             return;
         }
-        for [s0, s1] in inside_intervals(a, b, &corners2d, tol.snap) {
+        for [s0, s1] in corners2d.inside_intervals(a, b, tol.snap) {
             if (s1 - s0) * length > tol.snap {
                 let i = cuts.point(a.lerp(b, s0), &patch_edges, tol);
                 let j = cuts.point(a.lerp(b, s1), &patch_edges, tol);
@@ -1404,14 +1503,7 @@ fn patch_cuts_of(
     // Segments lying along the patch border change nothing: leave them out.
     cuts.segments.retain(|&([a, b], _)| {
         let (p, q) = (cuts.points[a as usize], cuts.points[b as usize]);
-        let on_border = |x: DVec2| {
-            patch_edges.edges.iter().any(|&([u, v], border)| {
-                border && distance_to_segment(x, u, v).0 <= 1e-6 * tol.snap
-            })
-        };
-        ![0.0, 0.25, 0.5, 0.75, 1.0]
-            .iter()
-            .all(|&s| on_border(p.lerp(q, s)))
+        !patch_edges.along_border(p, q, 1e-6 * tol.snap)
     });
     if cuts.segments.is_empty() {
         return None;
@@ -1701,6 +1793,90 @@ fn vertex_of(
 mod tests {
     use super::*;
     use crate::scene::{Instance, LightKind, Material};
+
+    /// The queries sorted by `x` find what scanning every vertex and edge finds (ties to the
+    /// first listed), and `along_border` agrees with testing every border edge.
+    #[test]
+    fn patch_edge_queries_match_scanning_every_edge() {
+        let mut rng = crate::sampling::Rng::new(3, 0, 0);
+        let mut point = || {
+            // On a coarse lattice now and then, so that distances tie.
+            let p = DVec2::new(rng.next_f32() as f64, rng.next_f32() as f64) * 2.0;
+            if rng.next_f32() < 0.3 {
+                (p * 8.0).round() / 8.0
+            } else {
+                p
+            }
+        };
+        let mut edges: Vec<([DVec2; 2], bool)> = Vec::new();
+        for k in 0..400 {
+            let a = point();
+            let b = if k % 5 == 0 {
+                a
+            } else {
+                a + (point() - 1.0) * 0.3
+            };
+            edges.push(([a, b], k % 3 != 0));
+        }
+        edges.push(([DVec2::ZERO, DVec2::new(2.0, 2.0)], true)); // spans the whole patch
+        let mut vertices: Vec<(DVec2, bool)> = Vec::new();
+        for &([a, b], border) in &edges {
+            for p in [a, b] {
+                match vertices.iter_mut().find(|(q, _)| *q == p) {
+                    Some(v) => v.1 |= border,
+                    None => vertices.push((p, border)),
+                }
+            }
+        }
+        let brute_nearest = |p: DVec2, within: f64, border_only: bool| {
+            let vertex = (vertices.iter())
+                .filter(|v| v.1 || !border_only)
+                .map(|&(v, border)| (v.distance(p), v, border))
+                .filter(|x| x.0 <= within)
+                .min_by(|x, y| x.0.total_cmp(&y.0));
+            vertex
+                .or_else(|| {
+                    (edges.iter())
+                        .filter(|e| e.1 || !border_only)
+                        .map(|&([a, b], border)| {
+                            let (d, t) = distance_to_segment(p, a, b);
+                            (d, a.lerp(b, t), border)
+                        })
+                        .filter(|x| x.0 <= within)
+                        .min_by(|x, y| x.0.total_cmp(&y.0))
+                })
+                .map(|(_, q, border)| (q, border))
+        };
+        let brute_along = |p: DVec2, q: DVec2, near: f64| {
+            [0.0, 0.25, 0.5, 0.75, 1.0].iter().all(|&s| {
+                let x = p.lerp(q, s);
+                (edges.iter())
+                    .any(|&([u, v], border)| border && distance_to_segment(x, u, v).0 <= near)
+            })
+        };
+        let patch = PatchEdges::new(edges.clone(), vertices.clone());
+        let (mut found, mut along) = (0, 0);
+        for k in 0..3000 {
+            let p = point();
+            let within = [0.01, 0.05, 0.2][k % 3];
+            let expected = brute_nearest(p, within, k % 2 == 0);
+            found += usize::from(expected.is_some());
+            assert_eq!(patch.nearest(p, within, k % 2 == 0), expected, "at {p}");
+            let ([a, b], _) = edges[k % edges.len()];
+            let (p, q) = match k % 4 {
+                0 => (a, b),
+                1 => (a.lerp(b, 0.25), a.lerp(b, 0.75)),
+                _ => (p, point()),
+            };
+            let expected = brute_along(p, q, 1e-6);
+            along += usize::from(expected);
+            assert_eq!(patch.along_border(p, q, 1e-6), expected, "{p} → {q}");
+        }
+        assert!(
+            found > 1000 && along > 100,
+            "{found} found, {along} along the border"
+        );
+    }
 
     /// Points near a segment's ends or near each other split it into no sliver (the fuzzer's
     /// out-of-memory case was pieces splitting each other without end).

@@ -34,7 +34,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 
 use glam::{DVec2, DVec3, Vec3};
 
-use super::geometry::{BoxGrid, Plane, inside_intervals, weld};
+use super::geometry::{BoxGrid, Plane, Triangles2d, weld};
 use super::{LightKind, Scene};
 
 /// A shadow edge is cut only where the light's jump is at least this share of all punctual
@@ -203,16 +203,13 @@ impl<'a> ShadowCutter<'a> {
     pub(super) fn patch_cuts(
         &self,
         plane: &Plane,
-        corners: &[[DVec2; 3]],
+        corners: &Triangles2d,
         (low, high): (DVec3, DVec3),
         texel: f64,
         touch: f64,
         work: &mut ShadowWork,
     ) -> Vec<[DVec2; 2]> {
-        let (mut lo, mut hi) = (DVec2::INFINITY, DVec2::NEG_INFINITY);
-        for c in corners.iter().flatten() {
-            (lo, hi) = (lo.min(*c), hi.max(*c));
-        }
+        let [lo, hi] = corners.bounds();
         let mut pieces = Vec::new();
         for (l, light) in self.lights.iter().enumerate() {
             // Height of the light above the plane (infinite for a sun in front of it).
@@ -251,7 +248,7 @@ impl<'a> ShadowCutter<'a> {
                 {
                     continue;
                 }
-                for [s0, s1] in inside_intervals(p, q, corners, 0.25 * texel) {
+                for [s0, s1] in corners.inside_intervals(p, q, 0.25 * texel) {
                     if (s1 - s0) * length >= texel {
                         self.boundaries(
                             plane,
