@@ -1,4 +1,4 @@
-//! xatlas unwrapping: each scene instance's convex planar regions go to xatlas as their outlines,
+//! xatlas unwrapping: each scene instance's planar regions go to xatlas as their convex outlines,
 //! its other triangles in blocks; all are charted and packed together into pages of at most
 //! `max_page_size`², each page then trimmed to the texels it uses.
 //!
@@ -44,13 +44,17 @@
 //!   in a chart's face count, hence the blocks ([`MAX_FACES_PER_XATLAS_MESH`]).
 //! - Planar regions: xatlas charts a planar chart by orthogonal projection, and packing only
 //!   sees the chart's outline (minimal bounding box of its convex hull, rasterised coverage).
-//!   So a convex planar region is handed over as the fan of its convex outline, a few triangles
+//!   So a planar region is handed over as the fan of its convex outline, a few triangles
 //!   instead of thousands, and its triangles are placed by the affine map xatlas gave the
-//!   outline ([`placement`]) — the layout xatlas would give the region as one chart, without
-//!   the quadratic chart growing and without block cuts. Only regions xatlas would chart on
+//!   outline ([`placement`]) — the layout xatlas would give a convex region as one chart (a
+//!   region with cut-outs is packed as that chart's hull), without the quadratic chart growing
+//!   and without block cuts. Only regions xatlas would chart on
 //!   their own qualify ([`planar_regions`]): bounded by open edges or creases of 60° or more
-//!   (xatlas never grows a chart over those), convex without holes, within the chart limits.
-//!   Non-convex regions, gentle folds and curved surfaces go to xatlas as triangles. An outline
+//!   (xatlas never grows a chart over those), within the chart limits, and covering at least
+//!   [`MIN_HULL_COVER`] of their convex hull without lying over themselves: a region with
+//!   cut-outs (a floor cut around what stands on it) is packed by its hull, the cut-outs left
+//!   as unused page space (no texels). Regions covering less, gentle folds and curved
+//!   surfaces go to xatlas as triangles. An outline
 //!   xatlas does not return as one chart (slivers below its area epsilon) is charted again as
 //!   triangles in a second run. On `testing::large_hall` at 3 texels per unit (116k triangles,
 //!   floor and ceiling 51k each) the atlas stage went from 3.6 s to 0.16 s, with 194 charts
@@ -263,6 +267,12 @@ const PLANE_TOLERANCE: f64 = 1e-3;
 /// region whose neighbours all turn that far is a chart of its own in xatlas too.
 const CREASE_DOT: f64 = 0.5;
 
+/// A planar region is one chart, packed by its convex hull, when its triangles cover at least
+/// this share of the hull. Before, only an exact cover (convex, no holes) was: the furnished
+/// interior's floor, walls and ceiling (cut around what stands on them, 0.96–0.99 covered)
+/// went to xatlas as 35,000 triangles, charted in blocks with seams at the blocks' borders.
+const MIN_HULL_COVER: f64 = 0.75;
+
 /// Hull corners closer than this to the line through their neighbours are dropped (texels), so
 /// no proxy triangle is degenerate.
 const HULL_TOLERANCE: f64 = 1e-6;
@@ -363,7 +373,7 @@ fn morton(p: glam::UVec3) -> u32 {
     spread(p.x) | (spread(p.y) << 1) | (spread(p.z) << 2)
 }
 
-/// A convex planar region of an instance, bounded by open edges and creases. xatlas charts and
+/// A planar region of an instance, bounded by open edges and creases. xatlas charts and
 /// parameterises it as the fan of its convex outline, a few triangles however many the region
 /// has; the region's triangles are then placed by the same affine map as the outline.
 struct Region {
@@ -410,7 +420,7 @@ fn planar_regions(
         let region = if members.len() < MIN_REGION_TRIANGLES || excluded.contains(&(index, seed)) {
             None
         } else {
-            mesh.convex_region(seed, &members, &region_of, limits, &mut directed)
+            mesh.planar_region(seed, &members, &region_of, limits, &mut directed)
         };
         match region {
             Some(region) => regions.push(region),
@@ -553,9 +563,10 @@ impl<'a> RegionMesh<'a> {
     }
 
     /// The grown region of `seed` (`members`) as a [`Region`], when xatlas would chart it on its
-    /// own as one planar chart: bounded by open edges and creases, manifold, convex without
-    /// holes and within the chart `limits`. `directed` is a reused buffer.
-    fn convex_region(
+    /// own as one planar chart: bounded by open edges and creases, manifold, covering at least
+    /// [`MIN_HULL_COVER`] of its convex hull without lying over itself, and within the chart
+    /// `limits`. `directed` is a reused buffer.
+    fn planar_region(
         &self,
         seed: u32,
         members: &[u32],
@@ -611,10 +622,14 @@ impl<'a> RegionMesh<'a> {
             }
             area += 0.5 * twice;
         }
-        // Convex without holes: the triangles cover their hull exactly.
+        // Packed by its convex hull: the triangles cover most of it (cut-outs such as a
+        // floor's around what stands on it leave page space unused, no texels) and none
+        // overlaps another (checked below where the hull is not covered exactly).
         let mut outline = convex_hull(&plane);
         let hull_area = polygon_area(&outline);
-        if outline.len() < 3 || (area - hull_area).abs() > 1e-6 * hull_area {
+        let exact = (area - hull_area).abs() <= 1e-6 * hull_area;
+        if outline.len() < 3 || !(exact || (MIN_HULL_COVER * hull_area..hull_area).contains(&area))
+        {
             return None;
         }
         let lo = outline.iter().fold(DVec2::INFINITY, |m, p| m.min(*p));
@@ -624,6 +639,13 @@ impl<'a> RegionMesh<'a> {
         }
         plane.iter_mut().for_each(|p| *p -= lo);
         outline.iter_mut().for_each(|p| *p -= lo);
+        let corner = |t: u32| {
+            self.local(t)
+                .map(|v| plane[vertices.binary_search(&v).unwrap_or(0)])
+        };
+        if !exact && dense::folds(members.iter().map(|&t| corner(t)), hi - lo) {
+            return None;
+        }
         Some(Region {
             instance: self.index,
             triangles: members.to_vec(),
@@ -1834,17 +1856,26 @@ pub(crate) mod tests {
         // A cube's faces meet at 90°: six regions of 32 triangles.
         let (regions, rest) = regions_of(&scene_of(&[cube(1.0, 4)], &[]), 16.0);
         assert_eq!((regions.len(), rest.len()), (6, 0));
-        // Non-convex (an L), with a hole, too small: left to xatlas.
-        let l_shape: Vec<(u32, u32)> = (4..8).flat_map(|i| (4..8).map(move |j| (i, j))).collect();
-        for part in [
-            grid(0.1, 8, &l_shape),
-            grid(0.1, 8, &[(3, 3)]),
-            grid(0.1, 2, &[]),
-        ] {
+        // Covering less than `MIN_HULL_COVER` of its hull (a thin L, 28 of 64 squares), too
+        // small: left to xatlas.
+        let l_shape: Vec<(u32, u32)> = (2..8).flat_map(|i| (2..8).map(move |j| (i, j))).collect();
+        for part in [grid(0.1, 8, &l_shape), grid(0.1, 2, &[])] {
             let scene = scene_of(&[part], &[]);
             let (regions, rest) = regions_of(&scene, 16.0);
             assert!(regions.is_empty());
             assert_eq!(rest.len(), scene.triangles.len());
+        }
+        // With a hole (63 of 64 squares) or a corner cut (48 of 64): one region, packed by its
+        // hull, its triangles apart from every other chart's.
+        let corner: Vec<(u32, u32)> = (4..8).flat_map(|i| (4..8).map(move |j| (i, j))).collect();
+        for holes in [vec![(3, 3)], corner] {
+            let scene = scene_of(&[grid(0.1, 8, &holes)], &[]);
+            let (regions, rest) = regions_of(&scene, 16.0);
+            assert_eq!((regions.len(), rest.len()), (1, 0), "holes {holes:?}");
+            let atlas = unwrap_ok(&scene, &params(16.0, 256));
+            assert_eq!(atlas.instances[0].chart_count(), 1);
+            let overlaps = first_page_overlaps(&scene, &atlas);
+            assert_eq!(overlaps.overlapping, 0, "{overlaps:?}");
         }
         // Two flat halves folded by 10°: xatlas may chart across the fold, so neither is taken.
         let mut roof = grid(0.1, 8, &[]);
@@ -1857,6 +1888,38 @@ pub(crate) mod tests {
         // A curved surface has no planar region.
         let (regions, _) = regions_of(&scene_of(&[sphere(Vec3::ZERO, 1.0, 16, 16)], &[]), 16.0);
         assert!(regions.is_empty());
+    }
+
+    /// A region that covers most of its hull but lies over itself (a fan turning 380° about
+    /// one vertex, a notch cut from it) is no planar chart: the fold test sends it to xatlas.
+    #[test]
+    fn a_planar_region_over_itself_is_left_to_xatlas() {
+        let (n, turn) = (32u32, 380f32.to_radians());
+        let mut part = Part::default();
+        part.positions.push(Vec3::ZERO);
+        for k in 0..=n {
+            let notch = if (8..=17).contains(&k) { 0.3 } else { 1.0 };
+            let r = notch * (1.0 + 0.002 * k as f32); // no rim vertex welds onto another
+            let a = turn * k as f32 / n as f32;
+            part.positions
+                .push(Vec3::new(r * a.cos(), r * a.sin(), 0.0));
+        }
+        part.triangles = (0..n).map(|k| [0, k + 1, k + 2]).collect();
+        // Its triangles cover 0.97 of the hull: only the fold test tells.
+        let flat: Vec<DVec2> = part
+            .positions
+            .iter()
+            .map(|p| p.truncate().as_dvec2())
+            .collect();
+        let area: f64 = (part.triangles.iter())
+            .map(|t| 0.5 * (flat[t[1] as usize] - flat[0]).perp_dot(flat[t[2] as usize] - flat[0]))
+            .sum();
+        let cover = area / polygon_area(&convex_hull(&flat));
+        assert!((MIN_HULL_COVER..1.0).contains(&cover), "covers {cover}");
+        let scene = scene_of(&[part], &[]);
+        let (regions, rest) = regions_of(&scene, 16.0);
+        assert!(regions.is_empty());
+        assert_eq!(rest.len(), scene.triangles.len());
     }
 
     #[test]

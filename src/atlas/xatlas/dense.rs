@@ -452,7 +452,7 @@ fn lattice_hull(points: &[DVec2]) -> Vec<DVec2> {
 /// Whether counter-clockwise triangles `faces` inside `[0, extent]` cover one sample point
 /// (a lattice of four per texel) twice: the patch folds over itself. Points on an edge count
 /// for no triangle, so neighbours never clash.
-fn folds(faces: impl Iterator<Item = [DVec2; 3]>, extent: DVec2) -> bool {
+pub(super) fn folds(faces: impl Iterator<Item = [DVec2; 3]>, extent: DVec2) -> bool {
     const PER_TEXEL: f64 = 4.0;
     let size = (extent * PER_TEXEL).ceil().as_uvec2() + 1;
     let mut covered = vec![false; (size.x * size.y) as usize];
