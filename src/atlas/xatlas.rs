@@ -1586,6 +1586,7 @@ pub(crate) mod tests {
             split_junctions: true,
             shadow_cuts: true,
             near_contacts: false,
+            slot_faces: true,
             instancing: Default::default(),
         }
     }
