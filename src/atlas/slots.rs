@@ -64,14 +64,14 @@ impl SlotReport {
         }
         format!(
             "slot faces: {} triangles ({:.3} m², gaps from {:.1} mm) raised to a texel no wider \
-             than their gap, up to ×{} (cap ×{}{}), about +{:.0} texels",
+             than their gap, up to ×{:.1} (cap ×{}{}), about +{:.0} texels",
             self.triangles,
             self.area,
             self.min_gap * 1e3,
             self.max_factor,
             MAX_FACTOR,
             self.capped.map_or(String::new(), |c| format!(
-                ", lowered to ×{c} to add at most ×{MAX_TEXEL_SHARE} the uniform atlas's texels"
+                ", lowered to ×{c:.1} to add at most ×{MAX_TEXEL_SHARE} the uniform atlas's texels"
             )),
             self.added_texels
         )

@@ -16,7 +16,8 @@
 //!    With near contacts (`AtlasParams::near_contacts`), the triangles facing the patch from
 //!    less than a texel in front of it (a door's edge 3 mm from its lining) give the
 //!    projection of their outline — their edges no other of them shares — as segments too:
-//!    the slot under them and the open surface beside it get texels of their own.
+//!    the slot under them and the open surface beside it get texels of their own (and, after
+//!    the split, texels at the scale of the slot's gap: `crate::atlas::slots`).
 //! 2. **Make the cuts separate**: segment ends within `SNAP_TEXELS` merge, move onto the patch
 //!    border's vertices and edges, and split segments they touch; inside the patch a cut point
 //!    within `TOUCH_TEXELS` of a mesh vertex or edge moves onto it (walls meeting on a floor's
