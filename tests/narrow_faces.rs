@@ -211,13 +211,14 @@ fn a_board_over_a_floor_gets_texels_at_its_gap_within_the_cap() {
     };
     let (off, off_total) = under_board(false);
     let (on, on_total) = under_board(true);
-    // 0.16 m² at 8 /m is 10 texels; at ×3.4, about 115.
+    // 0.16 m² at 8 /m is 10 whole texels (25 with the partial ones round the outline's cut);
+    // at ×3.4, about 115 whole ones.
     assert!(
-        off <= 20,
+        off <= 40,
         "{off} floor texels under the board without slot faces"
     );
     assert!(
-        on >= 4 * off.max(10),
+        on >= 3 * off,
         "{on} floor texels under the board with slot faces, {off} without"
     );
     // The cap: slot faces add at most the uniform atlas's texels (plus packing's borders).
