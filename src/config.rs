@@ -61,6 +61,12 @@ pub struct AtlasParams {
     /// beside it; cut ends then snap at 1/16 texel instead of ¼. More charts and triangles. Part
     /// of the junction split: no effect without `split_junctions`. Off by default.
     pub near_contacts: bool,
+    /// With near contacts, raise the texel density of slot faces (a surface facing another
+    /// from a gap narrower than a texel) until a texel is no wider than the gap, up to ×16 and
+    /// at most doubling the texels (`atlas::slots`): light in a slot falls over a length of the
+    /// order of its gap, and a wider texel's lookup reads several times the light there. More
+    /// texels on slot faces only. On by default; no effect without `near_contacts`.
+    pub slot_faces: bool,
     /// Meshes placed by several nodes: duplicated (each placement its own UVs) or shared (one
     /// unwrap, a page rectangle per node). Unwrapped atlases only.
     pub instancing: Instancing,
@@ -427,6 +433,7 @@ impl BakeConfig {
                 split_junctions: true,
                 shadow_cuts: true,
                 near_contacts: false,
+                slot_faces: true,
                 instancing: Instancing::Duplicate,
             },
             technique: Technique::DEFAULT,

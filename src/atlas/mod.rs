@@ -8,6 +8,7 @@
 mod existing;
 mod pack;
 pub(crate) mod share;
+pub(crate) mod slots;
 pub(crate) mod xatlas;
 
 pub use existing::Overlaps;

@@ -1608,6 +1608,7 @@ pub(crate) mod tests {
             split_junctions: true,
             shadow_cuts: true,
             near_contacts: false,
+            slot_faces: true,
             instancing: Default::default(),
         }
     }

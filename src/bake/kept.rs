@@ -100,6 +100,9 @@ pub struct Settings {
     /// `--near-contacts` (left out when false, so files of bakes without it are as before).
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub(crate) near_contacts: bool,
+    /// `--no-slot-faces` (left out when false, so files of other bakes are as before).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub(crate) no_slot_faces: bool,
     /// `--instancing share`: shared meshes with a page rect per node (left out when false, so
     /// files of duplicate-mode bakes are as before).
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
@@ -203,6 +206,7 @@ impl Settings {
             split_junctions: a.split_junctions,
             shadow_cuts: a.shadow_cuts,
             near_contacts: a.near_contacts,
+            no_slot_faces: !a.slot_faces,
             share_instances: a.instancing == crate::config::Instancing::Share,
             gather_rays: t.gather_rays,
             light_samples: t.light_samples,
@@ -244,6 +248,7 @@ impl Settings {
         a.split_junctions = self.split_junctions;
         a.shadow_cuts = self.shadow_cuts;
         a.near_contacts = self.near_contacts;
+        a.slot_faces = !self.no_slot_faces;
         if self.share_instances {
             a.instancing = crate::config::Instancing::Share;
         }

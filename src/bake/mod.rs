@@ -458,6 +458,22 @@ fn prepare_loaded(
     let tracer = Tracer::new(&scene);
     timed(&mut stages, "bvh", t);
 
+    // Slot faces (near contacts only: their cuts keep the raise inside the slot) get texels at
+    // their gap's scale; the density plan's factors are raised to these, never lowered below.
+    let mut junctions = junctions;
+    if config.atlas.near_contacts
+        && config.atlas.slot_faces
+        && let Some(report) = &mut junctions
+    {
+        let t = Instant::now();
+        let tpu = config.atlas.texels_per_unit;
+        let near = scene::junctions::near_distance(1.0 / tpu);
+        let (factors, slots) = atlas::slots::density(&scene, &tracer, tpu, near);
+        raise_to(&mut config.atlas.triangle_density, &factors);
+        report.slots = Some(slots);
+        timed(&mut stages, "slot faces", t);
+    }
+
     // Adaptive density (`density_pilot`): a density per region, and on a small scene perhaps
     // the final layout itself.
     let mut reused = pilot::Reused::default();
@@ -577,7 +593,9 @@ fn density_pilot(
             Ok((reused, Some(layout)))
         }
         (_, factors) => {
-            if let Some(factors) = factors {
+            if let Some(mut factors) = factors {
+                // Slot faces keep their gap's density whatever the pilot judged of them.
+                raise_to(&mut factors, &config.atlas.triangle_density);
                 config.atlas.triangle_density = factors;
             }
             if let Some(pair) = density.pair {
@@ -587,6 +605,19 @@ fn density_pilot(
             plan.overhead_seconds += t.elapsed().as_secs_f64();
             Ok((reused, None))
         }
+    }
+}
+
+/// Raises each of `factors` (per scene triangle, empty meaning 1) to at least `floor`'s.
+fn raise_to(factors: &mut Vec<f32>, floor: &[f32]) {
+    if floor.is_empty() {
+        return;
+    }
+    if factors.len() != floor.len() {
+        *factors = vec![1.0; floor.len()];
+    }
+    for (f, &g) in factors.iter_mut().zip(floor) {
+        *f = f.max(g);
     }
 }
 

@@ -67,6 +67,8 @@ pub struct Options {
     pub no_shadow_cuts: Option<bool>,
     /// Cut receivers along the outlines of near contacts too.
     pub near_contacts: Option<bool>,
+    /// With near contacts, keep slot faces at the plan's density.
+    pub no_slot_faces: Option<bool>,
     /// `duplicate` (the default) or `share`.
     pub instancing: Option<String>,
     /// Keep texel sample points where they are, even inside geometry.
@@ -201,6 +203,7 @@ impl Options {
         c.atlas.split_junctions = !self.no_split_junctions.unwrap_or(false);
         c.atlas.shadow_cuts = !self.no_shadow_cuts.unwrap_or(false);
         c.atlas.near_contacts = self.near_contacts.unwrap_or(false);
+        c.atlas.slot_faces = !self.no_slot_faces.unwrap_or(false);
         c.transport.validity = !self.no_validity.unwrap_or(false);
         c.transport.denoise = !self.no_denoise.unwrap_or(false);
         if !no_auto {

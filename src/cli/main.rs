@@ -154,6 +154,10 @@ struct AtlasArgs {
     /// the slot's light; more charts and triangles.
     #[arg(long)]
     near_contacts: bool,
+    /// With --near-contacts, keep slot faces at the plan's density instead of raising them
+    /// until a texel is no wider than the slot's gap.
+    #[arg(long)]
+    no_slot_faces: bool,
     /// A mesh placed by several nodes: duplicated per node, or written once with a page rect
     /// per node (its instances are then not junction-split).
     #[arg(long, value_enum, default_value = "duplicate")]
@@ -173,6 +177,7 @@ impl AtlasArgs {
         c.atlas.split_junctions = !self.no_split_junctions;
         c.atlas.shadow_cuts = !self.no_shadow_cuts;
         c.atlas.near_contacts = self.near_contacts;
+        c.atlas.slot_faces = !self.no_slot_faces;
         c.atlas.instancing = self.instancing.mode();
         c
     }
@@ -453,6 +458,7 @@ impl BakeArgs {
             no_split_junctions: Some(self.atlas.no_split_junctions),
             no_shadow_cuts: Some(self.atlas.no_shadow_cuts),
             near_contacts: Some(self.atlas.near_contacts),
+            no_slot_faces: Some(self.atlas.no_slot_faces),
             instancing: Some(value_name(self.atlas.instancing)),
             rays: self.rays,
             light_samples: self.light_samples,

@@ -16,7 +16,8 @@
 //!    With near contacts (`AtlasParams::near_contacts`), the triangles facing the patch from
 //!    less than a texel in front of it (a door's edge 3 mm from its lining) give the
 //!    projection of their outline — their edges no other of them shares — as segments too:
-//!    the slot under them and the open surface beside it get texels of their own.
+//!    the slot under them and the open surface beside it get texels of their own (and, after
+//!    the split, texels at the scale of the slot's gap: `crate::atlas::slots`).
 //! 2. **Make the cuts separate**: segment ends within `SNAP_TEXELS` merge, move onto the patch
 //!    border's vertices and edges, and split segments they touch; inside the patch a cut point
 //!    within `TOUCH_TEXELS` of a mesh vertex or edge moves onto it (walls meeting on a floor's
@@ -84,6 +85,11 @@ pub(crate) const TOUCH_TEXELS: f64 = 1.0 / 16.0;
 /// draft texel, would otherwise be snapped into the slot.
 const NEAR_TEXELS: f64 = 1.0;
 
+/// How far in front of a receiver near contacts reach at a texel of `texel` (world units).
+pub(crate) fn near_distance(texel: f32) -> f32 {
+    (NEAR_TEXELS * f64::from(texel)) as f32
+}
+
 /// Normals opposed at least this much (cosine of 30°) face each other.
 const FACING_DOT: f64 = 0.866;
 
@@ -103,7 +109,7 @@ const DENSE_TRIANGLES: usize = 4096;
 const DENSE_TEXELS: f64 = 1.0 / 16.0;
 
 /// What [`split`] did.
-#[derive(Clone, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct JunctionReport {
     /// Instances that were cut.
     pub receivers: usize,
@@ -130,6 +136,9 @@ pub struct JunctionReport {
     /// Instances left uncut because their mesh is shared by several nodes (`--instancing
     /// share`; the cell map of divided texels covers them).
     pub(crate) left_whole: usize,
+    /// Slot faces raised to texels at their gap's scale (`atlas::slots`; a bake with near
+    /// contacts sets it after the split).
+    pub(crate) slots: Option<crate::atlas::slots::SlotReport>,
 }
 
 impl JunctionReport {
@@ -149,6 +158,7 @@ impl JunctionReport {
             shadow_skipped,
             near_segments,
             left_whole,
+            slots: _,
         } = other;
         self.receivers += receivers;
         self.segments += segments;
@@ -167,7 +177,7 @@ impl JunctionReport {
     /// One phrase for the bake's summary line.
     pub fn brief(&self) -> String {
         format!(
-            "junctions: {} receiver(s) split ({} segments{}, {} extensions, {} triangles → +{}){}{}{}",
+            "junctions: {} receiver(s) split ({} segments{}, {} extensions, {} triangles → +{}){}{}{}{}",
             self.receivers,
             self.segments,
             if self.near_segments > 0 {
@@ -207,7 +217,9 @@ impl JunctionReport {
                 )
             } else {
                 String::new()
-            }
+            },
+            self.slots
+                .map_or(String::new(), |s| format!("; {}", s.brief()))
         )
     }
 }
