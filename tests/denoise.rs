@@ -68,7 +68,10 @@ fn does_not_raise_the_error_at_high_ray_counts() {
     let raw = cornell_error(512, false);
     let denoised = cornell_error(512, true);
     eprintln!("Cornell box, K = 512: relative RMSE {raw:.4} -> {denoised:.4} denoised");
-    assert!(denoised < 1.06 * raw, "{raw} -> {denoised}");
+    // Where noise is this low the filter's bias shows: measured 0.0341 -> 0.0360 (×1.056) on
+    // the atlas that charted the floor in xatlas blocks, 0.0336 -> 0.0358 (×1.065) with the
+    // floor one chart (a lower raw error, the same denoised one). 8% leaves room for layouts.
+    assert!(denoised < 1.08 * raw, "{raw} -> {denoised}");
 }
 
 /// Grey floor under a slab x ∈ [−½, ½] (across the whole floor), sun straight down: the floor
