@@ -119,18 +119,9 @@ fn narrow_faces_read_at_most_one_and_a_half_times_their_light() {
 /// underside read `ρ·H` ≈ 80 in one texel (0.4–0.6 beside it) that way.
 #[test]
 fn lights_sealed_inside_thin_posts_light_nothing_around_them() {
-    use lightbake::testing::{Face, Geometry, GltfBuilder, Light, Material};
+    use lightbake::testing::{Face, Geometry, GltfBuilder, Light};
     let mut gltf = GltfBuilder::new("sealed_light");
-    let grey = gltf.add_material(Material::grey("grey", 0.5));
-    let floor = Geometry::grid(
-        Vec3::new(-1.0, 0.0, 1.0),
-        Vec3::X * 2.0,
-        Vec3::NEG_Z * 2.0,
-        4,
-        4,
-    );
-    let floor = gltf.add_mesh("floor", floor, grey);
-    gltf.add_mesh_node("floor", floor);
+    let grey = grey_floor(&mut gltf);
     // Posts a fifth of a texel across (too narrow for the junction split to cut the floor
     // around), at offsets that walk across the texel grid, each with a light inside.
     for k in 0..24 {
@@ -176,18 +167,9 @@ fn lights_sealed_inside_thin_posts_light_nothing_around_them() {
 /// preset's texels.
 #[test]
 fn a_board_over_a_floor_gets_texels_at_its_gap_within_the_cap() {
-    use lightbake::testing::{Face, Geometry, GltfBuilder, Material};
+    use lightbake::testing::{Face, Geometry, GltfBuilder};
     let mut gltf = GltfBuilder::new("board_over_floor");
-    let grey = gltf.add_material(Material::grey("grey", 0.5));
-    let floor = Geometry::grid(
-        Vec3::new(-1.0, 0.0, 1.0),
-        Vec3::X * 2.0,
-        Vec3::NEG_Z * 2.0,
-        4,
-        4,
-    );
-    let floor = gltf.add_mesh("floor", floor, grey);
-    gltf.add_mesh_node("floor", floor);
+    let grey = grey_floor(&mut gltf);
     let (min, max) = (Vec3::new(-0.2, 0.006, -0.2), Vec3::new(0.2, 0.026, 0.2));
     let board = gltf.add_mesh("board", Geometry::box_faces(min, max, &Face::ALL, 1), grey);
     gltf.add_mesh_node("board", board);
@@ -226,4 +208,20 @@ fn a_board_over_a_floor_gets_texels_at_its_gap_within_the_cap() {
         on_total <= 3 * off_total,
         "{on_total} texels with slot faces, {off_total} without"
     );
+}
+
+/// A grey 2 × 2 m floor at y = 0 centred on the origin (4 × 4 quads); returns its material.
+fn grey_floor(gltf: &mut lightbake::testing::GltfBuilder) -> usize {
+    use lightbake::testing::{Geometry, Material};
+    let grey = gltf.add_material(Material::grey("grey", 0.5));
+    let floor = Geometry::grid(
+        Vec3::new(-1.0, 0.0, 1.0),
+        Vec3::X * 2.0,
+        Vec3::NEG_Z * 2.0,
+        4,
+        4,
+    );
+    let floor = gltf.add_mesh("floor", floor, grey);
+    gltf.add_mesh_node("floor", floor);
+    grey
 }

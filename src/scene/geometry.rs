@@ -106,20 +106,25 @@ impl Triangles2d {
         let boxed = (self.by_x[start..].iter())
             .take_while(|&&t| low(t) <= a.x.max(b.x))
             .filter(|&&t| may_clip(self.boxes[t as usize], a, b));
-        let mut inside: Vec<[f64; 2]> = (boxed.chain(&self.slivers))
+        let inside = (boxed.chain(&self.slivers))
             .filter_map(|&t| clip_interval(a, b, self.corners[t as usize], 1e-9 * snap))
             .collect();
-        // Merging is the same whatever order equal starts come in.
-        inside.sort_by(|x, y| x[0].total_cmp(&y[0]));
-        let mut merged: Vec<[f64; 2]> = Vec::new();
-        for iv in inside {
-            match merged.last_mut() {
-                Some(m) if iv[0] <= m[1] + snap / length => m[1] = m[1].max(iv[1]),
-                _ => merged.push(iv),
-            }
-        }
-        merged
+        merge_intervals(inside, snap / length)
     }
+}
+
+/// Parameter intervals sorted and merged across gaps up to `gap`; the same whatever order
+/// they come in (equal starts merge alike).
+fn merge_intervals(mut inside: Vec<[f64; 2]>, gap: f64) -> Vec<[f64; 2]> {
+    inside.sort_by(|x, y| x[0].total_cmp(&y[0]));
+    let mut merged: Vec<[f64; 2]> = Vec::new();
+    for iv in inside {
+        match merged.last_mut() {
+            Some(m) if iv[0] <= m[1] + gap => m[1] = m[1].max(iv[1]),
+            _ => merged.push(iv),
+        }
+    }
+    merged
 }
 
 /// The parameter interval of segment `a → b` inside the counter-clockwise triangle `c`
@@ -255,20 +260,12 @@ mod tests {
         corners.push([a, a + DVec2::X, a + DVec2::new(0.5, 1e-9)]); // a needle
         let snap = 1e-3;
         let boxed = Triangles2d::new(corners.clone(), snap);
+        // Every triangle clipped, in list order.
         let brute = |a: DVec2, b: DVec2| {
-            let length = a.distance(b);
-            let mut inside: Vec<[f64; 2]> = (corners.iter())
+            let inside = (corners.iter())
                 .filter_map(|&c| clip_interval(a, b, c, 1e-9 * snap))
                 .collect();
-            inside.sort_by(|x, y| x[0].total_cmp(&y[0]));
-            let mut merged: Vec<[f64; 2]> = Vec::new();
-            for iv in inside {
-                match merged.last_mut() {
-                    Some(m) if iv[0] <= m[1] + snap / length => m[1] = m[1].max(iv[1]),
-                    _ => merged.push(iv),
-                }
-            }
-            merged
+            merge_intervals(inside, snap / a.distance(b))
         };
         let mut met = 0;
         for k in 0..2000 {
