@@ -721,3 +721,28 @@ fn probes_from_a_missing_or_ambiguous_node_is_an_error_naming_both() {
         assert!(error.contains(says), "{error}");
     }
 }
+
+/// A probe casts the second half of its rays only where the first half is noisy
+/// (`ProbeParams::noisy`): in the furnace, where light is the same from every direction, no
+/// probe does; in two rooms, those beside the panel do and the others do not.
+#[test]
+fn probes_cast_their_second_half_only_where_light_is_noisy() {
+    let rays = |scene: &str, noisy: f32| {
+        let mut config = BakeConfig::draft();
+        config.output.probes = Some(probes::ProbeParams {
+            noisy,
+            ..Default::default()
+        });
+        let baked = lightbake::compute(&fixture(scene), &config, &NoProgress).unwrap();
+        baked.probes.expect("baked with probes").rays
+    };
+    let default = probes::ProbeParams::default().noisy;
+    let [half, adaptive, full] = [f32::INFINITY, default, 0.0].map(|x| rays("furnace.gltf", x));
+    assert!(half < full, "furnace: {half} rays at half, {full} in full");
+    assert_eq!(adaptive, half, "furnace: {adaptive} rays, {half} at half");
+    let [half, adaptive, full] = [f32::INFINITY, default, 0.0].map(|x| rays("two_rooms.gltf", x));
+    assert!(
+        half < adaptive && adaptive < full,
+        "two rooms: {adaptive} rays, between {half} and {full}?"
+    );
+}

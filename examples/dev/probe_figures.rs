@@ -1,13 +1,15 @@
 //! Light probes against the path tracer: the figures of the guide's "Light probes" section.
 //!
 //! ```text
-//! cargo run --release --example probe_figures -- SCENE [QUALITY] [BUDGET] [POINTS] [SAMPLES] [RAYS] [REFINE[:LEVELS]...]
+//! cargo run --release --example probe_figures -- SCENE [QUALITY] [BUDGET] [POINTS] [SAMPLES] [RAYS] [REFINE[:LEVELS[:NOISY]]...]
 //! ```
 //!
 //! Bakes `SCENE` at `QUALITY` (draft, medium or high; default medium) with `BUDGET` probes
 //! (default the library's) of `RAYS` rays each (default the library's), once per `REFINE` share
 //! of the budget kept for refinement, divided over at most `LEVELS` levels (default the
-//! library's; default: 0, the uniform grid, then the library's default share).
+//! library's; default: 0, the uniform grid, then the library's default share), the second half
+//! of a probe's rays cast where its first half's noise is above `NOISY` of the light's scale
+//! (default the library's `probes::NOISY`; 0: all rays at every probe).
 //! Then draws `POINTS` (default 1000) random free-space points of the scene with random normals
 //! (`probes::measure::free_space_points`) and path-traces `H/π` there about the normal with
 //! `SAMPLES` paths (default 512): every bake is measured at the same points against the same
@@ -40,7 +42,7 @@ fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let [scene, rest @ ..] = &args[..] else {
         panic!(
-            "usage: probe_figures SCENE [QUALITY] [BUDGET] [POINTS] [SAMPLES] [RAYS] [REFINE[:LEVELS]...]"
+            "usage: probe_figures SCENE [QUALITY] [BUDGET] [POINTS] [SAMPLES] [RAYS] [REFINE[:LEVELS[:NOISY]]...]"
         )
     };
     let quality = rest.first().map_or("medium", String::as_str);
@@ -58,24 +60,31 @@ fn main() {
     if let Some(r) = rest.get(4) {
         params.rays = r.parse().expect("RAYS");
     }
-    let shares: Vec<(f32, u32)> = match rest.get(5..) {
+    let shares: Vec<(f32, u32, f32)> = match rest.get(5..) {
         Some(r) if !r.is_empty() => (r.iter())
             .map(|s| {
-                let (share, levels) = s.split_once(':').unwrap_or((s, ""));
-                let levels = match levels {
-                    "" => params.levels,
-                    l => l.parse().expect("LEVELS"),
-                };
-                (share.parse().expect("REFINE"), levels)
+                let mut parts = s.split(':');
+                let share = parts.next().unwrap_or(s).parse().expect("REFINE");
+                let levels = parts
+                    .next()
+                    .map_or(params.levels, |l| l.parse().expect("LEVELS"));
+                let noisy = parts
+                    .next()
+                    .map_or(params.noisy, |x| x.parse().expect("NOISY"));
+                (share, levels, noisy)
             })
             .collect(),
-        _ => vec![(0.0, params.levels), (DEFAULT_REFINE, params.levels)],
+        _ => vec![
+            (0.0, params.levels, params.noisy),
+            (DEFAULT_REFINE, params.levels, params.noisy),
+        ],
     };
     let mut bakes = Vec::new();
-    for &(refine, levels) in &shares {
+    for &(refine, levels, noisy) in &shares {
         config.output.probes = Some(ProbeParams {
             refine,
             levels,
+            noisy,
             ..params.clone()
         });
         let baked = lightbake::compute(Path::new(scene), &config, &NoProgress).expect("bake");
@@ -87,7 +96,7 @@ fn main() {
         let probes = baked.probes.clone().expect("probes");
         let grid = probes.grid.expect("the automatic grid");
         println!(
-            "{scene} ({quality}), refine {refine}:{levels}: {} probes ({} valid, {} moved, divided cells per level {:?}), grid {:?} step {:.3}, {:.2} M rays; probes {probe_seconds:.2}s of {total:.2}s computing ({:.1}%)",
+            "{scene} ({quality}), refine {refine}:{levels}, noisy {noisy}: {} probes ({} valid, {} moved, divided cells per level {:?}), grid {:?} step {:.3}, {:.2} M rays; probes {probe_seconds:.2}s of {total:.2}s computing ({:.1}%)",
             probes.len(),
             probes.valid_count(),
             probes.moved,
@@ -102,7 +111,7 @@ fn main() {
             probes.rays as f64 * 1e-6,
             100.0 * probe_seconds / total
         );
-        bakes.push((format!("{refine}:{levels}"), baked, probes));
+        bakes.push((format!("{refine}:{levels}:{noisy}"), baked, probes));
     }
     let baked = &bakes[0].1;
     let tracer = Tracer::new(&baked.scene);

@@ -39,9 +39,13 @@
 //! are not gathered), so the lookup does not jump at the boundary. The grid's entries come first
 //! in every list; Bevy's volume is the grid alone.
 //!
-//! **Gathering** (`Gatherer::gather`): per probe, `rays` directions stratified over the sphere
-//! (Hammersley, turned by the probe's own random stream `(seed, probe)`: the result does not
-//! depend on the thread count). A ray that hits texel `j` from the front reads the solved
+//! **Gathering** (`Gatherer::gather`): per probe, up to `rays` directions over the sphere in four
+//! quarters, each a stratified set (Hammersley, turned by the probe's own random stream
+//! `(seed, probe)`: the result does not depend on the thread count). Every probe casts two
+//! quarters; only a probe whose two disagree by more than [`NOISY`] of the light's scale (the
+//! mean light of the grid's probes) casts the other two: where light is smooth half the rays
+//! leave a probe's own noise far below the error of interpolating between probes, and beside
+//! emitters they do not. A ray that hits texel `j` from the front reads the solved
 //! radiance leaving it, `ρ_j·H_j/π + Le_j` (the solution itself, not the dilated pages); one
 //! that escapes reads the sky; the back of a single-sided surface absorbs. Small emitters are
 //! also light-sampled, one sample per ray, combined with the sphere rays by the power heuristic
@@ -74,7 +78,8 @@
 //! | parameter       | default | effect                                                        |
 //! |-----------------|---------|---------------------------------------------------------------|
 //! | `budget`        | 1024    | probes at most; spacing `∛(bounds volume / budget)`           |
-//! | `rays`          | 256     | sphere rays per probe (+ as many emitter samples); noise ∝ 1/√rays |
+//! | `rays`          | 256     | sphere rays per probe at most (+ as many emitter samples); noise ∝ 1/√rays |
+//! | `noisy`         | 0.04    | half the rays where their noise is below this share of the mean light; 0: all rays everywhere |
 //! | `indirect_only` | false   | leave out punctual lights' direct light                       |
 //! | `from`          | none    | a node's children or box instead of the automatic grid        |
 //! | `refine`        | 0.25    | share of the budget kept for refining cells; 0: a uniform grid of the whole budget |
@@ -120,8 +125,24 @@ pub const DEFAULT_RAYS: u32 = 256;
 pub const DEFAULT_REFINE: f32 = 0.25;
 /// Levels of division refinement may use.
 pub const DEFAULT_LEVELS: u32 = 3;
-/// Probes per parallel work item (one progress tick each).
+/// Probes per parallel work item.
 const CHUNK: usize = 16;
+/// A probe's rays come in this many stratified sets ([`Gatherer::gather`]); every probe casts
+/// the first two.
+const QUARTERS: u32 = 4;
+/// A probe whose first two quarters differ by more than this share of the light's scale (half
+/// their RMS difference over the six axis normals: the noise of their mean) casts the other
+/// two. Where light is smooth half the rays suffice; beside emitters it is not.
+pub const NOISY: f32 = 0.04;
+/// The six axis normals the gather's noise and scale are read at.
+const AXES: [Vec3; 6] = [
+    Vec3::X,
+    Vec3::NEG_X,
+    Vec3::Y,
+    Vec3::NEG_Y,
+    Vec3::Z,
+    Vec3::NEG_Z,
+];
 /// Mixed into the seed: the probes' streams differ from the texels' of the same index.
 const SALT: u64 = 0x5052_4f42_4553; // "PROBES"
 /// Random-stream purpose of the gather (placement uses its own).
@@ -150,6 +171,9 @@ pub struct ProbeParams {
     /// Levels of division refinement may use (1: grid cells halved once; at most
     /// [`refine::MAX_LEVELS`]).
     pub levels: u32,
+    /// A probe casts the second half of its rays only where the first half's noise is above
+    /// this share of the light's scale ([`NOISY`]); 0: every probe casts all its rays.
+    pub noisy: f32,
 }
 
 impl ProbeParams {
@@ -170,6 +194,7 @@ impl Default for ProbeParams {
             from: None,
             refine: DEFAULT_REFINE,
             levels: DEFAULT_LEVELS,
+            noisy: NOISY,
         }
     }
 }
@@ -525,8 +550,8 @@ pub(crate) fn bake(
         seed: seed ^ SALT,
         sky,
     };
-    let (mut sh, mut rays) =
-        gatherer.gather_all(&placement.position, &placement.valid, |i| i, progress)?;
+    let (mut sh, mut rays, scale) =
+        gatherer.gather_all(&placement.position, &placement.valid, |i| i, None, progress)?;
     rays += placement.rays;
     fill_invalid(&placement, &mut sh);
     let Placement {
@@ -543,7 +568,7 @@ pub(crate) fn bake(
             let left = (params.budget as usize).saturating_sub(grid.len());
             let probes = (&mut position, &mut valid, &mut sh);
             let (refinement, added_rays, added_moved) =
-                refine_all(&gatherer, &grid, probes, left, progress)?;
+                refine_all(&gatherer, &grid, probes, (left, scale), progress)?;
             rays += added_rays;
             moved += added_moved;
             refinement
@@ -583,7 +608,7 @@ fn refine_all(
     gatherer: &Gatherer,
     grid: &Grid,
     (position, valid, sh): (&mut Vec<Vec3>, &mut Vec<bool>, &mut Vec<Sh2>),
-    budget: usize,
+    (budget, scale): (usize, f32),
     progress: &dyn Progress,
 ) -> Result<(Refinement, u64, usize)> {
     let params = gatherer.params;
@@ -658,7 +683,8 @@ fn refine_all(
         let at: Vec<Vec3> = todo.iter().map(|k| nodes[k].position).collect();
         let stream: Vec<usize> = todo.iter().map(|k| nodes[k].stream).collect();
         let every = vec![true; at.len()];
-        let (got, gathered_rays) = gatherer.gather_all(&at, &every, |i| stream[i], progress)?;
+        let (got, gathered_rays, _) =
+            gatherer.gather_all(&at, &every, |i| stream[i], Some(scale), progress)?;
         rays += gathered_rays;
         for (k, c) in todo.iter().zip(got) {
             nodes.get_mut(k).expect("a node").sh = Some(c);
@@ -681,48 +707,98 @@ struct Gatherer<'a> {
 
 impl Gatherer<'_> {
     /// Gathers the probes at `positions` that `gather` marks (`stream(i)` the random stream of
-    /// entry `i`), in parallel chunks: their coefficients (zero where not gathered) and the rays
-    /// cast.
+    /// entry `i`), in parallel chunks, in two rounds: every probe's first two quarters of its
+    /// rays, then the last two quarters of the probes whose first two disagree by more than
+    /// [`NOISY`] of `scale` (the light's scale: the mean over these probes when `None`).
+    /// Returns their coefficients (zero where not gathered), the rays cast and the scale.
     fn gather_all(
         &self,
         positions: &[Vec3],
         gather: &[bool],
         stream: impl Fn(usize) -> usize + Sync,
+        scale: Option<f32>,
         progress: &dyn Progress,
-    ) -> Result<(Vec<Sh2>, u64)> {
+    ) -> Result<(Vec<Sh2>, u64, f32)> {
         let n = positions.len();
-        progress.begin("probes", n as u64);
-        let mut out = vec![([Vec3::ZERO; 9], 0u64); n];
-        out.par_chunks_mut(CHUNK)
-            .enumerate()
-            .try_for_each(|(c, chunk)| {
-                if progress.aborted() {
-                    return Err(Error::Aborted);
-                }
-                for (k, (sh, rays)) in chunk.iter_mut().enumerate() {
-                    let i = c * CHUNK + k;
-                    if gather[i] {
-                        *rays = self.gather(stream(i), positions[i], sh);
+        // One tick per probe and round.
+        progress.begin("probes", 2 * n as u64);
+        let each = |todo: &[bool], quarters: [u32; 2]| -> Result<Vec<(Sh2, Sh2, u64)>> {
+            let mut out = vec![([Vec3::ZERO; 9], [Vec3::ZERO; 9], 0u64); n];
+            out.par_chunks_mut(CHUNK)
+                .enumerate()
+                .try_for_each(|(c, chunk)| {
+                    if progress.aborted() {
+                        return Err(Error::Aborted);
                     }
-                }
-                progress.advance(chunk.len() as u64);
-                Ok(())
-            })?;
+                    for (k, (a, b, rays)) in chunk.iter_mut().enumerate() {
+                        let i = c * CHUNK + k;
+                        if todo[i] {
+                            *rays = self.gather(stream(i), positions[i], quarters[0], a)
+                                + self.gather(stream(i), positions[i], quarters[1], b);
+                        }
+                    }
+                    progress.advance(chunk.len() as u64);
+                    Ok(())
+                })?;
+            Ok(out)
+        };
+        let first = each(gather, [0, 1])?;
+        let grey = |c: &Sh2| -> [f32; 6] {
+            AXES.map(|n| sh::irradiance_over_pi(c, n).element_sum() / 3.0)
+        };
+        // The light's scale: the mean over these probes and the six axis normals (summed in
+        // order, so the same on any thread count).
+        let scale = scale.unwrap_or_else(|| {
+            let gathered = gather.iter().filter(|&&g| g).count().max(1);
+            let sum: f64 = (first.iter().zip(gather))
+                .filter(|(_, g)| **g)
+                .map(|((a, b, _), _)| {
+                    let (a, b) = (grey(a), grey(b));
+                    (0..6).map(|k| f64::from(a[k] + b[k]) / 12.0).sum::<f64>()
+                })
+                .sum();
+            (sum / gathered as f64) as f32
+        });
+        // The noise of the two quarters' mean is half their difference (RMS over the axes).
+        let noisy: Vec<bool> = (first.iter().zip(gather))
+            .map(|((a, b, _), &g)| {
+                let (a, b) = (grey(a), grey(b));
+                let square = (0..6).map(|k| (a[k] - b[k]).powi(2)).sum::<f32>() / 6.0;
+                g && square.sqrt() / 2.0 >= self.params.noisy * scale
+            })
+            .collect();
+        let second = each(&noisy, [2, 3])?;
         progress.end();
-        let rays = out.iter().map(|o| o.1).sum();
-        Ok((out.into_iter().map(|o| o.0).collect(), rays))
+        let mut rays = 0;
+        let sh = (first.into_iter().zip(second).zip(&noisy))
+            .map(|(((a, b, r1), (c, d, r2)), &more)| {
+                rays += r1 + r2;
+                let half = sh::add(&a, &b);
+                match more {
+                    false => sh::scaled(&half, 0.5),
+                    true => sh::scaled(&sh::add(&half, &sh::add(&c, &d)), 0.25),
+                }
+            })
+            .collect();
+        Ok((sh, rays, scale))
     }
 
-    /// Projects the incident radiance at `x` (probe `i`) into `c`; returns the rays cast.
-    fn gather(&self, i: usize, x: Vec3, c: &mut Sh2) -> u64 {
+    /// Projects the incident radiance at `x` (probe `i`) into `c` from quarter `q` of its rays
+    /// (a stratified set of `rays / 4` directions turned by the quarter's own shift, and as many
+    /// light samples), as an estimate of the whole; returns the rays cast.
+    fn gather(&self, i: usize, x: Vec3, q: u32, c: &mut Sh2) -> u64 {
         let Surfaces {
             scene,
             texels,
             tracer,
         } = self.surfaces;
-        let k = self.params.rays.max(1);
+        let k = self.params.rays.div_ceil(QUARTERS).max(1);
         let kf = k as f32;
         let mut rng = Rng::new(self.seed, i as u64, GATHER);
+        for _ in 0..q {
+            rng.next_vec2();
+            rng.next_vec2();
+        }
         let (shift, light_shift) = (rng.next_vec2(), rng.next_vec2());
         // Uniform over the sphere: every direction matters for the projection.
         let p_sphere = 1.0 / (4.0 * PI);
