@@ -70,6 +70,19 @@ impl Boundable for Padded {
     }
 }
 
+/// The smallest ray epsilon: 4× obvhs' fixed 1e-4 entry clamp.
+pub(crate) const MIN_EPSILON: f32 = 4e-4;
+
+/// The ray epsilon of geometry within `lo..hi`: 1e-5 of its size or of its largest coordinate
+/// (f32 positions lose precision with both), never below [`MIN_EPSILON`].
+pub(crate) fn epsilon_of(lo: Vec3, hi: Vec3) -> f32 {
+    let extent = (hi - lo)
+        .max_element()
+        .max(hi.abs().max(lo.abs()).max_element())
+        .min(2.0 * MAX_COORDINATE);
+    (extent * 1e-5).max(MIN_EPSILON)
+}
+
 /// An obvhs ray. Adding +0.0 turns −0.0 direction components into +0.0: obvhs derives the
 /// traversal octant from the sign bits, and a −0.0 component (as in `-Vec3::Y`) made rays
 /// straight along an axis miss everything (found by `tests::axis_aligned_rays_hit`).
@@ -211,17 +224,12 @@ impl Tracer {
         };
         let tris: Vec<Triangle> = ids.iter().map(|&t| tri(t)).collect();
 
-        let (lo, hi) = scene.bounds();
-        let extent = if scene.positions.is_empty() {
-            1.0
+        let epsilon = if scene.positions.is_empty() {
+            MIN_EPSILON
         } else {
-            (hi - lo)
-                .max_element()
-                .max(hi.abs().max(lo.abs()).max_element())
-                .min(2.0 * MAX_COORDINATE)
+            let (lo, hi) = scene.bounds();
+            epsilon_of(lo, hi)
         };
-        // 1e-5 of the scene size, but never within 4x of obvhs' fixed 1e-4 clamp.
-        let epsilon = (extent * 1e-5).max(4e-4);
 
         if tris.is_empty() {
             return Tracer {

@@ -6,6 +6,8 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
+use glam::{Quat, Vec3};
+use lightbake::testing::Face;
 use lightbake::trace::Tracer;
 use serde_json::{Value, json};
 
@@ -502,4 +504,60 @@ fn non_finite_float_in_an_unused_accessor_is_an_error() {
     case.refused(&[&format!(
         "accessor {accessor}: element 0 is not finite (glTF requires finite floats)"
     )]);
+}
+
+/// A node moved far from the rest (the fuzzer moved a chair 400 km) widens the ray epsilon to
+/// 4 m, which blurs every contact and made a draft bake take minutes: the load names it in a
+/// warning. The fixtures, rooms and yards as authored, get none.
+#[test]
+fn a_node_far_from_the_rest_of_the_scene_is_named_in_a_warning() {
+    let far = |scene: &lightbake::scene::Scene| {
+        (scene.stats.warnings.iter())
+            .filter(|w| w.contains("far from the rest"))
+            .cloned()
+            .collect::<Vec<_>>()
+    };
+    for name in std::fs::read_dir(fixture("")).unwrap() {
+        let path = name.unwrap().path();
+        if matches!(
+            path.extension().and_then(|e| e.to_str()),
+            Some("gltf" | "glb")
+        ) {
+            let (scene, _) = lightbake::scene::load(&path).unwrap();
+            assert!(
+                far(&scene).is_empty(),
+                "{}: {:?}",
+                path.display(),
+                far(&scene)
+            );
+        }
+    }
+    use lightbake::testing::{Geometry, GltfBuilder, Material, Node};
+    let mut gltf = GltfBuilder::new("far_box");
+    let grey = gltf.add_material(Material::grey("grey", 0.5));
+    let (lo, hi) = (Vec3::ZERO, Vec3::splat(0.5));
+    let floor = Geometry::grid(
+        Vec3::new(-2.0, 0.0, 2.0),
+        Vec3::X * 4.0,
+        Vec3::NEG_Z * 4.0,
+        4,
+        4,
+    );
+    let floor = gltf.add_mesh("floor", floor, grey);
+    gltf.add_mesh_node("floor", floor);
+    let cube = gltf.add_mesh("cube", Geometry::box_faces(lo, hi, &Face::ALL, 1), grey);
+    gltf.add_node(Node::new("near box").with_mesh(cube));
+    let moved = Vec3::new(0.0, 0.0, -4.0e5);
+    gltf.add_node((Node::new("lost box").with_mesh(cube)).trs(moved, Quat::IDENTITY, Vec3::ONE));
+    let dir = scratch();
+    let input = dir.path().join("far_box.gltf");
+    gltf.write_gltf(&input).unwrap();
+    let (scene, _) = lightbake::scene::load(&input).unwrap();
+    let warned = far(&scene);
+    assert_eq!(warned.len(), 1, "{warned:?}");
+    assert!(
+        warned[0].starts_with("node 2 'lost box' lies far") && !warned[0].contains("near box"),
+        "{}",
+        warned[0]
+    );
 }

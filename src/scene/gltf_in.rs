@@ -75,6 +75,9 @@ pub(crate) fn load_edited(
     for problem in check::texture_transforms(&json) {
         warn(&mut scene, problem);
     }
+    if let Some(problem) = far_nodes(&document, &scene) {
+        warn(&mut scene, problem);
+    }
 
     #[cfg(debug_assertions)]
     scene.validate();
@@ -829,6 +832,75 @@ fn camera_matrix(transform: gltf::scene::Transform) -> Mat4 {
             Vec3::from(translation),
         ),
     }
+}
+
+/// Geometry this many times farther out than the rest of the scene spans is named in a warning:
+/// the ray epsilon grows with the whole scene's span ([`crate::trace::epsilon_of`]), so a node
+/// moved far away by mistake blurs every contact of the rest and slows its rays.
+const FAR_SPAN: f32 = 100.0;
+
+/// A warning naming the nodes that lie far from the rest of the scene ([`FAR_SPAN`]), if any:
+/// nodes are taken nearest first from the median of their boxes' centres, and the first that
+/// widens the ray epsilon of those before it by [`FAR_SPAN`]× starts the far ones.
+fn far_nodes(document: &gltf::Document, scene: &Scene) -> Option<String> {
+    let mut boxes: std::collections::BTreeMap<u32, (Vec3, Vec3)> = Default::default();
+    for inst in &scene.instances {
+        let vertices = &scene.positions[inst.vertices.start as usize..inst.vertices.end as usize];
+        let b = boxes.entry(inst.node).or_insert((Vec3::MAX, Vec3::MIN));
+        for &p in vertices {
+            *b = (b.0.min(p), b.1.max(p));
+        }
+    }
+    let boxes: Vec<(u32, (Vec3, Vec3))> =
+        boxes.into_iter().filter(|(_, b)| b.0.x <= b.1.x).collect();
+    if boxes.len() < 2 {
+        return None;
+    }
+    let median = |axis: usize| {
+        let mut c: Vec<f32> = boxes
+            .iter()
+            .map(|(_, b)| (b.0[axis] + b.1[axis]) * 0.5)
+            .collect();
+        c.sort_by(f32::total_cmp);
+        c[c.len() / 2]
+    };
+    let centre = Vec3::new(median(0), median(1), median(2));
+    let reach = |b: &(Vec3, Vec3)| (b.0 - centre).abs().max(b.1 - centre).max_element();
+    let mut order: Vec<&(u32, (Vec3, Vec3))> = boxes.iter().collect();
+    order.sort_by(|a, b| reach(&a.1).total_cmp(&reach(&b.1)).then(a.0.cmp(&b.0)));
+    let mut bulk = order[0].1;
+    for (k, (_, b)) in order.iter().enumerate().skip(1) {
+        let wider = (bulk.0.min(b.0), bulk.1.max(b.1));
+        let (near, all) = (
+            crate::trace::epsilon_of(bulk.0, bulk.1),
+            crate::trace::epsilon_of(wider.0, wider.1),
+        );
+        if all < FAR_SPAN * near {
+            bulk = wider;
+            continue;
+        }
+        let (lo, hi) = scene.bounds();
+        let far = &order[k..];
+        let mut names: Vec<String> = (far.iter().take(3))
+            .filter_map(|(n, _)| document.nodes().nth(*n as usize))
+            .map(|n| node_label(&n))
+            .collect();
+        if far.len() > 3 {
+            names.push(format!("{} more", far.len() - 3));
+        }
+        return Some(format!(
+            "{} {} far from the rest of the scene: with them it spans {:.1} units, without them \
+             {:.1}; the ray offset (a 100 000th of the span) grows from {:.2e} to {:.2e} units, \
+             which blurs contact shadows everywhere and slows the rays. Moved by mistake?",
+            names.join(", "),
+            if far.len() == 1 { "lies" } else { "lie" },
+            (hi - lo).max_element(),
+            (bulk.1 - bulk.0).max_element(),
+            near,
+            crate::trace::epsilon_of(lo, hi),
+        ));
+    }
+    None
 }
 
 fn node_label(node: &gltf::Node) -> String {
