@@ -134,15 +134,6 @@ const QUARTERS: u32 = 4;
 /// their RMS difference over the six axis normals: the noise of their mean) casts the other
 /// two. Where light is smooth half the rays suffice; beside emitters it is not.
 pub const NOISY: f32 = 0.04;
-/// The six axis normals the gather's noise and scale are read at.
-const AXES: [Vec3; 6] = [
-    Vec3::X,
-    Vec3::NEG_X,
-    Vec3::Y,
-    Vec3::NEG_Y,
-    Vec3::Z,
-    Vec3::NEG_Z,
-];
 /// Mixed into the seed: the probes' streams differ from the texels' of the same index.
 const SALT: u64 = 0x5052_4f42_4553; // "PROBES"
 /// Random-stream purpose of the gather (placement uses its own).
@@ -744,7 +735,8 @@ impl Gatherer<'_> {
         };
         let first = each(gather, [0, 1])?;
         let grey = |c: &Sh2| -> [f32; 6] {
-            AXES.map(|n| sh::irradiance_over_pi(c, n).element_sum() / 3.0)
+            // At the six axis normals (the ambient cube's sides).
+            volume::SIDES.map(|n| sh::irradiance_over_pi(c, n).element_sum() / 3.0)
         };
         // The light's scale: the mean over these probes and the six axis normals (summed in
         // order, so the same on any thread count).
