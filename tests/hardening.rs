@@ -11,7 +11,7 @@ use lightbake::testing::Face;
 use lightbake::trace::Tracer;
 use serde_json::{Value, json};
 
-use crate::util::{fixture, list_files, scratch};
+use crate::util::{fixture, grey_floor, list_files, scratch};
 
 /// A scene to edit: the point-light floor (mesh 0 'floor', 81 vertices, light 0, material 0),
 /// its JSON and its external buffer `scene.bin`.
@@ -532,19 +532,10 @@ fn a_node_far_from_the_rest_of_the_scene_is_named_in_a_warning() {
             );
         }
     }
-    use lightbake::testing::{Geometry, GltfBuilder, Material, Node};
+    use lightbake::testing::{Geometry, GltfBuilder, Node};
     let mut gltf = GltfBuilder::new("far_box");
-    let grey = gltf.add_material(Material::grey("grey", 0.5));
+    let grey = grey_floor(&mut gltf);
     let (lo, hi) = (Vec3::ZERO, Vec3::splat(0.5));
-    let floor = Geometry::grid(
-        Vec3::new(-2.0, 0.0, 2.0),
-        Vec3::X * 4.0,
-        Vec3::NEG_Z * 4.0,
-        4,
-        4,
-    );
-    let floor = gltf.add_mesh("floor", floor, grey);
-    gltf.add_mesh_node("floor", floor);
     let cube = gltf.add_mesh("cube", Geometry::box_faces(lo, hi, &Face::ALL, 1), grey);
     gltf.add_node(Node::new("near box").with_mesh(cube));
     let moved = Vec3::new(0.0, 0.0, -4.0e5);

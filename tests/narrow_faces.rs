@@ -9,7 +9,7 @@ use lightbake::render::RenderScene;
 use lightbake::testing::{narrow_face, narrow_face_points};
 use lightbake::{BakeConfig, NoProgress};
 
-use crate::util::{fixture, scratch};
+use crate::util::{fixture, grey_floor, scratch};
 
 /// Points on the narrow faces whose draft lookup reads more than 1.5× their path-traced
 /// reference (plus three standard errors), counting only references above 5% of the scene
@@ -217,20 +217,4 @@ fn a_board_over_a_floor_gets_texels_at_its_gap_within_the_cap() {
         on_total <= 3 * off_total,
         "{on_total} texels with slot faces, {off_total} without"
     );
-}
-
-/// A grey 2 × 2 m floor at y = 0 centred on the origin (4 × 4 quads); returns its material.
-fn grey_floor(gltf: &mut lightbake::testing::GltfBuilder) -> usize {
-    use lightbake::testing::{Geometry, Material};
-    let grey = gltf.add_material(Material::grey("grey", 0.5));
-    let floor = Geometry::grid(
-        Vec3::new(-1.0, 0.0, 1.0),
-        Vec3::X * 2.0,
-        Vec3::NEG_Z * 2.0,
-        4,
-        4,
-    );
-    let floor = gltf.add_mesh("floor", floor, grey);
-    gltf.add_mesh_node("floor", floor);
-    grey
 }

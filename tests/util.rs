@@ -85,3 +85,20 @@ pub fn panel_room(
     gltf.add_mesh_node("panel", mesh);
     (gltf, grey)
 }
+
+/// A grey 2 × 2 m floor at y = 0 centred on the origin (4 × 4 quads); returns its material.
+pub fn grey_floor(gltf: &mut lightbake::testing::GltfBuilder) -> usize {
+    use glam::Vec3;
+    use lightbake::testing::{Geometry, Material};
+    let grey = gltf.add_material(Material::grey("grey", 0.5));
+    let floor = Geometry::grid(
+        Vec3::new(-1.0, 0.0, 1.0),
+        Vec3::X * 2.0,
+        Vec3::NEG_Z * 2.0,
+        4,
+        4,
+    );
+    let floor = gltf.add_mesh("floor", floor, grey);
+    gltf.add_mesh_node("floor", floor);
+    grey
+}

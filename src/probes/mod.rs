@@ -734,29 +734,28 @@ impl Gatherer<'_> {
             Ok(out)
         };
         let first = each(gather, [0, 1])?;
-        let grey = |c: &Sh2| -> [f32; 6] {
-            // At the six axis normals (the ambient cube's sides).
-            volume::SIDES.map(|n| sh::irradiance_over_pi(c, n).element_sum() / 3.0)
-        };
-        // The light's scale: the mean over these probes and the six axis normals (summed in
-        // order, so the same on any thread count).
+        // Each gathered probe's two quarters at the six axis normals (the ambient cube's sides).
+        let grey =
+            |c: &Sh2| volume::SIDES.map(|n| sh::irradiance_over_pi(c, n).element_sum() / 3.0);
+        let sides: Vec<Option<[[f32; 6]; 2]>> = (first.iter().zip(gather))
+            .map(|((a, b, _), &g)| g.then(|| [grey(a), grey(b)]))
+            .collect();
+        // The light's scale: the mean over these probes and the six sides (summed in order, so
+        // the same on any thread count).
         let scale = scale.unwrap_or_else(|| {
-            let gathered = gather.iter().filter(|&&g| g).count().max(1);
-            let sum: f64 = (first.iter().zip(gather))
-                .filter(|(_, g)| **g)
-                .map(|((a, b, _), _)| {
-                    let (a, b) = (grey(a), grey(b));
-                    (0..6).map(|k| f64::from(a[k] + b[k]) / 12.0).sum::<f64>()
-                })
+            let gathered = sides.iter().flatten().count().max(1);
+            let sum: f64 = (sides.iter().flatten())
+                .map(|[a, b]| (0..6).map(|k| f64::from(a[k] + b[k]) / 12.0).sum::<f64>())
                 .sum();
             (sum / gathered as f64) as f32
         });
-        // The noise of the two quarters' mean is half their difference (RMS over the axes).
-        let noisy: Vec<bool> = (first.iter().zip(gather))
-            .map(|((a, b, _), &g)| {
-                let (a, b) = (grey(a), grey(b));
-                let square = (0..6).map(|k| (a[k] - b[k]).powi(2)).sum::<f32>() / 6.0;
-                g && square.sqrt() / 2.0 >= self.params.noisy * scale
+        // The noise of the two quarters' mean is half their difference (RMS over the sides).
+        let noisy: Vec<bool> = (sides.iter())
+            .map(|s| {
+                s.is_some_and(|[a, b]| {
+                    let square = (0..6).map(|k| (a[k] - b[k]).powi(2)).sum::<f32>() / 6.0;
+                    square.sqrt() / 2.0 >= self.params.noisy * scale
+                })
             })
             .collect();
         let second = each(&noisy, [2, 3])?;

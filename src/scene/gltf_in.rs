@@ -865,7 +865,7 @@ fn far_nodes(document: &gltf::Document, scene: &Scene) -> Option<String> {
         c[c.len() / 2]
     };
     let centre = Vec3::new(median(0), median(1), median(2));
-    let reach = |b: &(Vec3, Vec3)| (b.0 - centre).abs().max(b.1 - centre).max_element();
+    let reach = |b: &(Vec3, Vec3)| (b.0 - centre).abs().max((b.1 - centre).abs()).max_element();
     let mut order: Vec<&(u32, (Vec3, Vec3))> = boxes.iter().collect();
     order.sort_by(|a, b| reach(&a.1).total_cmp(&reach(&b.1)).then(a.0.cmp(&b.0)));
     let mut bulk = order[0].1;
