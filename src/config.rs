@@ -530,10 +530,10 @@ impl BakeConfig {
             )));
         }
         if let Some(p) = &self.output.probes
-            && (p.budget == 0 || p.budget > 1 << 24 || p.rays == 0 || p.rays > 1 << 20)
+            && (p.budget.is_some_and(|b| b == 0 || b > 1 << 24) || p.rays == 0 || p.rays > 1 << 20)
         {
             return Err(Option(format!(
-                "probes must be within 1..=16777216 and probe rays within 1..=1048576, got {} and {}",
+                "probes must be within 1..=16777216 and probe rays within 1..=1048576, got {:?} and {}",
                 p.budget, p.rays
             )));
         }

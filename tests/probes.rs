@@ -85,6 +85,8 @@ fn probes_match_the_path_tracer_in_two_rooms() {
     };
     let (uniform, baked) = (bake(0.0), bake(probes::DEFAULT_REFINE));
     let probes = baked.probes.as_ref().unwrap();
+    // A bake this cheap keeps the least budget that follows it.
+    assert_eq!(probes.budget, probes::DEFAULT_BUDGET);
     assert!(probes.len() <= 1024 && probes.valid_count() == probes.len());
     assert!(!probes.refinement.is_empty(), "nothing refined");
     assert!(
@@ -122,7 +124,7 @@ fn probes_match_the_path_tracer_in_two_rooms() {
     let between = measure::free_space_points(&baked.scene, &tracer, 1000, 3);
     assert_eq!(between.len(), 1000);
     let positions: Vec<Vec3> = between.iter().map(|b| b.0).collect();
-    let near_field = measure::near_field(&baked.scene, probes::DEFAULT_BUDGET);
+    let near_field = measure::near_field(&baked.scene, probes.budget);
     let near = measure::near_emitters(&baked.scene, &baked.texels, &positions, near_field);
     assert!(
         (10..100).contains(&near.len()),
@@ -291,7 +293,7 @@ fn the_grid_spans_a_room_with_solid_walls() {
 
     let mut config = BakeConfig::draft();
     config.output.probes = Some(probes::ProbeParams {
-        budget: 1024,
+        budget: Some(1024),
         ..Default::default()
     });
     let baked = lightbake::compute(&input, &config, &NoProgress).unwrap();
@@ -357,7 +359,7 @@ fn probes_on_a_thin_wall_are_moved_off_it() {
     let mut config = BakeConfig::draft();
     // The uniform grid of the whole budget (its count along x is odd).
     config.output.probes = Some(probes::ProbeParams {
-        budget: 4096,
+        budget: Some(4096),
         refine: 0.0,
         ..Default::default()
     });
@@ -570,7 +572,7 @@ fn room_with(dir: &std::path::Path, extra: impl FnOnce(&mut GltfBuilder)) -> std
 fn probes_from(name: &str) -> BakeConfig {
     let mut config = BakeConfig::draft();
     config.output.probes = Some(probes::ProbeParams {
-        budget: 64,
+        budget: Some(64),
         from: Some(name.to_string()),
         ..Default::default()
     });

@@ -70,7 +70,7 @@ fn main() {
         ..ProbeParams::default()
     };
     if let Some(b) = rest.get(1) {
-        params.budget = b.parse().expect("BUDGET");
+        params.budget = Some(b.parse().expect("BUDGET"));
     }
     let n: usize = rest.get(2).map_or(300, |s| s.parse().expect("POINTS"));
     let samples: u32 = rest.get(3).map_or(512, |s| s.parse().expect("SAMPLES"));
@@ -296,16 +296,15 @@ fn truncation(scene: &str, mut config: BakeConfig, rest: &[String]) {
     use lightbake::probes::{measure, sh};
     let mut params = ProbeParams::default();
     if let Some(b) = rest.get(1) {
-        params.budget = b.parse().expect("BUDGET");
+        params.budget = Some(b.parse().expect("BUDGET"));
     }
     let count: usize = rest.get(2).map_or(16, |s| s.parse().expect("PROBES"));
     let samples: u32 = rest.get(3).map_or(1024, |s| s.parse().expect("SAMPLES"));
-    let budget = params.budget;
     config.output.probes = Some(params);
     let baked = lightbake::compute(Path::new(scene), &config, &NoProgress).expect("bake");
     let probes = baked.probes.as_ref().expect("probes");
     let tracer = Tracer::new(&baked.scene);
-    let near_field = measure::near_field(&baked.scene, budget);
+    let near_field = measure::near_field(&baked.scene, probes.budget);
     // Valid probes by distance to the nearest emitter texel (with that texel).
     let emitters: Vec<Vec3> = (0..baked.texels.position.len())
         .filter(|&i| baked.texels.emission[i].max_element() > 0.0)

@@ -5,7 +5,7 @@
 //! ```
 //!
 //! Bakes `SCENE` at `QUALITY` (draft, medium or high; default medium) with `BUDGET` probes
-//! (default the library's) of `RAYS` rays each (default the library's), once per `REFINE` share
+//! (default, or `auto`: the library's, following the bake's rays) of `RAYS` rays each (default the library's), once per `REFINE` share
 //! of the budget kept for refinement, divided over at most `LEVELS` levels (default the
 //! library's; default: 0, the uniform grid, then the library's default share), the second half
 //! of a probe's rays cast where its first half's noise is above `NOISY` of the light's scale
@@ -53,7 +53,7 @@ fn main() {
     };
     let mut params = ProbeParams::default();
     if let Some(b) = rest.get(1) {
-        params.budget = b.parse().expect("BUDGET");
+        params.budget = (b != "auto").then(|| b.parse().expect("BUDGET"));
     }
     let n: usize = rest.get(2).map_or(1000, |s| s.parse().expect("POINTS"));
     let samples: u32 = rest.get(3).map_or(512, |s| s.parse().expect("SAMPLES"));
@@ -115,7 +115,7 @@ fn main() {
     }
     let baked = &bakes[0].1;
     let tracer = Tracer::new(&baked.scene);
-    let near_field = measure::near_field(&baked.scene, params.budget);
+    let near_field = measure::near_field(&baked.scene, bakes[0].2.budget);
     let trace = |at: &[(Vec3, Vec3)]| {
         let pts: Vec<Point> = (at.iter())
             .map(|&(position, normal)| Point {

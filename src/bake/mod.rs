@@ -119,8 +119,14 @@ impl BakeReport {
         });
         let probes = self.probes.map_or(String::new(), |p| {
             format!(
-                "; {} probes ({} valid, {} moved off a surface), {:.2} M probe rays",
+                "; {} probes (budget {}{}; {} valid, {} moved off a surface), {:.2} M probe rays",
                 p.probes,
+                p.budget,
+                if p.following {
+                    " following the bake's rays"
+                } else {
+                    ""
+                },
                 p.valid,
                 p.moved,
                 p.rays as f64 * 1e-6
@@ -165,15 +171,21 @@ pub struct ProbeCount {
     pub moved: usize,
     /// Rays cast by placement and gathering.
     pub rays: u64,
+    /// The budget they were placed within.
+    pub budget: u32,
+    /// The budget followed the bake's rays (no number was given).
+    pub following: bool,
 }
 
 impl ProbeCount {
-    fn of(p: &crate::probes::Probes) -> ProbeCount {
+    fn of(p: &crate::probes::Probes, following: bool) -> ProbeCount {
         ProbeCount {
             probes: p.len(),
             valid: p.valid_count(),
             moved: p.moved,
             rays: p.rays,
+            budget: p.budget,
+            following,
         }
     }
 }
@@ -877,10 +889,13 @@ pub(crate) fn finish(prepared: Prepared, lit: Lighting, progress: &dyn Progress)
     let t = Instant::now();
     let probes = (config.output.probes.as_ref())
         .map(|params| {
+            // The lightmaps' rays, the pilots' included: what a following budget reads.
+            let bake_rays = transport.rays + plan.as_ref().map_or(0, |p| p.discarded_rays);
             let bake = (
                 config.transport.seed,
                 config.transport.sky,
                 prepared.source.path.as_path(),
+                bake_rays,
             );
             crate::probes::bake(
                 prepared.surfaces(),
@@ -1150,7 +1165,10 @@ pub fn write(
         junctions: baked.junctions,
         sharing: atlas::ShareReport::of(&baked.atlas),
         directional: baked.directional.map(|(_, a, _)| a),
-        probes: baked.probes.as_ref().map(ProbeCount::of),
+        probes: (baked.probes.as_ref()).map(|p| {
+            let following = (config.output.probes.as_ref()).is_some_and(|q| q.budget.is_none());
+            ProbeCount::of(p, following)
+        }),
         stages: baked.stages,
         files,
         incremental: None,

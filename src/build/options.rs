@@ -8,6 +8,17 @@ use serde::Deserialize;
 use crate::config::{AutoParams, Instancing, Keep, LayerGroup, RowStorage, Technique, UvMode};
 use crate::{BakeConfig, Error, Result};
 
+/// The `probes` option: on (`true`, `--probes` without a number: the budget follows the bake,
+/// `crate::probes::ProbeParams::budget_for`) or a budget (`--probes N`).
+#[derive(Clone, Copy, Debug, PartialEq, Deserialize)]
+#[serde(untagged)]
+pub enum Probes {
+    /// Probes or none; with probes, the budget follows the bake.
+    On(bool),
+    /// At most this many probes.
+    Budget(u32),
+}
+
 /// Every option of `lightbake bake` that changes what is baked; `None` (left out) is the
 /// command line's default. Unknown names are an error.
 #[derive(Clone, Debug, Default, PartialEq, Deserialize)]
@@ -53,8 +64,9 @@ pub struct Options {
     pub directional: Option<bool>,
     /// Hemisphere rays per texel of the directional gather.
     pub directional_rays: Option<u32>,
-    /// Also bake light probes, at most this many (see `crate::probes`).
-    pub probes: Option<u32>,
+    /// Also bake light probes: `true` (a budget that follows the bake) or at most this many
+    /// (see `crate::probes`).
+    pub probes: Option<Probes>,
     /// Leave punctual lights' direct light out of the probes.
     pub probes_indirect_only: Option<bool>,
     /// Place the probes from this node of the scene: its children, or its box (implies probes).
@@ -176,10 +188,12 @@ impl Options {
             self.directional_rays
                 .unwrap_or(crate::lightmap::directional::DEFAULT_RAYS)
         });
-        // A probe node asks for probes: at the default budget unless one is given.
+        // Probes asked for, with a budget or following the bake (`None` inside); a probe node
+        // asks for them.
         let budget = match (self.probes, &self.probes_from) {
-            (None, Some(_)) => Some(crate::probes::DEFAULT_BUDGET),
-            (budget, _) => budget,
+            (Some(Probes::Budget(n)), _) => Some(Some(n)),
+            (Some(Probes::On(true)), _) | (None | Some(Probes::On(false)), Some(_)) => Some(None),
+            (None | Some(Probes::On(false)), None) => None,
         };
         c.output.probes = budget.map(|budget| crate::probes::ProbeParams {
             budget,
@@ -304,10 +318,29 @@ mod tests {
         assert!(bad.config().unwrap_err().to_string().contains("sideways"));
     }
 
+    /// `probes = true` (or a probe node alone) lets the budget follow the bake, `probes = N`
+    /// gives it, `probes = false` asks for none.
+    #[test]
+    fn probes_take_a_budget_or_follow_the_bake() {
+        let budget = |text: &str| {
+            let o: Options = toml::from_str(text).unwrap();
+            o.config().unwrap().output.probes.map(|p| p.budget)
+        };
+        assert_eq!(budget("probes = true"), Some(None));
+        assert_eq!(budget("probes = 2048"), Some(Some(2048)));
+        assert_eq!(budget("probes = false"), None);
+        assert_eq!(budget(""), None);
+        assert_eq!(budget("probes-from = \"Volume\""), Some(None));
+        assert_eq!(
+            budget("probes = 64\nprobes-from = \"Volume\""),
+            Some(Some(64))
+        );
+    }
+
     #[test]
     fn the_probes_refine_share_is_kept_and_checked() {
         let o = |share: Option<f32>| Options {
-            probes: Some(256),
+            probes: Some(Probes::Budget(256)),
             probes_refine: share,
             ..Options::default()
         };

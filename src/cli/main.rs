@@ -18,7 +18,7 @@ use anyhow::{Context, Result};
 use clap::{Parser, Subcommand, ValueEnum};
 use glam::Vec3;
 use lightbake::BakeConfig;
-use lightbake::build::options::{Options, Rgb};
+use lightbake::build::options::{Options, Probes, Rgb};
 use lightbake::build::{Gate, SceneResult};
 use lightbake::config::{AutoParams, Instancing, UvMode};
 use progress::Bars;
@@ -254,10 +254,11 @@ struct BakeArgs {
     /// Hemisphere rays per texel of the directional gather.
     #[arg(long, value_name = "N", requires = "directional")]
     directional_rays: Option<u32>,
-    /// Also place and bake light probes in the scene's empty space, at most N [default: 1024]:
+    /// Also place and bake light probes in the scene's empty space, at most N [default: the
+    /// probes whose rays are 5% of the bake's, from 1024 to 8192]:
     /// <stem>_probes.json, named in the glTF's root extras (see the guide, src/guide/output.md).
-    #[arg(long, value_name = "N", num_args = 0..=1, default_missing_value = "1024")]
-    probes: Option<u32>,
+    #[arg(long, value_name = "N", num_args = 0..=1)]
+    probes: Option<Option<u32>>,
     /// Leave punctual lights' direct light out of the probes (for engines that light moving
     /// objects with the same lights at run time).
     #[arg(long)]
@@ -473,7 +474,7 @@ impl BakeArgs {
             error_map: Some(self.error_map),
             directional: Some(self.directional),
             directional_rays: self.directional_rays,
-            probes: self.probes,
+            probes: (self.probes).map(|n| n.map_or(Probes::On(true), Probes::Budget)),
             probes_indirect_only: Some(self.probes_indirect_only),
             probes_from: self.probes_from.clone(),
             probes_refine: self.probes_refine,

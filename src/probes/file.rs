@@ -226,6 +226,7 @@ pub fn from_json(bytes: &[u8], path: &Path) -> Result<Probes> {
         indirect_only: file.indirect_only,
         rays: 0,
         moved: 0,
+        budget: 0,
     })
 }
 
@@ -258,6 +259,7 @@ mod tests {
             indirect_only: false,
             rays: 0,
             moved: 0,
+            budget: 0,
         }
     }
 

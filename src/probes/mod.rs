@@ -18,8 +18,12 @@
 //!
 //! **Placement** (`place.rs`): a regular grid spanning the scene's free space (found by a sketch
 //! grid: how far free probes see along the axes), its outermost probes a fifth of a spacing
-//! from the walls, at the spacing three quarters of the budget allow (`--probes N`, default
-//! [`DEFAULT_BUDGET`]; [`ProbeParams::refine`] keeps the rest for refinement), or where a node
+//! from the walls, at the spacing three quarters of the budget allow (`--probes N`; without a
+//! number the budget follows the bake, [`ProbeParams::budget_for`]: the probes whose rays are
+//! [`RAY_SHARE`] of the bake's, from [`DEFAULT_BUDGET`] to [`MAX_FOLLOWING_BUDGET`], as the
+//! error between probes falls with their spacing and a bake that casts more rays affords more
+//! probes at the same share of its time; [`ProbeParams::refine`] keeps the rest for
+//! refinement), or where a node
 //! of the scene says
 //! (`--probes-from NODE`: its children's positions, or a grid filling its box, the unit cube
 //! under its transform, in the box's axes); probes buried in solids (or outside an
@@ -77,7 +81,7 @@
 //!
 //! | parameter       | default | effect                                                        |
 //! |-----------------|---------|---------------------------------------------------------------|
-//! | `budget`        | 1024    | probes at most; spacing `∛(bounds volume / budget)`           |
+//! | `budget`        | follows the bake | probes at most; spacing `∛(bounds volume / budget)`; `None`: 5% of the bake's rays, 1024 to 8192 |
 //! | `rays`          | 256     | sphere rays per probe at most (+ as many emitter samples); noise ∝ 1/√rays |
 //! | `noisy`         | 0.04    | half the rays where their noise is below this share of the mean light; 0: all rays everywhere |
 //! | `indirect_only` | false   | leave out punctual lights' direct light                       |
@@ -117,8 +121,15 @@ use place::{Placement, uniform_sphere};
 pub use refine::Refinement;
 pub use sh::Sh2;
 
-/// Probes placed when `--probes` gives no number.
+/// The least budget when `--probes` gives no number ([`ProbeParams::budget_for`]).
 pub const DEFAULT_BUDGET: u32 = 1024;
+/// With no number given, the budget rises to the probes whose rays are at most this share of
+/// the bake's own rays: the probes' error between them falls with their spacing (the
+/// furnished interior's far from emitters 11.2% at 1024, 8.5% at 4096, `medium`), and a bake
+/// that spends more rays on its lightmaps can afford them at the same share of its time.
+pub const RAY_SHARE: f64 = 0.05;
+/// The most probes a budget that follows the bake rises to (a JSON file of about 3 MB).
+pub const MAX_FOLLOWING_BUDGET: u32 = 8192;
 /// Sphere rays per probe.
 pub const DEFAULT_RAYS: u32 = 256;
 /// Share of the budget kept for refining cells where light changes.
@@ -146,8 +157,8 @@ pub const BEYOND: f32 = 0.5;
 /// How probes are placed and baked.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ProbeParams {
-    /// Probes at most.
-    pub budget: u32,
+    /// Probes at most; `None`: the budget follows the bake ([`ProbeParams::budget_for`]).
+    pub budget: Option<u32>,
     /// Sphere rays per probe.
     pub rays: u32,
     /// Leave out punctual lights' direct light.
@@ -168,18 +179,37 @@ pub struct ProbeParams {
 }
 
 impl ProbeParams {
+    /// The budget for a bake that cast `bake_rays` rays: the one given, or the probes whose
+    /// rays (sphere rays and as many light samples, at most) are [`RAY_SHARE`] of the bake's,
+    /// within [`DEFAULT_BUDGET`]..=[`MAX_FOLLOWING_BUDGET`]. The bake's ray count does not
+    /// depend on the thread count, so neither does the budget.
+    #[must_use]
+    pub fn budget_for(&self, bake_rays: u64) -> u32 {
+        self.budget.unwrap_or_else(|| {
+            let per_probe = 2.0 * f64::from(self.rays.max(1));
+            let afforded = (RAY_SHARE * bake_rays as f64 / per_probe) as u32;
+            afforded.clamp(DEFAULT_BUDGET, MAX_FOLLOWING_BUDGET)
+        })
+    }
+
+    /// The budget given, or the least one ([`DEFAULT_BUDGET`]) before the bake's rays are known.
+    fn budget(&self) -> u32 {
+        self.budget.unwrap_or(DEFAULT_BUDGET)
+    }
+
     /// Probes the grid may take: the budget less the share kept for refinement (at least one).
     #[must_use]
     pub fn grid_budget(&self) -> u32 {
-        let kept = (self.budget as f32 * self.refine.clamp(0.0, 1.0)).floor() as u32;
-        self.budget.saturating_sub(kept).max(1)
+        let budget = self.budget();
+        let kept = (budget as f32 * self.refine.clamp(0.0, 1.0)).floor() as u32;
+        budget.saturating_sub(kept).max(1)
     }
 }
 
 impl Default for ProbeParams {
     fn default() -> Self {
         ProbeParams {
-            budget: DEFAULT_BUDGET,
+            budget: None,
             rays: DEFAULT_RAYS,
             indirect_only: false,
             from: None,
@@ -262,6 +292,8 @@ pub struct Probes {
     pub rays: u64,
     /// Probes moved away from a surface.
     pub moved: usize,
+    /// The budget they were placed within (0 for probes read from a file).
+    pub budget: u32,
 }
 
 impl Probes {
@@ -523,14 +555,20 @@ pub(crate) fn check(scene: &crate::scene::Scene, params: &ProbeParams, input: &P
 }
 
 /// Places probes (`place::place`) and gathers the solved light at them; `h` is the solved
-/// irradiance per texel (`H`, W/m²), `seed` and `sky` the bake's, `input` the glTF (for errors).
+/// irradiance per texel (`H`, W/m²), `seed` and `sky` the bake's, `input` the glTF (for errors),
+/// `bake_rays` the rays the bake cast (a budget that follows the bake reads them).
 pub(crate) fn bake(
     surfaces: Surfaces,
     h: &[Vec3],
     params: &ProbeParams,
-    (seed, sky, input): (u64, Vec3, &Path),
+    (seed, sky, input, bake_rays): (u64, Vec3, &Path, u64),
     progress: &dyn Progress,
 ) -> Result<Probes> {
+    let budget = params.budget_for(bake_rays);
+    let params = &ProbeParams {
+        budget: Some(budget),
+        ..params.clone()
+    };
     let start = place::start(surfaces.scene, params, input)?;
     let placement = place::place(surfaces.tracer, start, seed ^ SALT);
     let gatherer = Gatherer {
@@ -556,7 +594,7 @@ pub(crate) fn bake(
     let refinement = match grid {
         // With no share kept, the grid alone (whatever of the budget it leaves unused).
         Some(grid) if params.refine > 0.0 => {
-            let left = (params.budget as usize).saturating_sub(grid.len());
+            let left = (params.budget() as usize).saturating_sub(grid.len());
             let probes = (&mut position, &mut valid, &mut sh);
             let (refinement, added_rays, added_moved) =
                 refine_all(&gatherer, &grid, probes, (left, scale), progress)?;
@@ -575,6 +613,7 @@ pub(crate) fn bake(
         indirect_only: params.indirect_only,
         rays,
         moved,
+        budget,
     })
 }
 
@@ -917,6 +956,26 @@ fn fill_invalid(placement: &Placement, sh: &mut [Sh2]) {
 mod tests {
     use super::*;
 
+    /// A budget given is kept; one that follows the bake is the probes whose sphere rays and
+    /// light samples are `RAY_SHARE` of the bake's rays, within its floor and cap.
+    #[test]
+    fn a_budget_follows_the_bake_only_when_none_is_given() {
+        let following = ProbeParams::default();
+        let per_probe = 2 * u64::from(following.rays);
+        assert_eq!(following.budget_for(0), DEFAULT_BUDGET);
+        assert_eq!(following.budget_for(3_000_000), DEFAULT_BUDGET);
+        let afford = |probes: u64| (probes as f64 * per_probe as f64 / RAY_SHARE).ceil() as u64;
+        assert_eq!(following.budget_for(afford(3000)), 3000);
+        assert_eq!(following.budget_for(afford(3000) - 1), 2999);
+        assert_eq!(following.budget_for(u64::MAX), MAX_FOLLOWING_BUDGET);
+        let given = ProbeParams {
+            budget: Some(64),
+            ..ProbeParams::default()
+        };
+        assert_eq!(given.budget_for(u64::MAX), 64);
+        assert_eq!(given.grid_budget(), 48);
+    }
+
     /// Beyond the outermost probes (the slab by the walls) the lookup continues the outer
     /// cells' light: a field linear in position is read exactly there, up to [`BEYOND`] of a
     /// spacing out, and held farther.
@@ -946,6 +1005,7 @@ mod tests {
             indirect_only: false,
             rays: 0,
             moved: 0,
+            budget: 0,
         };
         let world = |l: Vec3| grid.origin + grid.rotation * (grid.step * l);
         let close = |a: &Sh2, b: &Sh2| (0..9).all(|m| (a[m] - b[m]).abs().max_element() < 1e-4);

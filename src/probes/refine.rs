@@ -715,6 +715,7 @@ mod tests {
             indirect_only: false,
             rays: 0,
             moved: 0,
+            budget: 0,
         };
         let at = |p: Vec3| probes.sh_at(p, |_| true);
         let close =
