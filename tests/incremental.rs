@@ -131,6 +131,37 @@ fn incremental(since: Since) -> (Baked, Incremental) {
     }
 }
 
+/// Probes whose budget follows the bake keep the kept bake's budget when re-baked (the
+/// incremental bake's own rays are those it re-traced: none here), so the probe file is the
+/// same too. Few probe rays, so that this small bake's rays afford more than the least budget.
+#[test]
+fn probes_following_the_bake_rebake_to_the_same_bytes() {
+    let dir = scratch();
+    let input = two_rooms_with_box(&dir.path().join("in"), -1.0);
+    let mut config = kept_config();
+    config.transport.gather_rays = 256;
+    config.output.probes = Some(lightbake::probes::ProbeParams {
+        rays: 16,
+        ..Default::default()
+    });
+    let old = dir.path().join("old");
+    let full = bake(&input, &old, &config, &NoProgress).unwrap();
+    let budget = full.probes.expect("probes").budget;
+    assert!(budget > lightbake::probes::DEFAULT_BUDGET, "{budget}");
+    let new = dir.path().join("new");
+    let since = old.join("two_rooms.gltf");
+    let report = bake_since(&input, &since, &new, &config, &NoProgress).unwrap();
+    let inc = report.incremental.expect("an incremental report");
+    assert_eq!((inc.retraced, inc.patched), (0, 0), "{}", inc.brief());
+    assert_eq!(report.probes.expect("probes").budget, budget);
+    let probes = "two_rooms_probes.json";
+    let read = |d: &Path| std::fs::read(d.join(probes)).unwrap();
+    assert!(
+        read(&old) == read(&new),
+        "{probes} differs from the previous bake's"
+    );
+}
+
 #[test]
 fn an_unmoved_scene_rebakes_to_the_same_bytes() {
     let dir = scratch();

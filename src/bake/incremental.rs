@@ -434,10 +434,18 @@ pub fn compute_since(
         Ok(Planned {
             prepared,
             incremental,
-            lighting,
+            mut lighting,
             layout_nodes,
             written,
         }) => {
+            // A budget that follows the bake: the kept bake's, else what a full trace's rays
+            // afford (this bake's own rays are only those it re-traced).
+            if let Some(p) = lighting.config.output.probes.as_mut()
+                && p.budget.is_none()
+            {
+                let full = p.budget_for(incremental.full_rays);
+                p.budget = Some(kept.settings.probe_budget.unwrap_or(full));
+            }
             let mut baked = super::finish(prepared, lighting, progress)?;
             baked.layout_nodes = Some(layout_nodes);
             if let Some((of_input, input)) = written {

@@ -128,6 +128,10 @@ pub struct Settings {
     /// transport is kept.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub(crate) input: Option<super::incremental::InputRecord>,
+    /// The probe budget the bake used (left out without probes): an incremental bake whose
+    /// budget follows the bake keeps it, as its own rays are only those it re-traced.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub(crate) probe_budget: Option<u32>,
     /// The scene's punctual lights, in scene order (sources `0..lights.len()`).
     pub(crate) lights: Vec<LightEntry>,
     /// The scene's materials, in scene order.
@@ -223,6 +227,7 @@ impl Settings {
             seams: o.seams,
             count_rows: t.count_rows,
             input: None,
+            probe_budget: None,
             lights,
             materials,
             emissive: Sources::new(scene).emissive,

@@ -1229,6 +1229,7 @@ fn keep_with_gltf(
     };
     let config = &baked.config;
     let mut settings = kept::Settings::new(&baked.scene, config, &name);
+    settings.probe_budget = baked.probes.as_ref().map(|p| p.budget);
     if config.output.keep_transport {
         // What `bake --since` compares an edited input with.
         let mut record = incremental::input_record(input)?;
