@@ -255,7 +255,7 @@ struct BakeArgs {
     #[arg(long, value_name = "N", requires = "directional")]
     directional_rays: Option<u32>,
     /// Also place and bake light probes in the scene's empty space, at most N [default: the
-    /// probes whose rays are 5% of the bake's, from 1024 to 8192]:
+    /// probes whose rays are 10% of the bake's, from 1024 to 8192]:
     /// <stem>_probes.json, named in the glTF's root extras (see the guide, src/guide/output.md).
     #[arg(long, value_name = "N", num_args = 0..=1)]
     probes: Option<Option<u32>>,
