@@ -60,7 +60,9 @@
 //!  ─ lightmap::directional ──▶ L1 SH per texel       with --directional: a final gather over
 //!                                                     the solution (pages like the lightmap's)
 //!           ─ probes::bake ──▶ Probes                with --probes: a grid of L2 SH light
-//!                                                     probes in the empty space, its cells
+//!                                                     probes in the empty space (as many
+//!                                                     as a tenth of the bake's rays
+//!                                                     afford), its cells
 //!                                                     divided where light changes, level by
 //!                                                     level (or where a node says,
 //!                                                     --probes-from), buried ones
