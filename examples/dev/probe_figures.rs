@@ -26,7 +26,8 @@
 //! `PROBE_DUMP=PREFIX` each bake's free-space points are written to `PREFIX_REFINE:LEVELS.csv`
 //! (position, normal, emitter distance, grid coordinates, then the red channel of the probes'
 //! value, the reference, its standard error and the held lookup's value, NaN without
-//! `PROBE_HOLD`), to see which points hold the error.
+//! `PROBE_HOLD`), to see which points hold the error; the points at the probes go to
+//! `PREFIX_REFINE:LEVELS_at_probes.csv` alike.
 
 use std::path::Path;
 
@@ -234,7 +235,7 @@ fn report(
         );
         held_values = Some(held);
     }
-    if let (Ok(prefix), "free space") = (std::env::var("PROBE_DUMP"), what) {
+    if let Ok(prefix) = std::env::var("PROBE_DUMP") {
         use std::fmt::Write as _;
         let mut out = String::from("k,x,y,z,nx,ny,nz,emitter,gx,gy,gz,ours,reference,std,held\n");
         let grid = probes.grid.expect("a grid");
@@ -260,7 +261,12 @@ fn report(
                 held_values.as_ref().map_or(f32::NAN, |h| h[k].x)
             );
         }
-        std::fs::write(format!("{prefix}_{refine}.csv"), out).expect("dump");
+        let part = if what == "free space" {
+            ""
+        } else {
+            "_at_probes"
+        };
+        std::fs::write(format!("{prefix}_{refine}{part}.csv"), out).expect("dump");
     }
     // Where the squared error lies.
     let sq: Vec<f32> = (0..at.len())
