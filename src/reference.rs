@@ -38,6 +38,7 @@
 //! | `max_depth`         | 1024     | bounces per path at most (0.99^1024 ≈ 3e-5: no visible bias)   |
 //! | `sky`               | 0        | uniform radiance of rays that leave the scene                 |
 //! | `indirect_only`     | false    | leave out light reaching `x₀` without a bounce, like the bake |
+//! | `no_punctual_direct` | false   | leave out only punctual lights' light reaching `x₀` without a bounce, like probes with `indirect_only` |
 //!
 //! Camera mode ([`trace_view`], `lightbake reference --view`; see `reference/camera.rs`): the
 //! same estimator of `H/π` (`Paths::reflected`) started at the first hit of jittered primary
@@ -100,6 +101,9 @@ pub struct ReferenceParams {
     pub sky: Vec3,
     /// Leave out light reaching the first vertex without a bounce, like the bake.
     pub indirect_only: bool,
+    /// Leave out only the punctual lights' light reaching the first vertex without a bounce
+    /// (what probes baked with `indirect_only` hold: `crate::probes::ProbeParams`).
+    pub no_punctual_direct: bool,
 }
 
 impl Default for ReferenceParams {
@@ -113,6 +117,7 @@ impl Default for ReferenceParams {
             max_depth: 1024,
             sky: Vec3::ZERO,
             indirect_only: false,
+            no_punctual_direct: false,
         }
     }
 }
@@ -492,7 +497,8 @@ impl Paths<'_> {
             let counts = depth > 0 || !self.params.indirect_only;
             let horizon = horizon.filter(|_| depth == 0);
             if counts {
-                l += beta * rho * self.next_event(x, n, horizon, rng, rays) / PI;
+                let punctual = depth > 0 || !self.params.no_punctual_direct;
+                l += beta * rho * self.next_event(x, n, horizon, punctual, rng, rays) / PI;
             }
             let (tx, ty) = frame(n);
             let local = cosine_hemisphere(rng.next_vec2());
@@ -542,20 +548,21 @@ impl Paths<'_> {
         if l.is_finite() { l } else { Vec3::ZERO }
     }
 
-    /// Irradiance estimate at `x` (offset, normal `n`) from punctual lights and one
-    /// MIS-weighted sample of the small emitters; none from below `horizon`.
+    /// Irradiance estimate at `x` (offset, normal `n`) from punctual lights (unless not
+    /// `punctual`) and one MIS-weighted sample of the small emitters; none from below `horizon`.
     #[inline]
     fn next_event(
         &self,
         x: Vec3,
         n: Vec3,
         horizon: Option<Vec3>,
+        punctual: bool,
         rng: &mut Rng,
         rays: &mut u64,
     ) -> Vec3 {
         let above = |dir: Vec3| horizon.is_none_or(|h| h.dot(dir) > 0.0);
         let mut e = Vec3::ZERO;
-        for light in &self.scene.lights {
+        for light in self.scene.lights.iter().filter(|_| punctual) {
             let toward = match light.kind {
                 scene::LightKind::Directional => -light.direction,
                 _ => light.position - x,
@@ -564,7 +571,11 @@ impl Paths<'_> {
                 e += punctual_irradiance(light, x, n, self.tracer);
             }
         }
-        *rays += self.scene.lights.len() as u64;
+        *rays += if punctual {
+            self.scene.lights.len() as u64
+        } else {
+            0
+        };
         if self.emitters.is_empty() {
             return e;
         }

@@ -314,6 +314,20 @@ fn indirect_only_leaves_out_direct_light() {
             .max_element()
             < 1e-5
     );
+    // Without the punctual light's direct light (what probes baked indirect-only hold) the
+    // sky's stays: H/π = L_sky everywhere.
+    let p = ReferenceParams {
+        no_punctual_direct: true,
+        ..p
+    };
+    let r = reference::compute(&fixture("point_light.gltf"), &quick(), &p, &NoProgress)
+        .unwrap()
+        .reference;
+    let sky = Vec3::new(0.5, 1.0, 2.0);
+    assert!(
+        (r.mean.iter()).all(|m| (*m - sky).abs().max_element() < 1e-5),
+        "the point light's direct light stayed in"
+    );
 }
 
 #[test]

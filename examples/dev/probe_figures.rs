@@ -20,7 +20,8 @@
 //! that, where the squared error lies: the points in the slab between the bake's outermost
 //! probes and the bounds, and the worst points.
 //!
-//! `PROBE_SEED=S` draws another set of points (default 3: the guide's figures). With
+//! `PROBE_INDIRECT_ONLY=1` bakes the probes without punctual lights' direct light and traces the
+//! reference without it (`ReferenceParams::no_punctual_direct`). `PROBE_SEED=S` draws another set of points (default 3: the guide's figures). With
 //! `PROBE_HOLD=1` each free-space figure is also given for the lookup that held the face's
 //! value in the slab by the walls instead of continuing the outer cells' light. With
 //! `PROBE_DUMP=PREFIX` each bake's free-space points are written to `PREFIX_REFINE:LEVELS.csv`
@@ -53,6 +54,9 @@ fn main() {
         _ => BakeConfig::medium(),
     };
     let mut params = ProbeParams::default();
+    // Probes without punctual direct light, against a reference without it.
+    let indirect_only = std::env::var("PROBE_INDIRECT_ONLY").is_ok();
+    params.indirect_only = indirect_only;
     if let Some(b) = rest.get(1) {
         params.budget = (b != "auto").then(|| b.parse().expect("BUDGET"));
     }
@@ -128,6 +132,7 @@ fn main() {
         let reference = ReferenceParams {
             max_samples: samples,
             seed: 7,
+            no_punctual_direct: indirect_only,
             ..ReferenceParams::like(&baked.config)
         };
         points::trace_about(
