@@ -23,8 +23,8 @@
 //! cargo run --release --example probe_diagnose -- SCENE QUALITY BUDGET PROBES SAMPLES truncation
 //! ```
 //!
-//! The probes' own error beside the emitters (the default refined bake): at up to `PROBES` valid
-//! probes closest to an emitter (and as many far ones), the path tracer's `H/π` about 256
+//! The probes' own error beside the emitters (the default refined bake): at up to `PROBES` valid,
+//! gathered probes closest to an emitter (and as many far ones), the path tracer's `H/π` about 256
 //! normals spread over the sphere (a Fibonacci set) is projected onto L2 SH by quadrature; that
 //! projection is what a perfect L2 probe would hold. The probe's error against the path tracer
 //! splits into the truncation (projection − path tracer) and the bake's own (probe −
@@ -315,8 +315,11 @@ fn truncation(scene: &str, mut config: BakeConfig, rest: &[String]) {
             .min_by(|a, b| a.distance(p).total_cmp(&b.distance(p)))
             .unwrap_or(p)
     };
+    // Gathered probes only: a node refinement holds at its coarser cell's interpolated value
+    // carries that cell's interpolation error, not a gather's.
+    let gathered = probes.gathered();
     let mut by_distance: Vec<(f32, usize)> = (0..probes.len())
-        .filter(|&q| probes.valid[q])
+        .filter(|&q| probes.valid[q] && gathered[q])
         .map(|q| (nearest(probes.position[q]).distance(probes.position[q]), q))
         .collect();
     by_distance.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
