@@ -110,6 +110,29 @@ fn rows_flag_is_explained_as_forced() {
     assert!(stdout.contains("forced by --rows counts"), "{stdout}");
 }
 
+/// `--explain` states the probe budget's rule: following the bake without a number, given
+/// with one.
+#[test]
+fn probe_budget_is_explained() {
+    let dir = scratch();
+    let scene = fixture("cornell_box.gltf");
+    let explain = |extra: &[&str], out: &str| {
+        let o = bake(&scene, &dir.path().join(out), extra);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let stdout = String::from_utf8_lossy(&o.stdout).into_owned();
+        let line = stdout.lines().find(|l| l.contains("probes: budget"));
+        line.unwrap_or_else(|| panic!("no probe line: {stdout}"))
+            .to_string()
+    };
+    let following = explain(&["--quality", "draft", "--probes", "--explain"], "a");
+    assert!(
+        following.contains("budget 1024 (following the bake: the probes whose rays are 10%"),
+        "{following}"
+    );
+    let given = explain(&["--quality", "draft", "--probes", "64", "--explain"], "b");
+    assert!(given.contains("budget 64 (given)"), "{given}");
+}
+
 /// Runs a bake that must fail; checks the message and that nothing was written.
 fn fails(scene: &Path, extra: &[&str], needle: &str) {
     let dir = scratch();

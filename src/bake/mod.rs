@@ -175,18 +175,53 @@ pub struct ProbeCount {
     pub budget: u32,
     /// The budget followed the bake's rays (no number was given).
     pub following: bool,
+    /// The rays the bake cast for its lightmaps, pilots included (what a following budget
+    /// reads).
+    pub bake_rays: u64,
+    /// Sphere rays per probe at most (as many light samples again).
+    pub rays_per_probe: u32,
 }
 
 impl ProbeCount {
-    fn of(p: &crate::probes::Probes, following: bool) -> ProbeCount {
+    fn of(
+        p: &crate::probes::Probes,
+        params: &crate::probes::ProbeParams,
+        bake_rays: u64,
+    ) -> ProbeCount {
         ProbeCount {
             probes: p.len(),
             valid: p.valid_count(),
             moved: p.moved,
             rays: p.rays,
             budget: p.budget,
-            following,
+            following: params.budget.is_none(),
+            bake_rays,
+            rays_per_probe: params.rays,
         }
+    }
+
+    /// One line for `--explain`: the budget and the rule that set it.
+    pub fn explain(&self) -> String {
+        let rule = if self.following {
+            format!(
+                "following the bake: the probes whose rays are {:.0}% of its {:.2} M rays at \
+                 {} per probe, within {}..={}",
+                100.0 * crate::probes::RAY_SHARE,
+                self.bake_rays as f64 * 1e-6,
+                2 * self.rays_per_probe,
+                crate::probes::DEFAULT_BUDGET,
+                crate::probes::MAX_FOLLOWING_BUDGET
+            )
+        } else {
+            "given".to_string()
+        };
+        format!(
+            "probes: budget {} ({rule}); {} placed, {} valid, {:.2} M probe rays",
+            self.budget,
+            self.probes,
+            self.valid,
+            self.rays as f64 * 1e-6
+        )
     }
 }
 
@@ -851,6 +886,12 @@ pub(crate) fn light(
     })
 }
 
+/// The rays a bake cast for its lightmaps: the final transport's and the pilot bakes' not
+/// mixed into it (what a probe budget that follows the bake reads).
+fn lightmap_rays(transport_rays: u64, plan: Option<&Plan>) -> u64 {
+    transport_rays + plan.map_or(0, |p| p.discarded_rays)
+}
+
 /// Denoising, dilation and seams of a lit bake.
 pub(crate) fn finish(prepared: Prepared, lit: Lighting, progress: &dyn Progress) -> Result<Baked> {
     let Lighting {
@@ -889,8 +930,7 @@ pub(crate) fn finish(prepared: Prepared, lit: Lighting, progress: &dyn Progress)
     let t = Instant::now();
     let probes = (config.output.probes.as_ref())
         .map(|params| {
-            // The lightmaps' rays, the pilots' included: what a following budget reads.
-            let bake_rays = transport.rays + plan.as_ref().map_or(0, |p| p.discarded_rays);
+            let bake_rays = lightmap_rays(transport.rays, plan.as_ref());
             let bake = (
                 config.transport.seed,
                 config.transport.sky,
@@ -1146,14 +1186,14 @@ pub fn write(
     let files = commit(staging)?;
     timed(&mut baked.stages, "write", t);
 
+    let lightmap_rays = lightmap_rays(baked.transport.rays, baked.plan.as_ref());
     Ok(BakeReport {
         triangles: baked.scene.triangles.len(),
         texels: baked.texels.len(),
         pages: baked.pages.pages.len(),
         // Every ray cast, the pilot bakes that are not part of the result and the directional
         // gather included.
-        rays: baked.transport.rays
-            + baked.plan.as_ref().map_or(0, |p| p.discarded_rays)
+        rays: lightmap_rays
             + baked.directional.as_ref().map_or(0, |d| d.2)
             + baked.probes.as_ref().map_or(0, |p| p.rays),
         iterations: baked.solution.history.len(),
@@ -1165,10 +1205,9 @@ pub fn write(
         junctions: baked.junctions,
         sharing: atlas::ShareReport::of(&baked.atlas),
         directional: baked.directional.map(|(_, a, _)| a),
-        probes: (baked.probes.as_ref()).map(|p| {
-            let following = (config.output.probes.as_ref()).is_some_and(|q| q.budget.is_none());
-            ProbeCount::of(p, following)
-        }),
+        probes: (baked.probes.as_ref())
+            .zip(config.output.probes.as_ref())
+            .map(|(p, params)| ProbeCount::of(p, params, lightmap_rays)),
         stages: baked.stages,
         files,
         incremental: None,

@@ -555,6 +555,11 @@ fn bake(args: &BakeArgs) -> Result<()> {
             sharing.brief()
         );
     }
+    if args.explain
+        && let Some(probes) = &report.probes
+    {
+        println!("  - {}", probes.explain());
+    }
     if !args.run.quiet {
         println!("{}", report.summary());
         if let Some(gltf) = report.files.first() {
