@@ -533,8 +533,10 @@ impl BakeConfig {
             && (p.budget.is_some_and(|b| b == 0 || b > 1 << 24) || p.rays == 0 || p.rays > 1 << 20)
         {
             return Err(Option(format!(
-                "probes must be within 1..=16777216 and probe rays within 1..=1048576, got {:?} and {}",
-                p.budget, p.rays
+                "probes must be within 1..=16777216 and probe rays within 1..=1048576, got {} and {}",
+                p.budget
+                    .map_or("a budget following the bake".into(), |b| b.to_string()),
+                p.rays
             )));
         }
         if t.light_samples > 1 << 20 {

@@ -443,8 +443,8 @@ pub fn compute_since(
             if let Some(p) = lighting.config.output.probes.as_mut()
                 && p.budget.is_none()
             {
-                let full = p.budget_for(incremental.full_rays);
-                p.budget = Some(kept.settings.probe_budget.unwrap_or(full));
+                let full = || p.budget_for(incremental.full_rays);
+                p.budget = Some(kept.settings.probe_budget.unwrap_or_else(full));
             }
             let mut baked = super::finish(prepared, lighting, progress)?;
             baked.layout_nodes = Some(layout_nodes);
