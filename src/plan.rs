@@ -65,10 +65,10 @@
 //!   — punctual lights exactly (one shadow ray each, about the shading normal), emitters, sky and interreflection gathered at
 //!   the point as transport gathers at a texel (32 rays and 8 emitter light samples through
 //!   each run's solution). Each run's difference is independent of the other's, so the mean of
-//!   their products has neither's noise; points are drawn in batches of 4096 until the mean
-//!   square is known to ±40% (two standard errors), is clearly small, or the sample has cast
-//!   half the pilot's rays (it always casts one batch: 0.1–0.3 s, as much as a sub-second bake;
-//!   2.0 s of 22 s on the furnished interior at draft, 2.9 s of 65 s at medium). The pilot's
+//!   their products has neither's noise; points are drawn in batches (4096, or as many as the
+//!   budget pays for down to 1024) until the mean square is known to ±40% (two standard
+//!   errors), is clearly small, or the sample has cast half the pilot's rays (it always casts
+//!   one batch; 2.0 s of 22 s on the furnished interior at draft, 2.9 s of 65 s at medium). The pilot's
 //!   second differences (`resolution_error`) it replaced are a lower bound (emitter shadows and
 //!   contacts narrower than a texel are not in them) and stay in `--explain` beside it; the
 //!   punctual sample (`PunctualSample`, about the face normal) still steers the adaptive

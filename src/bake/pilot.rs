@@ -718,13 +718,21 @@ mod tests {
 
     use super::*;
     use crate::NoProgress;
-    use crate::plan::gathered::{BATCH, GATHER_RAYS, LIGHT_SAMPLES};
+    use crate::plan::gathered::{BATCH, GATHER_RAYS, LIGHT_SAMPLES, MIN_BATCH};
     use crate::shard::Alone;
     use crate::texels::validity::PROBE_RAYS;
 
+    /// Rays of one Cornell box sample point (no punctual lights).
+    const PER_POINT: u64 = (PROBE_RAYS + 2 * (GATHER_RAYS + LIGHT_SAMPLES)) as u64;
+
     /// The Cornell box's lookup-error sample on a uniform atlas at `tpu` texels per metre, with
-    /// a pilot pair baked there, reading `reuse`'s light first.
+    /// a pilot pair baked there, reading `reuse`'s light first, with a budget of a full batch.
     fn cornell_sample(tpu: f32, reuse: &[PointLight]) -> GatheredSample {
+        cornell_sample_within(tpu, PER_POINT * BATCH as u64, reuse)
+    }
+
+    /// [`cornell_sample`] with a budget of `budget_rays`.
+    fn cornell_sample_within(tpu: f32, budget_rays: u64, reuse: &[PointLight]) -> GatheredSample {
         let input = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/cornell_box.gltf");
         let mut config = BakeConfig {
             auto: None,
@@ -749,7 +757,7 @@ mod tests {
             runs.irradiance(),
             [&a, &b],
             0.04,
-            (0, reuse),
+            (budget_rays, reuse),
             &Alone,
         )
         .expect("samples")
@@ -825,13 +833,30 @@ mod tests {
     }
 
     #[test]
+    fn a_small_budget_casts_a_small_first_batch() {
+        // A budget that pays for no point: the sample still casts one batch, of the least
+        // size (the rays of MIN_BATCH gathered points, give or take the last batch), not a
+        // full one.
+        let small = cornell_sample_within(16.0, 0, &[]);
+        let full = cornell_sample(16.0, &[]);
+        let said = format!(
+            "{} rays over {} drawn points, a full batch {} over {}",
+            small.rays, small.drawn, full.rays, full.drawn
+        );
+        assert!(small.rays >= PER_POINT * MIN_BATCH as u64, "{said}");
+        assert!(small.rays < 2 * PER_POINT * MIN_BATCH as u64, "{said}");
+        assert!(full.rays >= PER_POINT * BATCH as u64, "{said}");
+        assert_eq!(small.drawn % MIN_BATCH, 0, "{said}");
+    }
+
+    #[test]
     fn a_sample_reads_an_earlier_samples_light_without_casting_a_ray() {
         let fresh = cornell_sample(16.0, &[]);
         assert!(fresh.rays > 0 && fresh.reused == 0 && fresh.points.len() > 1000);
         assert_eq!(fresh.lights.len(), fresh.drawn);
 
         // The same atlas and runs: the same points bit for bit, none of them gathered again.
-        let again = cornell_sample(16.0, &fresh.lights);
+        let again = cornell_sample_within(16.0, 0, &fresh.lights);
         assert_eq!((again.rays, again.reused), (0, fresh.points.len()));
         let bits = |s: &GatheredSample| -> Vec<[u32; 5]> {
             s.points
@@ -853,15 +878,14 @@ mod tests {
         // lookup error as gathering there afresh, within the two estimates' standard errors.
         // Rays go only to points the earlier atlas buried (never probed there), a few.
         let finer = cornell_sample(32.0, &[]);
-        let read = cornell_sample(32.0, &fresh.lights);
+        let read = cornell_sample_within(32.0, 0, &fresh.lights);
         let unknown = fresh
             .lights
             .iter()
             .filter(|l| matches!(l, PointLight::Redraw { accept } if *accept == 0.0))
             .count() as u64;
-        let per_point = u64::from(PROBE_RAYS + 2 * (GATHER_RAYS + LIGHT_SAMPLES));
         assert!(
-            read.rays <= unknown * per_point && read.rays * 50 < fresh.rays,
+            read.rays <= unknown * PER_POINT && read.rays * 50 < fresh.rays,
             "{} rays, {unknown} points unknown, {} rays fresh",
             read.rays,
             fresh.rays

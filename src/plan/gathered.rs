@@ -45,10 +45,14 @@
 //! whole budget either way.
 //!
 //! **Cost.** Per gathered point, 16 probe rays, 2 runs × ([`GATHER_RAYS`] + [`LIGHT_SAMPLES`])
-//! and one shadow ray per punctual light; the rays of [`BATCH`] gathered points at least, more
-//! while the estimate is not precise and the sample has cast less than its budget (the bake
-//! gives it half the pilot's rays). Measured (the guide, `src/guide/performance.md`): 0.1–0.3 s for the first batch, as much as
-//! a sub-second bake; 9% of the furnished interior's draft bake and 4% of its medium one.
+//! and one shadow ray per punctual light. The sample casts the rays of one batch's gathered
+//! points at least, more while the estimate is not precise and the sample has cast less than
+//! its budget (the bake gives it half the pilot's rays). A batch is what the budget pays for,
+//! within [`MIN_BATCH`]..=[`BATCH`] points ([`batch_size`]): a first batch of 4096 whatever the
+//! budget cost as much as a sub-second bake (the Cornell box at `draft` asks 285 points' rays;
+//! 0.16–0.20 s → 0.09–0.13 s with the same bytes, the guide's "The sample's first batch"). 9%
+//! of the furnished interior's draft bake and 4% of its medium one, where the budget pays for
+//! full batches.
 //!
 //! **Gathered once.** A point's light does not depend on the atlas its lookup reads (apart
 //! from the second bounce at the gathering run's texel resolution), so the sample on the final
@@ -73,14 +77,17 @@ use crate::texels::validity::{self, MAX_BACK, PROBE_RAYS};
 use crate::texels::{NO_TEXEL, RayEnd, Texels};
 use crate::trace::Tracer;
 
-/// Random surface points are drawn in batches of this many ...
+/// Random surface points are drawn in batches of this many (fewer on a small scene: as many
+/// as the budget's rays gather, but at least [`MIN_BATCH`]) ...
 pub(crate) const BATCH: usize = 4096;
+/// ... the least batch: what the first batch gathers whatever the budget.
+pub(crate) const MIN_BATCH: usize = 1024;
 /// ... until the mean square's two standard errors are within this share of it ...
 pub(crate) const PRECISION: f64 = 0.2;
 /// ... or the error is clearly small next to the target (its upper bound below this share of
 /// it), or the sample's rays exceed its budget (the bake passes half the pilot's; the first
-/// batch is cast whatever the budget), or this many points have been drawn (most of them
-/// read, not gathered).
+/// batch's rays are cast whatever the budget), or this many points have been drawn (most of
+/// them read, not gathered).
 pub(crate) const SMALL: f32 = 0.25;
 pub(crate) const MAX_POINTS: usize = 262_144;
 /// Gathering rays per point and run (the pilot's own [`super::PILOT_RAYS`] twice over: the
@@ -268,8 +275,8 @@ pub(crate) struct Runs<'a> {
     pub(crate) irradiance: [&'a [Vec3]; 2],
     /// Uniform sky radiance the bake uses.
     pub(crate) sky: Vec3,
-    /// The relative error the bake aims at, the rays the sample may cast past its first batch,
-    /// and the seed of its streams.
+    /// The relative error the bake aims at, the rays the sample may cast past its first batch
+    /// (and what sizes its batches, [`batch_size`]), and the seed of its streams.
     pub(crate) target: f32,
     pub(crate) budget_rays: u64,
     pub(crate) seed: u64,
@@ -282,8 +289,16 @@ pub(crate) struct Runs<'a> {
     pub(crate) reuse: &'a [PointLight],
 }
 
+/// Points per batch for a sample of `budget_rays` at `per_point` rays a gathered point: as many
+/// as the budget gathers, within [`MIN_BATCH`]..=[`BATCH`]. A small scene's budget is smaller
+/// than one full batch (the Cornell box at `draft`: 27k rays, about 280 points), and a full batch
+/// cast there anyway was most of the bake.
+pub(crate) fn batch_size(budget_rays: u64, per_point: u64) -> usize {
+    (budget_rays / per_point.max(1)).clamp(MIN_BATCH as u64, BATCH as u64) as usize
+}
+
 impl GatheredSample {
-    /// Samples surface points of `scene` with the pilot's two `runs` in batches of [`BATCH`]
+    /// Samples surface points of `scene` with the pilot's two `runs` in batches of [`batch_size`]
     /// until the estimate is within [`PRECISION`], clearly below the relative error
     /// `runs.target` ([`SMALL`]), past `runs.budget_rays`, or [`MAX_POINTS`]; `punctual` (the
     /// punctual lights' texel values) splits off the rest. `None` without texels.
@@ -324,6 +339,7 @@ impl GatheredSample {
         };
         let per_point =
             (PROBE_RAYS + 2 * (GATHER_RAYS + light_samples)) as u64 + scene.lights.len() as u64;
+        let batch_points = batch_size(runs.budget_rays, per_point);
         // Batches until the estimate is precise enough: each point has its own stream, so the
         // result does not depend on the thread count.
         let mut sample = GatheredSample::default();
@@ -332,7 +348,11 @@ impl GatheredSample {
         // cost no ray); past them a batch is cast only while the budget holds it whole.
         let free = runs.reuse.len();
         while drawn < MAX_POINTS {
-            let size = if drawn < free { free - drawn } else { BATCH };
+            let size = if drawn < free {
+                free - drawn
+            } else {
+                batch_points
+            };
             let batch = shard::map(shards, size, |k| drawer.draw(drawn + k))?;
             drawn += size;
             for d in batch {
@@ -358,9 +378,9 @@ impl GatheredSample {
             // Without earlier light, the first batch's rays are cast whatever the budget: as
             // many as a batch of points all gathered would cast (a batch gathers fewer).
             let spent = if free > 0 {
-                sample.rays + per_point * BATCH as u64 > runs.budget_rays
+                sample.rays + per_point * batch_points as u64 > runs.budget_rays
             } else {
-                sample.rays >= runs.budget_rays.max(per_point * BATCH as u64)
+                sample.rays >= runs.budget_rays.max(per_point * batch_points as u64)
             };
             if hi < SMALL * runs.target
                 || (mean_square > 0.0 && 2.0 * stderr <= PRECISION * mean_square)
@@ -369,7 +389,7 @@ impl GatheredSample {
                 break;
             }
             // No light at the points, or none visible: more of them will not tell more.
-            if !(lo.is_finite() || drawn < 4 * BATCH) {
+            if !(lo.is_finite() || drawn < 4 * batch_points) {
                 break;
             }
         }
