@@ -46,7 +46,8 @@
 //!                                                     three stages above then run once with the
 //!                                                     factors (auto, adaptive). A small scene is
 //!                                                     measured on the final uniform atlas, kept
-//!                                                     with its pilot pair when no factor is asked
+//!                                                     with its pilot pair when the factors asked
+//!                                                     move under 5% of its texels
 //!   (all of the above is `prepare`, shared by the bake and the reference)
 //!    ─ pilot runs + plan   ──▶ BakeConfig + pilot    rays for the target error after
 //!                                                     denoising, measured (auto); the lookup

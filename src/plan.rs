@@ -55,7 +55,9 @@
 //!   are then laid out once, and the pilot's noise at `PILOT_RAYS` is the transport plan's
 //!   first measurement (its pair is not cast again on the new atlas). A small scene is
 //!   measured on its final atlas, uniform at the preset's density; when no factor is asked,
-//!   that atlas and the pilot's pair are the bake's own (`bake::pilot::Reused::pair`).
+//!   or the factors would move fewer than 5% of its texels (a few unseen regions at ×⅛: a new
+//!   layout and pair would cost more), that atlas and the pilot's pair are the bake's own
+//!   (`bake::pilot::Reused::pair`).
 //! - **Resolution error** is predicted (`predict_resolution`): what a renderer shows
 //!   between texel centres, where it blends four texels bilinearly, differs from the light at
 //!   that point where the light changes within a texel.

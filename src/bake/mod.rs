@@ -574,9 +574,10 @@ type LaidOut = (
 /// `plan::density::PILOT_TEXELS` texels, chooses a density per region (`plan::density`) into
 /// `config`; the atlas is then laid out at those densities. A scene small enough that its
 /// pilot atlas is at the preset's density and whose charting is cheap is measured on the final
-/// atlas itself ([`MEASURE_ON_FINAL_TRIANGLES`]): when the density stays uniform, that layout
-/// is returned and its pilot pair is in the returned [`pilot::Reused`], so the pilot cost
-/// nothing but its sample.
+/// atlas itself ([`MEASURE_ON_FINAL_TRIANGLES`]): when the density stays uniform, or the
+/// factors asked would move fewer than [`KEEP_MOVED_SHARE`] of its texels, that layout is
+/// returned and its pilot pair is in the returned [`pilot::Reused`], so the pilot cost nothing
+/// but its sample.
 fn density_pilot(
     (scene, source, tracer): (&scene::Scene, &scene::Source, &Tracer),
     config: &mut BakeConfig,
@@ -619,7 +620,28 @@ fn density_pilot(
     };
     let density = pilot::measure_density(surfaces, &coarse, tpu, plan, processes, progress)?;
     let mut reused = density.reused;
-    match (layout, density.triangle_factors) {
+    let factors = density.triangle_factors.map(|mut factors| {
+        // Slot faces keep their gap's density whatever the pilot judged of them.
+        raise_to(&mut factors, &config.atlas.triangle_density);
+        factors
+    });
+    let moved = factors
+        .as_ref()
+        .map(|f| moved_share(scene, f, &config.atlas.triangle_density));
+    let factors = match (&layout, moved) {
+        (Layout::Final(_), Some(moved)) if moved < KEEP_MOVED_SHARE => {
+            plan.reasons.push(format!(
+                "texel density kept uniform: the chosen densities would move {:.1}% of the \
+                 measured atlas's texels, below {:.0}%; laying it out again and casting its \
+                 pilot pair again would cost more than they move",
+                100.0 * moved,
+                100.0 * KEEP_MOVED_SHARE
+            ));
+            None
+        }
+        _ => factors,
+    };
+    match (layout, factors) {
         (Layout::Final(layout), None) => {
             // The bake's own atlas, texels and pair: only the pilot's sample is overhead.
             stages.extend(layout_stages);
@@ -640,9 +662,7 @@ fn density_pilot(
             Ok((reused, Some(layout)))
         }
         (_, factors) => {
-            if let Some(mut factors) = factors {
-                // Slot faces keep their gap's density whatever the pilot judged of them.
-                raise_to(&mut factors, &config.atlas.triangle_density);
+            if let Some(factors) = factors {
                 config.atlas.triangle_density = factors;
             }
             if let Some(pair) = density.pair {
@@ -653,6 +673,27 @@ fn density_pilot(
             Ok((reused, None))
         }
     }
+}
+
+/// A density pilot that measured the final atlas keeps it, with its pilot pair, when the
+/// densities it chose would move fewer than this share of the atlas's texels (added and
+/// removed, by area): a new layout costs a validity pass and a pilot pair cast again (40 rays
+/// and light samples a texel, half a `draft` bake's), more than 5% of the texels save; the
+/// small scenes' plans that moved less were a few regions at ×⅛ or a small one raised to
+/// its least texels.
+const KEEP_MOVED_SHARE: f64 = 0.05;
+
+/// The share of the texels of an atlas laid out at `laid` (per scene triangle, empty meaning
+/// 1) that `chosen` adds or removes, by area.
+fn moved_share(scene: &scene::Scene, chosen: &[f32], laid: &[f32]) -> f64 {
+    let (mut moved, mut all) = (0.0, 0.0);
+    for (t, &c) in chosen.iter().enumerate() {
+        let area = scene.triangle_area(t);
+        let was = f64::from(laid.get(t).copied().unwrap_or(1.0)).powi(2);
+        moved += area * (f64::from(c).powi(2) - was).abs();
+        all += area * was;
+    }
+    if all > 0.0 { moved / all } else { 0.0 }
 }
 
 /// Raises each of `factors` (per scene triangle, empty meaning 1) to at least `floor`'s.

@@ -249,10 +249,10 @@ pub(crate) fn density_measurable(scene: &crate::scene::Scene, config: &BakeConfi
 
 /// Step 1b of the automatic choice, on the density pilot's uniform atlas (`surfaces`, at
 /// `config`'s density: its own from `crate::atlas::build_quick`, or the final atlas that the
-/// bake keeps, with the pair, when no factor is asked): a pilot pair at [`PILOT_RAYS`], its lookup
-/// error at random surface points, and the density per region that asks for
-/// ([`plan::density`]) at `tpu`, the preset's density. Its rays and time go to the plan's
-/// overhead: none of it is in the result.
+/// bake keeps, with the pair, when the factors asked move few texels): a pilot pair at
+/// [`PILOT_RAYS`], its lookup error at random surface points, and the density per region that
+/// asks for ([`plan::density`]) at `tpu`, the preset's density. Its rays and time go to the
+/// plan's overhead: none of it is in the result.
 pub(crate) fn measure_density(
     surfaces: Surfaces,
     config: &BakeConfig,

@@ -28,7 +28,8 @@
 //! **The pilot's atlas** is uniform. A scene of at most `MEASURE_ON_FINAL_TRIANGLES` triangles
 //! whose preset atlas stays within `PILOT_TEXELS` is measured on the final atlas itself (charted
 //! in full; `crate::bake`), which the bake keeps, with the pilot's pair, when the measurement
-//! asks for no factor. Any other scene's pilot atlas is its own, charted quickly
+//! asks for no factor or for factors that move fewer than 5% of its texels. Any other scene's
+//! pilot atlas is its own, charted quickly
 //! (`crate::atlas::build_quick`), at the preset's density or, when that would pass
 //! `PILOT_TEXELS` texels, coarser; mean
 //! squares measured there are carried to the preset's density by `PILOT_EXPONENT` (a pilot
