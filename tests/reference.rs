@@ -276,23 +276,24 @@ fn stops_on_target_error_and_time_limit() {
 
 #[test]
 fn indirect_only_leaves_out_direct_light() {
+    let trace = |p: &ReferenceParams| {
+        reference::compute(&fixture("point_light.gltf"), &quick(), p, &NoProgress)
+            .unwrap()
+            .reference
+    };
     // A lone black floor under a point light: everything is direct.
     let p = ReferenceParams {
         indirect_only: true,
         ..params(8)
     };
-    let r = reference::compute(&fixture("point_light.gltf"), &quick(), &p, &NoProgress)
-        .unwrap()
-        .reference;
+    let r = trace(&p);
     assert!(r.mean.iter().all(|m| *m == Vec3::ZERO));
     // Sky only: every path from the open floor escapes, H/π = L_sky.
     let p = ReferenceParams {
         sky: Vec3::new(0.5, 1.0, 2.0),
         ..p
     };
-    let r = reference::compute(&fixture("point_light.gltf"), &quick(), &p, &NoProgress)
-        .unwrap()
-        .reference;
+    let r = trace(&p);
     assert!(
         r.mean.iter().all(|m| *m == Vec3::ZERO),
         "the first bounce to the sky is direct"
@@ -301,9 +302,7 @@ fn indirect_only_leaves_out_direct_light() {
         indirect_only: false,
         ..p
     };
-    let r = reference::compute(&fixture("point_light.gltf"), &quick(), &p, &NoProgress)
-        .unwrap()
-        .reference;
+    let r = trace(&p);
     let i = (0..r.mean.len())
         .max_by(|&a, &b| r.mean[a].x.total_cmp(&r.mean[b].x))
         .unwrap();
@@ -320,9 +319,7 @@ fn indirect_only_leaves_out_direct_light() {
         no_punctual_direct: true,
         ..p
     };
-    let r = reference::compute(&fixture("point_light.gltf"), &quick(), &p, &NoProgress)
-        .unwrap()
-        .reference;
+    let r = trace(&p);
     let sky = Vec3::new(0.5, 1.0, 2.0);
     assert!(
         (r.mean.iter()).all(|m| (*m - sky).abs().max_element() < 1e-5),

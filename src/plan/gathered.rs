@@ -50,7 +50,7 @@
 //! its budget (the bake gives it half the pilot's rays). A batch is what the budget pays for,
 //! within [`MIN_BATCH`]..=[`BATCH`] points ([`batch_size`]): a first batch of 4096 whatever the
 //! budget cost as much as a sub-second bake (the Cornell box at `draft` asks 285 points' rays;
-//! 0.16–0.20 s → 0.09–0.13 s with the same bytes, the guide's "The sample's first batch"). 9%
+//! 0.16–0.20 s → 0.09–0.13 s with the same plan, the guide's "The sample's first batch"). 9%
 //! of the furnished interior's draft bake and 4% of its medium one, where the budget pays for
 //! full batches.
 //!
