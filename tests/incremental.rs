@@ -162,6 +162,39 @@ fn probes_following_the_bake_rebake_to_the_same_bytes() {
     );
 }
 
+/// Probes asked of an incremental bake whose kept bake had none: the budget follows what a full
+/// trace's rays afford (this bake re-traces nothing, so its own rays would give the least
+/// budget), the budget a full bake with probes chooses.
+#[test]
+fn probes_new_to_an_incremental_bake_follow_a_full_trace() {
+    let dir = scratch();
+    let input = two_rooms_with_box(&dir.path().join("in"), -1.0);
+    let mut config = kept_config();
+    config.transport.gather_rays = 256;
+    let old = dir.path().join("old");
+    let kept = bake(&input, &old, &config, &NoProgress).unwrap();
+    assert!(kept.probes.is_none());
+    config.output.probes = Some(lightbake::probes::ProbeParams {
+        rays: 16,
+        ..Default::default()
+    });
+    let full = bake(&input, &dir.path().join("full"), &config, &NoProgress).unwrap();
+    let budget = full.probes.expect("probes").budget;
+    assert!(budget > lightbake::probes::DEFAULT_BUDGET, "{budget}");
+    let since = old.join("two_rooms.gltf");
+    let report = bake_since(
+        &input,
+        &since,
+        &dir.path().join("new"),
+        &config,
+        &NoProgress,
+    )
+    .unwrap();
+    let inc = report.incremental.expect("an incremental report");
+    assert_eq!((inc.retraced, inc.patched), (0, 0), "{}", inc.brief());
+    assert_eq!(report.probes.expect("probes").budget, budget);
+}
+
 #[test]
 fn an_unmoved_scene_rebakes_to_the_same_bytes() {
     let dir = scratch();
