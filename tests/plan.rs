@@ -319,6 +319,36 @@ fn adaptive_density_spends_texels_where_the_light_changes() {
     assert!(fixed.config.atlas.triangle_density.is_empty());
 }
 
+/// The lookup-error sample on the laid-out atlas only confirms the prediction: it reads the
+/// density pilot's points against the light gathered there and draws no new ones (rays only
+/// where the pilot's atlas buried a point). The courtyard at 24 texels a metre, whose pilot
+/// measured an atlas of its own, for a 2% target (at 8% its error is clearly below the target
+/// at the pilot's points alone, and no sample would draw more).
+#[test]
+fn the_final_atlas_sample_reads_the_density_pilots_points_and_draws_no_more() {
+    let mut preset = BakeConfig::draft();
+    preset.atlas.texels_per_unit = 24.0;
+    let config = auto(preset, 0.02, Keep::default());
+    let baked = lightbake::compute(&fixture("courtyard.gltf"), &config, &NoProgress).unwrap();
+    let plan = baked.plan.unwrap();
+    let measured = plan
+        .reasons
+        .iter()
+        .find_map(|r| r.split("Resolution error measured at ").nth(1))
+        .expect("a gathered sample");
+    let number = |s: &str| -> usize { s.split(' ').next().unwrap().parse().unwrap() };
+    let points = number(measured);
+    let reused = number(
+        measured
+            .split("random surface points (")
+            .nth(1)
+            .expect("the density pilot's points read again"),
+    );
+    assert!(reused > 1000, "{measured}");
+    // Points the pilot's atlas buried are drawn again on this one: a few.
+    assert!(points - reused <= points / 50, "{measured}");
+}
+
 /// A density pilot that measured the final atlas keeps it (with its pilot pair) when its
 /// choice moves few texels: on the Cornell box at `draft` two small unseen regions at ×⅛ and
 /// one small region raised to its least texels move 3.6% of them, and a new layout with a
