@@ -131,6 +131,15 @@ fn incremental(since: Since) -> (Baked, Incremental) {
     }
 }
 
+/// Probes whose budget follows the bake, with few rays each, so that a small bake's rays afford
+/// more than the least budget.
+fn few_ray_probes() -> lightbake::probes::ProbeParams {
+    lightbake::probes::ProbeParams {
+        rays: 16,
+        ..Default::default()
+    }
+}
+
 /// Probes whose budget follows the bake keep the kept bake's budget when re-baked (the
 /// incremental bake's own rays are those it re-traced: none here), so the probe file is the
 /// same too. Few probe rays, so that this small bake's rays afford more than the least budget.
@@ -140,10 +149,7 @@ fn probes_following_the_bake_rebake_to_the_same_bytes() {
     let input = two_rooms_with_box(&dir.path().join("in"), -1.0);
     let mut config = kept_config();
     config.transport.gather_rays = 256;
-    config.output.probes = Some(lightbake::probes::ProbeParams {
-        rays: 16,
-        ..Default::default()
-    });
+    config.output.probes = Some(few_ray_probes());
     let old = dir.path().join("old");
     let full = bake(&input, &old, &config, &NoProgress).unwrap();
     let budget = full.probes.expect("probes").budget;
@@ -174,10 +180,7 @@ fn probes_new_to_an_incremental_bake_follow_a_full_trace() {
     let old = dir.path().join("old");
     let kept = bake(&input, &old, &config, &NoProgress).unwrap();
     assert!(kept.probes.is_none());
-    config.output.probes = Some(lightbake::probes::ProbeParams {
-        rays: 16,
-        ..Default::default()
-    });
+    config.output.probes = Some(few_ray_probes());
     let full = bake(&input, &dir.path().join("full"), &config, &NoProgress).unwrap();
     let budget = full.probes.expect("probes").budget;
     assert!(budget > lightbake::probes::DEFAULT_BUDGET, "{budget}");

@@ -272,6 +272,16 @@ fn emitter_and_unlit_texels_cast_fewer_rays() {
     );
 }
 
+/// The courtyard baked at `draft` with the automatic choice for `target`, at 24 texels a metre:
+/// its density pilot measures an atlas of its own (at the preset's 8 it is measured on its
+/// final atlas, which it keeps).
+fn courtyard_on_a_pilot_atlas(target: f32) -> lightbake::Baked {
+    let mut preset = BakeConfig::draft();
+    preset.atlas.texels_per_unit = 24.0;
+    let config = auto(preset, target, Keep::default());
+    lightbake::compute(&fixture("courtyard.gltf"), &config, &NoProgress).unwrap()
+}
+
 /// Texel density per region (`plan::density`): on the sun-lit courtyard (hard shadows across
 /// the ground, evenly lit walls) the density pilot gives none of the seen regions less than the
 /// preset's density, and the faces nobody sees (walls' bottoms on the ground, backs against
@@ -281,10 +291,7 @@ fn emitter_and_unlit_texels_cast_fewer_rays() {
 /// preset's density: `the_density_rises_where_the_lookup_error_asks_for_it`.
 #[test]
 fn adaptive_density_spends_texels_where_the_light_changes() {
-    let mut preset = BakeConfig::draft();
-    preset.atlas.texels_per_unit = 24.0;
-    let config = auto(preset, 0.08, Keep::default());
-    let baked = lightbake::compute(&fixture("courtyard.gltf"), &config, &NoProgress).unwrap();
+    let baked = courtyard_on_a_pilot_atlas(0.08);
     let factors = &baked.config.atlas.triangle_density;
     assert_eq!(factors.len(), baked.scene.triangles.len());
     let hidden = lightbake::plan::density::HIDDEN_FACTOR;
@@ -326,11 +333,7 @@ fn adaptive_density_spends_texels_where_the_light_changes() {
 /// at the pilot's points alone, and no sample would draw more).
 #[test]
 fn the_final_atlas_sample_reads_the_density_pilots_points_and_draws_no_more() {
-    let mut preset = BakeConfig::draft();
-    preset.atlas.texels_per_unit = 24.0;
-    let config = auto(preset, 0.02, Keep::default());
-    let baked = lightbake::compute(&fixture("courtyard.gltf"), &config, &NoProgress).unwrap();
-    let plan = baked.plan.unwrap();
+    let plan = courtyard_on_a_pilot_atlas(0.02).plan.unwrap();
     let measured = plan
         .reasons
         .iter()

@@ -261,9 +261,9 @@ fn browser_with(
             .expect("run node")
     };
     let mut node = run();
-    // A Playwright timeout is the machine's load (software WebGL on a shared 2-core machine
-    // once missed the page's load event by 120 s), not the page: run once more. Page errors
-    // and wrong pixels fail at once.
+    // A Playwright timeout is the machine, not the page (a CI run on a loaded 2-core machine
+    // once missed the page's load event by 120 s; software WebGL, a cold browser start): run
+    // once more. Page errors and wrong pixels fail at once.
     if !node.status.success() && String::from_utf8_lossy(&node.stderr).contains("TimeoutError") {
         eprintln!(
             "the browser timed out; once more:\n{}",

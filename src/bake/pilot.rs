@@ -126,12 +126,10 @@ pub(crate) fn choose_transport(
         // pilot's atlas buried). It decides nothing, it only tells the prediction; new points
         // cost the furnished interior at `medium` 0.7 s of a 17 s bake for an interval about
         // 1.3× narrower (the guide: "The final atlas's sample draws no new points").
-        let budget = if !density.lights.is_empty() {
-            0
-        } else if measured.is_some() {
-            plan.pilot_rays / 8
-        } else {
+        let budget = if density.lights.is_empty() {
             plan.pilot_rays / 2
+        } else {
+            0
         };
         let Samples {
             punctual,
