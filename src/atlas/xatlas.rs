@@ -1609,6 +1609,7 @@ pub(crate) mod tests {
             shadow_cuts: true,
             near_contacts: false,
             slot_faces: true,
+            narrow_faces: true,
             instancing: Default::default(),
         }
     }

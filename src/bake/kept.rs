@@ -103,6 +103,9 @@ pub struct Settings {
     /// `--no-slot-faces` (left out when false, so files of other bakes are as before).
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub(crate) no_slot_faces: bool,
+    /// `--no-narrow-faces` (left out when false, so files of other bakes are as before).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub(crate) no_narrow_faces: bool,
     /// `--instancing share`: shared meshes with a page rect per node (left out when false, so
     /// files of duplicate-mode bakes are as before).
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
@@ -211,6 +214,7 @@ impl Settings {
             shadow_cuts: a.shadow_cuts,
             near_contacts: a.near_contacts,
             no_slot_faces: !a.slot_faces,
+            no_narrow_faces: !a.narrow_faces,
             share_instances: a.instancing == crate::config::Instancing::Share,
             gather_rays: t.gather_rays,
             light_samples: t.light_samples,
@@ -254,6 +258,7 @@ impl Settings {
         a.shadow_cuts = self.shadow_cuts;
         a.near_contacts = self.near_contacts;
         a.slot_faces = !self.no_slot_faces;
+        a.narrow_faces = !self.no_narrow_faces;
         if self.share_instances {
             a.instancing = crate::config::Instancing::Share;
         }

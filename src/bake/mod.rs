@@ -506,19 +506,24 @@ fn prepare_loaded(
     timed(&mut stages, "bvh", t);
 
     // Slot faces (near contacts only: their cuts keep the raise inside the slot) get texels at
-    // their gap's scale; the density plan's factors are raised to these, never lowered below.
+    // their gap's scale, and narrow faces at steep light four texels across; the density
+    // plan's factors are raised to these, never lowered below.
     let mut junctions = junctions;
-    if config.atlas.near_contacts
-        && config.atlas.slot_faces
+    let slots = config.atlas.near_contacts && config.atlas.slot_faces;
+    if (slots || config.atlas.narrow_faces)
         && let Some(report) = &mut junctions
     {
         let t = Instant::now();
         let tpu = config.atlas.texels_per_unit;
-        let near = scene::junctions::near_distance(1.0 / tpu);
-        let (factors, slots) = atlas::slots::density(&scene, &tracer, tpu, near);
+        let raise = atlas::slots::Raise {
+            slots: slots.then(|| scene::junctions::near_distance(1.0 / tpu)),
+            narrow: config.atlas.narrow_faces,
+            sky: config.transport.sky.max_element() > 0.0,
+        };
+        let (factors, slots) = atlas::slots::density(&scene, &tracer, tpu, &raise);
         raise_to(&mut config.atlas.triangle_density, &factors);
         report.slots = Some(slots);
-        timed(&mut stages, "slot faces", t);
+        timed(&mut stages, "narrow faces", t);
     }
 
     // Adaptive density (`density_pilot`): a density per region, and on a small scene perhaps

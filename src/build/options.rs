@@ -81,6 +81,8 @@ pub struct Options {
     pub near_contacts: Option<bool>,
     /// With near contacts, keep slot faces at the plan's density.
     pub no_slot_faces: Option<bool>,
+    /// Keep narrow faces at steep light at the plan's density.
+    pub no_narrow_faces: Option<bool>,
     /// `duplicate` (the default) or `share`.
     pub instancing: Option<String>,
     /// Keep texel sample points where they are, even inside geometry.
@@ -218,6 +220,7 @@ impl Options {
         c.atlas.shadow_cuts = !self.no_shadow_cuts.unwrap_or(false);
         c.atlas.near_contacts = self.near_contacts.unwrap_or(false);
         c.atlas.slot_faces = !self.no_slot_faces.unwrap_or(false);
+        c.atlas.narrow_faces = !self.no_narrow_faces.unwrap_or(false);
         c.transport.validity = !self.no_validity.unwrap_or(false);
         c.transport.denoise = !self.no_denoise.unwrap_or(false);
         if !no_auto {

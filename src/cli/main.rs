@@ -158,6 +158,10 @@ struct AtlasArgs {
     /// until a texel is no wider than the slot's gap.
     #[arg(long)]
     no_slot_faces: bool,
+    /// Keep faces narrower than four texels that touch a slot face or an emitter at the plan's
+    /// density instead of raising them to four texels across.
+    #[arg(long)]
+    no_narrow_faces: bool,
     /// A mesh placed by several nodes: duplicated per node, or written once with a page rect
     /// per node (its instances are then not junction-split).
     #[arg(long, value_enum, default_value = "duplicate")]
@@ -178,6 +182,7 @@ impl AtlasArgs {
         c.atlas.shadow_cuts = !self.no_shadow_cuts;
         c.atlas.near_contacts = self.near_contacts;
         c.atlas.slot_faces = !self.no_slot_faces;
+        c.atlas.narrow_faces = !self.no_narrow_faces;
         c.atlas.instancing = self.instancing.mode();
         c
     }
@@ -460,6 +465,7 @@ impl BakeArgs {
             no_shadow_cuts: Some(self.atlas.no_shadow_cuts),
             near_contacts: Some(self.atlas.near_contacts),
             no_slot_faces: Some(self.atlas.no_slot_faces),
+            no_narrow_faces: Some(self.atlas.no_narrow_faces),
             instancing: Some(value_name(self.atlas.instancing)),
             rays: self.rays,
             light_samples: self.light_samples,
