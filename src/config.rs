@@ -67,10 +67,11 @@ pub struct AtlasParams {
     /// order of its gap, and a wider texel's lookup reads several times the light there. More
     /// texels on slot faces only. On by default; no effect without `near_contacts`.
     pub slot_faces: bool,
-    /// Raise faces narrower than four texels that touch steep light (a slot face or an
-    /// emitter: a light's border, a recess's band under a light, a slot's corners) to four
-    /// texels across, up to ×32 and at most doubling the texels (`atlas::slots`): light can
-    /// change by its whole range across them, and one texel row reads its mean at both edges.
+    /// Raise faces narrower than four texels within four of their widths (at most two texels)
+    /// of an emitter (a
+    /// light's border, a recess's band under a light) to four texels across, up to ×32 and at
+    /// most doubling the texels (`atlas::slots`): light can change by its whole range across
+    /// them, and one texel row reads its mean at both edges.
     /// Only the faces someone may see. On by default; part of the junction split: no effect
     /// without `split_junctions`.
     pub narrow_faces: bool,

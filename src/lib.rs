@@ -27,8 +27,8 @@
 //!                                                     of surfaces facing them from under a
 //!                                                     texel away too
 //!             Tracer::new   ──▶ Tracer                obvhs CWBVH: closest hit, occlusion
-//!    ─ atlas::slots::density ─▶ a density factor per  faces narrower than four texels at an
-//!                               triangle              emitter or a slot: four texels across;
+//!    ─ atlas::slots::density ─▶ a density factor per  faces narrower than four texels near an
+//!                               triangle              emitter: four texels across;
 //!                                                     with --near-contacts, slot faces: a texel
 //!                                                     no wider than the gap
 //!            ─ atlas::build ──▶ Atlas                 xatlas charts + pages, or input TEXCOORD_1;

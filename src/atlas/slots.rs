@@ -1,4 +1,4 @@
-//! Slot faces get texels at the scale of the slot's gap, and narrow faces at steep light four
+//! Slot faces get texels at the scale of the slot's gap, and narrow faces near emitters four
 //! texels across (issue 27, item 3).
 //!
 //! A face with another surface facing it (normals opposed within 30°) from a gap `g` narrower
@@ -26,41 +26,47 @@
 //! the raise stays inside the slot; without them a triangle reaching into a slot would raise
 //! a whole wall.
 //!
-//! **Narrow faces** at steep light get [`ROWS`] texels across. A face narrower than that many
-//! texels that touches a slot face or an emitter (a light panel's border, a ceiling recess's
-//! 2 cm band between the ceiling and the light's plane, a slot's corners beyond the part that
-//! faces something) is where light can change by its whole range over a few centimetres: the
+//! **Narrow faces** near emitters get [`ROWS`] texels across. A face narrower than that many
+//! texels within [`ROWS`] of its own widths of an emitter, and at most [`REACH_TEXELS`]
+//! texels (a light panel's border, a ceiling
+//! recess's 2 cm band between the ceiling and the light's plane, the recess walls' corners
+//! beside the light) is where light can change by its whole range over a few centimetres: the
 //! recess band's falls from 1.5 to 0.3 over its 2 cm below the emitter's plane. A renderer
 //! reads the half texel at each of its edges as the nearest texel centre, so on light falling
 //! linearly by `Δ` across a width `w` an edge reads `Δ·s/(2w)` too much with texels `s` wide:
 //! where the light at that edge is a fifth of the range, as on the band, `1 + 2s/w` times its
-//! light, at most 1.5× from `s = w/4`. Only faces at steep light: a narrow face in even light
-//! (a board's edge, a reveal away from any light) reads its mean well with one row, and
-//! raising every narrow face cost the furnished interior 2.6× its texels at `medium` (33 m²
-//! of board edges at `draft`).
+//! light, at most 1.5× from `s = w/4`. An emitter's light changes over lengths of the order of
+//! the distance to it, so a face a few of its widths away sees that change across its width;
+//! farther away, or in even light (a board's edge, a reveal away from any light), one row
+//! reads a narrow face's mean well. (Without the two-texel bound, the Cornell box's blocks at
+//! `draft`, 21 cm wide by this measure, were within four widths of its light.) Raising every narrow face cost the furnished interior 2.6×
+//! its texels at `medium` (33 m² of board edges at `draft`); raising those that touch a slot
+//! face too (with near contacts) cost it 1.27× the wall time at `medium` for the same point
+//! error (2.02% → 2.01%).
 //!
-//! A face is a connected region (`plan::density::Regions`) that touches a slot face or an
-//! emitter (a corner within a sixteenth of a texel of one of theirs: cut ends snap that close).
-//! Its width is the area over the bounding box's diagonal of its triangles someone may see (a
-//! strip `w` by `L` reads about `w`, a square of side `a` about `0.7a`, a ring or frame up to
-//! three times its width: on the safe side); those triangles alone are raised, by
-//! `ROWS·texel/w` on quarter octaves, at most ×[`MAX_NARROW_FACTOR`]. A narrow face then costs
-//! about `ROWS²·L/w` texels: its aspect ratio, not its width. Together they add at most
-//! [`NARROW_TEXEL_SHARE`] × the uniform atlas's texels (the cap lowered as for slot faces,
-//! separately, so narrow faces leave the slots' raise as it was). Emitters keep their density
-//! (their texels hold mostly their emission). A triangle nobody sees is not raised: inside a
-//! solid (more than a quarter of the probe rays from its centroid meet a back face within
-//! [`REACH`] texels, the validity pass's test; a recess wall's band is one face with the part
-//! buried in the slab above it) or facing the void of a scene without sky (every probe ray
-//! escapes: no light reaches it).
+//! A face is a connected region (`plan::density::Regions`). It is near an emitter when a
+//! corner of one of its triangles lies within `ROWS·w` (at most `REACH_TEXELS` texels, at
+//! least a sixteenth of a texel, as cut ends snap) of an edge of an emitter triangle, or the other way round, `w` its width
+//! over all its triangles. Its width for the raise is the area over the bounding box's
+//! diagonal of its triangles someone may see (a strip `w` by `L` reads about `w`, a square of
+//! side `a` about `0.7a`, a ring or frame up to three times its width: on the safe side);
+//! those triangles alone are raised, by `ROWS·texel/w` on quarter octaves, at most
+//! ×[`MAX_NARROW_FACTOR`]. A narrow face then costs about `ROWS²·L/w` texels: its aspect
+//! ratio, not its width. Together they add at most [`NARROW_TEXEL_SHARE`] × the uniform atlas's
+//! texels (the cap lowered as for slot faces, separately, so narrow faces leave the slots'
+//! raise as it was). Emitters keep their density (their texels hold mostly their emission). A
+//! triangle nobody sees is not raised: inside a solid (more than a quarter of the probe rays
+//! from its centroid meet a back face within [`REACH`] texels, the validity pass's test; a
+//! recess wall's band is one face with the part buried in the slab above it) or facing the
+//! void of a scene without sky (every probe ray escapes: no light reaches it).
 //!
 //! On by default (`AtlasParams::narrow_faces`), as part of the junction split: on the corpus
 //! scenes it finds no narrow face at any preset (the Cornell box's light, itself narrow, is an
 //! emitter), so their bakes are unchanged (the furnished interior's bytes compared at
-//! `medium`); it costs them the regions and one hash lookup per corner (0.16 s of the
-//! interior's 16 s). With near contacts its
-//! cuts separate a slot's mouth and the band below it from the wall they belong to, which is
-//! what lets `fixtures/narrow_faces.gltf`'s recess band be found.
+//! `medium`, and at `draft` with near contacts); it costs them the regions and the emitters'
+//! neighbourhoods (0.06–0.08 s of the interior's bakes). With near contacts their cuts separate a
+//! slot's mouth and the band below it from the wall they belong to, which is what lets
+//! `fixtures/narrow_faces.gltf`'s recess band be measured as narrow.
 
 use std::collections::HashMap;
 
@@ -85,6 +91,9 @@ const STEPS_PER_OCTAVE: f32 = 4.0;
 /// Texels across a narrow face, at least (the module docs: an edge then reads at most 1.5× on
 /// light that falls to a fifth of its range across the face).
 pub(crate) const ROWS: f32 = 4.0;
+/// A narrow face looks for an emitter within [`ROWS`] of its widths, but at most this many
+/// texels (beyond that, light from the emitter changes over more than a narrow face's width).
+pub(crate) const REACH_TEXELS: f32 = 2.0;
 /// Narrow faces rise at most this far above the preset's density (a 2 cm band at `draft`'s
 /// 12.5 cm texels asks ×25; a 4 mm sliver would ask ×125).
 pub(crate) const MAX_NARROW_FACTOR: f32 = 32.0;
@@ -123,10 +132,10 @@ impl SlotReport {
         let narrow = if !self.narrow_on {
             String::new()
         } else if self.narrow_triangles == 0 {
-            format!("narrow faces: none (at least {ROWS} texels across at a slot or an emitter)")
+            format!("narrow faces: none (at least {ROWS} texels across near an emitter)")
         } else {
             format!(
-                "narrow faces: {} triangles ({:.3} m²) at a slot or an emitter raised to \
+                "narrow faces: {} triangles ({:.3} m²) near an emitter raised to \
                  {ROWS} texels across, up to ×{:.1} (cap ×{}{}), about +{:.0} texels",
                 self.narrow_triangles,
                 self.narrow_area,
@@ -170,7 +179,7 @@ impl SlotReport {
 pub(crate) struct Raise {
     /// Slot faces, with near contacts reaching this far (world units); `None` for none.
     pub(crate) slots: Option<f32>,
-    /// Narrow faces at steep light.
+    /// Narrow faces near emitters.
     pub(crate) narrow: bool,
     /// The scene has a sky (a face looking at the void is lit).
     pub(crate) sky: bool,
@@ -204,9 +213,8 @@ pub(crate) fn density(
         })
         .collect();
     let slots = Capped::of(scene, tpu, &raw, MAX_FACTOR, MAX_TEXEL_SHARE);
-    // Where light is steep at a face's edge: slot faces and emitters (whose own texels hold
-    // mostly their emission, and are not raised).
-    let mut steep: Vec<bool> = gaps.iter().map(|g| g.is_finite()).collect();
+    // Light is steep near emitters (whose own texels hold mostly their emission, and are not
+    // raised).
     let mut emitter = vec![false; scene.triangles.len()];
     for inst in &scene.instances {
         if scene.materials[inst.material as usize]
@@ -215,13 +223,12 @@ pub(crate) fn density(
             > 0.0
         {
             for t in inst.triangles.clone() {
-                steep[t as usize] = true;
                 emitter[t as usize] = true;
             }
         }
     }
     let mut narrow = if raise.narrow {
-        narrow_factors(scene, tracer, texel, raise.sky, &steep)
+        narrow_factors(scene, tracer, texel, raise.sky, &emitter)
     } else {
         vec![1.0; scene.triangles.len()]
     };
@@ -306,8 +313,8 @@ impl Capped {
 }
 
 /// Each scene triangle's factor for [`ROWS`] texels of size `texel` across the seen part of
-/// its region (see the module docs): 1 for triangles nobody sees and for regions at least that
-/// wide.
+/// its region, when the region is near a `steep` triangle (an emitter; see the module docs): 1
+/// for triangles nobody sees and for regions at least that wide.
 fn narrow_factors(
     scene: &Scene,
     tracer: &Tracer,
@@ -331,19 +338,35 @@ fn narrow_factors(
     let width = |area: f64, lo: Vec3, hi: Vec3| {
         (area / f64::from((hi - lo).length()).max(f64::MIN_POSITIVE)) as f32
     };
-    let candidate: Vec<bool> = (0..n)
-        .map(|r| width(regions.area[r], lo[r], hi[r]) < ROWS * texel)
-        .collect();
-    // Steep triangles on a grid of texel-sized cells (by their boxes grown by the touch
-    // distance: cut ends snap within a sixteenth of a texel).
+    // Candidates: narrower than ROWS texels, looking for emitters within ROWS widths and at
+    // most REACH_TEXELS texels (at least a sixteenth of a texel, as cut ends snap).
     let touch = (texel / 16.0).max(4.0 * tracer.epsilon);
+    let reach: Vec<f32> = (0..n)
+        .map(|r| {
+            let w = width(regions.area[r], lo[r], hi[r]);
+            if w < ROWS * texel {
+                (ROWS * w).min(REACH_TEXELS * texel).max(touch)
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    // Candidate triangles on a grid of texel-sized cells; each emitter triangle then visits
+    // the cells within the largest reach of it (emitters are few, candidates many).
     let cell = |p: Vec3| (p / texel).floor().as_ivec3();
+    let bounds = |c: [Vec3; 3], d: f32| {
+        let (lo, hi) = (c[0].min(c[1]).min(c[2]), c[0].max(c[1]).max(c[2]));
+        (cell(lo - Vec3::splat(d)), cell(hi + Vec3::splat(d)))
+    };
     let mut grid: HashMap<glam::IVec3, Vec<u32>> = HashMap::new();
-    for t in (0..scene.triangles.len()).filter(|&t| steep[t]) {
-        let c = corners(t);
-        let (a, b) = (cell(c[0].min(c[1]).min(c[2]) - Vec3::splat(touch)), {
-            cell(c[0].max(c[1]).max(c[2]) + Vec3::splat(touch))
-        });
+    let mut farthest = 0.0f32;
+    for t in 0..scene.triangles.len() {
+        let d = reach[regions.of_triangle[t] as usize];
+        if d <= 0.0 || steep[t] {
+            continue;
+        }
+        farthest = farthest.max(d);
+        let (a, b) = bounds(corners(t), 0.0);
         for x in a.x..=b.x {
             for y in a.y..=b.y {
                 for z in a.z..=b.z {
@@ -354,43 +377,38 @@ fn narrow_factors(
             }
         }
     }
-    if grid.is_empty() {
-        return vec![1.0; scene.triangles.len()];
+    // A triangle is within `d` of another when a corner of either lies within `d` of an edge
+    // of the other (for two overlapping parallel edges, a corner of one always lies beside the
+    // other).
+    let near_edges = |p: Vec3, tri: [Vec3; 3], d: f32| {
+        (0..3).any(|k| segment_distance(p, tri[k], tri[(k + 1) % 3]) <= d)
+    };
+    let within = |c: [Vec3; 3], e: [Vec3; 3], d: f32| {
+        c.iter().any(|&p| near_edges(p, e, d)) || e.iter().any(|&p| near_edges(p, c, d))
+    };
+    let mut touching = vec![false; scene.triangles.len()];
+    for s in (0..scene.triangles.len()).filter(|&t| steep[t] && !grid.is_empty()) {
+        let e = corners(s);
+        let (a, b) = bounds(e, farthest);
+        for x in a.x..=b.x {
+            for y in a.y..=b.y {
+                for z in a.z..=b.z {
+                    for &t in grid.get(&glam::IVec3::new(x, y, z)).into_iter().flatten() {
+                        let t = t as usize;
+                        if !touching[t] {
+                            let d = reach[regions.of_triangle[t] as usize];
+                            touching[t] = within(corners(t), e, d);
+                        }
+                    }
+                }
+            }
+        }
     }
-    // Two triangles touch when a corner of either lies within `touch` of an edge of the other
-    // (a shared edge, a shared corner, or a corner on the other's edge).
-    let near_edges = |p: Vec3, tri: [Vec3; 3]| {
-        (0..3).any(|k| segment_distance(p, tri[k], tri[(k + 1) % 3]) <= touch)
-    };
-    let touches_steep = |t: usize| {
-        let c = corners(t);
-        let (a, b) = (
-            cell(c[0].min(c[1]).min(c[2])),
-            cell(c[0].max(c[1]).max(c[2])),
-        );
-        (a.x..=b.x).any(|x| {
-            (a.y..=b.y).any(|y| {
-                (a.z..=b.z).any(|z| {
-                    grid.get(&glam::IVec3::new(x, y, z)).is_some_and(|steep| {
-                        steep.iter().any(|&s| {
-                            let d = corners(s as usize);
-                            c.iter().any(|&p| near_edges(p, d))
-                                || d.iter().any(|&p| near_edges(p, c))
-                        })
-                    })
-                })
-            })
-        })
-    };
-    let touching: Vec<bool> = (0..scene.triangles.len())
-        .into_par_iter()
-        .map(|t| candidate[regions.of_triangle[t] as usize] && !steep[t] && touches_steep(t))
-        .collect();
     let mut at_steep = vec![false; n];
     for (t, &touching) in touching.iter().enumerate() {
         at_steep[regions.of_triangle[t] as usize] |= touching;
     }
-    // Probe rays only for the regions that touch steep light.
+    // Probe rays only for the regions near an emitter.
     let seen: Vec<bool> = (0..scene.triangles.len() as u32)
         .into_par_iter()
         .map(|t| {

@@ -506,7 +506,7 @@ fn prepare_loaded(
     timed(&mut stages, "bvh", t);
 
     // Slot faces (near contacts only: their cuts keep the raise inside the slot) get texels at
-    // their gap's scale, and narrow faces at steep light four texels across; the density
+    // their gap's scale, and narrow faces near emitters four texels across; the density
     // plan's factors are raised to these, never lowered below.
     let mut junctions = junctions;
     let slots = config.atlas.near_contacts && config.atlas.slot_faces;

@@ -81,7 +81,7 @@ pub struct Options {
     pub near_contacts: Option<bool>,
     /// With near contacts, keep slot faces at the plan's density.
     pub no_slot_faces: Option<bool>,
-    /// Keep narrow faces at steep light at the plan's density.
+    /// Keep narrow faces near emitters at the plan's density.
     pub no_narrow_faces: Option<bool>,
     /// `duplicate` (the default) or `share`.
     pub instancing: Option<String>,

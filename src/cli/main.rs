@@ -158,8 +158,8 @@ struct AtlasArgs {
     /// until a texel is no wider than the slot's gap.
     #[arg(long)]
     no_slot_faces: bool,
-    /// Keep faces narrower than four texels that touch a slot face or an emitter at the plan's
-    /// density instead of raising them to four texels across.
+    /// Keep faces narrower than four texels near an emitter at the plan's density instead of
+    /// raising them to four texels across.
     #[arg(long)]
     no_narrow_faces: bool,
     /// A mesh placed by several nodes: duplicated per node, or written once with a page rect

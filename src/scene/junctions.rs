@@ -18,7 +18,7 @@
 //!    projection of their outline — their edges no other of them shares — as segments too:
 //!    the slot under them and the open surface beside it get texels of their own (and, after
 //!    the split, texels at the scale of the slot's gap: `crate::atlas::slots`, which also
-//!    raises narrow faces at steep light to four texels across).
+//!    raises narrow faces near emitters to four texels across).
 //! 2. **Make the cuts separate**: segment ends within `SNAP_TEXELS` merge, move onto the patch
 //!    border's vertices and edges, and split segments they touch; inside the patch a cut point
 //!    within `TOUCH_TEXELS` of a mesh vertex or edge moves onto it (walls meeting on a floor's
@@ -138,7 +138,7 @@ pub struct JunctionReport {
     /// share`; the cell map of divided texels covers them).
     pub(crate) left_whole: usize,
     /// Slot faces raised to texels at their gap's scale (with near contacts) and narrow faces
-    /// at steep light to four texels across (`atlas::slots`; the bake sets it after the split).
+    /// near emitters to four texels across (`atlas::slots`; the bake sets it after the split).
     pub(crate) slots: Option<crate::atlas::slots::SlotReport>,
 }
 
