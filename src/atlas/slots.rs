@@ -325,8 +325,8 @@ fn narrow_factors(
     let regions = Regions::of(scene);
     let n = regions.len();
     let corners = |t: usize| scene.triangles[t].map(|v| scene.positions[v as usize]);
-    // Candidates: regions narrower than ROWS texels over all their triangles (buried ones
-    // too: the seen part's width is measured below).
+    // Each region's width over all its triangles (buried ones too: the seen part's width is
+    // measured below).
     let (mut lo, mut hi) = (vec![Vec3::MAX; n], vec![Vec3::MIN; n]);
     for t in 0..scene.triangles.len() {
         let r = regions.of_triangle[t] as usize;
@@ -390,14 +390,28 @@ fn narrow_factors(
     for s in (0..scene.triangles.len()).filter(|&t| steep[t] && !grid.is_empty()) {
         let e = corners(s);
         let (a, b) = bounds(e, farthest);
-        for x in a.x..=b.x {
-            for y in a.y..=b.y {
-                for z in a.z..=b.z {
-                    for &t in grid.get(&glam::IVec3::new(x, y, z)).into_iter().flatten() {
-                        let t = t as usize;
-                        if !touching[t] {
-                            let d = reach[regions.of_triangle[t] as usize];
-                            touching[t] = within(corners(t), e, d);
+        let mut visit = |ts: &[u32]| {
+            for &t in ts {
+                let t = t as usize;
+                if !touching[t] {
+                    let d = reach[regions.of_triangle[t] as usize];
+                    touching[t] = within(corners(t), e, d);
+                }
+            }
+        };
+        // A large emitter (a sky panel) visits the grid's cells rather than its own.
+        let volume = (b - a + glam::IVec3::ONE).as_dvec3();
+        if volume.x * volume.y * volume.z > grid.len() as f64 {
+            let inside = |c: &glam::IVec3| c.cmpge(a).all() && c.cmple(b).all();
+            for ts in grid.iter().filter(|(c, _)| inside(c)).map(|(_, ts)| ts) {
+                visit(ts);
+            }
+        } else {
+            for x in a.x..=b.x {
+                for y in a.y..=b.y {
+                    for z in a.z..=b.z {
+                        if let Some(ts) = grid.get(&glam::IVec3::new(x, y, z)) {
+                            visit(ts);
                         }
                     }
                 }
