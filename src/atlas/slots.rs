@@ -38,27 +38,28 @@
 //! light, at most 1.5× from `s = w/4`. An emitter's light changes over lengths of the order of
 //! the distance to it, so a face a few of its widths away sees that change across its width;
 //! farther away, or in even light (a board's edge, a reveal away from any light), one row
-//! reads a narrow face's mean well. (Without the two-texel bound, the Cornell box's blocks at
-//! `draft`, 21 cm wide by this measure, were within four widths of its light.) Raising every narrow face cost the furnished interior 2.6×
-//! its texels at `medium` (33 m² of board edges at `draft`); raising those that touch a slot
-//! face too (with near contacts) cost it 1.27× the wall time at `medium` for the same point
-//! error (2.02% → 2.01%).
+//! reads a narrow face's mean well. (Without the two-texel bound, faces up to four texels wide
+//! looked up to sixteen texels away: at `draft` 72 triangles, 1.17 m², of the Cornell box
+//! were raised.) Raising every narrow face cost the furnished interior 2.6× its texels at
+//! `medium` (33 m² of narrow faces at `draft`); raising those that touch a slot face too (with
+//! near contacts) cost it 1.27× the wall time at `medium` for the same point error (2.02% →
+//! 2.01%).
 //!
-//! A face is a connected region (`plan::density::Regions`). It is near an emitter when a
-//! corner of one of its triangles lies within `ROWS·w` (at most `REACH_TEXELS` texels, at
-//! least a sixteenth of a texel, as cut ends snap) of an edge of an emitter triangle, or the other way round, `w` its width
-//! over all its triangles. Its width for the raise is the area over the bounding box's
-//! diagonal of its triangles someone may see (a strip `w` by `L` reads about `w`, a square of
-//! side `a` about `0.7a`, a ring or frame up to three times its width: on the safe side);
-//! those triangles alone are raised, by `ROWS·texel/w` on quarter octaves, at most
-//! ×[`MAX_NARROW_FACTOR`]. A narrow face then costs about `ROWS²·L/w` texels: its aspect
-//! ratio, not its width. Together they add at most [`NARROW_TEXEL_SHARE`] × the uniform atlas's
-//! texels (the cap lowered as for slot faces, separately, so narrow faces leave the slots'
-//! raise as it was). Emitters keep their density (their texels hold mostly their emission). A
-//! triangle nobody sees is not raised: inside a solid (more than a quarter of the probe rays
-//! from its centroid meet a back face within [`REACH`] texels, the validity pass's test; a
-//! recess wall's band is one face with the part buried in the slab above it) or facing the
-//! void of a scene without sky (every probe ray escapes: no light reaches it).
+//! A face is a connected region (`plan::density::Regions`). It is near an emitter when a corner of
+//! one of its triangles lies within `ROWS·w` (at most [`REACH_TEXELS`] texels, at least a sixteenth
+//! of a texel, as cut ends snap) of an edge of an emitter triangle, or the other way round, `w` its
+//! width over all its triangles. Its width for the raise is the area over the bounding box's
+//! diagonal of its triangles someone may see (a strip `w` by `L` reads about `w`, a square of side
+//! `a` about `0.7a`, a ring or frame up to three times its width: on the safe side); those
+//! triangles alone are raised, by `ROWS·texel/w` on quarter octaves, at most
+//! ×[`MAX_NARROW_FACTOR`]. A narrow face then costs about `ROWS²·L/w` texels: its aspect ratio, not
+//! its width. Together they add at most [`NARROW_TEXEL_SHARE`] × the uniform atlas's texels (the
+//! cap lowered as for slot faces, separately, so narrow faces leave the slots' raise as it was).
+//! Emitters keep their density (their texels hold mostly their emission). A triangle nobody sees is
+//! not raised: inside a solid (more than a quarter of the probe rays from its centroid meet a back
+//! face within [`REACH`] texels, the validity pass's test; a recess wall's band is one face with
+//! the part buried in the slab above it) or facing the void of a scene without sky (every probe ray
+//! escapes: no light reaches it).
 //!
 //! On by default (`AtlasParams::narrow_faces`), as part of the junction split: on the corpus
 //! scenes it finds no narrow face at any preset (the Cornell box's light, itself narrow, is an
