@@ -228,14 +228,11 @@ pub(crate) fn density(
             }
         }
     }
-    let mut narrow = if raise.narrow {
+    let narrow = if raise.narrow {
         narrow_factors(scene, tracer, texel, raise.sky, &emitter)
     } else {
         vec![1.0; scene.triangles.len()]
     };
-    for (f, _) in narrow.iter_mut().zip(&emitter).filter(|(_, e)| **e) {
-        *f = 1.0;
-    }
     let narrow = Capped::of(scene, tpu, &narrow, MAX_NARROW_FACTOR, NARROW_TEXEL_SHARE);
     let mut report = SlotReport {
         min_gap: f32::INFINITY,
@@ -314,14 +311,14 @@ impl Capped {
 }
 
 /// Each scene triangle's factor for [`ROWS`] texels of size `texel` across the seen part of
-/// its region, when the region is near a `steep` triangle (an emitter; see the module docs): 1
-/// for triangles nobody sees and for regions at least that wide.
+/// its region, when the region is near an `emitter` triangle (see the module docs): 1 for
+/// emitters, for triangles nobody sees and for regions at least that wide.
 fn narrow_factors(
     scene: &Scene,
     tracer: &Tracer,
     texel: f32,
     sky: bool,
-    steep: &[bool],
+    emitter: &[bool],
 ) -> Vec<f32> {
     let regions = Regions::of(scene);
     let n = regions.len();
@@ -363,7 +360,7 @@ fn narrow_factors(
     let mut farthest = 0.0f32;
     for t in 0..scene.triangles.len() {
         let d = reach[regions.of_triangle[t] as usize];
-        if d <= 0.0 || steep[t] {
+        if d <= 0.0 || emitter[t] {
             continue;
         }
         farthest = farthest.max(d);
@@ -388,7 +385,7 @@ fn narrow_factors(
         c.iter().any(|&p| near_edges(p, e, d)) || e.iter().any(|&p| near_edges(p, c, d))
     };
     let mut touching = vec![false; scene.triangles.len()];
-    for s in (0..scene.triangles.len()).filter(|&t| steep[t] && !grid.is_empty()) {
+    for s in (0..scene.triangles.len()).filter(|&t| emitter[t] && !grid.is_empty()) {
         let e = corners(s);
         let (a, b) = bounds(e, farthest);
         let mut visit = |ts: &[u32]| {
@@ -419,15 +416,17 @@ fn narrow_factors(
             }
         }
     }
-    let mut at_steep = vec![false; n];
+    let mut near_emitter = vec![false; n];
     for (t, &touching) in touching.iter().enumerate() {
-        at_steep[regions.of_triangle[t] as usize] |= touching;
+        near_emitter[regions.of_triangle[t] as usize] |= touching;
     }
-    // Probe rays only for the regions near an emitter.
+    // Probe rays only for the regions near an emitter, and never for emitters (not raised).
     let seen: Vec<bool> = (0..scene.triangles.len() as u32)
         .into_par_iter()
         .map(|t| {
-            at_steep[regions.of_triangle[t as usize] as usize] && seen(scene, tracer, t, texel, sky)
+            !emitter[t as usize]
+                && near_emitter[regions.of_triangle[t as usize] as usize]
+                && may_be_seen(scene, tracer, t, texel, sky)
         })
         .collect();
     // The seen part's width.
@@ -459,7 +458,7 @@ fn narrow_factors(
 /// [`MAX_BACK`] of [`PROBE_RAYS`] probe rays meet a back face within [`REACH`] texels (it is
 /// not inside a solid), and without a sky some ray meets a surface (it does not face the void
 /// outside a closed model, where no light reaches it).
-fn seen(scene: &Scene, tracer: &Tracer, t: u32, texel: f32, sky: bool) -> bool {
+fn may_be_seen(scene: &Scene, tracer: &Tracer, t: u32, texel: f32, sky: bool) -> bool {
     let Some(&[a, b, c]) = scene.triangles.get(t as usize) else {
         return false;
     };
