@@ -659,6 +659,7 @@ fn density_pilot(
                 plan.overhead_seconds += (measuring - pair.seconds).max(0.0);
             }
             reused.pair = density.pair;
+            reused.punctual = density.punctual;
             plan.reasons.push(
                 "atlas: the one the density pilot measured (uniform at the preset's \
                  density, charted in full), kept with its validity pass and pilot pair"

@@ -147,6 +147,7 @@ pub(crate) fn choose_transport(
             stored,
             e,
             (budget, &density.lights),
+            density.punctual.take(),
             processes,
         )?;
         if let Some(g) = &gathered {
@@ -220,6 +221,8 @@ pub(crate) struct Density {
     /// bake's first pair when the pilot measured the final atlas ([`Reused::pair`]), and
     /// otherwise counts its rays as discarded.
     pub(crate) pair: Option<KeptPair>,
+    /// Its punctual sample, which the caller keeps with the pair ([`Reused::punctual`]).
+    pub(crate) punctual: Option<PunctualSample>,
 }
 
 /// What the density pilot measured that the transport plan reuses on the final atlas.
@@ -234,6 +237,10 @@ pub(crate) struct Reused {
     /// [`choose_transport`] would bake first (same texels, rays, seeds and tolerance), so it is
     /// taken instead of baked again.
     pub(crate) pair: Option<KeptPair>,
+    /// The punctual sample of that atlas: the light at its texels and at the sample's points
+    /// does not depend on the pair, so [`choose_transport`]'s sample only reads its lookups
+    /// again from its own pair ([`PunctualSample::normalised_by`]) instead of tracing them.
+    pub(crate) punctual: Option<PunctualSample>,
 }
 
 /// A density pilot's pair at [`PILOT_RAYS`] and the seconds it took (the ray choice's time per
@@ -268,6 +275,7 @@ pub(crate) fn measure_density(
         triangle_factors: None,
         reused: Reused::default(),
         pair: None,
+        punctual: None,
     };
     if surfaces.texels.is_empty() || !lit(surfaces, &config.transport) {
         return Ok(density);
@@ -295,6 +303,7 @@ pub(crate) fn measure_density(
         stored,
         target,
         (budget, &[]),
+        None,
         processes,
     )?;
     let (scene, texels) = (surfaces.scene, surfaces.texels);
@@ -308,6 +317,7 @@ pub(crate) fn measure_density(
         density.reused.lights = g.lights;
     }
     density.pair = Some(KeptPair { runs, seconds });
+    density.punctual = samples.punctual;
     Ok(density)
 }
 
@@ -415,19 +425,23 @@ fn punctual_sample(
     if transport.indirect_only {
         return Ok(None);
     }
-    let mean: Vec<Vec3> = pilot[0]
-        .iter()
-        .zip(pilot[1])
-        .map(|(a, b)| (*a + *b) * 0.5)
-        .collect();
     PunctualSample::measure(
         surfaces.scene,
         surfaces.texels,
         surfaces.tracer,
-        &mean,
+        &pair_mean(pilot),
         transport.seed,
         shards,
     )
+}
+
+/// The mean of a pilot pair's two runs, texel by texel.
+fn pair_mean(pilot: [&[Vec3]; 2]) -> Vec<Vec3> {
+    pilot[0]
+        .iter()
+        .zip(pilot[1])
+        .map(|(a, b)| (*a + *b) * 0.5)
+        .collect()
 }
 
 /// All the light's lookup error at random surface points against a gather there through each
@@ -486,7 +500,9 @@ struct Samples {
 impl Samples {
     /// Both samples of `runs`, whose stored values are `stored`; the gathered one for the
     /// relative error `target`, casting up to `budget_rays` past its first batch, reading the
-    /// light of an earlier sample's points (`reuse`) first.
+    /// light of an earlier sample's points (`reuse`) first; the punctual one read again from
+    /// `earlier`, a punctual sample of the same texels, when there is one.
+    #[allow(clippy::too_many_arguments)]
     fn measure(
         surfaces: Surfaces,
         transport: &TransportParams,
@@ -494,10 +510,14 @@ impl Samples {
         stored: [&[Vec3]; 2],
         target: f32,
         budget: (u64, &[PointLight]),
+        earlier: Option<PunctualSample>,
         shards: &dyn Shards,
     ) -> Result<Samples> {
         let start = Instant::now();
-        let punctual = punctual_sample(surfaces, transport, stored, shards)?;
+        let punctual = match earlier {
+            Some(p) => Some(p.normalised_by(&pair_mean(stored))),
+            None => punctual_sample(surfaces, transport, stored, shards)?,
+        };
         let gathered = gathered_sample(
             surfaces,
             transport,
@@ -761,6 +781,7 @@ mod tests {
             [&a, &b],
             0.04,
             (budget_rays, reuse),
+            None,
             &Alone,
         )
         .expect("samples")
@@ -850,6 +871,51 @@ mod tests {
         assert!(small.rays < 2 * PER_POINT * MIN_BATCH as u64, "{said}");
         assert!(full.rays >= PER_POINT * BATCH as u64, "{said}");
         assert_eq!(small.drawn % MIN_BATCH, 0, "{said}");
+    }
+
+    #[test]
+    fn a_punctual_sample_read_again_from_another_pair_is_the_one_measured_with_it() {
+        // The ray choice's sample on the density pilot's atlas reads the pilot's punctual
+        // sample again from its own pair instead of tracing it: that must be the sample it
+        // would have traced, bit for bit.
+        let input =
+            Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/spot_and_directional.gltf");
+        let config = BakeConfig {
+            auto: None,
+            ..BakeConfig::default()
+        };
+        let p = crate::prepare(&input, &config, &NoProgress).expect("prepares");
+        let pair = |k| {
+            let runs = PilotRuns::bake(
+                p.surfaces(),
+                &config.transport,
+                k,
+                1e-3,
+                &Alone,
+                &NoProgress,
+            )
+            .expect("bakes");
+            pair_mean(runs.stored(false).each_ref().map(Vec::as_slice))
+        };
+        let (first, second) = (pair(PILOT_RAYS), pair(4 * PILOT_RAYS));
+        assert_ne!(first, second);
+        let measure = |total: &[Vec3]| {
+            let (s, t, tracer) = (&p.scene, &p.texels, &p.tracer);
+            PunctualSample::measure(s, t, tracer, total, config.transport.seed, &Alone)
+                .expect("measures")
+                .expect("the scene has punctual lights")
+        };
+        let read_again = measure(&first).normalised_by(&second);
+        let traced = measure(&second);
+        let bits = |s: &PunctualSample| -> Vec<[u32; 3]> {
+            let points = s.points.iter();
+            points
+                .map(|p| [p.square.to_bits(), p.total.to_bits(), u32::from(p.border)])
+                .collect()
+        };
+        assert!(traced.points.len() > 1000);
+        assert_eq!(bits(&read_again), bits(&traced));
+        assert_eq!(read_again.texel, traced.texel);
     }
 
     #[test]

@@ -18,7 +18,7 @@ use crate::Result;
 use crate::lights::{punctual_irradiance, triangle_point};
 use crate::sampling::{self, Rng};
 use crate::scene::Scene;
-use crate::shard::{self, Packed, Shards, flag};
+use crate::shard::{self, Packed, Shards, bits, flag};
 use crate::texels::{NO_TEXEL, Texels};
 use crate::trace::Tracer;
 
@@ -41,15 +41,24 @@ pub(crate) struct PointError {
     pub(crate) border: bool,
     /// The bilinear lookup of the total light (what the mean of a relative error divides by).
     pub(crate) total: f32,
+    /// The texels that lookup blends and their weights (zero where one was left out), so the
+    /// total can be read again from another bake of the same texels
+    /// ([`PunctualSample::normalised_by`]).
+    pub(crate) lookup: [(u32, f32); 4],
 }
 
 /// A sampled point's error, or none where the lookup finds no texel.
 impl Packed for Option<PointError> {
-    const FLOATS: usize = 4;
+    const FLOATS: usize = 12;
     fn pack(&self, out: &mut Vec<f32>) {
         match self {
-            Some(p) => out.extend([1.0, p.square, flag(p.border), p.total]),
-            None => out.extend([0.0; 4]),
+            Some(p) => {
+                out.extend([1.0, p.square, flag(p.border), p.total]);
+                for (j, w) in p.lookup {
+                    out.extend([bits(j), w]);
+                }
+            }
+            None => out.extend([0.0; 12]),
         }
     }
     fn unpack(v: &[f32]) -> Self {
@@ -57,6 +66,7 @@ impl Packed for Option<PointError> {
             square: v[1],
             border: v[2] != 0.0,
             total: v[3],
+            lookup: std::array::from_fn(|k| (v[4 + 2 * k].to_bits(), v[5 + 2 * k])),
         })
     }
 }
@@ -129,10 +139,22 @@ impl PunctualSample {
                 square: (d * d).element_sum() / 3.0,
                 border: lookup.1,
                 total: read(total).element_sum() / 3.0,
+                lookup: lookup.0,
             })
         })?;
         let points = points.into_iter().flatten().collect();
         Ok(Some(PunctualSample { texel, points }))
+    }
+
+    /// The same sample with each point's total read from `total` (another bake of the same
+    /// texels): the exact light and the texels' punctual light do not depend on the bake, so a
+    /// later pilot pair on the same atlas needs no shadow ray to be measured against.
+    pub(crate) fn normalised_by(mut self, total: &[Vec3]) -> PunctualSample {
+        for p in &mut self.points {
+            let read: Vec3 = p.lookup.iter().map(|&(j, w)| total[j as usize] * w).sum();
+            p.total = read.element_sum() / 3.0;
+        }
+        self
     }
 
     /// Relative RMS error of the lookups (over the points' mean total light).
