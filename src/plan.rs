@@ -23,9 +23,13 @@
 //!   15% at K=64), and 1/√K from K=16 asked that hall for 4096 rays for a 4% target; the
 //!   fit asks for 640, which gave 4.4% (bench.md).
 //!   Light samples follow as K/4, like the presets.
-//! - **Nothing measured is thrown away**: the last pilot pair is part of the result. The
-//!   final lightmap is the ray-weighted mean of the two pilot bakes and one more bake at the
-//!   rays they lack (or of the pilots alone when they suffice). Its noise is that of
+//! - **Nothing measured is thrown away**: the last pilot pair is part of the result, and so
+//!   is the first pair when a second ran on the same atlas. The final lightmap is the
+//!   ray-weighted mean of the pilot bakes on the final atlas and one more bake at the rays
+//!   they lack (or of the pilots alone when they suffice). Keeping the first pair beside the
+//!   second took planning on the Cornell box at `high` from 24% to 10% of the bake, on two
+//!   rooms at `high` from 29% to 11%, on the lamp room at `medium` from 34% to 17% (its
+//!   16-ray runs were thrown away before). Its noise is that of
 //!   independent runs averaged, which falls only as the square root of their number even where
 //!   one run's stratified noise falls as `K^−α` (the furnished interior at `high`: one run of
 //!   128 rays read 1.74% at random points, the mean of three runs of 64, 1.95%), and the rays
@@ -161,8 +165,8 @@ pub struct Plan {
     /// Gathering rays per texel of the pilot pair the resolution sample read (`PILOT_RAYS`,
     /// or 4× when a second pilot ran).
     pub resolution_pilot_rays: u32,
-    /// Rays of pilot bakes not reused in the result (the density pilot's, and the first pair
-    /// when a second ran).
+    /// Rays of pilot bakes not reused in the result (the density pilot's when the final atlas
+    /// is another).
     pub discarded_rays: u64,
     /// Wall seconds of planning whose work the result does not contain: the density pilot (its
     /// atlas, pair and sample), pilot pairs not reused, the lookup-error samples. Pilot pairs
@@ -173,6 +177,11 @@ pub struct Plan {
     /// What the denoiser leaves of the noise (denoised over raw relative noise of a pilot
     /// pair); the rays aim at the noise after denoising when it was measured.
     pub denoise_gain: Option<f32>,
+    /// Weight of each run of a first pilot pair averaged in beside a second
+    /// ([`choose_rays`]): the rays of a run as noisy under the fitted fall `K^−α` as the
+    /// earlier run is under `1/K`, which the other runs' ray weights and the denoiser's noise
+    /// model assume. `None` without such a pair.
+    pub earlier_weight: Option<f32>,
     /// Gathering rays per texel of the last bake where fewer than its `gather_rays` suffice
     /// (emitters, black and unlit texels, measured by the pilot); `None`: `gather_rays`
     /// everywhere. Monte Carlo rows only (not the gather solver, not hierarchical).
@@ -345,9 +354,11 @@ pub(crate) fn needs_second_pilot(first: f32, e: f32) -> bool {
 /// Step 3, from the pilot's relative noise at [`PILOT_RAYS`] (`first`) and at 4× (`second`,
 /// when [`needs_second_pilot`]): the gathering rays of the bake that completes the last pilot
 /// pair. Returns true when that pair alone reaches the target (no further bake). Expects
-/// `plan.pilot_seconds` to be set.
+/// `plan.pilot_seconds` to be set. `earlier` is the rays per run of a first pair on the same
+/// texels averaged in beside the last (0 without one); its weight in the mean is set in
+/// `plan.earlier_weight`.
 ///
-/// The final lightmap is the ray-weighted mean of the pair and that bake: independent runs,
+/// The final lightmap is the ray-weighted mean of the pairs and that bake: independent runs,
 /// whose noise falls only as the square root of their number even where each run's own
 /// (stratified) noise falls as `K^−alpha`. The rays aim at the noise after denoising when
 /// `plan.denoise_gain` was measured.
@@ -356,6 +367,7 @@ pub(crate) fn choose_rays(
     plan: &mut Plan,
     first: f32,
     second: Option<f32>,
+    earlier: u32,
 ) -> bool {
     let e = plan.target_error;
     let gain = plan.denoise_gain.unwrap_or(1.0);
@@ -385,19 +397,33 @@ pub(crate) fn choose_rays(
     // The reused pair and one more run of `extra` rays: independent runs in a ray-weighted
     // mean, whose variances add as the squares of the weights (not a single run of all the
     // rays: stratification holds within a run, not across runs).
-    let kp = last_pilot as f32;
+    let (kp, ke) = (last_pilot as f32, earlier as f32);
+    // A first pair's runs fall faster than 1/K below the last pair's rays: each weighs as the
+    // rays of a 1/K run as noisy (its inverse variance beside the last pair's), fewer than
+    // it cast when α > ½ (16 rays count as 8 at α = 0.75).
+    let we = if earlier > 0 {
+        ke * (ke / kp).powf(2.0 * alpha - 1.0)
+    } else {
+        0.0
+    };
+    plan.earlier_weight = (earlier > 0).then_some(we);
     let combined = |extra: f32| {
-        let sum = 2.0 * kp + extra;
+        let sum = 2.0 * (kp + we) + extra;
         let pair = 2.0 * (kp / sum * run_noise(kp)).powi(2);
+        let first = if we > 0.0 {
+            2.0 * (we / sum * run_noise(ke)).powi(2)
+        } else {
+            0.0
+        };
         let more = if extra > 0.0 {
             (extra / sum * run_noise(extra)).powi(2)
         } else {
             0.0
         };
-        (pair + more).sqrt()
+        (pair + first + more).sqrt()
     };
     let aim = NOISE_SHARE * e / gain;
-    let reused = 2 * last_pilot;
+    let reused = 2 * (last_pilot + earlier);
     let enough = combined(0.0) <= aim;
     config.transport.gather_rays = if enough {
         last_pilot
@@ -435,13 +461,16 @@ pub(crate) fn choose_rays(
             first * 100.0
         )
     };
+    let bakes = if earlier > 0 {
+        "the four pilot bakes"
+    } else {
+        "the last two pilot bakes"
+    };
     let reuse_why = if enough {
-        format!(
-            "the last two pilot bakes ({reused} rays together) are the bake, nothing more is cast"
-        )
+        format!("{bakes} ({reused} rays together) are the bake, nothing more is cast")
     } else {
         format!(
-            "the last two pilot bakes ({reused} rays) are averaged with one more at K={}",
+            "{bakes} ({reused} rays) are averaged with one more at K={}",
             config.transport.gather_rays
         )
     };
@@ -1080,21 +1109,21 @@ mod tests {
         // 4% at K=16, aiming at 3%: the pilot pair (2 × 16) is the bake; its noise is that of
         // two independent runs, 4%/√2.
         let mut config = BakeConfig::default();
-        assert!(choose_rays(&mut config, &mut plan, 0.04, None));
+        assert!(choose_rays(&mut config, &mut plan, 0.04, None, 0));
         assert_eq!(plan.total_rays, Some(32));
         let pair = 0.04 / 2f32.sqrt();
         assert!((plan.predicted_noise.unwrap() - pair).abs() < 1e-6);
         // 5.9% at K=16: the pair (4.17%) and one more run; with 1/√K every ray counts alike,
         // so the mean of 32 + K rays has 5.9%·√(16/(32 + K)) ≤ 3% once K ≥ 29.9: 32 on
         // quarter-octave steps (28 leaves 3.05%).
-        assert!(!choose_rays(&mut config, &mut plan, 0.059, None));
+        assert!(!choose_rays(&mut config, &mut plan, 0.059, None, 0));
         assert_eq!(plan.total_rays, Some(64));
         let at_64 = 0.059 * (16.0f32 / 64.0).sqrt();
         assert!((plan.predicted_noise.unwrap() - at_64).abs() < 1e-6);
         // The denoiser's measured gain lowers what the rays must reach: ×0.5 leaves the
         // pair's 4.17% at 2.09% after denoising, within 3%: the pair is the bake.
         plan.denoise_gain = Some(0.5);
-        assert!(choose_rays(&mut config, &mut plan, 0.059, None));
+        assert!(choose_rays(&mut config, &mut plan, 0.059, None, 0));
         assert_eq!(plan.total_rays, Some(32));
         // A second pilot at 64 rays falling as K^−0.75 (16 → 64: 8% → 2.83%): the pair's mean
         // is two independent runs, 2.83%/√2 = 2.0%, not one run of 128 rays (1.68%).
@@ -1104,7 +1133,8 @@ mod tests {
             &mut config,
             &mut plan,
             0.08,
-            Some(0.08 / 4f32.powf(0.75))
+            Some(0.08 / 4f32.powf(0.75)),
+            0
         ));
         // One more run brings the mean to the aim (75% of 2%), and its noise is that of the
         // runs averaged: above what one run of all the rays would have.
@@ -1114,6 +1144,27 @@ mod tests {
         assert_eq!(total, 128.0 + config.transport.gather_rays as f32);
         assert!(predicted <= 0.75 * 0.02, "{predicted}");
         assert!(predicted > n64 * (64.0 / total).powf(0.75), "{predicted}");
+        // The first pair (16 rays a run) averaged in beside the second: its 32 rays are in
+        // the total, the mean's noise is lower for the same further run, and the run that
+        // completes it needs no more rays than without it.
+        let without = (config.transport.gather_rays, predicted);
+        assert!(!choose_rays(&mut config, &mut plan, 0.08, Some(n64), 16));
+        assert!(config.transport.gather_rays <= without.0);
+        assert_eq!(plan.total_rays.unwrap(), 160 + config.transport.gather_rays);
+        // Each 16-ray run (8% noise, falling as K^−0.75) weighs as 8 rays of a 1/K run: its
+        // inverse variance beside the 64-ray runs'. At the same further rays the first pair
+        // lowers the mean's noise.
+        let we = plan.earlier_weight.expect("a weight for the first pair");
+        assert!((we - 8.0).abs() < 1e-4, "{we}");
+        let k = config.transport.gather_rays as f32;
+        let at = |we: f32, k: f32| {
+            let sum = 128.0 + 2.0 * we + k;
+            let run = |r: f32| 0.08 * (16.0 / r).powf(0.75);
+            let first = 2.0 * (we / sum * 0.08).powi(2);
+            (2.0 * (64.0 / sum * n64).powi(2) + first + (k / sum * run(k)).powi(2)).sqrt()
+        };
+        assert!((plan.predicted_noise.unwrap() - at(8.0, k)).abs() < 1e-5);
+        assert!(at(8.0, k) < at(0.0, k));
     }
 
     /// A `w × h` page fully covered by texels facing +z, of unit area, lit by `f(x, y)` at the

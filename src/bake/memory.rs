@@ -51,15 +51,15 @@ pub(crate) fn check(input: &Path, sizes: &Sizes, config: &BakeConfig, limit: u64
     refuse_above(input, sizes, &least, limit, config)
 }
 
-/// Once the rays are chosen (`pilot`: gathering rays of each reused pilot run, and whether
-/// no further bake follows; the plan's per-texel rays count when it has them): switches the automatic choice to the gather solver when the stored
+/// Once the rays are chosen (`pilot`: gathering rays of the last pilot pair's runs, whether
+/// no further bake follows, and how many pilot runs the result averages; the plan's per-texel rays count when it has them): switches the automatic choice to the gather solver when the stored
 /// rows do not fit and it does (with a warning), and refuses what still does not fit.
 pub(crate) fn fit(
     input: &Path,
     sizes: &Sizes,
     config: &mut BakeConfig,
     plan: Option<&mut Plan>,
-    pilot: Option<(u32, bool)>,
+    pilot: Option<(u32, bool, usize)>,
     limit: u64,
     progress: &dyn Progress,
 ) -> Result<()> {

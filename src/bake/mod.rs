@@ -886,12 +886,14 @@ pub(crate) fn light(
         config.transport.split_direct = true;
         if let Some(plan) = plan.as_mut() {
             if let Some(runs) = pilot.take() {
-                plan.discarded_rays += runs.runs.iter().map(|r| r.transport.rays).sum::<u64>();
-                // The one run casts what the pilot pair and the final bake would have together.
+                let earlier = runs.earlier.as_deref();
+                plan.discarded_rays += runs.rays() + earlier.map_or(0, |e| e.rays());
+                // The one run casts what the pilot pairs and the final bake would have together.
                 let t = &mut config.transport;
                 let own = !runs.enough as u32;
-                t.gather_rays = own * t.gather_rays + 2 * runs.gather_rays;
-                t.light_samples = own * t.light_samples + 2 * runs.light_samples;
+                let (k, l) = earlier.map_or((0, 0), |e| (e.gather_rays, e.light_samples));
+                t.gather_rays = own * t.gather_rays + 2 * (runs.gather_rays + k);
+                t.light_samples = own * t.light_samples + 2 * (runs.light_samples + l);
                 plan.reasons.push(format!(
                     "kept transport: one bake at K={} and L={} (the pilot bakes' rays and the final bake's together), the pilot bakes not mixed in",
                     t.gather_rays, t.light_samples
@@ -905,7 +907,9 @@ pub(crate) fn light(
         &sizes,
         &mut config,
         plan.as_mut(),
-        pilot.as_ref().map(|p| (p.gather_rays, p.enough)),
+        pilot
+            .as_ref()
+            .map(|p| (p.gather_rays, p.enough, p.held_runs())),
         limit,
         progress,
     )?;

@@ -2,8 +2,9 @@
 //!
 //! The pilot bakes the texels twice with [`PILOT_RAYS`] gathering rays and independent seeds
 //! (again at 4× when the plan asks for a second pilot); the plan turns the measured noise into
-//! rays. The final lightmap is the ray-weighted mean of the last pilot pair and, unless they
-//! suffice, one more bake at the chosen rays.
+//! rays. The final lightmap is the ray-weighted mean of the pilot pairs on the final atlas
+//! (the first one too when a second ran) and, unless they suffice, one more bake at the
+//! chosen rays.
 
 use std::f32::consts::PI;
 use std::time::Instant;
@@ -84,16 +85,22 @@ pub(crate) fn choose_transport(
         progress.advance(1);
         let mut second = None;
         if plan::needs_second_pilot(first, e) {
-            if let Some(discarded) = runs.take() {
-                plan.discarded_rays += discarded.rays();
-                plan.overhead_seconds += start.elapsed().as_secs_f64();
-            }
-            if let Some(discarded) = kept.take() {
-                plan.discarded_rays += discarded.runs.rays();
-                plan.overhead_seconds += discarded.seconds;
-            }
-            let pair = bake(4 * PILOT_RAYS)?;
+            // A first pair on this atlas (baked here, or the density pilot's) is averaged into
+            // the result beside the second: its rays are spent on these texels.
+            let earlier = match (runs.take(), kept.take()) {
+                (Some(runs), _) => Some(runs),
+                (None, Some(kept)) => Some(pair_at_pilot_rays(Some(kept))?),
+                (None, None) => None,
+            };
+            let mut pair = bake(4 * PILOT_RAYS)?;
             second = Some(pair.noise(texels, indirect_only));
+            pair.earlier = earlier.map(|mut earlier| {
+                // Only the last pair's rows can be a result's (`final_bake`).
+                for run in &mut earlier.runs {
+                    run.transport.rows = Default::default();
+                }
+                Box::new(earlier)
+            });
             runs = Some(pair);
         }
         let mut runs = match runs {
@@ -117,8 +124,9 @@ pub(crate) fn choose_transport(
         progress.advance(1);
         progress.end();
         plan.pilot_seconds = start.elapsed().as_secs_f64() + kept_seconds;
-        plan.pilot_rays = rays;
-        runs.enough = plan::choose_rays(config, plan, first, second);
+        plan.pilot_rays = rays + runs.earlier.as_ref().map_or(0, |e| e.rays());
+        let earlier_rays = runs.earlier.as_ref().map_or(0, |e| e.gather_rays);
+        runs.enough = plan::choose_rays(config, plan, first, second, earlier_rays);
         let [a, b] = runs.stored(config.transport.indirect_only);
         let stored = [a.as_slice(), b.as_slice()];
         // After a density pilot's sample, this one confirms the laid-out atlas at its points,
@@ -127,7 +135,7 @@ pub(crate) fn choose_transport(
         // cost the furnished interior at `medium` 0.7 s of a 17 s bake for an interval about
         // 1.3× narrower (the guide: "The final atlas's sample draws no new points").
         let budget = if density.lights.is_empty() {
-            plan.pilot_rays / 2
+            rays / 2
         } else {
             0
         };
@@ -487,6 +495,9 @@ pub(crate) struct PilotRuns {
     pub(crate) runs: Vec<Lit>,
     /// True when the runs alone reach the target: no further bake is needed.
     pub(crate) enough: bool,
+    /// The pair at [`PILOT_RAYS`] measured on the same texels before this one (at 4×), without
+    /// its rows: averaged into the result by its rays like the others ([`final_bake`]).
+    pub(crate) earlier: Option<Box<PilotRuns>>,
 }
 
 /// The lookup-error samples of a pilot pair ([`PunctualSample`], [`GatheredSample`]) and the
@@ -579,11 +590,18 @@ impl PilotRuns {
             light_samples,
             runs,
             enough: false,
+            earlier: None,
         })
     }
 
+    /// Rays of this pair's two runs (not of [`PilotRuns::earlier`]).
     pub(crate) fn rays(&self) -> u64 {
         self.runs.iter().map(|r| r.transport.rays).sum()
+    }
+
+    /// The runs the result averages: this pair's and the earlier pair's.
+    pub(crate) fn held_runs(&self) -> usize {
+        self.runs.len() + self.earlier.as_ref().map_or(0, |e| e.runs.len())
     }
 
     /// Each run's solved irradiance `H`.
@@ -680,12 +698,25 @@ pub(crate) fn final_bake(
             run.transport.rows = Default::default();
         }
     }
-    let mut runs: Vec<(f32, Lit)> = pilot
-        .runs
-        .into_iter()
-        .map(|r| (pilot.gather_rays as f32, r))
-        .collect();
     let (mut k_total, mut l_total) = (2 * pilot.gather_rays, 2 * pilot.light_samples);
+    let mut runs: Vec<(f32, Lit)> = Vec::new();
+    if let Some(earlier) = pilot.earlier.take() {
+        // Its runs weigh (and count for the denoiser's noise model) as the rays of a 1/K run
+        // as noisy (`Plan::earlier_weight`), their light samples alike.
+        let k = plan
+            .and_then(|p| p.earlier_weight)
+            .unwrap_or(earlier.gather_rays as f32);
+        let share = k / earlier.gather_rays.max(1) as f32;
+        k_total += (2.0 * k).round() as u32;
+        l_total += (2.0 * share * earlier.light_samples as f32).round() as u32;
+        runs.extend(earlier.runs.into_iter().map(|r| (k, r)));
+    }
+    runs.extend(
+        pilot
+            .runs
+            .into_iter()
+            .map(|r| (pilot.gather_rays as f32, r)),
+    );
     if !pilot.enough {
         runs.push((k as f32, bake()?));
         k_total += k;

@@ -388,16 +388,19 @@ impl Sizes {
         &self,
         technique: Technique,
         rays: f64,
-        pilot: Option<(u32, bool)>,
+        pilot: Option<(u32, bool, usize)>,
     ) -> FinalPeaks {
-        // The pilot pair's rows are dropped before a final bake builds its own
-        // (`pilot::final_bake`); when they suffice, they are the result's.
+        // The pilot runs' rows are dropped before a final bake builds its own
+        // (`pilot::final_bake`); when they suffice, the last run's are the result's.
         let (held, held_rays, more) = match pilot {
-            Some((k, enough)) => (2.0, if enough { k as f64 / 2.0 } else { 0.0 }, !enough),
+            Some((k, enough, runs)) => {
+                let held_rays = if enough { k as f64 / 2.0 } else { 0.0 };
+                (runs as f64, held_rays, !enough)
+            }
             None => (0.0, 0.0, true),
         };
         let rays = if more { rays } else { 0.0 };
-        let pilot_peak = pilot.map(|(k, _)| self.pilot_peak(k > PILOT_RAYS));
+        let pilot_peak = pilot.map(|(k, _, _)| self.pilot_peak(k > PILOT_RAYS));
         let with_pilot = |e: MemoryEstimate| pilot_peak.map_or(e, |p| larger(p, e));
         let stored_as =
             |counts| with_pilot(self.estimate_rows(technique, counts, rays, held, held_rays));
