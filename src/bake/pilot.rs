@@ -92,15 +92,17 @@ pub(crate) fn choose_transport(
                 (None, Some(kept)) => Some(pair_at_pilot_rays(Some(kept))?),
                 (None, None) => None,
             };
-            let mut pair = bake(4 * PILOT_RAYS)?;
-            second = Some(pair.noise(texels, indirect_only));
-            pair.earlier = earlier.map(|mut earlier| {
-                // Only the last pair's rows can be a result's (`final_bake`).
+            let earlier = earlier.map(|mut earlier| {
+                // Only the last pair's rows can be a result's (`final_bake`): these go before
+                // the second pair builds its own.
                 for run in &mut earlier.runs {
                     run.transport.rows = Default::default();
                 }
                 Box::new(earlier)
             });
+            let mut pair = bake(4 * PILOT_RAYS)?;
+            second = Some(pair.noise(texels, indirect_only));
+            pair.earlier = earlier;
             runs = Some(pair);
         }
         let mut runs = match runs {
