@@ -178,7 +178,7 @@ pub struct Plan {
     /// pair); the rays aim at the noise after denoising when it was measured.
     pub denoise_gain: Option<f32>,
     /// Weight of each run of a first pilot pair averaged in beside a second
-    /// ([`choose_rays`]): the rays of a run as noisy under the fitted fall `K^−α` as the
+    /// (`choose_rays`): the rays of a run as noisy under the fitted fall `K^−α` as the
     /// earlier run is under `1/K`, which the other runs' ray weights and the denoiser's noise
     /// model assume. `None` without such a pair.
     pub earlier_weight: Option<f32>,
