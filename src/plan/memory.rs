@@ -301,8 +301,9 @@ impl Sizes {
 
     /// The pilot's peak: its second run built while the first is held (its solution; a pilot
     /// run's rows go once it is solved, `PilotRuns::bake`), or with a `second` pilot at 4× the
-    /// rays, its second pair's second run while the first pair (the rows of its second run)
-    /// and the other run are held.
+    /// rays, its second pair's second run while the first pair and the other run are held
+    /// (counted with the rows of the first pair's second run, though `choose_transport` drops
+    /// them before the second pair: a conservative estimate, left as measured).
     fn pilot_peak(&self, second: bool) -> MemoryEstimate {
         let k = PILOT_RAYS as f64;
         // Every process of a distributed bake runs the pilots whole, before any exchange.
