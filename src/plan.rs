@@ -27,9 +27,10 @@
 //!   is the first pair when a second ran on the same atlas. The final lightmap is the
 //!   ray-weighted mean of the pilot bakes on the final atlas and one more bake at the rays
 //!   they lack (or of the pilots alone when they suffice). Keeping the first pair beside the
-//!   second took planning on the Cornell box at `high` from 24% to 10% of the bake, on two
-//!   rooms at `high` from 29% to 11%, on the lamp room at `medium` from 34% to 17% (its
-//!   16-ray runs were thrown away before). Its noise is that of
+//!   second (its 16-ray runs were thrown away before) took planning on the Cornell box at
+//!   `high` from 28% to 10% of the bake, on two rooms at `high` from 27% to 11%, on the lamp
+//!   room at `medium` from 39% to 15% (one `density_figures` run, the guide's performance
+//!   page). Its noise is that of
 //!   independent runs averaged, which falls only as the square root of their number even where
 //!   one run's stratified noise falls as `K^−α` (the furnished interior at `high`: one run of
 //!   128 rays read 1.74% at random points, the mean of three runs of 64, 1.95%), and the rays
