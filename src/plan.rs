@@ -818,9 +818,13 @@ fn over_target(e: f32, noise: f32, r: f32) -> String {
 /// The pilot's values without the direct light of punctual lights (measured apart by
 /// [`PunctualSample`]), so the second differences see the rest alone.
 fn without_punctual(pilot: [&[Vec3]; 2], punctual: Option<&PunctualSample>) -> [Vec<Vec3>; 2] {
-    pilot.map(|run| match punctual {
-        Some(p) => run.iter().zip(&p.texel).map(|(h, d)| *h - *d).collect(),
-        None => run.to_vec(),
+    [0, 1].map(|r| match punctual {
+        Some(p) => pilot[r]
+            .iter()
+            .zip(&p.texel[r])
+            .map(|(h, d)| *h - *d)
+            .collect(),
+        None => pilot[r].to_vec(),
     })
 }
 

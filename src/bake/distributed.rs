@@ -292,13 +292,32 @@ fn solve_shared(
     exchange.rows_seconds = start.elapsed().as_secs_f64();
     let (start, waited) = (Instant::now(), exchange.waited);
 
-    // First exchange: direct light and sky fraction of every texel, and the rays cast.
-    let local: Vec<f32> = (rows.direct.iter().zip(&rows.escape))
-        .flat_map(|(d, e)| [d.x, d.y, d.z, *e])
-        .collect();
-    let (all, rays) = exchange.all_gather(local, rows.rays, 4 * n)?;
-    let direct: Vec<Vec3> = all.chunks_exact(4).map(Vec3::from_slice).collect();
-    let escape: Vec<f32> = all.chunks_exact(4).map(|c| c[3]).collect();
+    // First exchange: direct light and sky fraction of every texel (and its punctual part,
+    // which the planner's punctual sample reads, when the scene has punctual lights), and the
+    // rays cast. Every process has the same lights, so all send the same width.
+    let width = if surfaces.scene.lights.is_empty() {
+        4
+    } else {
+        7
+    };
+    let mut local: Vec<f32> = Vec::with_capacity(width * mine.len());
+    for i in 0..mine.len() {
+        let (d, e) = (rows.direct[i], rows.escape[i]);
+        local.extend([d.x, d.y, d.z, e]);
+        if width == 7 {
+            local.extend(rows.punctual[i].to_array());
+        }
+    }
+    let (all, rays) = exchange.all_gather(local, rows.rays, width * n)?;
+    let direct: Vec<Vec3> = all.chunks_exact(width).map(Vec3::from_slice).collect();
+    let escape: Vec<f32> = all.chunks_exact(width).map(|c| c[3]).collect();
+    let punctual: Vec<Vec3> = match width {
+        7 => all
+            .chunks_exact(7)
+            .map(|c| Vec3::from_slice(&c[4..]))
+            .collect(),
+        _ => Vec::new(),
+    };
 
     let emitted = solve::row_emission(&rows, texels);
     let mut h = direct.clone();
@@ -344,6 +363,7 @@ fn solve_shared(
         rows_carry_emission: rows.rows_carry_emission,
         direct_terms: Vec::new(),
         sources: Default::default(),
+        punctual,
     };
     Ok(Lit {
         transport,

@@ -13,9 +13,11 @@
 //! there, apart from the light's second bounce at texel resolution (a second-order effect).
 //!
 //! **Punctual lights apart.** Their direct light is exact at a point (one shadow ray per
-//! light), so its part is the [`PunctualSample`]'s texel values read back against the exact
-//! light there, about the shading normal: noise-free. The gather covers the rest, and the two
-//! mean squares add (independent errors, as noise and resolution error are).
+//! light), so its part is each run's punctual light at the texels (the [`PunctualSample`]'s)
+//! read back against the exact light there, about the shading normal, the two runs' errors
+//! multiplied as below. The gather covers the rest (each run's lookup less its own punctual
+//! light), and the two mean squares add (independent errors, as noise and resolution error
+//! are).
 //!
 //! **Noise out.** Both sides of the rest are noisy: the pilot's texels (K = 16) and the
 //! point's own gather. Each of the pilot's two independent runs gives its own difference `d_a`, `d_b` (its
@@ -114,11 +116,13 @@ pub(crate) struct GatheredPoint {
     /// The scene triangle the point lies on.
     pub(crate) triangle: u32,
     /// `d_a·d_b` of the light other than punctual direct light (emitters, sky,
-    /// interreflection): the lookup of each run's values less the punctual sample's texels,
+    /// interreflection): the lookup of each run's values less that run's punctual light,
     /// against the gather through that run. An unbiased estimate of its squared lookup error.
     pub(crate) rest_square: f32,
-    /// The squared lookup error of the punctual direct light: the punctual sample's texels
-    /// against the exact light about the shading normal (no noise on either side).
+    /// `p_a·p_b` of the punctual direct light: each run's punctual light at the texels (the
+    /// punctual sample's) looked up, against the exact light about the shading normal. An
+    /// unbiased estimate of its squared lookup error: the footprint sampling's noise is
+    /// independent between the runs.
     pub(crate) punctual_square: f32,
     /// The bilinear lookup of the two runs' mean (what a relative error divides by).
     pub(crate) total: f32,
@@ -377,8 +381,8 @@ impl GatheredSample {
                 sample.lights.push(light);
             }
             let (_, lo, hi) = sample.relative_error_bounds();
-            let (rest, stderr) = sample.mean_square(|p| p.rest_square);
-            let mean_square = rest.max(0.0) + sample.mean_square(|p| p.punctual_square).0;
+            let stderr = sample.mean_square_total().1;
+            let mean_square = sample.mean_square_clamped();
             // Without earlier light, the first batch's rays are cast whatever the budget: as
             // many as a batch of points all gathered would cast (a batch gathers fewer).
             let spent = if free > 0 {
@@ -419,13 +423,25 @@ impl GatheredSample {
         self.relative(self.mean_square(|p| p.punctual_square).0)
     }
 
-    /// [`GatheredSample::relative_error`] and the relative errors with the rest's mean square
-    /// ∓ two standard errors (how far the sample's own noise could move it).
+    /// [`GatheredSample::relative_error`] and the relative errors with the mean square ∓ two
+    /// standard errors of the per-point sums (how far the sample's own noise could move it).
     pub(crate) fn relative_error_bounds(&self) -> (f32, f32, f32) {
-        let (rest, stderr) = self.mean_square(|p| p.rest_square);
+        let central = self.mean_square_clamped();
+        let stderr = self.mean_square_total().1;
+        let at = |r: f64| self.relative(r);
+        (
+            at(central),
+            at(central - 2.0 * stderr),
+            at(central + 2.0 * stderr),
+        )
+    }
+
+    /// The mean square lookup error of all the light, each part's clamped at 0 (a product's
+    /// mean can fall below 0 where the light is smooth).
+    fn mean_square_clamped(&self) -> f64 {
+        let rest = self.mean_square(|p| p.rest_square).0;
         let punctual = self.mean_square(|p| p.punctual_square).0;
-        let at = |r: f64| self.relative(r.max(0.0) + punctual);
-        (at(rest), at(rest - 2.0 * stderr), at(rest + 2.0 * stderr))
+        rest.max(0.0) + punctual.max(0.0)
     }
 
     /// The mean square lookup error of all the light (the rest's and the punctual light's
@@ -621,12 +637,14 @@ impl PointDrawer<'_> {
         }
         let read = |v: &[Vec3]| -> Vec3 { lookup.iter().map(|&(j, w)| v[j as usize] * w).sum() };
         let origin = sp.p + sp.n_geo * tracer.epsilon;
-        let punctual_texels = self.punctual.map_or(Vec3::ZERO, |p| read(&p.texel));
+        // Each run's own punctual light at the texels (the same for both when traced apart).
+        let punctual_texels =
+            [0, 1].map(|r| self.punctual.map_or(Vec3::ZERO, |p| read(&p.texel[r])));
         let (rest, exact, fresh) = match earlier {
             PointLight::Gathered { rest, exact, .. } => (rest, exact, false),
             _ => {
-                // Punctual light: the exact light about the shading normal (noise-free: no
-                // product needed); the rest gathered through each run.
+                // Punctual light: the exact light about the shading normal (no noise); the
+                // rest gathered through each run.
                 let exact = match self.punctual {
                     Some(_) => scene
                         .lights
@@ -647,15 +665,15 @@ impl PointDrawer<'_> {
             exact,
             accept,
         };
-        let [da, db] = [0usize, 1].map(|r| read(runs.irradiance[r]) - punctual_texels - rest[r]);
-        let dp = punctual_texels - exact;
+        let [da, db] = [0usize, 1].map(|r| read(runs.irradiance[r]) - punctual_texels[r] - rest[r]);
+        let [pa, pb] = punctual_texels.map(|p| p - exact);
         let [ha, hb] = runs.irradiance.map(read);
         let total = (ha + hb) * 0.5;
         let spread = ha - hb;
         let point = GatheredPoint {
             triangle: t,
             rest_square: (da * db).element_sum() / 3.0,
-            punctual_square: (dp * dp).element_sum() / 3.0,
+            punctual_square: (pa * pb).element_sum() / 3.0,
             total: total.element_sum() / 3.0,
             noise_square: (spread * spread).element_sum() / 6.0,
             weight,

@@ -5,12 +5,21 @@
 //! that read a gutter or a buried texel. For punctual lights (sun, point, spot: the hard edges)
 //! the exact irradiance at any point costs one shadow ray per light, so the error a renderer
 //! shows can be measured directly: texel values as transport computes them (the mean of
-//! jittered footprint points, `transport::montecarlo`; [`GRID`]² of them), read back by a bilinear lookup
-//! at area-weighted random surface points and compared with the exact irradiance there — the
+//! jittered footprint points, `transport::montecarlo`), read back by a bilinear lookup at
+//! area-weighted random surface points and compared with the exact irradiance there — the
 //! point yardstick's procedure on the direct punctual light alone, where no path tracing is
 //! needed. Lookup neighbours that are gutters or buried (invalid) texels are left out of the
 //! bilinear weights, as dilation and the invalid-texel fill replace them by their neighbours;
 //! such lookups are counted ([`PunctualSample::border_share`]).
+//!
+//! **The texels' values are the pilot runs' own.** Monte Carlo transport keeps each texel's
+//! punctual light (`Transport::punctual`, 2×2 jittered points a run), so the sample casts one
+//! shadow ray per point and light and none per texel. A run's texel value is noisy (4 points
+//! across a shadow edge), but the two runs' are independent: the product of their lookup
+//! errors, `(a − e)·(b − e)`, has the squared bias of the lookup as its mean and none of the
+//! footprint sampling's noise, as the gathered sample's products do for the rest of the light.
+//! Where the runs did not keep it (another transport method), the texels are traced here at
+//! [`GRID`]² points each and both factors are that one value.
 
 use glam::{Vec2, Vec3};
 
@@ -24,19 +33,15 @@ use crate::trace::Tracer;
 
 /// Random surface points the error is measured at.
 pub(crate) const POINTS: usize = 16_384;
-/// Jittered footprint points per texel side. Transport samples punctual lights at 2×2 points
-/// per run, and the automatic bake averages at least three runs (the pilot pair and the final
-/// bake): 4×4 stands for that mean (on the courtyard at medium it gave 8.63% where 2×2 gave
-/// 8.73%: the footprint sampling noise is a small part of the error). 2×2 would cost a
-/// quarter of the rays (planning's share on the courtyard at `high` 31% → 23%), but it is
-/// noisier than the bake's texels and the density plan reads that noise as lookup error: on
-/// 7 December it raised the lamp room at `draft` and `medium` (1.27 → 1.50 s and 1.87 → 2.66
-/// s for 5.81% → 3.07% and 2.93% → 2.32% against 8% and 4% targets); not taken. Nor 2×2
-/// first and 4×4 only where those four disagree (by more than 2%, or on whether the light
-/// reaches): the same lightmaps on every corpus scene with punctual lights and less planning
-/// (the courtyard at `medium` 18% → 9%), but four points miss the slivers of contact shadow
-/// that the bake's own twelve catch, so the error it measured fell where the bake's did not
-/// (the courtyard at `medium`: 0.46% → 0.18%).
+/// Jittered footprint points per texel side when the texels' punctual light is traced here
+/// (the runs did not keep theirs). Until 7 December it was traced for every texel whatever
+/// the transport, 4×4 points standing for the mean of the three runs a bake averages: 16
+/// shadow rays a texel and light, up to a third of planning (the courtyard at `high`). Its
+/// cheaper forms were rejected because a single noisy value squared reads its noise as
+/// lookup error (2×2 raised the lamp room at `draft` and `medium`), or because refining only
+/// where four points disagreed measured less error than the bake showed (it missed slivers
+/// of contact shadow: the courtyard at `medium` 0.46% → 0.18%). The runs' own values with
+/// their errors multiplied have neither fault: no noise in the mean, no selection.
 pub(crate) const GRID: u32 = 4;
 /// Mixed into the seed: these streams differ from transport's and the point yardstick's.
 const SALT: u64 = 0x05EE_D0FD_1EC7;
@@ -44,7 +49,8 @@ const SALT: u64 = 0x05EE_D0FD_1EC7;
 /// The error of one sampled point.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct PointError {
-    /// Squared error (mean over channels) of the bilinear lookup against the exact irradiance.
+    /// Squared error (mean over channels) of the bilinear lookup against the exact irradiance:
+    /// the product of the two runs' errors (unbiased, negative at times).
     pub(crate) square: f32,
     /// The lookup left out a gutter or buried neighbour.
     pub(crate) border: bool,
@@ -83,21 +89,24 @@ impl Packed for Option<PointError> {
 /// Direct punctual light at the texels and its lookup error at random surface points.
 #[derive(Clone, Debug, Default)]
 pub(crate) struct PunctualSample {
-    /// Irradiance (W/m²) from punctual lights per texel, as transport computes it.
-    pub(crate) texel: Vec<Vec3>,
+    /// Irradiance (W/m²) from punctual lights per texel, as each of the pilot pair's two runs
+    /// computed it ([`crate::transport::Transport::punctual`]), or traced here when the runs
+    /// did not keep it (both then the same).
+    pub(crate) texel: [Vec<Vec3>; 2],
     /// One per visible sampled point (points on buried or unrasterised texels are left out).
     pub(crate) points: Vec<PointError>,
 }
 
 impl PunctualSample {
-    /// Samples the scene's punctual lights at the texels and at [`POINTS`] surface points;
-    /// `total` is the lightmap (any scale) each point's lookup is normalised by. `None`
-    /// without punctual lights.
+    /// Samples the scene's punctual lights at [`POINTS`] surface points against the texels'
+    /// punctual light: `runs`, each pilot run's own when transport kept it, or traced here at
+    /// [`GRID`]² footprint points per texel; `total` is the lightmap (any scale) each point's
+    /// lookup is normalised by. `None` without punctual lights.
     pub(crate) fn measure(
         scene: &Scene,
         texels: &Texels,
         tracer: &Tracer,
-        total: &[Vec3],
+        (total, runs): (&[Vec3], Option<[Vec<Vec3>; 2]>),
         seed: u64,
         shards: &dyn Shards,
     ) -> Result<Option<PunctualSample>> {
@@ -112,18 +121,24 @@ impl PunctualSample {
                 .map(|l| punctual_irradiance(l, origin, n, tracer))
                 .sum()
         };
-        let texel: Vec<Vec3> = shard::map(shards, texels.len(), |i| {
-            let mut rng = Rng::new(seed ^ SALT, i as u64, 0);
-            let n = texels.normal[i];
-            let mut sum = Vec3::ZERO;
-            for s in 0..GRID * GRID {
-                let cell = Vec2::new((s % GRID) as f32, (s / GRID) as f32);
-                let u = (cell + rng.next_vec2()) / GRID as f32;
-                let p = texels.footprint_point(i, u) + n * tracer.epsilon;
-                sum += exact(texels.punctual_point(tracer, i, p), n);
+        let texel: [Vec<Vec3>; 2] = match runs {
+            Some([a, b]) if a.len() == texels.len() && b.len() == texels.len() => [a, b],
+            _ => {
+                let traced: Vec<Vec3> = shard::map(shards, texels.len(), |i| {
+                    let mut rng = Rng::new(seed ^ SALT, i as u64, 0);
+                    let n = texels.normal[i];
+                    let mut sum = Vec3::ZERO;
+                    for s in 0..GRID * GRID {
+                        let cell = Vec2::new((s % GRID) as f32, (s / GRID) as f32);
+                        let u = (cell + rng.next_vec2()) / GRID as f32;
+                        let p = texels.footprint_point(i, u) + n * tracer.epsilon;
+                        sum += exact(texels.punctual_point(tracer, i, p), n);
+                    }
+                    sum / (GRID * GRID) as f32
+                })?;
+                [traced.clone(), traced]
             }
-            sum / (GRID * GRID) as f32
-        })?;
+        };
         let valid = texels.valid_mask();
         let mut cdf = Vec::with_capacity(scene.triangles.len());
         let mut area = 0.0f64;
@@ -143,9 +158,12 @@ impl PunctualSample {
             let lookup = bilinear(texels, &valid, page, uv)?;
             let read =
                 |v: &[Vec3]| -> Vec3 { lookup.0.iter().map(|&(j, w)| v[j as usize] * w).sum() };
-            let d = read(&texel) - exact(p + n * tracer.epsilon, n);
+            let e = exact(p + n * tracer.epsilon, n);
+            // The two runs' errors are independent: their product holds the lookup's squared
+            // bias, not the footprint sampling's noise.
+            let [da, db] = [&texel[0], &texel[1]].map(|v| read(v) - e);
             Some(PointError {
-                square: (d * d).element_sum() / 3.0,
+                square: (da * db).element_sum() / 3.0,
                 border: lookup.1,
                 total: read(total).element_sum() / 3.0,
                 lookup: lookup.0,
@@ -172,7 +190,7 @@ impl PunctualSample {
         let square: f64 = self.points.iter().map(|p| p.square as f64).sum::<f64>() / n;
         let mean: f64 = self.points.iter().map(|p| p.total as f64).sum::<f64>() / n;
         if mean > 0.0 {
-            (square.sqrt() / mean) as f32
+            (square.max(0.0).sqrt() / mean) as f32
         } else {
             f32::NAN
         }

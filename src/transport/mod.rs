@@ -74,6 +74,11 @@ pub struct Transport {
     pub direct_terms: Vec<Vec3>,
     /// The sources of `direct_terms`.
     pub sources: Sources,
+    /// The part of `direct` from punctual lights, per texel, as Monte Carlo transport samples
+    /// it (jittered footprint points); empty without punctual lights or for other methods.
+    /// The planner's punctual sample reads each pilot run's own (`plan::PunctualSample`), so
+    /// no shadow ray is cast for it again; a bake drops it once read (empty in its result).
+    pub punctual: Vec<Vec3>,
 }
 
 /// The light sources direct light is split into ([`Transport::direct_terms`]): every punctual

@@ -25,6 +25,8 @@ pub(crate) struct ChunkRows {
     pub(crate) direct: Vec<Vec3>,
     /// `direct` by source, when split ([`Transport::direct_terms`]).
     pub(crate) terms: Vec<Vec3>,
+    /// The punctual part of `direct` ([`Transport::punctual`]).
+    pub(crate) punctual: Vec<Vec3>,
     pub(crate) rays: u64,
 }
 
@@ -140,10 +142,15 @@ impl Assembled {
         self.t.escape.extend(c.escape);
         self.t.direct.extend(c.direct);
         self.t.direct_terms.extend(c.terms);
+        self.t.punctual.extend(c.punctual);
         self.t.rays += c.rays;
     }
 
     fn finish(mut self) -> Transport {
+        // Whole or not at all: a builder that does not sample punctual lights leaves none.
+        if self.t.punctual.len() != self.t.direct.len() {
+            self.t.punctual = Vec::new();
+        }
         self.t.rows = match self.counted {
             true => Rows::Counts(self.counts),
             false => Rows::Weights(self.weights),
