@@ -252,6 +252,10 @@ pub struct TransportParams {
     /// rows only): what relighting and per-light layers scale. Costs 12 bytes per texel and
     /// source; set by the bake when `output.keep_transport` or `output.layers` asks.
     pub(crate) split_direct: bool,
+    /// Keep the punctual lights' part of direct light per texel as well
+    /// (`Transport::punctual`; Monte Carlo only): what the planner's punctual sample reads.
+    /// Costs 12 bytes per texel; set for the pilot runs only.
+    pub(crate) keep_punctual: bool,
     /// Store Monte Carlo rows as their exact ray counts (`transport::Rows::Counts`): the same
     /// output from 4.1–6.5× fewer row bytes, sweeps somewhat slower ([`crate::guide::baking`], "Memory"). Set
     /// by `row_storage` when forced, else by the memory check (`bake::memory::fit`) when f32
@@ -455,6 +459,7 @@ impl BakeConfig {
                 validity: true,
                 denoise: true,
                 split_direct: false,
+                keep_punctual: false,
                 count_rows: false,
                 row_storage: RowStorage::Auto,
             },

@@ -293,12 +293,13 @@ fn solve_shared(
     let (start, waited) = (Instant::now(), exchange.waited);
 
     // First exchange: direct light and sky fraction of every texel (and its punctual part,
-    // which the planner's punctual sample reads, when the scene has punctual lights), and the
-    // rays cast. Every process has the same lights, so all send the same width.
-    let width = if surfaces.scene.lights.is_empty() {
-        4
-    } else {
+    // which the planner's punctual sample reads, when a pilot run keeps it and the scene has
+    // punctual lights), and the rays cast. Every process has the same lights and parameters,
+    // so all send the same width.
+    let width = if params.keep_punctual && !surfaces.scene.lights.is_empty() {
         7
+    } else {
+        4
     };
     let mut local: Vec<f32> = Vec::with_capacity(width * mine.len());
     for i in 0..mine.len() {

@@ -574,6 +574,8 @@ impl PilotRuns {
                     gather_rays: k,
                     light_samples,
                     seed: transport.seed ^ 0x9E37_79B9_7F4A_7C15u64.wrapping_mul(stream + 1),
+                    // For the punctual sample (`PunctualSample`), which takes it.
+                    keep_punctual: true,
                     ..transport.clone()
                 };
                 let technique = Technique::DEFAULT;
@@ -689,10 +691,9 @@ pub(crate) fn final_bake(
     };
     let Some(pilot) = pilot else {
         let Lit {
-            mut transport,
+            transport,
             solution,
         } = bake()?;
-        transport.punctual = Vec::new();
         let texel_gather_rays = match texel_rays {
             Some(r) => r.iter().map(|&k| k as f32).collect(),
             None => vec![k as f32; surfaces.texels.len()],
@@ -734,10 +735,7 @@ pub(crate) fn final_bake(
             .map(|r| (pilot.gather_rays as f32, r)),
     );
     if !pilot.enough {
-        let mut last = bake()?;
-        // Read by the pilots' samples only.
-        last.transport.punctual = Vec::new();
-        runs.push((k as f32, last));
+        runs.push((k as f32, bake()?));
         k_total += k;
         l_total += l;
     }

@@ -75,9 +75,10 @@ pub struct Transport {
     /// The sources of `direct_terms`.
     pub sources: Sources,
     /// The part of `direct` from punctual lights, per texel, as Monte Carlo transport samples
-    /// it (jittered footprint points); empty without punctual lights or for other methods.
-    /// The planner's punctual sample reads each pilot run's own (`plan::PunctualSample`), so
-    /// no shadow ray is cast for it again; a bake drops it once read (empty in its result).
+    /// it (jittered footprint points), when `TransportParams::keep_punctual` asks (the
+    /// planner's pilot runs); empty otherwise, without punctual lights or for other methods.
+    /// The planner's punctual sample takes each pilot run's own (`plan::PunctualSample`), so
+    /// no shadow ray is cast for it again.
     pub punctual: Vec<Vec3>,
 }
 

@@ -241,11 +241,13 @@ impl Context<'_> {
                 }
             }
             shadow_rays = (g * g) as u64 * scene.lights.len() as u64;
-            out.punctual.push(if punctual.is_finite() {
-                punctual
-            } else {
-                Vec3::ZERO
-            });
+            if p.keep_punctual {
+                out.punctual.push(if punctual.is_finite() {
+                    punctual
+                } else {
+                    Vec3::ZERO
+                });
+            }
         }
 
         let escape = escaped as f32 / kf;
