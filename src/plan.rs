@@ -69,10 +69,11 @@
 //!   It is *measured* at random surface points (`GatheredSample`): the last pilot pair's texel
 //!   values (denoised as the final lightmap will be, when the denoiser's gain is credited, so
 //!   that its smoothing of edges counts) read back by bilinear lookup against the light there
-//!   — punctual lights exactly (one shadow ray each, about the shading normal), emitters, sky and interreflection gathered at
-//!   the point as transport gathers at a texel (32 rays and 8 emitter light samples through
-//!   each run's solution). Each run's difference is independent of the other's, so the mean of
-//!   their products has neither's noise; points are drawn in batches (4096, or as many as the
+//!   — punctual lights exactly (one shadow ray each, about the shading normal, against each
+//!   run's own punctual light at the texels, `Transport::punctual`), emitters, sky and
+//!   interreflection gathered at the point as transport gathers at a texel (32 rays and 8
+//!   emitter light samples through each run's solution). Each run's difference is independent
+//!   of the other's, so the mean of their products has neither's noise; points are drawn in batches (4096, or as many as the
 //!   budget pays for down to 1024) until the mean square is known to ±40% (two standard
 //!   errors), is clearly small, or the sample has cast half the pilot's rays (it always casts
 //!   one batch; 2.0 s of 22 s on the furnished interior at draft, 2.9 s of 65 s at medium). The pilot's
