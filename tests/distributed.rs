@@ -61,6 +61,46 @@ fn free_addresses(n: usize) -> Vec<String> {
 }
 
 #[test]
+fn processes_give_the_bytes_of_one_process_with_punctual_lights() {
+    // The pilot runs' punctual light per texel travels in the first exchange (the planner's
+    // punctual sample reads it): a wider exchange than the Cornell box's, which has none.
+    let scene = fixture("spot_and_directional.gltf");
+    let scene = scene.to_str().unwrap();
+    let dir = scratch();
+    let one = dir.path().join("one");
+    let o = run(&[
+        "bake",
+        scene,
+        "-o",
+        one.to_str().unwrap(),
+        "--quality",
+        "draft",
+    ]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let expected = outputs(&one);
+    for (processes, threads) in [("2", "1"), ("3", "2")] {
+        let out = dir.path().join(format!("p{processes}t{threads}"));
+        let o = run(&[
+            "bake",
+            scene,
+            "-o",
+            out.to_str().unwrap(),
+            "--quality",
+            "draft",
+            "--processes",
+            processes,
+            "--threads",
+            threads,
+        ]);
+        assert!(o.status.success(), "{}", text(&o.stderr));
+        assert!(
+            outputs(&out) == expected,
+            "{processes} processes × {threads} threads: the output differs from one process's"
+        );
+    }
+}
+
+#[test]
 fn processes_give_the_bytes_of_one_process() {
     let scene = fixture("cornell_box.gltf");
     let scene = scene.to_str().unwrap();
