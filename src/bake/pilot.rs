@@ -922,11 +922,9 @@ mod tests {
         assert_eq!(small.drawn % MIN_BATCH, 0, "{said}");
     }
 
-    #[test]
-    fn a_punctual_sample_read_again_from_another_pair_is_the_one_measured_with_it() {
-        // The ray choice's sample on the density pilot's atlas reads the pilot's punctual
-        // sample again from its own pair instead of tracing it: that must be the sample it
-        // would have traced, bit for bit.
+    /// The spot and directional fixture (punctual lights only), prepared without the
+    /// automatic choice, and its settings.
+    fn punctual_scene() -> (BakeConfig, crate::Prepared) {
         let input =
             Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/spot_and_directional.gltf");
         let config = BakeConfig {
@@ -934,6 +932,15 @@ mod tests {
             ..BakeConfig::default()
         };
         let p = crate::prepare(&input, &config, &NoProgress).expect("prepares");
+        (config, p)
+    }
+
+    #[test]
+    fn a_punctual_sample_read_again_from_another_pair_is_the_one_measured_with_it() {
+        // The ray choice's sample on the density pilot's atlas reads the pilot's punctual
+        // sample again from its own pair instead of tracing it: that must be the sample it
+        // would have traced, bit for bit.
+        let (config, p) = punctual_scene();
         let pair = |k| {
             let runs = PilotRuns::bake(
                 p.surfaces(),
@@ -972,13 +979,7 @@ mod tests {
         // Transport keeps each run's punctual light per texel; the punctual sample reads it
         // (two runs' errors multiplied) instead of tracing 4×4 points a texel again. Both
         // estimate the same squared bias of the lookup.
-        let input =
-            Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/spot_and_directional.gltf");
-        let config = BakeConfig {
-            auto: None,
-            ..BakeConfig::default()
-        };
-        let p = crate::prepare(&input, &config, &NoProgress).expect("prepares");
+        let (config, p) = punctual_scene();
         let mut runs = PilotRuns::bake(
             p.surfaces(),
             &config.transport,
