@@ -15,9 +15,11 @@
 //! **Punctual lights apart.** Their direct light is exact at a point (one shadow ray per
 //! light), so its part is each run's punctual light at the texels (the [`PunctualSample`]'s)
 //! read back against the exact light there, about the shading normal, the two runs' errors
-//! multiplied as below. The gather covers the rest (each run's lookup less its own punctual
-//! light), and the two mean squares add (independent errors, as noise and resolution error
-//! are).
+//! multiplied as below. The gather covers the rest (each run's lookup less the punctual
+//! sample's value for that run: its own, or, when a sample taken on the same atlas with an
+//! earlier pair is read again, that pair's run — still independent of the other factor, so
+//! the product stays unbiased, only noisier), and the two mean squares add (independent
+//! errors, as noise and resolution error are).
 //!
 //! **Noise out.** Both sides of the rest are noisy: the pilot's texels (K = 16) and the
 //! point's own gather. Each of the pilot's two independent runs gives its own difference `d_a`, `d_b` (its
@@ -121,7 +123,7 @@ pub(crate) struct GatheredPoint {
     /// The scene triangle the point lies on.
     pub(crate) triangle: u32,
     /// `d_a·d_b` of the light other than punctual direct light (emitters, sky,
-    /// interreflection): the lookup of each run's values less that run's punctual light,
+    /// interreflection): the lookup of each run's values less the punctual sample's for it,
     /// against the gather through that run. An unbiased estimate of its squared lookup error.
     pub(crate) rest_square: f32,
     /// `p_a·p_b` of the punctual direct light: each run's punctual light at the texels (the
