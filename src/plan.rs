@@ -57,8 +57,11 @@
 //!   leaves beside the noise; above it, the regions with most error rise first until the
 //!   prediction meets it (up to ×4 and the preset's budget). The sample gathers its points
 //!   where the pilot's light steps, weighed by one over their chance (`gathered`). The atlas, texels and validity
-//!   are then laid out once, and the pilot's noise at `PILOT_RAYS` is the transport plan's
-//!   first measurement (its pair is not cast again on the new atlas). A small scene is
+//!   are then laid out (once, but for the check below), and the pilot's noise at `PILOT_RAYS` is the transport plan's
+//!   first measurement (its pair is not cast again on the new atlas). The laid-out atlas's
+//!   own sample checks the choice once: when it predicts the bake above its target, its lookup
+//!   error the larger part, the pilot's model is scaled to what that atlas measured and the
+//!   atlas laid out again (`density::DensityChoice::raise_after`). A small scene is
 //!   measured on its final atlas, uniform at the preset's density; when no factor is asked,
 //!   or the factors would move fewer than 5% of its texels (a few unseen regions at ×⅛: a new
 //!   layout and pair would cost more), that atlas and the pilot's pair are the bake's own
@@ -220,14 +223,16 @@ impl Plan {
     /// The expected error at random points of the surfaces, as a renderer shows the bake: noise
     /// and resolution error are independent, so they add in quadrature. `None` without a pilot.
     pub fn predicted_error(&self) -> Option<f32> {
-        let gain = self.denoise_gain.unwrap_or(1.0);
-        match (
-            self.predicted_noise.map(|n| n * gain),
-            self.predicted_resolution,
-        ) {
+        match (self.denoised_noise(), self.predicted_resolution) {
             (Some(n), Some(r)) => Some(n.hypot(r)),
             (n, r) => n.or(r),
         }
+    }
+
+    /// The predicted noise as the final lightmap keeps it: after denoising, when the
+    /// denoiser's gain is credited.
+    pub(crate) fn denoised_noise(&self) -> Option<f32> {
+        (self.predicted_noise).map(|n| n * self.denoise_gain.unwrap_or(1.0))
     }
 
     /// The choice in a few words (sets [`Plan::brief`]), once every decision is made.
@@ -724,8 +729,7 @@ pub(crate) fn predict_resolution(
 fn push_prediction(plan: &mut Plan, r: f32, measured: &str) {
     plan.predicted_resolution = Some(r);
     let e = plan.target_error;
-    let gain = plan.denoise_gain.unwrap_or(1.0);
-    let noise = plan.predicted_noise.unwrap_or(0.0) * gain;
+    let noise = plan.denoised_noise().unwrap_or(0.0);
     let combined = noise.hypot(r);
     let pct = |x: f32| format!("{:.2}%", x * 100.0);
     let verdict = if combined <= e {

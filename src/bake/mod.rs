@@ -861,24 +861,63 @@ pub(crate) fn light(
     let sizes_of = |p: &Prepared| {
         plan::memory::Sizes::counted(&p.scene, &p.source, &p.texels).per_process(p.processes)
     };
-    let sizes = sizes_of(prepared);
+    let mut sizes = sizes_of(prepared);
     let limit = config.max_memory.unwrap_or(u64::MAX);
     memory::check(&prepared.source.path, &sizes, &config, limit)?;
     let mut pilot = None;
-    if let (Some(plan), Some(auto)) = (&mut plan, config.auto) {
-        let t = Instant::now();
-        let surfaces = prepared.surfaces();
-        pilot = pilot::choose_transport(
-            surfaces,
-            &mut config,
-            plan,
-            &auto.keep,
-            progress,
+    if let (Some(auto), Some(planned)) = (config.auto, &plan) {
+        let before = planned.clone();
+        let choose = |prepared: &Prepared,
+                      (config, plan): (&mut BakeConfig, &mut Plan),
+                      density: &mut pilot::Reused,
+                      (stages, stage): (&mut Vec<StageTime>, &'static str)| {
+            let t = Instant::now();
+            let runs = pilot::choose_transport(
+                prepared.surfaces(),
+                config,
+                plan,
+                &auto.keep,
+                progress,
+                density,
+                processes,
+            )?;
+            config.validate()?;
+            timed(stages, stage, t);
+            Ok::<_, Error>(runs)
+        };
+        let first = plan.as_mut().expect("a plan");
+        pilot = choose(
+            prepared,
+            (&mut config, first),
             &mut density,
-            processes,
+            (&mut stages, "plan"),
         )?;
-        config.validate()?;
-        timed(&mut stages, "plan", t);
+        // The laid-out atlas's own sample checks the density pilot's choice, once.
+        if let Some((factors, why)) = (density.choice.take()).and_then(|c| c.raise_after(first)) {
+            let mut again = before;
+            // The first plan's pilot runs were cast on an atlas the bake no longer uses.
+            let spent = pilot.take().map_or(0, |runs| {
+                runs.rays() + runs.earlier.as_ref().map_or(0, |e| e.rays())
+            });
+            again.discarded_rays = first.discarded_rays + spent;
+            again.overhead_seconds = first.overhead_seconds + first.pilot_seconds;
+            again.reasons.push(why);
+            let t = Instant::now();
+            lay_out_again(prepared, factors, processes, progress)?;
+            timed(&mut stages, "atlas again", t);
+            again.overhead_seconds += t.elapsed().as_secs_f64();
+            sizes = sizes_of(prepared);
+            memory::check(&prepared.source.path, &sizes, &prepared.config, limit)?;
+            config = prepared.config.clone();
+            plan = Some(again);
+            let replanned = plan.as_mut().expect("a plan");
+            pilot = choose(
+                prepared,
+                (&mut config, replanned),
+                &mut density,
+                (&mut stages, "plan again"),
+            )?;
+        }
     }
     let surfaces = prepared.surfaces();
     let input = prepared.source.path.as_path();
@@ -940,6 +979,31 @@ pub(crate) fn light(
         stages,
         last,
     })
+}
+
+/// The atlas, texels and validity laid out again at the triangle density `factors` (never
+/// below the densities the atlas was laid out at: slot faces keep their floor), when the
+/// laid-out atlas's sample found the density pilot's choice short
+/// (`plan::density::DensityChoice::raise_after`).
+fn lay_out_again(
+    prepared: &mut Prepared,
+    mut factors: Vec<f32>,
+    shards: &dyn Shards,
+    progress: &dyn Progress,
+) -> Result<()> {
+    raise_to(&mut factors, &prepared.config.atlas.triangle_density);
+    prepared.config.atlas.triangle_density = factors;
+    let (atlas, texels, validity) = lay_out(
+        &prepared.scene,
+        &prepared.source,
+        &prepared.tracer,
+        &prepared.config,
+        shards,
+        progress,
+        &mut Vec::new(),
+    )?;
+    (prepared.atlas, prepared.texels, prepared.validity) = (atlas, texels, validity);
+    Ok(())
 }
 
 /// The rays a bake cast for its lightmaps: the final transport's and the pilot bakes' not

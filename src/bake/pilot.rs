@@ -135,7 +135,8 @@ pub(crate) fn choose_transport(
         let stored = [a.as_slice(), b.as_slice()];
         // After a density pilot's sample, this one confirms the laid-out atlas at its points,
         // reading the light gathered there: no budget past them (rays only for points the
-        // pilot's atlas buried). It decides nothing, it only tells the prediction; new points
+        // pilot's atlas buried). It tells the prediction, which may send the bake back to
+        // lay the atlas out again (`DensityChoice::raise_after`), once; new points
         // cost the furnished interior at `medium` 0.7 s of a 17 s bake for an interval about
         // 1.3× narrower (the guide: "The final atlas's sample draws no new points").
         let budget = if density.lights.is_empty() {
@@ -255,6 +256,9 @@ pub(crate) struct Reused {
     /// does not depend on the pair, so [`choose_transport`]'s sample only reads its lookups
     /// again from its own pair ([`PunctualSample::normalised_by`]) instead of tracing them.
     pub(crate) punctual: Option<PunctualSample>,
+    /// The density pilot's model of the regions and its choice, for the laid-out atlas's own
+    /// sample to check once (`bake::light`).
+    pub(crate) choice: Option<plan::density::DensityChoice>,
 }
 
 /// A density pilot's pair at [`PILOT_RAYS`] and the seconds it took (the ray choice's time per
@@ -323,9 +327,10 @@ pub(crate) fn measure_density(
     )?;
     let (scene, texels) = (surfaces.scene, surfaces.texels);
     let densities = (tpu, config.atlas.texels_per_unit);
-    density.triangle_factors = samples.gathered.as_ref().and_then(|g| {
-        plan::density::choose_region_density(scene, texels, stored, g, densities, plan)
-    });
+    if let Some(g) = &samples.gathered {
+        (density.triangle_factors, density.reused.choice) =
+            plan::density::choose_region_density(scene, texels, stored, g, densities, plan);
+    }
     density.reused.noise = Some(metrics::relative_noise(&a, &b, &texels.invalid));
     plan.discarded_rays += samples.gathered.as_ref().map_or(0, |g| g.rays);
     if let Some(g) = samples.gathered {
