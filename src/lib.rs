@@ -44,7 +44,8 @@
 //!  ─ pilot + plan::density ──▶ a density factor per region (connected surface between
 //!                                                     creases) where the lookup error of a pilot
 //!                                                     pair sits, measured on a uniform atlas of
-//!                                                     its own (atlas::build_quick: planar regions
+//!                                                     its own at half the preset's density or
+//!                                                     coarser (atlas::build_quick: planar regions
 //!                                                     and smooth patches, shelf-packed by
 //!                                                     atlas::pack); ×⅛ on what nobody sees; the
 //!                                                     three stages above then run once with the

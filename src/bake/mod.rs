@@ -575,8 +575,9 @@ type LaidOut = (
     texels::validity::ValidityReport,
 );
 
-/// The density pilot: a pilot on a uniform atlas of its own, charted quickly and at most
-/// `plan::density::PILOT_TEXELS` texels, chooses a density per region (`plan::density`) into
+/// The density pilot: a pilot on a uniform atlas of its own, charted quickly, at half the
+/// preset's density and at most `plan::density::PILOT_TEXELS` texels, chooses a density per
+/// region (`plan::density`) into
 /// `config`; the atlas is then laid out at those densities. A scene small enough that its
 /// pilot atlas is at the preset's density and whose charting is cheap is measured on the final
 /// atlas itself ([`MEASURE_ON_FINAL_TRIANGLES`]): when the density stays uniform, or the
@@ -598,6 +599,12 @@ fn density_pilot(
         .sqrt()
         .min(1.0);
     let on_final = scale >= 1.0 && scene.triangles.len() <= MEASURE_ON_FINAL_TRIANGLES;
+    // A pilot atlas of its own at the preset's density is measured at half of it.
+    let scale = if scale >= 1.0 && !on_final {
+        plan::density::QUICK_PILOT_SCALE
+    } else {
+        scale
+    };
     let mut coarse = config.clone();
     coarse.atlas.texels_per_unit = tpu * scale as f32;
     let mut layout_stages = Vec::new();

@@ -30,11 +30,13 @@
 //! in full; `crate::bake`), which the bake keeps, with the pilot's pair, when the measurement
 //! asks for no factor or for factors that move fewer than 5% of its texels. Any other scene's
 //! pilot atlas is its own, charted quickly
-//! (`crate::atlas::build_quick`), at the preset's density or, when that would pass
-//! `PILOT_TEXELS` texels, coarser; mean
-//! squares measured there are carried to the preset's density by `PILOT_EXPONENT` (a pilot
-//! at half the density on every preset was tried: it carried too little error at `medium`,
-//! 110k texels and 4.19% against a 4% target, and too much at `high`, 1.25 M texels).
+//! (`crate::atlas::build_quick`), at half the preset's density (`QUICK_PILOT_SCALE`) or,
+//! when the preset's atlas would pass `PILOT_TEXELS` texels, at the density that fills them;
+//! mean squares measured there are carried to the preset's density by `PILOT_EXPONENT`. (Half
+//! the density on every preset was tried before the small scenes were measured on their final
+//! atlas: it carried too little error at `medium`, 110k texels and 4.19% against a 4% target,
+//! and too much at `high`, 1.25 M texels; halving where `PILOT_TEXELS` already binds still
+//! sends the furnished interior at `high` to the texel cap, the guide's `baking` chapter.)
 //!
 //! **What nobody sees.** A region whose texels the validity pass found all buried, whose drawn
 //! points were all left out as unseen (faces looking into geometry: the back of a wall standing
@@ -79,6 +81,12 @@ pub(crate) const MAX_TEXEL_RAISE: f64 = 4.0;
 /// when the preset's atlas is larger (its mean squares are carried to the preset's density by
 /// [`ERROR_EXPONENT`]), so that the pilot costs a bounded share of a large bake.
 pub(crate) const PILOT_TEXELS: f64 = 131_072.0;
+/// A density pilot on an atlas of its own (not the bake's) that would be at the preset's
+/// density is at this share of it: a quarter of the texels, where the pilot's layout, pair and
+/// sample were a quarter to a third of the bake (the furnished interior at `draft` and
+/// `medium`: planning 23–29% → 11–18% of the bake, point error within the target on every seed
+/// measured; the guide's `baking` chapter).
+pub(crate) const QUICK_PILOT_SCALE: f64 = 0.5;
 /// The mean square lookup error of a pilot coarser than the preset is carried to the preset's
 /// density as `s^−PILOT_EXPONENT`: the `√h` of edges narrower than a texel, the slowest fall
 /// (from the furnished interior's pilot at 16.5 /m to its atlas at 32 /m the error fell as
