@@ -57,7 +57,10 @@
 //!    ─ pilot runs + plan   ──▶ BakeConfig + pilot    rays for the target error after
 //!                                                     denoising, measured (auto); the lookup
 //!                                                     error read at the density pilot's points
-//!                                                     against the light it gathered there
+//!                                                     against the light it gathered there; when
+//!                                                     that predicts the target missed by texels,
+//!                                                     the atlas is laid out again once and
+//!                                                     planned again (`bake::light`)
 //!  ─ one dispatch on config::Technique:
 //!        ─ transport::build ──▶ Transport             form factors F_ij (CSR rows) + H_direct
 //!            ─ solve::solve ──▶ Solution              H = H_direct + F·(ρH), iterated
