@@ -872,42 +872,41 @@ pub(crate) fn light(
     let limit = config.max_memory.unwrap_or(u64::MAX);
     memory::check(&prepared.source.path, &sizes, &config, limit)?;
     let mut pilot = None;
-    if let (Some(auto), Some(planned)) = (config.auto, &plan) {
-        let before = planned.clone();
+    if let (Some(auto), Some(plan)) = (config.auto, plan.as_mut()) {
+        let before = plan.clone();
         let choose = |prepared: &Prepared,
-                      (config, plan): (&mut BakeConfig, &mut Plan),
+                      config: &mut BakeConfig,
+                      plan: &mut Plan,
                       density: &mut pilot::Reused,
-                      (stages, stage): (&mut Vec<StageTime>, &'static str)| {
+                      stages: &mut Vec<StageTime>,
+                      stage| {
             let t = Instant::now();
+            let surfaces = prepared.surfaces();
+            let keep = &auto.keep;
             let runs = pilot::choose_transport(
-                prepared.surfaces(),
-                config,
-                plan,
-                &auto.keep,
-                progress,
-                density,
-                processes,
+                surfaces, config, plan, keep, progress, density, processes,
             )?;
             config.validate()?;
             timed(stages, stage, t);
             Ok::<_, Error>(runs)
         };
-        let first = plan.as_mut().expect("a plan");
         pilot = choose(
             prepared,
-            (&mut config, first),
+            &mut config,
+            plan,
             &mut density,
-            (&mut stages, "plan"),
+            &mut stages,
+            "plan",
         )?;
         // The laid-out atlas's own sample checks the density pilot's choice, once.
-        if let Some((factors, why)) = (density.choice.take()).and_then(|c| c.raise_after(first)) {
+        if let Some((factors, why)) = (density.choice.take()).and_then(|c| c.raise_after(plan)) {
             let mut again = before;
             // The first plan's pilot runs were cast on an atlas the bake no longer uses.
             let spent = pilot.take().map_or(0, |runs| {
                 runs.rays() + runs.earlier.as_ref().map_or(0, |e| e.rays())
             });
-            again.discarded_rays = first.discarded_rays + spent;
-            again.overhead_seconds = first.overhead_seconds + first.pilot_seconds;
+            again.discarded_rays = plan.discarded_rays + spent;
+            again.overhead_seconds = plan.overhead_seconds + plan.pilot_seconds;
             again.reasons.push(why);
             let t = Instant::now();
             lay_out_again(prepared, factors, processes, progress)?;
@@ -916,13 +915,14 @@ pub(crate) fn light(
             sizes = sizes_of(prepared);
             memory::check(&prepared.source.path, &sizes, &prepared.config, limit)?;
             config = prepared.config.clone();
-            plan = Some(again);
-            let replanned = plan.as_mut().expect("a plan");
+            *plan = again;
             pilot = choose(
                 prepared,
-                (&mut config, replanned),
+                &mut config,
+                plan,
                 &mut density,
-                (&mut stages, "plan again"),
+                &mut stages,
+                "plan again",
             )?;
         }
     }
@@ -988,10 +988,11 @@ pub(crate) fn light(
     })
 }
 
-/// The atlas, texels and validity laid out again at the triangle density `factors` (never
-/// below the densities the atlas was laid out at: slot faces keep their floor), when the
+/// The atlas, texels and validity laid out again at the triangle density `factors`, when the
 /// laid-out atlas's sample found the density pilot's choice short
-/// (`plan::density::DensityChoice::raise_after`).
+/// (`plan::density::DensityChoice::raise_after`). Factors the atlas was laid out with stay a
+/// floor (slot faces keep theirs); an atlas laid out uniform has none, and its hidden regions
+/// then go to their ×⅛ like any new layout's.
 fn lay_out_again(
     prepared: &mut Prepared,
     mut factors: Vec<f32>,

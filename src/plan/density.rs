@@ -979,7 +979,7 @@ mod tests {
     }
 
     #[test]
-    fn a_laid_out_atlas_that_measures_more_than_the_model_raises_its_regions_once() {
+    fn a_laid_out_atlas_that_measures_more_than_the_model_raises_its_regions() {
         let scene = cube_and_floor();
         let floor_triangles = scene.instances[0].triangles.clone();
         // The model: the cube's faces 16× the floor's mean square, 2.26% RMS in all, within
