@@ -256,6 +256,10 @@ pub struct TransportParams {
     /// (`Transport::punctual`; Monte Carlo only): what the planner's punctual sample reads.
     /// Costs 12 bytes per texel; set for the pilot runs only.
     pub(crate) keep_punctual: bool,
+    /// Measure each texel's per-ray variance after the solve (`bake::light::Lit::ray_variance`;
+    /// stored Monte Carlo rows only): where the final bake's rays go. Set for the pilot runs
+    /// only.
+    pub(crate) ray_variance: bool,
     /// Store Monte Carlo rows as their exact ray counts (`transport::Rows::Counts`): the same
     /// output from 4.1–6.5× fewer row bytes, sweeps somewhat slower ([`crate::guide::baking`], "Memory"). Set
     /// by `row_storage` when forced, else by the memory check (`bake::memory::fit`) when f32
@@ -460,6 +464,7 @@ impl BakeConfig {
                 denoise: true,
                 split_direct: false,
                 keep_punctual: false,
+                ray_variance: false,
                 count_rows: false,
                 row_storage: RowStorage::Auto,
             },

@@ -100,34 +100,24 @@ fn processes_give_the_bytes_of_one_process_with_punctual_lights() {
     }
 }
 
-#[test]
-fn processes_give_the_bytes_of_one_process_when_the_atlas_is_laid_out_again() {
-    // The lamp room at `draft` with seed 2: the laid-out atlas's own sample finds the density
-    // pilot's choice short, and every process lays the atlas out again alike.
-    let scene = fixture("lamp_room.gltf");
-    let scene = scene.to_str().unwrap();
+/// Bakes `scene` with `options` on one process and on two (one thread each), checks that both
+/// write the same bytes and that the one process's output (`--explain` and summary) contains
+/// `shows`, the path this case is about.
+fn two_processes_write_one_process_bytes(scene: &str, options: &[&str], shows: &str) {
+    let scene = fixture(scene);
     let dir = scratch();
     let bake = |out: &Path, more: &[&str]| {
-        let mut args = vec![
-            "bake",
-            scene,
-            "-o",
-            out.to_str().unwrap(),
-            "--quality",
-            "draft",
-            "--seed",
-            "2",
-        ];
-        args.extend_from_slice(more);
+        let out = out.to_str().unwrap();
+        let args = [&["bake", scene.to_str().unwrap(), "-o", out], options, more].concat();
         let o = run(&args);
         assert!(o.status.success(), "{}", text(&o.stderr));
         text(&o.stdout) + &text(&o.stderr)
     };
     let one = dir.path().join("one");
-    let summary = bake(&one, &[]);
+    let said = bake(&one, &["--explain"]);
     assert!(
-        summary.contains("atlas again"),
-        "this bake no longer lays its atlas out again (pick one that does): {summary}"
+        said.contains(shows),
+        "this bake no longer shows {shows:?} (pick one that does): {said}"
     );
     let two = dir.path().join("two");
     bake(&two, &["--processes", "2", "--threads", "1"]);
@@ -135,6 +125,23 @@ fn processes_give_the_bytes_of_one_process_when_the_atlas_is_laid_out_again() {
         outputs(&two) == outputs(&one),
         "2 processes: the output differs from one process's"
     );
+}
+
+#[test]
+fn processes_give_the_bytes_of_one_process_when_the_atlas_is_laid_out_again() {
+    // The lamp room at `draft` with seed 2: the laid-out atlas's own sample finds the density
+    // pilot's choice short, and every process lays the atlas out again alike.
+    let options = ["--quality", "draft", "--seed", "2"];
+    two_processes_write_one_process_bytes("lamp_room.gltf", &options, "atlas again");
+}
+
+#[test]
+fn processes_give_the_bytes_of_one_process_when_rays_follow_their_spread() {
+    // The Cornell box for a 1.5% target: a second pilot pair (64 rays a run) and one more bake,
+    // whose rays per texel follow what the pair's rays returned (`plan::spread_rays`): each
+    // process measures its rows' texels and gathers the others'.
+    let options = ["--quality", "draft", "--target-error", "0.015"];
+    two_processes_write_one_process_bytes("cornell_box.gltf", &options, "rays where they disagree");
 }
 
 #[test]

@@ -61,6 +61,7 @@ use super::light::{Lit, Processes};
 use super::{BakeReport, refuse_overwriting_input};
 use crate::config::{BakeConfig, SolveParams, Technique, TransportParams};
 use crate::lights::Emitters;
+use crate::plan::error_map;
 use crate::shard::{self, Shards};
 use crate::solve::{self, Solution, Stopping, jacobi};
 use crate::transport::{Surfaces, Transport, montecarlo, rows};
@@ -350,6 +351,14 @@ fn solve_shared(
     stopping.end();
     exchange.sweeps_seconds = start.elapsed().as_secs_f64();
     exchange.sweeps_waited = exchange.waited - waited;
+    // Each process measures its rows' texels and gathers the others'.
+    let ray_variance = match params.ray_variance {
+        true => {
+            let mine = error_map::ray_variance(&rows, texels, &h, params.sky);
+            exchange.all_gather(mine, 0, n)?.0
+        }
+        false => Vec::new(),
+    };
     solution.irradiance = h;
     // The rows stay with the processes that built them; the rest is whole on every process.
     let transport = Transport {
@@ -369,6 +378,7 @@ fn solve_shared(
     Ok(Lit {
         transport,
         solution,
+        ray_variance,
     })
 }
 

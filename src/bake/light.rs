@@ -3,7 +3,8 @@
 //! [`solve::solve`]; the matrix-free gatherer and the hierarchy make their transport as they
 //! solve ([`solve::gather`], [`solve::hierarchical`]).
 
-use crate::config::{SolveParams, Technique, TransportParams};
+use crate::config::{FormFactors, SolveParams, Technique, TransportParams};
+use crate::plan::error_map;
 use crate::shard::{Alone, Shards};
 use crate::solve::{self, Solution};
 use crate::transport::{self, Surfaces, Transport};
@@ -14,6 +15,10 @@ use crate::{Progress, Result};
 pub(crate) struct Lit {
     pub(crate) transport: Transport,
     pub(crate) solution: Solution,
+    /// Per texel, the variance of what one gathering ray returned
+    /// (`plan::error_map::ray_variance`), when `TransportParams::ray_variance` asked; else
+    /// empty.
+    pub(crate) ray_variance: Vec<f32>,
 }
 
 /// The processes a bake runs on: what they share of the per-item work ([`Shards`]), and how
@@ -56,6 +61,7 @@ pub(crate) fn transport_and_solve(
     solve: &SolveParams,
     progress: &dyn Progress,
 ) -> Result<Lit> {
+    let mut ray_variance = Vec::new();
     let (transport, solution) = match technique {
         Technique::Stored {
             form_factors,
@@ -63,6 +69,10 @@ pub(crate) fn transport_and_solve(
         } => {
             let t = transport::build(surfaces, form_factors, params, texel_rays, progress)?;
             let s = solve::solve(&t, surfaces.texels, solver, solve, progress)?;
+            if params.ray_variance && form_factors == FormFactors::MonteCarlo {
+                let (texels, sky) = (surfaces.texels, params.sky);
+                ray_variance = error_map::ray_variance(&t, texels, &s.irradiance, sky);
+            }
             (t, s)
         }
         Technique::Gather => solve::gather::solve(surfaces, params, solve, progress)?,
@@ -71,5 +81,6 @@ pub(crate) fn transport_and_solve(
     Ok(Lit {
         transport,
         solution,
+        ray_variance,
     })
 }

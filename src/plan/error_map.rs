@@ -57,33 +57,55 @@ pub(crate) fn gathering_noise(
     sky: Vec3,
     samples: &Samples,
 ) -> Vec<Vec3> {
-    let sky = sky * std::f32::consts::PI;
-    let radiosity = |j: usize| {
-        let emitted = match transport.rows_carry_emission {
-            true => texels.emission[j] * std::f32::consts::PI,
-            false => Vec3::ZERO,
-        };
-        texels.albedo[j] * h[j] + emitted
-    };
     (0..transport.len())
         .map(|i| {
-            let escape = transport.escape[i];
-            let (mut mean, mut square) = (sky * escape, sky * sky * escape);
-            for (j, f) in transport.row(i) {
-                let b = radiosity(j as usize);
-                mean += b * f;
-                square += b * b * f;
-            }
+            let (mean, square) = ray_moments(transport, i, texels, h, sky);
             let k = samples.rays[i].max(1.0);
             let mut variance = (square - mean * mean).max(Vec3::ZERO) / k;
             let lights = samples.light_per_ray * k;
             if lights > 0.0 {
-                let sampled = (transport.direct[i] - sky * escape).max(Vec3::ZERO);
+                let sampled = (transport.direct[i]
+                    - sky * std::f32::consts::PI * transport.escape[i])
+                    .max(Vec3::ZERO);
                 variance += (sampled / lights) * (sampled / lights);
             }
             variance.sqrt()
         })
         .collect()
+}
+
+/// Per row of `rows` (all texels', or one process's part), the variance of the irradiance one gathering ray
+/// returns there, the mean over the channels: [`gathering_noise`]'s `E[X²] − E[X]²` for `K = 1`,
+/// without light samples. Where a texel's rays disagree most, more of them lower the
+/// lightmap's noise most (`plan::spread_rays`).
+pub(crate) fn ray_variance(rows: &Transport, texels: &Texels, h: &[Vec3], sky: Vec3) -> Vec<f32> {
+    use rayon::prelude::*;
+    (0..rows.len())
+        .into_par_iter()
+        .map(|r| {
+            let (mean, square) = ray_moments(rows, r, texels, h, sky);
+            (square - mean * mean).max(Vec3::ZERO).element_sum() / 3.0
+        })
+        .collect()
+}
+
+/// Mean and mean square of what a gathering ray of row `r` of `rows` returns: the radiosity `ρ_j·H_j` (plus `π·Le_j` where rows carry emission) of the texel it hits with
+/// probability `F_ij`, `π·sky` when it escapes.
+fn ray_moments(rows: &Transport, r: usize, texels: &Texels, h: &[Vec3], sky: Vec3) -> (Vec3, Vec3) {
+    let sky = sky * std::f32::consts::PI;
+    let escape = rows.escape[r];
+    let (mut mean, mut square) = (sky * escape, sky * sky * escape);
+    for (j, f) in rows.row(r) {
+        let j = j as usize;
+        let emitted = match rows.rows_carry_emission {
+            true => texels.emission[j] * std::f32::consts::PI,
+            false => Vec3::ZERO,
+        };
+        let b = texels.albedo[j] * h[j] + emitted;
+        mean += b * f;
+        square += b * b * f;
+    }
+    (mean, square)
 }
 
 /// The denoiser's noise model per texel ([`expected_noise`]), for a bake that kept no rows:
