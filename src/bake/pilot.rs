@@ -945,18 +945,17 @@ mod tests {
     #[test]
     fn a_small_budget_casts_a_small_first_batch() {
         // A budget that pays for no point: the sample still casts one batch, of the least
-        // size (the rays of MIN_BATCH gathered points, give or take the last batch), not a
-        // full one.
+        // size (MIN_BATCH points drawn, the rays of those it gathers), not a full one.
         let small = cornell_sample_within(16.0, 0, &[]);
         let full = cornell_sample(16.0, &[]);
         let said = format!(
             "{} rays over {} drawn points, a full batch {} over {}",
             small.rays, small.drawn, full.rays, full.drawn
         );
-        assert!(small.rays >= PER_POINT * MIN_BATCH as u64, "{said}");
-        assert!(small.rays < 2 * PER_POINT * MIN_BATCH as u64, "{said}");
+        assert_eq!(small.drawn, MIN_BATCH, "{said}");
+        assert!(small.rays > 0, "{said}");
+        assert!(small.rays <= PER_POINT * MIN_BATCH as u64, "{said}");
         assert!(full.rays >= PER_POINT * BATCH as u64, "{said}");
-        assert_eq!(small.drawn % MIN_BATCH, 0, "{said}");
     }
 
     /// The spot and directional fixture (punctual lights only), prepared without the

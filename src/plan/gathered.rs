@@ -84,13 +84,13 @@ use crate::trace::Tracer;
 /// Random surface points are drawn in batches of this many (fewer on a small scene: as many
 /// as the budget's rays gather, but at least [`MIN_BATCH`]) ...
 pub(crate) const BATCH: usize = 4096;
-/// ... the least batch: what the first batch gathers whatever the budget.
+/// ... the least batch: what the first batch draws whatever the budget.
 pub(crate) const MIN_BATCH: usize = 1024;
 /// ... until the mean square's two standard errors are within this share of it ...
 pub(crate) const PRECISION: f64 = 0.2;
 /// ... or the error is clearly small next to the target (its upper bound below this share of
 /// it), or the sample's rays exceed its budget (the bake passes half the pilot's; the first
-/// batch's rays are cast whatever the budget), or this many points have been drawn (most of
+/// batch is gathered whatever the budget), or this many points have been drawn (most of
 /// them read, not gathered). Stopping once the upper bound is below the room the target leaves
 /// beside the noise (0.66 of it) was tried: the same bakes on the six small fixtures, with less
 /// planning (two rooms at `draft` 18% → 8% of the bake), but the furnished interior's first
@@ -390,12 +390,14 @@ impl GatheredSample {
             let (_, lo, hi) = sample.relative_error_bounds();
             let stderr = sample.mean_square_total().1;
             let mean_square = sample.mean_square_clamped();
-            // Without earlier light, the first batch's rays are cast whatever the budget: as
-            // many as a batch of points all gathered would cast (a batch gathers fewer).
+            // Without earlier light, the first batch is gathered whatever the budget; past it,
+            // batches while the rays are within the budget. (Until 7 December the first batch
+            // ran on to the rays of as many points all gathered: three batches on a small
+            // scene, where a third of the drawn points gather.)
             let spent = if free > 0 {
                 sample.rays + per_point * batch_points as u64 > runs.budget_rays
             } else {
-                sample.rays >= runs.budget_rays.max(per_point * batch_points as u64)
+                sample.rays >= runs.budget_rays
             };
             if hi < SMALL * runs.target
                 || (mean_square > 0.0 && 2.0 * stderr <= PRECISION * mean_square)
