@@ -333,6 +333,11 @@ pub(crate) fn measure_density(
     )?;
     let seconds = start.elapsed().as_secs_f64();
     let [a, b] = runs.stored(config.transport.indirect_only);
+    // Half the pilot's rays. Also capping it at a tenth of the rays the bake would cast (from
+    // the pair's noise, as `1/√K`) was tried on 7 December: planning's share fell on most
+    // small bakes (the courtyard at `draft` 22–25% → 5–11%), but with less evidence the lamp
+    // room at `draft` seed 3 read 9.17% against its 8% target and the sphere at `high` seed 1
+    // raised its texels ×3 (0.45 → 1.17 s, 1.15% → 1.47%); not kept.
     let (stored, budget) = ([a.as_slice(), b.as_slice()], runs.rays() / 2);
     let target = plan.target_error;
     let own_punctual = runs.take_punctual();
