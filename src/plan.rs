@@ -1006,7 +1006,8 @@ fn texel_rays(texels: &Texels, pilot: &[&[Vec3]], k: u32) -> (Vec<u32>, (usize, 
 /// ([`spread_rays`]), as the point figures floor their relative errors.
 const SPREAD_FLOOR: f32 = 0.05;
 /// Bounds of a texel's rays ([`spread_rays`], the pilots' and the last bake's together) over
-/// the uniform count: a pilot's variance from 16 rays can miss a small bright source.
+/// the uniform count: a variance from 64 rays a run, even its neighbours', can miss a small
+/// bright source.
 const SPREAD_RANGE: (f32, f32) = (0.5, 4.0);
 
 /// Half the side of the window [`neighbour_variance`] averages over, in texels.
@@ -1071,8 +1072,8 @@ struct Spread {
 impl Spread {
     fn reason(&self) -> String {
         format!(
-            "rays where they disagree: {} texels' rays ∝ σ/√(H + 5% of the mean) (σ what one of \
-             the pilot's rays returned, spread; the squared noise weighed by one over the light, \
+            "rays where they disagree: {} texels' rays ∝ σ/√(H + 5% of the mean) (σ the spread of \
+             what one of the pilot's rays returned at the texel's neighbours; the squared noise weighed by one over the light, \
              between what the RMS over the mean and the relative p95 weigh), ×{:.2}…×{:.2} of \
              the uniform count, {} raised, the same rays in all; by the pilot's variances the \
              RMS noise ×{:.2} and the texels' 95th-percentile relative noise ×{:.2} of uniform \

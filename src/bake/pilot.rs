@@ -374,6 +374,17 @@ pub(crate) fn measure_density(
 /// work (the rays aim at the noise after denoising): over seeds 0–3 the Cornell box's p95 stayed
 /// at 4.7% (4.55% before that work) for 11–29% more time, the lamp room's went 4.65% → 4.50%
 /// (4.36%) for 10–25% more time and 146–170 → 179–236 MB; not taken.
+///
+/// Those p95 figures mostly measured the 2048-point references' own noise (71% of the lamp
+/// room's squared point error at `high`). Against references with 16× the paths (65,536 a
+/// point, 0.23–0.28% noise; 7 December, night) the loss is plain and the credit is its cause:
+/// the lamp room at `high`, seeds 0/1, p95 1.7%/1.7% before the cost work (K=448), 2.40%/2.56%
+/// now (K=272/240), 1.61%/1.60% crediting nothing (K=608/576, about 1.9× the time); the
+/// Cornell box at `high` 2.64%/2.79%, 3.02%/2.66%, 2.49%/2.09%. And at the final rays the
+/// denoiser changes nothing a point sees: the lamp room with `--no-denoise` reads 1.28% and
+/// p95 2.43% against 1.27% and 2.40% (its gain is measured on the 64-ray pair, where the range
+/// kernel is wider). Not changed yet: crediting less costs the time the interior's `high` bake
+/// saved, and needs that measured on every scene.
 const DENOISE_GAIN_RANGE: (f32, f32) = (0.5, 1.0);
 
 /// What the bake's denoiser leaves of a pilot pair's noise: each run denoised as the final
