@@ -632,7 +632,8 @@ pub(crate) fn choose_texel_rays(
     plan: &mut Plan,
 ) {
     let n = texels.len();
-    let (mut rays, reduced) = texel_rays(texels, pilot, k);
+    let h = pilot_mean(pilot);
+    let (mut rays, reduced) = texel_rays(texels, &h, k);
     let full = k as u64 * n as u64;
     let cast: u64 = rays.iter().map(|&k| k as u64).sum();
     let mut changed = false;
@@ -646,7 +647,7 @@ pub(crate) fn choose_texel_rays(
         changed = true;
     }
     if let Some((variance, pilot_rays)) = variance
-        && let Some(spread) = spread_rays(texels, pilot, variance, pilot_rays, k, &mut rays)
+        && let Some(spread) = spread_rays(texels, &h, variance, pilot_rays, k, &mut rays)
     {
         plan.reasons.push(spread.reason());
         changed = true;
@@ -966,17 +967,23 @@ fn round_up_quarter_octave(x: f32) -> u32 {
 /// Fewest gathering rays a texel gets.
 pub(crate) const MIN_TEXEL_RAYS: u32 = 16;
 
-/// Gathering rays per texel for the final bake, from the pilot's mean irradiance: a texel's
+/// Per texel, the pilot runs' mean irradiance over the channels.
+fn pilot_mean(pilot: &[&[Vec3]]) -> Vec<f32> {
+    let n = pilot.first().map_or(0, |h| h.len());
+    let runs = pilot.len().max(1) as f32;
+    (0..n)
+        .map(|i| pilot.iter().map(|h| h[i].element_sum() / 3.0).sum::<f32>() / runs)
+        .collect()
+}
+
+/// Gathering rays per texel for the final bake, from the pilot's mean irradiance `h`: a texel's
 /// lightmap noise reaches the rendered image as `ρH/π` next to its emission `Le`, so its relative
 /// error there is the lightmap's times `w = (ρH/π)/(ρH/π + Le)`, and `K·w²` rays keep it level
 /// with a plain texel's. Black texels (ρ = 0) and texels the pilot found unlit (below 10⁻³ of
 /// the mean) get the minimum. Returns the rays and (emitter, black or unlit) texel counts reduced.
-fn texel_rays(texels: &Texels, pilot: &[&[Vec3]], k: u32) -> (Vec<u32>, (usize, usize)) {
+fn texel_rays(texels: &Texels, h: &[f32], k: u32) -> (Vec<u32>, (usize, usize)) {
     let n = texels.len();
     let mean = |v: Vec3| v.element_sum() / 3.0;
-    let h: Vec<f32> = (0..n)
-        .map(|i| pilot.iter().map(|h| mean(h[i])).sum::<f32>() / pilot.len() as f32)
-        .collect();
     let h_mean = h.iter().sum::<f32>() / n.max(1) as f32;
     let floor = MIN_TEXEL_RAYS.min(k);
     let mut reduced = (0, 0);
@@ -1024,33 +1031,15 @@ fn neighbour_variance(texels: &Texels, variance: &[f32], valid: &[bool]) -> Vec<
     (0..texels.len())
         .into_par_iter()
         .map(|i| {
-            let page = texels.page[i] as usize;
-            let size = texels.pages[page];
-            let [x, y] = texels.xy[i];
-            let (p, n) = (texels.position[i], texels.normal[i]);
             let reach = 2.0 * (texels.du[i].length() + texels.dv[i].length());
+            let surface = (0.9, reach * reach);
             let (mut sum, mut count) = (0.0f64, 0u32);
-            for dy in -SPREAD_RADIUS..=SPREAD_RADIUS {
-                for dx in -SPREAD_RADIUS..=SPREAD_RADIUS {
-                    let (nx, ny) = (x as i64 + dx, y as i64 + dy);
-                    let inside = (0..size.width as i64).contains(&nx)
-                        && (0..size.height as i64).contains(&ny);
-                    if (dx, dy) == (0, 0) || !inside {
-                        continue;
-                    }
-                    let j = texels.index[page][(ny * size.width as i64 + nx) as usize];
-                    if j == crate::texels::NO_TEXEL || !valid[j as usize] {
-                        continue;
-                    }
-                    let j = j as usize;
-                    let along = p + texels.du[i] * dx as f32 + texels.dv[i] * dy as f32;
-                    if texels.normal[j].dot(n) >= 0.9 && texels.position[j].distance(along) <= reach
-                    {
-                        sum += f64::from(variance[j].max(0.0));
-                        count += 1;
-                    }
+            texels.for_surface_neighbours(i, SPREAD_RADIUS, valid, surface, |dx, dy, j| {
+                if (dx, dy) != (0, 0) {
+                    sum += f64::from(variance[j].max(0.0));
+                    count += 1;
                 }
-            }
+            });
             match count {
                 0 => variance[i].max(0.0),
                 c => (sum / f64::from(c)) as f32,
@@ -1097,21 +1086,18 @@ impl Spread {
 /// emitters, black or unlit) and valid ones move. `None` when nothing would.
 fn spread_rays(
     texels: &Texels,
-    pilot: &[&[Vec3]],
+    h: &[f32],
     variance: &[f32],
     pilot_rays: f32,
     k: u32,
     rays: &mut [u32],
 ) -> Option<Spread> {
     let n = texels.len();
-    if variance.len() != n || pilot.is_empty() {
+    if variance.len() != n || h.len() != n {
         return None;
     }
     let valid = texels.valid_mask();
-    let gray = |v: Vec3| v.element_sum() / 3.0;
-    let h: Vec<f32> = (0..n)
-        .map(|i| (pilot.iter().map(|h| gray(h[i])).sum::<f32>() / pilot.len() as f32).max(0.0))
-        .collect();
+    let h: Vec<f32> = h.iter().map(|&h| h.max(0.0)).collect();
     let kept: Vec<usize> = (0..n).filter(|&i| valid[i]).collect();
     let mean_h = kept.iter().map(|&i| f64::from(h[i])).sum::<f64>() / kept.len().max(1) as f64;
     let floor = SPREAD_FLOOR * mean_h as f32;
@@ -1412,7 +1398,8 @@ mod tests {
             .collect();
         let mut rays = vec![k; t.len()];
         rays[id(0, 0)] = MIN_TEXEL_RAYS;
-        let spread = spread_rays(&t, &[&h], &variance, pilot_rays, k, &mut rays).unwrap();
+        let spread =
+            spread_rays(&t, &pilot_mean(&[&h]), &variance, pilot_rays, k, &mut rays).unwrap();
         assert_eq!(rays[id(0, 0)], MIN_TEXEL_RAYS, "set by another rule");
         assert_eq!(rays[id(4, 1)], k, "buried");
         assert_eq!(spread.texels, 30);
@@ -1429,7 +1416,7 @@ mod tests {
         // No spread measured anywhere: nothing to move.
         let mut rays = vec![k; t.len()];
         let none = vec![0.0; t.len()];
-        assert!(spread_rays(&t, &[&h], &none, pilot_rays, k, &mut rays).is_none());
+        assert!(spread_rays(&t, &pilot_mean(&[&h]), &none, pilot_rays, k, &mut rays).is_none());
     }
 
     #[test]

@@ -54,7 +54,7 @@ use glam::{DMat3, DVec3, Vec3};
 use rayon::prelude::*;
 
 use crate::config::TransportParams;
-use crate::texels::{NO_TEXEL, Texels};
+use crate::texels::Texels;
 use crate::transport::Transport;
 use crate::{Error, Progress, Result};
 
@@ -231,17 +231,7 @@ fn filter_texel(
     params: &DenoiseParams,
     i: usize,
 ) -> Vec3 {
-    let page = texels.page[i] as usize;
-    let width = texels.pages[page].width as i64;
-    let height = texels.pages[page].height as i64;
-    let index = &texels.index[page];
-    let [xi, yi] = texels.xy[i];
-    let (p_i, n_i, du, dv) = (
-        texels.position[i],
-        texels.normal[i],
-        texels.du[i],
-        texels.dv[i],
-    );
+    let (du, dv) = (texels.du[i], texels.dv[i]);
     let gate2 = (params.gate * (du + dv).length())
         .powi(2)
         .max(f32::MIN_POSITIVE);
@@ -252,48 +242,28 @@ fn filter_texel(
     // Weighted moments of the basis φ = (1, dx, dy): `a = Σ w φφᵀ`, `b_k = Σ w φ_k x_j`.
     let mut a = DMat3::ZERO;
     let mut b = [DVec3::ZERO; 3];
-    for dy in -r..=r {
-        let y = yi as i64 + dy;
-        if !(0..height).contains(&y) {
-            continue;
-        }
-        for dx in -r..=r {
-            let xx = xi as i64 + dx;
-            if !(0..width).contains(&xx) {
-                continue;
-            }
-            let j = index[(y * width + xx) as usize];
-            if j == NO_TEXEL || !valid[j as usize] {
-                continue;
-            }
-            let j = j as usize;
-            let expected = p_i + dx as f32 * du + dy as f32 * dv;
-            if texels.normal[j].dot(n_i) < params.min_cos
-                || texels.position[j].distance_squared(expected) > gate2
-            {
-                continue;
-            }
-            let spatial = -((dx * dx + dy * dy) as f32) * inv_2ss;
-            let diff = guide[j].element_sum() / 3.0 - y_i;
-            let var = c2 * (noise[i] * noise[i] + noise[j] * noise[j]);
-            let range = if diff == 0.0 {
-                0.0
-            } else if var > 0.0 {
-                -diff * diff / (2.0 * var)
-            } else {
-                f32::NEG_INFINITY
-            };
-            let w = (spatial + range).exp();
-            if w.is_finite() && guide[j].is_finite() && x[j].is_finite() {
-                let phi = DVec3::new(1.0, dx as f64, dy as f64);
-                let w = w as f64;
-                a += DMat3::from_cols(phi * (w * phi.x), phi * (w * phi.y), phi * (w * phi.z));
-                for (b_k, phi_k) in b.iter_mut().zip(phi.to_array()) {
-                    *b_k += w * phi_k * x[j].as_dvec3();
-                }
+    let surface = (params.min_cos, gate2);
+    texels.for_surface_neighbours(i, r, valid, surface, |dx, dy, j| {
+        let spatial = -((dx * dx + dy * dy) as f32) * inv_2ss;
+        let diff = guide[j].element_sum() / 3.0 - y_i;
+        let var = c2 * (noise[i] * noise[i] + noise[j] * noise[j]);
+        let range = if diff == 0.0 {
+            0.0
+        } else if var > 0.0 {
+            -diff * diff / (2.0 * var)
+        } else {
+            f32::NEG_INFINITY
+        };
+        let w = (spatial + range).exp();
+        if w.is_finite() && guide[j].is_finite() && x[j].is_finite() {
+            let phi = DVec3::new(1.0, dx as f64, dy as f64);
+            let w = w as f64;
+            a += DMat3::from_cols(phi * (w * phi.x), phi * (w * phi.y), phi * (w * phi.z));
+            for (b_k, phi_k) in b.iter_mut().zip(phi.to_array()) {
+                *b_k += w * phi_k * x[j].as_dvec3();
             }
         }
-    }
+    });
     // The centre always has weight 1, so `weight` ≥ 1 unless the centre itself is non-finite.
     let weight = a.x_axis.x;
     let mean = if weight > 0.0 {
@@ -319,6 +289,7 @@ mod tests {
     use super::*;
     use crate::NoProgress;
     use crate::atlas::PageSize;
+    use crate::texels::NO_TEXEL;
 
     /// A `w × h` flat chart on y = 0 (texel size 0.1), facing up.
     fn flat(w: u32, h: u32) -> Texels {

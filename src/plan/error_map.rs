@@ -74,9 +74,9 @@ pub(crate) fn gathering_noise(
         .collect()
 }
 
-/// Per row of `rows` (all texels', or one process's part), the variance of the irradiance one gathering ray
-/// returns there, the mean over the channels: [`gathering_noise`]'s `E[X²] − E[X]²` for `K = 1`,
-/// without light samples. Where a texel's rays disagree most, more of them lower the
+/// Per row of `rows` (all texels', or one process's part), the variance of the irradiance one
+/// gathering ray returns there, the mean over the channels: [`gathering_noise`]'s
+/// `E[X²] − E[X]²` for `K = 1`, without light samples. Where a texel's rays disagree most, more of them lower the
 /// lightmap's noise most (`plan::spread_rays`).
 pub(crate) fn ray_variance(rows: &Transport, texels: &Texels, h: &[Vec3], sky: Vec3) -> Vec<f32> {
     use rayon::prelude::*;
@@ -89,8 +89,9 @@ pub(crate) fn ray_variance(rows: &Transport, texels: &Texels, h: &[Vec3], sky: V
         .collect()
 }
 
-/// Mean and mean square of what a gathering ray of row `r` of `rows` returns: the radiosity `ρ_j·H_j` (plus `π·Le_j` where rows carry emission) of the texel it hits with
-/// probability `F_ij`, `π·sky` when it escapes.
+/// Mean and mean square of what a gathering ray of row `r` of `rows` returns: the radiosity
+/// `ρ_j·H_j` (plus `π·Le_j` where rows carry emission) of the texel it hits with probability
+/// `F_ij`, `π·sky` when it escapes.
 fn ray_moments(rows: &Transport, r: usize, texels: &Texels, h: &[Vec3], sky: Vec3) -> (Vec3, Vec3) {
     let sky = sky * std::f32::consts::PI;
     let escape = rows.escape[r];
