@@ -39,7 +39,9 @@
 //! - **The denoiser counts** where rays are most of the cost: when a second pair (4×
 //!   `PILOT_RAYS`) ran, each of its runs is denoised as the final lightmap is, and the rays aim
 //!   at what the denoiser leaves (`denoise_gain`: 0.52 on the furnished interior's final atlas
-//!   at `high`, credited within ×½…×1). A pair at 16 rays is not asked: the denoiser's range
+//!   at `high`, credited within ×½…×1). That gain holds at the pair's rays; a last bake beyond
+//!   them is credited less, as the fourth root of the rays (`DENOISE_GAIN_RISE`: the range
+//!   kernel narrows with the noise). A pair at 16 rays is not asked: the denoiser's range
 //!   kernel is twice as wide there, and the gain it showed cost small scenes' p95 error.
 //! - **Fewer rays where the lightmap matters less**: from the pilot's irradiance, an emitter
 //!   texel whose rendered radiance is mostly its own `Le` gets `K·w²` rays (`w` the lightmap's
@@ -187,8 +189,9 @@ pub struct Plan {
     pub overhead_seconds: f64,
     /// Whether the noise at `PILOT_RAYS` behind the rays is the density pilot's.
     pub noise_from_density_pilot: bool,
-    /// What the denoiser leaves of the noise (denoised over raw relative noise of a pilot
-    /// pair); the rays aim at the noise after denoising when it was measured.
+    /// What the denoiser leaves of the noise: measured on a pilot pair (denoised over raw
+    /// relative noise), then, once the rays are chosen, as credited at the bake's rays
+    /// (less beyond the pilot pair's rays, as the fourth root of the rays); the rays aim at the noise after denoising when it was measured.
     pub denoise_gain: Option<f32>,
     /// Weight of each run of a first pilot pair averaged in beside a second
     /// (`choose_rays`): the rays of a run as noisy under the fitted fall `K^−α` as the
@@ -366,6 +369,30 @@ pub(crate) fn needs_second_pilot(first: f32, e: f32) -> bool {
     rays_for_target(PILOT_RAYS as f32, first, 0.5, e) > SECOND_PILOT_ABOVE as f32 && first > 0.0
 }
 
+/// How fast the denoiser's share of the noise rises with the rays beyond the pilot pair it was
+/// measured on: `g(T) = g_pair · (T / T_pair)^¼`, `T` the bake's rays in all (first pairs at
+/// their weight) and `T_pair` the last pair's two runs together, never above 1. The range
+/// kernel is tied to the expected noise (`lightmap::denoise`), so as rays lower the noise it
+/// admits fewer neighbours across the light's own gradients: on a gradient the admitted band
+/// is as wide as the noise, `K^−½`, and the noise left goes as one over the square root of
+/// the neighbours, `K^¼`. Measured 7 December (seed pairs at fixed rays, 32 texels/m,
+/// denoised against raw relative noise): lamp room 0.48 / 0.60 / 0.94 at K = 64 / 256 / 1024
+/// (the rule from 64: 0.60 at 256), two rooms 0.30 / 0.35 / 0.60 (0.36 at 256, 0.50 at
+/// 1024), furnished interior 0.65 / 0.69 / 0.74 at 64 / 128 / 256 (0.65 / 0.78), Cornell box
+/// 0.52 / 0.81 / 0.94 (0.62 at 256: it rises faster there). Crediting the pair's gain at any
+/// `K` aimed the lamp room at `high` at 1.44% after denoising where the rays left about 1.7%,
+/// and its p95 against a 16×-path reference went 1.7% → 2.4% against the build before the
+/// cost work (`bake::pilot::DENOISE_GAIN_RANGE`).
+pub(crate) const DENOISE_GAIN_RISE: f32 = 0.25;
+
+/// The denoiser's gain credited at `ratio` times the rays of the pair that measured `measured`
+/// ([`DENOISE_GAIN_RISE`]); 1 (no credit) when nothing was measured.
+pub(crate) fn denoise_gain_at(measured: Option<f32>, ratio: f32) -> f32 {
+    measured.map_or(1.0, |g| {
+        (g * ratio.max(1.0).powf(DENOISE_GAIN_RISE)).min(1.0)
+    })
+}
+
 /// Step 3, from the pilot's relative noise at [`PILOT_RAYS`] (`first`) and at 4× (`second`,
 /// when [`needs_second_pilot`]): the gathering rays of the bake that completes the last pilot
 /// pair. Returns true when that pair alone reaches the target (no further bake). Expects
@@ -437,16 +464,20 @@ pub(crate) fn choose_rays(
         };
         (pair + first + more).sqrt()
     };
-    let aim = NOISE_SHARE * e / gain;
+    // What the denoiser leaves at the bake's rays: the gain measured on the last pair holds at
+    // the pair's rays together and rises beyond them (see `DENOISE_GAIN_RISE`).
+    let pair_rays = 2.0 * (kp + we);
+    let gain_at = |extra: f32| denoise_gain_at(plan.denoise_gain, (pair_rays + extra) / pair_rays);
+    let aim = NOISE_SHARE * e;
     let reused = 2 * (last_pilot + earlier);
-    let enough = combined(0.0) <= aim;
+    let enough = combined(0.0) * gain_at(0.0) <= aim;
     config.transport.gather_rays = if enough {
         last_pilot
     } else {
         // The fewest rays, on quarter-octave steps, that bring the mean to the aim.
         let cap = RAYS_RANGE.1.saturating_sub(reused).max(RAYS_RANGE.0);
         let mut extra = RAYS_RANGE.0;
-        while extra < cap && combined(extra as f32) > aim {
+        while extra < cap && combined(extra as f32) * gain_at(extra as f32) > aim {
             extra = round_up_quarter_octave(extra as f32 + 1.0);
         }
         extra.min(cap)
@@ -461,6 +492,13 @@ pub(crate) fn choose_rays(
     } else {
         config.transport.gather_rays as f32
     });
+    let measured_gain = plan.denoise_gain;
+    let credited = gain_at(if enough {
+        0.0
+    } else {
+        config.transport.gather_rays as f32
+    });
+    plan.denoise_gain = measured_gain.map(|_| credited);
     plan.predicted_noise = Some(predicted);
     plan.total_rays = Some(total);
     let measured = if second.is_some() {
@@ -489,10 +527,13 @@ pub(crate) fn choose_rays(
             config.transport.gather_rays
         )
     };
-    let denoised = match plan.denoise_gain {
+    let denoised = match measured_gain {
         Some(g) => format!(
-            " before denoising, {:.2}% after (the denoiser left ×{g:.2} of the last pilot pair's noise)",
-            predicted * g * 100.0
+            " before denoising, {:.2}% after (the denoiser left ×{g:.2} of the last pilot \
+             pair's noise; credited ×{credited:.2} at {:.1}× the pair's rays, as its range \
+             kernel narrows with the noise)",
+            predicted * credited * 100.0,
+            (pair_rays + total as f32 - reused as f32) / pair_rays,
         ),
         None => String::new(),
     };
@@ -1353,6 +1394,44 @@ mod tests {
         };
         assert!((plan.predicted_noise.unwrap() - at(8.0, k)).abs() < 1e-5);
         assert!(at(8.0, k) < at(0.0, k));
+    }
+
+    #[test]
+    fn the_denoiser_is_credited_less_as_rays_go_beyond_the_pair_that_measured_it() {
+        // The gain holds at the pair's rays and rises as the fourth root of the rays beyond.
+        assert_eq!(denoise_gain_at(None, 4.0), 1.0);
+        assert_eq!(denoise_gain_at(Some(0.5), 1.0), 0.5);
+        assert_eq!(denoise_gain_at(Some(0.5), 0.5), 0.5);
+        assert!((denoise_gain_at(Some(0.5), 16.0) - 1.0).abs() < 1e-6);
+        assert_eq!(denoise_gain_at(Some(0.8), 16.0), 1.0);
+        let at_4 = denoise_gain_at(Some(0.5), 4.0);
+        assert!((at_4 - 0.5 * 2f32.sqrt()).abs() < 1e-6, "{at_4}");
+
+        // A hard scene (8% at K=16, 2.83% at K=64, falling as K^−0.75) aiming at 2%: the pair
+        // alone (2.0% before denoising) is the bake when the denoiser halves its noise...
+        let n64 = 0.08 / 4f32.powf(0.75);
+        let mut plan = Plan {
+            target_error: 0.02,
+            denoise_gain: Some(0.5),
+            ..Plan::default()
+        };
+        let mut config = BakeConfig::default();
+        assert!(choose_rays(&mut config, &mut plan, 0.08, Some(n64), 0));
+        assert_eq!(plan.denoise_gain, Some(0.5));
+        // ...but where one more run is needed, the gain credited is the one at the bake's rays,
+        // and the rays bring the noise so credited to the aim: more than crediting the
+        // pair's gain at any rays would ask for.
+        plan.target_error = 0.01;
+        plan.denoise_gain = Some(0.5);
+        assert!(!choose_rays(&mut config, &mut plan, 0.08, Some(n64), 0));
+        let total = plan.total_rays.unwrap() as f32;
+        let credited = plan.denoise_gain.unwrap();
+        assert!((credited - denoise_gain_at(Some(0.5), total / 128.0)).abs() < 1e-6);
+        assert!(credited > 0.5);
+        let after = plan.denoised_noise().unwrap();
+        assert!(after <= 0.75 * 0.01, "{after}");
+        let before = plan.predicted_noise.unwrap();
+        assert!(before * 0.5 < 0.75 * 0.01 * 0.9, "{before}");
     }
 
     /// A `w × h` page fully covered by texels facing +z, of unit area, lit by `f(x, y)` at the
