@@ -190,8 +190,9 @@ pub struct Plan {
     /// Whether the noise at `PILOT_RAYS` behind the rays is the density pilot's.
     pub noise_from_density_pilot: bool,
     /// What the denoiser leaves of the noise: measured on a pilot pair (denoised over raw
-    /// relative noise), then, once the rays are chosen, as credited at the bake's rays
-    /// (less beyond the pilot pair's rays, as the fourth root of the rays); the rays aim at the noise after denoising when it was measured.
+    /// relative noise), then, once the rays are chosen, as credited at the bake's rays (less
+    /// beyond the pair's rays, as their fourth root); the rays aim at the noise after
+    /// denoising when it was measured.
     pub denoise_gain: Option<f32>,
     /// Weight of each run of a first pilot pair averaged in beside a second
     /// (`choose_rays`): the rays of a run as noisy under the fitted fall `K^−α` as the
