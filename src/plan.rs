@@ -426,6 +426,12 @@ pub(crate) fn choose_rays(
             alpha = ((first / n1).ln() / 4f32.ln()).clamp(0.5, MAX_EXPONENT);
             (noise, k_pilot) = (n1, 4.0 * k0);
             wanted = rays_for_target(k_pilot, n1 * gain, alpha, e);
+            // Beyond the pair's rays the denoiser is credited less: a few steps settle it (the
+            // credit rises as K^¼, the noise falls at least as K^−½).
+            for _ in 0..8 {
+                let credited = denoise_gain_at(plan.denoise_gain, wanted / (2.0 * k_pilot));
+                wanted = rays_for_target(k_pilot, n1 * credited, alpha, e);
+            }
         } else {
             wanted = 4.0 * k0;
         }
