@@ -383,10 +383,11 @@ pub(crate) fn needs_second_pilot(first: f32, e: f32) -> bool {
 /// 0.35 / 0.60 (0.30 / 0.36 / 0.50), furnished interior 0.65 / 0.69 / 0.74 at 64 / 128 / 256
 /// (0.65 / 0.78), Cornell box 0.52 / 0.65 / 0.81 / 0.94 (it rises from 64 on: its pair-only
 /// bakes are still credited more than they get). Three of four moving 2–7% from 64 to 128 is
-/// why the rule starts at the pair's two runs together, not at one run's rays. Crediting the pair's gain at any
-/// `K` aimed the lamp room at `high` at 1.44% after denoising where the rays left about 1.7%,
-/// and its p95 against a 16×-path reference went 1.7% → 2.4% against the build before the
-/// cost work (`bake::pilot::DENOISE_GAIN_RANGE`).
+/// why the rule starts at the pair's two runs together, not at one run's rays. Crediting the
+/// pair's gain at any `K` aimed the lamp room at `high` at 1.44% after denoising where, by the
+/// gain measured at 256 rays, its rays left about 1.7%, and its p95 against a 16×-path
+/// reference went 1.7% → 2.4% against the build before the cost work
+/// (`bake::pilot::DENOISE_GAIN_RANGE`).
 pub(crate) const DENOISE_GAIN_RISE: f32 = 0.25;
 
 /// The denoiser's gain credited at `ratio` times the rays of the pair that measured `measured`
@@ -492,22 +493,15 @@ pub(crate) fn choose_rays(
         }
         extra.min(cap)
     };
-    let total = if enough {
-        reused
+    let extra = if enough {
+        0
     } else {
-        reused + config.transport.gather_rays
+        config.transport.gather_rays
     };
-    let predicted = combined(if enough {
-        0.0
-    } else {
-        config.transport.gather_rays as f32
-    });
+    let total = reused + extra;
+    let predicted = combined(extra as f32);
     let measured_gain = plan.denoise_gain;
-    let credited = gain_at(if enough {
-        0.0
-    } else {
-        config.transport.gather_rays as f32
-    });
+    let credited = gain_at(extra as f32);
     plan.denoise_gain = measured_gain.map(|_| credited);
     plan.predicted_noise = Some(predicted);
     plan.total_rays = Some(total);
@@ -543,7 +537,7 @@ pub(crate) fn choose_rays(
              pair's noise; credited ×{credited:.2} at {:.1}× the pair's rays, as its range \
              kernel narrows with the noise)",
             predicted * credited * 100.0,
-            (pair_rays + total as f32 - reused as f32) / pair_rays,
+            (pair_rays + extra as f32) / pair_rays,
         ),
         None => String::new(),
     };
