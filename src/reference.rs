@@ -45,6 +45,12 @@
 //! rays through the renderer's pinhole camera gives `baseColor·H/π + Le` per pixel with a
 //! standard error — the image `lightbake render` approximates with the lightmap.
 //!
+//! Probe mode ([`trace_sh`], `reference/probes.rs`): at points of free space, the L2
+//! spherical-harmonic irradiance about a normal that a light probe there would hold (the
+//! projection's irradiance, estimated one direction at a time through the L2 kernel), so baked
+//! probes can be measured without L2's truncation as well as against the true irradiance
+//! ([`points::trace_about`]).
+//!
 //! When to use: to measure a bake's error, in tests and benchmarks. Limits: slow (every texel
 //! needs hundreds of paths for 1–2 % noise); the standard error is itself estimated, and heavy-
 //! tailed paths (a small emitter reached only by a lucky bounce) can understate it at low sample
@@ -69,9 +75,11 @@ use crate::{Error, Progress, Result, atlas, scene};
 
 mod camera;
 pub mod points;
+mod probes;
 
 pub use crate::bake::{Prepared, prepare};
 pub use camera::{View, trace_view};
+pub use probes::trace_sh;
 
 /// Texels per parallel work item (one progress tick each).
 const CHUNK: usize = 64;

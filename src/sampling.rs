@@ -140,6 +140,17 @@ pub(crate) fn power_weight(this: f32, other: f32) -> f32 {
     if d > 0.0 { this / d } else { 0.0 }
 }
 
+/// Uniformly distributed direction on the unit sphere (pdf `1/4π`) from a point of the unit
+/// square: `z = 1 − 2u.x`, azimuth `2π·u.y`.
+#[inline]
+#[must_use]
+pub(crate) fn uniform_sphere(u: Vec2) -> Vec3 {
+    let z = 1.0 - 2.0 * u.x;
+    let r = (1.0 - z * z).max(0.0).sqrt();
+    let phi = std::f32::consts::TAU * u.y;
+    Vec3::new(r * phi.cos(), r * phi.sin(), z)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -35,8 +35,8 @@ use std::path::Path;
 use glam::Vec3;
 use lightbake::probes::measure::{self, SplitError};
 use lightbake::probes::{DEFAULT_REFINE, ProbeParams, Probes};
-use lightbake::reference::ReferenceParams;
 use lightbake::reference::points::{self, Normals, Point};
+use lightbake::reference::{Reference, ReferenceParams};
 use lightbake::trace::Tracer;
 use lightbake::{BakeConfig, Baked, NoProgress};
 
@@ -144,10 +144,22 @@ fn main() {
         )
         .expect("reference")
     };
+    // The L2 projection a probe holds, path-traced at the same points with as many samples.
+    let trace_l2 = |at: &[(Vec3, Vec3)]| {
+        let reference = ReferenceParams {
+            max_samples: samples,
+            seed: 7,
+            no_punctual_direct: indirect_only,
+            ..ReferenceParams::like(&baked.config)
+        };
+        let surfaces = (&baked.scene, &baked.texels, &tracer);
+        lightbake::reference::trace_sh(surfaces, at, &reference, &NoProgress).expect("reference")
+    };
     // The same free-space points for every bake.
     let seed = std::env::var("PROBE_SEED").map_or(3, |s| s.parse().expect("PROBE_SEED"));
     let shared = measure::free_space_points(&baked.scene, &tracer, n, seed);
     let shared_ref = trace(&shared);
+    let shared_l2 = trace_l2(&shared);
     println!(
         "{} free-space points; near field: closer than {near_field:.3} to an emitter",
         shared.len()
@@ -157,11 +169,19 @@ fn main() {
         // the bake's own error).
         let at_probes = at_probes(probes, n);
         let own = trace(&at_probes);
-        for (what, at, r) in [
-            ("at the probes", &at_probes, &own),
-            ("free space", &shared, &shared_ref),
+        let own_l2 = trace_l2(&at_probes);
+        for (what, at, r, l2) in [
+            ("at the probes", &at_probes, &own, &own_l2),
+            ("free space", &shared, &shared_ref, &shared_l2),
         ] {
-            report(refine, what, probes, (baked, &tracer, near_field), at, r);
+            report(
+                refine,
+                what,
+                probes,
+                (baked, &tracer, near_field),
+                at,
+                (r, l2),
+            );
         }
     }
 }
@@ -194,7 +214,7 @@ fn report(
     probes: &Probes,
     (baked, tracer, near_field): (&Baked, &Tracer, f32),
     at: &[(Vec3, Vec3)],
-    r: &lightbake::reference::Reference,
+    (r, l2): (&Reference, &Reference),
 ) {
     let ours: Vec<Vec3> = (at.iter())
         .map(|&(p, n)| probes.irradiance_over_pi(p, n, Some(tracer)))
@@ -215,6 +235,14 @@ fn report(
         100.0 * far,
         100.0 * near_error,
         100.0 * noise,
+    );
+    let e = measure::split_error(&ours, &l2.mean, &l2.std_error, &near);
+    println!(
+        "    against the path tracer's L2 projection: all {:.2}%, far {:.2}%, near {:.2}%; its noise {:.2}%",
+        100.0 * e.all,
+        100.0 * e.far,
+        100.0 * e.near,
+        100.0 * e.noise,
     );
     let mut held_values = None;
     if std::env::var("PROBE_HOLD").is_ok() {

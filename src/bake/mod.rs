@@ -1016,7 +1016,7 @@ fn lay_out_again(
 
 /// The rays a bake cast for its lightmaps: the final transport's and the pilot bakes' not
 /// mixed into it (what a probe budget that follows the bake reads).
-fn lightmap_rays(transport_rays: u64, plan: Option<&Plan>) -> u64 {
+pub(crate) fn lightmap_rays(transport_rays: u64, plan: Option<&Plan>) -> u64 {
     transport_rays + plan.map_or(0, |p| p.discarded_rays)
 }
 

@@ -111,13 +111,13 @@ use glam::{Quat, Vec3};
 use rayon::prelude::*;
 
 use crate::lights::{Emitters, punctual_irradiance, triangle_point};
-use crate::sampling::{Rng, hammersley, power_weight};
+use crate::sampling::{Rng, hammersley, power_weight, uniform_sphere};
 use crate::scene::LightKind;
 use crate::texels::RayEnd;
 use crate::trace::Tracer;
 use crate::transport::Surfaces;
 use crate::{Error, Progress, Result};
-use place::{Placement, uniform_sphere};
+use place::Placement;
 pub use refine::Refinement;
 pub use sh::Sh2;
 
@@ -554,6 +554,34 @@ impl Probes {
 /// fails at once. `input` names the glTF in errors.
 pub(crate) fn check(scene: &crate::scene::Scene, params: &ProbeParams, input: &Path) -> Result<()> {
     place::start(scene, params, input).map(|_| ())
+}
+
+/// Probes for a finished bake, with other parameters than its own (another budget, layout or
+/// rays): the light the bake solved is gathered again without baking the lightmaps anew. With
+/// the bake's own parameters the probes are the ones it made. `input` is the glTF the bake read
+/// (named in errors, e.g. of `from`).
+pub fn for_bake(
+    baked: &crate::Baked,
+    params: &ProbeParams,
+    input: &Path,
+    progress: &dyn Progress,
+) -> Result<Probes> {
+    let tracer = Tracer::new(&baked.scene);
+    let surfaces = Surfaces {
+        scene: &baked.scene,
+        texels: &baked.texels,
+        tracer: &tracer,
+    };
+    let transport = &baked.config.transport;
+    let bake_rays = crate::bake::lightmap_rays(baked.transport.rays, baked.plan.as_ref());
+    let bake_params = (transport.seed, transport.sky, input, bake_rays);
+    bake(
+        surfaces,
+        &baked.solution.irradiance,
+        params,
+        bake_params,
+        progress,
+    )
 }
 
 /// Places probes (`place::place`) and gathers the solved light at them; `h` is the solved

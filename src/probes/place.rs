@@ -37,7 +37,7 @@ use glam::{Quat, Vec2, Vec3};
 use rayon::prelude::*;
 
 use super::{Grid, ProbeParams};
-use crate::sampling::{Rng, hammersley};
+use crate::sampling::{Rng, hammersley, uniform_sphere};
 use crate::scene::{Scene, SceneNode};
 use crate::texels::validity::MAX_BACK;
 use crate::trace::Tracer;
@@ -456,17 +456,6 @@ fn look_around(tracer: &Tracer, p: Vec3, shift: Vec2, reach: f32) -> (u32, Optio
         }
     }
     (back, nearest)
-}
-
-/// Uniformly distributed direction on the unit sphere (pdf `1/4π`) from a point of the unit
-/// square: `z = 1 − 2u.x`, azimuth `2π·u.y`.
-#[inline]
-#[must_use]
-pub(crate) fn uniform_sphere(u: Vec2) -> Vec3 {
-    let z = 1.0 - 2.0 * u.x;
-    let r = (1.0 - z * z).max(0.0).sqrt();
-    let phi = std::f32::consts::TAU * u.y;
-    Vec3::new(r * phi.cos(), r * phi.sin(), z)
 }
 
 #[cfg(test)]

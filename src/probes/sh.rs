@@ -82,6 +82,19 @@ pub fn irradiance_over_pi(c: &Sh2, n: Vec3) -> Vec3 {
     e.max(Vec3::ZERO)
 }
 
+/// `E(n)/π` from the L2 projection of light arriving from one unit direction `d` with flux
+/// density 1, as a function of `t = n·d` (unclamped): the addition theorem sums each band's
+/// `Y_lm(n)·Y_lm(d)` to `(2l + 1)/(4π)·P_l(t)`, so
+/// `k(t) = (1 + 2t + (5/8)(3t² − 1))/(4π)`. `∫ L(d)·k(n·d) dω` is the L2 irradiance over π
+/// of any radiance `L` — what [`irradiance_over_pi`] reads from its projection — which is how
+/// the reference path tracer estimates it one direction at a time
+/// (`crate::reference::trace_sh`). Negative for `t` near −½ (the ringing).
+#[inline]
+#[must_use]
+pub fn kernel(t: f32) -> f32 {
+    (1.0 + 2.0 * t + 0.625 * (3.0 * t * t - 1.0)) / (4.0 * std::f32::consts::PI)
+}
+
 /// `c·s`, coefficient by coefficient.
 #[inline]
 #[must_use]
@@ -180,6 +193,24 @@ mod tests {
         // Along the direction itself: 1/4·(1 + 2 + 5/4)·... = 0.25 + 0.5 + 0.3125 = 1.0625.
         let e0 = irradiance_over_pi(&c, Vec3::Z).x * PI;
         assert!((e0 - (0.25 + 0.5 + 0.3125)).abs() < 1e-3, "{e0}");
+    }
+
+    #[test]
+    fn the_kernel_is_the_irradiance_of_one_projected_direction() {
+        let d = Vec3::new(0.36, 0.48, 0.8);
+        let mut c = [Vec3::ZERO; 9];
+        project(&mut c, d, Vec3::ONE);
+        // Normals where the projection's irradiance is positive (the kernel is unclamped).
+        for n in [d, Vec3::X, Vec3::Y, Vec3::Z, -d] {
+            let e = irradiance_over_pi(&c, n).x;
+            assert!((e - kernel(n.dot(d))).abs() < 1e-5, "{n}: {e}");
+        }
+        // Uniform radiance: ∫ k dω = 1 (only band 0 survives).
+        let n = 1 << 12;
+        let sum: f32 = (0..n)
+            .map(|k| kernel(1.0 - 2.0 * (k as f32 + 0.5) / n as f32) * 4.0 * PI / n as f32)
+            .sum();
+        assert!((sum - 1.0).abs() < 1e-4, "{sum}");
     }
 
     #[test]
