@@ -7,6 +7,7 @@
 //! cargo run --release --example benchmark -- --scene cornell_box --scene furnace
 //! cargo run --release --example benchmark -- --scene furnace --method hierarchical
 //! cargo run --release --example benchmark -- --relight  # only the relight table (large hall)
+//! cargo run --release --example benchmark -- --probes   # only probe error against probe count
 //! cargo run --release --example benchmark -- --directional-only --scene cornell_box
 //! ```
 //!
@@ -46,6 +47,7 @@ use plotters::prelude::*;
 
 mod directional;
 mod font;
+mod probes;
 mod relight;
 mod stability;
 
@@ -794,6 +796,10 @@ fn main() {
         return;
     }
     font::register();
+    if args.iter().any(|a| a == "--probes") {
+        println!("{}", probes::measure_all(&gallery));
+        return;
+    }
 
     let mut rows: Vec<Row> = Vec::new();
     let mut md = String::new();
