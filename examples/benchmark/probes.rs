@@ -181,6 +181,9 @@ fn scene(name: &'static str, path: &Path) -> Vec<Row> {
     rows
 }
 
+/// A chart line: label, value of a row, colour, dashed.
+type Line = (&'static str, fn(&Row) -> f32, RGBColor, bool);
+
 /// Error against probe count, one panel per scene: far and all points, against the true
 /// irradiance (solid) and the L2 projection (dashed); the automatic budget marked.
 fn chart(path: &Path, rows: &[Row]) -> Result<(), Box<dyn std::error::Error>> {
@@ -222,7 +225,7 @@ fn chart(path: &Path, rows: &[Row]) -> Result<(), Box<dyn std::error::Error>> {
             .x_label_formatter(&|v| format!("{:.0}", v.exp2()))
             .y_label_formatter(&|v| format!("{:.0}%", v * 100.0))
             .draw()?;
-        let lines: [(&str, fn(&Row) -> f32, RGBColor, bool); 4] = [
+        let lines: [Line; 4] = [
             (
                 "all points vs irradiance",
                 |r| r.truth.0,
