@@ -142,7 +142,9 @@
 //! a wall, where leaks would show) and reads the written bake there as a renderer does
 //! (`TEXCOORD_1`, bilinear lookup in the EXR page). [`probes`] carries the solved light to
 //! points off the surfaces (what moves), read back through [`render::RenderScene`] and
-//! measured at free-space points by [`reference::points::trace_about`]. [`view`] serves a page that shows a bake in a browser with
+//! measured at free-space points by [`reference::points::trace_about`] (the true irradiance)
+//! and [`reference::trace_sh`] (the L2 projection a probe can hold at best);
+//! [`probes::for_bake`] gathers probes of other parameters for a finished bake. [`view`] serves a page that shows a bake in a browser with
 //! three.js (vendored, offline), loaded exactly as a three.js user would load it, and with
 //! probes a sphere they light, moved by the user.
 //!
