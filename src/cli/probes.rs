@@ -48,7 +48,7 @@ pub fn run(args: &Args) -> Result<()> {
 }
 
 /// The points of a CSV text: (position, unit normal) per line.
-fn parse_points(text: &str) -> Result<Vec<(Vec3, Vec3)>> {
+pub(super) fn parse_points(text: &str) -> Result<Vec<(Vec3, Vec3)>> {
     let mut points = Vec::new();
     for (k, line) in text.lines().enumerate() {
         let line = line.trim();

@@ -9,7 +9,7 @@ use glam::Vec3;
 use lightbake::config::{AutoParams, Keep};
 use lightbake::lightmap::{self, LightmapPages};
 use lightbake::output::{self, Staging};
-use lightbake::reference::points::Strip;
+use lightbake::reference::points::{Normals, Point, Strip};
 use lightbake::reference::{self, ReferenceParams};
 use lightbake::render::Image;
 use lightbake::{BakeConfig, Progress, texels};
@@ -46,6 +46,15 @@ pub struct Args {
     /// junction strip along a wall, a texel wide; as `compare --strip` selects).
     #[arg(long, value_name = "X,Y,Z,NX,NY,NZ,W", requires = "points")]
     strip: Option<Strip>,
+    /// Path-trace the light at points off the surfaces (lines x,y,z,nx,ny,nz, as `lightbake
+    /// probes --at` reads them) instead of the texels: per point the irradiance over π about
+    /// its normal, and the L2 projection of it a light probe can hold; -o is a CSV file.
+    #[arg(long, value_name = "FILE.csv", conflicts_with_all = ["view", "points"])]
+    probes_at: Option<PathBuf>,
+    /// With --probes-at, leave out punctual lights' direct light (match a bake made with
+    /// --probes-indirect-only).
+    #[arg(long, requires = "probes_at")]
+    probes_indirect_only: bool,
     #[command(flatten)]
     camera: ViewArgs,
     /// Exposure of a --view PNG in stops (ignored for EXR).
@@ -116,7 +125,14 @@ normal, H/π, standard error, unit shading normal). Compare bakes with it:
   lightbake compare baked/scene.gltf --points points.csv
 With --strip, every point lies in the strip (the dark side of a wall, one texel wide):
   lightbake reference two_rooms.gltf --points 2048 --strip 0,0,0,1,0,0,0.03 -o strip.csv
-  lightbake compare baked/two_rooms.gltf --points strip.csv";
+  lightbake compare baked/two_rooms.gltf --points strip.csv
+
+With --probes-at FILE.csv (lines x,y,z,nx,ny,nz, world space), -o is a CSV file: per point,
+in the input's order, the path-traced irradiance over π about its normal (r,g,b, what a surface
+there receives) and the irradiance of its L2 projection (l2_r,l2_g,l2_b, what a light probe there
+can hold at best), each with its standard error, --spp paths each. Check a bake's probes with it:
+  lightbake probes out/scene.gltf --at points.csv > probes.csv
+  lightbake reference scene.gltf --probes-at points.csv --spp 4096 -o reference.csv";
 
 impl Args {
     fn config(&self) -> BakeConfig {
@@ -163,6 +179,9 @@ pub fn run(args: &Args) -> Result<()> {
     }
     if let Some(n) = args.points {
         return points(args, n, &config, &params);
+    }
+    if let Some(at) = &args.probes_at {
+        return probes_at(args, at, &config, &params);
     }
     if args.camera.any() {
         bail!("--camera, --eye, --target, --fov and --size need --view");
@@ -287,6 +306,95 @@ fn points(args: &Args, n: usize, config: &BakeConfig, params: &ReferenceParams) 
             traced.rms_rel_error * 100.0,
             traced.stop.reason(),
             traced.seconds
+        );
+        println!("wrote {}", args.output.display());
+    }
+    Ok(())
+}
+
+/// `--probes-at`: the light at free points, as the probes' yardstick (CSV).
+fn probes_at(
+    args: &Args,
+    at: &std::path::Path,
+    config: &BakeConfig,
+    params: &ReferenceParams,
+) -> Result<()> {
+    let text =
+        std::fs::read_to_string(at).with_context(|| format!("reading {} failed", at.display()))?;
+    let at_points =
+        super::probes::parse_points(&text).with_context(|| format!("in {}", at.display()))?;
+    let params = ReferenceParams {
+        no_punctual_direct: args.probes_indirect_only,
+        ..params.clone()
+    };
+    let bars = Bars::new(args.run.quiet);
+    let p = reference::prepare(&args.scene, config, &bars)
+        .with_context(|| format!("loading {} failed", args.scene.display()))?;
+    let surfaces = (&p.scene, &p.texels, &p.tracer);
+    let points: Vec<Point> = (at_points.iter())
+        .map(|&(position, normal)| Point {
+            position,
+            normal,
+            shading_normal: normal,
+        })
+        .collect();
+    let traced = || -> lightbake::Result<_> {
+        let truth =
+            reference::points::trace_about(surfaces, &points, Normals::Shading, &params, &bars)?;
+        let l2 = reference::trace_sh(surfaces, &at_points, &params, &bars)?;
+        Ok((truth, l2))
+    };
+    let (truth, l2) =
+        traced().with_context(|| format!("tracing points of {} failed", args.scene.display()))?;
+    if bars.aborted() {
+        bail!("aborted");
+    }
+    let mut csv = format!(
+        "# lightbake reference --probes-at {}: {} paths per point\n\
+         x,y,z,nx,ny,nz,r,g,b,se_r,se_g,se_b,l2_r,l2_g,l2_b,l2_se_r,l2_se_g,l2_se_b\n",
+        at.display(),
+        truth.samples
+    );
+    for (k, (x, n)) in at_points.iter().enumerate() {
+        let values = [
+            truth.mean[k],
+            truth.std_error[k],
+            l2.mean[k],
+            l2.std_error[k],
+        ];
+        let fields: Vec<String> = (values.iter().flat_map(|v| v.to_array()))
+            .map(|c| c.to_string())
+            .collect();
+        csv.push_str(&format!(
+            "{},{},{},{},{},{},{}\n",
+            x.x,
+            x.y,
+            x.z,
+            n.x,
+            n.y,
+            n.z,
+            fields.join(",")
+        ));
+    }
+    // Written under a temporary name and renamed, never over the input.
+    let dir = (args.output.parent())
+        .filter(|d| !d.as_os_str().is_empty())
+        .unwrap_or(std::path::Path::new("."));
+    let mut staging = Staging::new(dir, std::slice::from_ref(&args.scene))?;
+    let name = (args.output.file_name())
+        .and_then(|f| f.to_str())
+        .context("-o must name a file")?;
+    staging.write(name, csv.as_bytes())?;
+    staging.commit()?;
+    if !args.run.quiet {
+        println!(
+            "{} points, {} paths per point, relative RMS standard error {:.2}% (irradiance) and {:.2}% (L2), {:.2} M rays, {:.2}s",
+            at_points.len(),
+            truth.samples,
+            truth.rms_rel_error * 100.0,
+            l2.rms_rel_error * 100.0,
+            (truth.rays + l2.rays) as f64 * 1e-6,
+            truth.seconds + l2.seconds
         );
         println!("wrote {}", args.output.display());
     }
