@@ -26,11 +26,7 @@ fn reference_at(
     samples: u32,
 ) -> (Vec<Vec3>, Vec<Vec3>) {
     let points: Vec<Point> = (at.iter())
-        .map(|&(position, normal)| Point {
-            position,
-            normal,
-            shading_normal: normal,
-        })
+        .map(|&(position, normal)| Point::free(position, normal))
         .collect();
     let params = ReferenceParams {
         max_samples: samples,

@@ -127,11 +127,7 @@ fn scene(name: &'static str, path: &Path) -> Vec<Row> {
     let surfaces = (&baked.scene, &baked.texels, &tracer);
     let t = Instant::now();
     let pts: Vec<Point> = (at.iter())
-        .map(|&(position, normal)| Point {
-            position,
-            normal,
-            shading_normal: normal,
-        })
+        .map(|&(position, normal)| Point::free(position, normal))
         .collect();
     let truth = points::trace_about(surfaces, &pts, Normals::Shading, &params, &NoProgress)
         .expect("reference");

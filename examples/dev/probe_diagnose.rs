@@ -128,19 +128,11 @@ fn main() {
     // Reference at the points, then at every point's corners about the point's normal.
     let mut pts: Vec<Point> = at
         .iter()
-        .map(|&(position, normal)| Point {
-            position,
-            normal,
-            shading_normal: normal,
-        })
+        .map(|&(position, normal)| Point::free(position, normal))
         .collect();
     for (k, &(_, normal)) in at.iter().enumerate() {
         for &(q, _, _) in &corners[k] {
-            pts.push(Point {
-                position: probes.position[q],
-                normal,
-                shading_normal: normal,
-            });
+            pts.push(Point::free(probes.position[q], normal));
         }
     }
     let reference = ReferenceParams {

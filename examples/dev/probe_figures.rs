@@ -123,11 +123,7 @@ fn main() {
     let near_field = measure::near_field(&baked.scene, bakes[0].2.budget);
     let trace = |at: &[(Vec3, Vec3)]| {
         let pts: Vec<Point> = (at.iter())
-            .map(|&(position, normal)| Point {
-                position,
-                normal,
-                shading_normal: normal,
-            })
+            .map(|&(position, normal)| Point::free(position, normal))
             .collect();
         let reference = ReferenceParams {
             max_samples: samples,

@@ -332,11 +332,7 @@ fn probes_at(
         .with_context(|| format!("loading {} failed", args.scene.display()))?;
     let surfaces = (&p.scene, &p.texels, &p.tracer);
     let points: Vec<Point> = (at_points.iter())
-        .map(|&(position, normal)| Point {
-            position,
-            normal,
-            shading_normal: normal,
-        })
+        .map(|&(position, normal)| Point::free(position, normal))
         .collect();
     let traced = || -> lightbake::Result<_> {
         let truth =

@@ -105,6 +105,19 @@ pub struct Point {
     pub shading_normal: Vec3,
 }
 
+impl Point {
+    /// A point off the surfaces (free space, where a probe is read) about a unit normal: the
+    /// face's and the shading normal are both `normal`.
+    #[must_use]
+    pub fn free(position: Vec3, normal: Vec3) -> Point {
+        Point {
+            position,
+            normal,
+            shading_normal: normal,
+        }
+    }
+}
+
 /// Visible points drawn on a scene's surfaces.
 #[derive(Clone, Debug, Default)]
 pub struct PointSet {
