@@ -19,12 +19,12 @@
 //!
 //! Each sample at `(x, n)` is one direction `ω` — cosine-distributed about `n` or uniform over
 //! the sphere, even odds (the kernel is large in front of `n`, small and partly negative behind;
-//! on `two_rooms`' free-space points the mixture's noise is 0.7× the sphere's alone) — and one light
-//! sample of the small emitters, combined by the power heuristic (as the probes' gather and the
-//! texel mode do); where `ω` hits a texel `j` from the front, `L_in = Le_j` (MIS-weighted) plus `ρ_j` times
-//! one path of the texel mode's estimator of `H/π` started there (next-event estimation at every
-//! vertex, Russian roulette); rays that escape see the sky, the back of a single-sided surface
-//! absorbs. Punctual lights add `F·k(n·l)` (their flux density `F` along their direction `l`)
+//! on `two_rooms`' free-space points the mixture's noise is 0.7× the sphere's alone) — and one
+//! light sample of the small emitters, combined by the power heuristic (as the probes' gather
+//! and the texel mode do); where `ω` hits a texel `j` from the front, `L_in = Le_j`
+//! (MIS-weighted) plus `ρ_j` times one path of the texel mode's estimator of `H/π` started
+//! there (next-event estimation at every vertex, Russian roulette); rays that escape see the
+//! sky, the back of a single-sided surface absorbs. Punctual lights add `F·k(n·l)` (their flux density `F` along their direction `l`)
 //! unless `no_punctual_direct`. Light reaching `x` directly from emitters and the sky always
 //! counts, as in the probes. Like the probes' gather and the texel mode, hits read the texels'
 //! `ρ` and `Le`, so the difference is the probes' error, not texture resolution. Random streams
