@@ -246,10 +246,15 @@ fn chart(path: &Path, rows: &[Row]) -> Result<(), Box<dyn std::error::Error>> {
             let pts: Vec<(f64, f64)> = (mine.iter()).map(|r| (x(r), f64::from(value(r)))).collect();
             let style = color.stroke_width(2);
             if dashed {
+                // The legend's sample dashed too: two short strokes.
                 chart
                     .draw_series(DashedLineSeries::new(pts.clone(), 8, 5, style))?
                     .label(label)
-                    .legend(move |(x, y)| PathElement::new([(x, y), (x + 18, y)], style));
+                    .legend(move |(x, y)| {
+                        EmptyElement::at((x, y))
+                            + PathElement::new([(0, 0), (7, 0)], style)
+                            + PathElement::new([(11, 0), (18, 0)], style)
+                    });
             } else {
                 chart
                     .draw_series(LineSeries::new(pts.clone(), style))?
