@@ -48,8 +48,9 @@ pub struct Args {
     strip: Option<Strip>,
     /// Path-trace the light at points off the surfaces (lines x,y,z,nx,ny,nz, as `lightbake
     /// probes --at` reads them) instead of the texels: per point the irradiance over π about
-    /// its normal, and the L2 projection of it a light probe can hold; -o is a CSV file.
-    #[arg(long, value_name = "FILE.csv", conflicts_with_all = ["view", "points"])]
+    /// its normal, and the L2 projection of it a light probe can hold; -o is a CSV file. Not
+    /// with --indirect-only (probes keep the light reaching them directly from emitters).
+    #[arg(long, value_name = "FILE.csv", conflicts_with_all = ["view", "points", "indirect_only"])]
     probes_at: Option<PathBuf>,
     /// With --probes-at, leave out punctual lights' direct light (match a bake made with
     /// --probes-indirect-only).
