@@ -121,34 +121,22 @@ fn main() {
     let baked = &bakes[0].1;
     let tracer = Tracer::new(&baked.scene);
     let near_field = measure::near_field(&baked.scene, bakes[0].2.budget);
+    let reference = ReferenceParams {
+        max_samples: samples,
+        seed: 7,
+        no_punctual_direct: indirect_only,
+        ..ReferenceParams::like(&baked.config)
+    };
+    let surfaces = (&baked.scene, &baked.texels, &tracer);
     let trace = |at: &[(Vec3, Vec3)]| {
         let pts: Vec<Point> = (at.iter())
             .map(|&(position, normal)| Point::free(position, normal))
             .collect();
-        let reference = ReferenceParams {
-            max_samples: samples,
-            seed: 7,
-            no_punctual_direct: indirect_only,
-            ..ReferenceParams::like(&baked.config)
-        };
-        points::trace_about(
-            (&baked.scene, &baked.texels, &tracer),
-            &pts,
-            Normals::Shading,
-            &reference,
-            &NoProgress,
-        )
-        .expect("reference")
+        points::trace_about(surfaces, &pts, Normals::Shading, &reference, &NoProgress)
+            .expect("reference")
     };
     // The L2 projection a probe holds, path-traced at the same points with as many samples.
     let trace_l2 = |at: &[(Vec3, Vec3)]| {
-        let reference = ReferenceParams {
-            max_samples: samples,
-            seed: 7,
-            no_punctual_direct: indirect_only,
-            ..ReferenceParams::like(&baked.config)
-        };
-        let surfaces = (&baked.scene, &baked.texels, &tracer);
         lightbake::reference::trace_sh(surfaces, at, &reference, &NoProgress).expect("reference")
     };
     // The same free-space points for every bake.

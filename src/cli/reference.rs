@@ -335,14 +335,10 @@ fn probes_at(
     let points: Vec<Point> = (at_points.iter())
         .map(|&(position, normal)| Point::free(position, normal))
         .collect();
-    let traced = || -> lightbake::Result<_> {
-        let truth =
-            reference::points::trace_about(surfaces, &points, Normals::Shading, &params, &bars)?;
-        let l2 = reference::trace_sh(surfaces, &at_points, &params, &bars)?;
-        Ok((truth, l2))
-    };
-    let (truth, l2) =
-        traced().with_context(|| format!("tracing points of {} failed", args.scene.display()))?;
+    let failed = || format!("tracing points of {} failed", args.scene.display());
+    let truth = reference::points::trace_about(surfaces, &points, Normals::Shading, &params, &bars)
+        .with_context(failed)?;
+    let l2 = reference::trace_sh(surfaces, &at_points, &params, &bars).with_context(failed)?;
     if bars.aborted() {
         bail!("aborted");
     }
@@ -353,25 +349,19 @@ fn probes_at(
         truth.samples
     );
     for (k, (x, n)) in at_points.iter().enumerate() {
-        let values = [
+        let row = [
+            *x,
+            *n,
             truth.mean[k],
             truth.std_error[k],
             l2.mean[k],
             l2.std_error[k],
         ];
-        let fields: Vec<String> = (values.iter().flat_map(|v| v.to_array()))
+        let fields: Vec<String> = (row.iter().flat_map(|v| v.to_array()))
             .map(|c| c.to_string())
             .collect();
-        csv.push_str(&format!(
-            "{},{},{},{},{},{},{}\n",
-            x.x,
-            x.y,
-            x.z,
-            n.x,
-            n.y,
-            n.z,
-            fields.join(",")
-        ));
+        csv.push_str(&fields.join(","));
+        csv.push('\n');
     }
     // Written under a temporary name and renamed, never over the input.
     let dir = (args.output.parent())
