@@ -6,8 +6,10 @@
 //! cargo run --release --example density_figures -- --from CSV CHART.png
 //! ```
 //!
-//! `QUALITIES` is a comma-separated list of presets (`draft,medium,high`); `--seed N` bakes with
-//! that seed (the plan is drawn from it: run several to see a change beside the seed spread).
+//! `QUALITIES` is a comma-separated list of presets (`draft,medium,high`), each optionally with
+//! its own target (`high@0.014`: `--quality high --target-error 0.014`, both binaries; a few
+//! of them trace each binary's error-against-time front); `--seed N` bakes with that seed (the
+//! plan is drawn from it: run several to see a change beside the seed spread).
 //! For each scene the point reference `REFS/<stem>.csv` is read (written by `lightbake reference
 //! SCENE --points N`); when missing it is computed (2048 points, to 1% noise or 4096 paths) and
 //! stored there. Each binary bakes with `bake SCENE --quality Q` under `/usr/bin/time` (wall seconds, peak resident
@@ -18,8 +20,10 @@
 //! each bake's view (`render`) and compares 4×4-pixel block means (`compare --view`, the
 //! reference's noise taken out). The share of each bake's wall time spent planning on work the
 //! result does not contain (density pilot, discarded pilot pairs, lookup-error samples) is
-//! read from its summary line. Prints a Markdown table, writes `OUT/density_figures.csv`
-//! and `OUT/density_before_after.png` (point error against time, one panel per scene).
+//! read from its summary line. Prints a Markdown table, writes `OUT/density_figures.csv`,
+//! `OUT/density_before_after.png` (point error against time, one panel per scene) and
+//! `OUT/density_before_after_p95.png` (the p95 alike). `--from CSV CHART.png` draws both again
+//! from a CSV (the p95's beside it, `_p95` added to its name).
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -63,7 +67,7 @@ fn main() {
         && from == "--from"
     {
         let rows = read_csv(&std::fs::read_to_string(csv).expect("CSV"));
-        chart(Path::new(png), &rows).expect("chart");
+        charts(Path::new(png), &rows);
         return;
     }
     let [out, refs, old, new, qualities, scenes @ ..] = &args[..] else {
@@ -82,19 +86,26 @@ fn main() {
         let stem = input.file_stem().unwrap().to_string_lossy().to_string();
         let reference = point_reference(input, &refs.join(format!("{stem}.csv")));
         let view_reference = view_reference(new, input, &refs.join(format!("{stem}_view.exr")));
-        for quality in qualities.split(',') {
-            let target = lightbake::config::AutoParams::for_preset(quality).expect("quality");
+        for entry in qualities.split(',') {
+            let (quality, aim) = entry
+                .split_once('@')
+                .map_or((entry, None), |(q, t)| (q, Some(t)));
+            let target = aim.map_or_else(
+                || lightbake::config::AutoParams::for_preset(quality).expect("quality"),
+                |t| t.parse().expect("a target error"),
+            );
             for (binary, bin) in [("before", old), ("after", new)] {
-                let dir = out.join(format!("{stem}_{quality}_{binary}"));
+                let dir = out.join(format!("{stem}_{entry}_{binary}"));
                 let _ = std::fs::remove_dir_all(&dir);
-                let (seconds, peak_mb, planning) = bake(bin, input, &dir, quality, seed.as_deref());
+                let (seconds, peak_mb, planning) =
+                    bake(bin, input, &dir, quality, aim, seed.as_deref());
                 let baked = baked_file(&dir, &stem);
                 let render = RenderScene::load(&baked).expect("load the bake");
                 let c = points::compare(&render, &reference);
                 let view = view_error(new, &baked, &dir.join("view.exr"), &view_reference);
                 let row = Row {
                     scene: stem.clone(),
-                    quality: quality.to_string(),
+                    quality: entry.to_string(),
                     binary,
                     seconds,
                     peak_mb,
@@ -106,7 +117,7 @@ fn main() {
                     planning,
                 };
                 println!(
-                    "| {} | {} | {:.0}% | {} | {:.2} | {:.0} | {:.2}%{} | {:.1}% | {:.2}% | {:.2}% | {:.0}% |",
+                    "| {} | {} | {:.1}% | {} | {:.2} | {:.0} | {:.2}%{} | {:.1}% | {:.2}% | {:.2}% | {:.0}% |",
                     row.scene,
                     row.quality,
                     target * 100.0,
@@ -144,7 +155,17 @@ fn main() {
         );
     }
     std::fs::write(out.join("density_figures.csv"), csv).expect("write CSV");
-    chart(&out.join("density_before_after.png"), &rows).expect("chart");
+    charts(&out.join("density_before_after.png"), &rows);
+}
+
+/// Point error against time at `png`, and the p95 alike beside it (`_p95` added to its name).
+fn charts(png: &Path, rows: &[Row]) {
+    chart(png, rows, Metric::Rmse).expect("chart");
+    let p95 = png.with_file_name(format!(
+        "{}_p95.png",
+        png.file_stem().unwrap().to_string_lossy()
+    ));
+    chart(&p95, rows, Metric::P95).expect("chart");
 }
 
 /// Rows of a `density_figures.csv`.
@@ -247,13 +268,21 @@ fn run(command: &mut Command) -> String {
 /// Bakes with `bin` under `/usr/bin/time`; wall seconds, peak resident memory (MB) and the
 /// share of the bake spent planning (from the summary line, printed when not `--quiet`; NaN
 /// for a binary that does not print it).
-fn bake(bin: &str, input: &Path, dir: &Path, quality: &str, seed: Option<&str>) -> (f64, f64, f32) {
+fn bake(
+    bin: &str,
+    input: &Path,
+    dir: &Path,
+    quality: &str,
+    target: Option<&str>,
+    seed: Option<&str>,
+) -> (f64, f64, f32) {
     let output = Command::new("/usr/bin/time")
         .args(["-f", "%e %M", bin, "bake"])
         .arg(input)
         .arg("-o")
         .arg(dir)
         .args(["--quality", quality])
+        .args(target.map(|t| ["--target-error", t]).iter().flatten())
         .args(seed.map(|s| ["--seed", s]).iter().flatten())
         .output()
         .expect("run the bake");
@@ -293,8 +322,27 @@ fn baked_file(dir: &Path, stem: &str) -> PathBuf {
         .expect("baked file")
 }
 
-/// Point error against wall time, one panel per scene: before and after, one point per preset.
-fn chart(path: &Path, rows: &[Row]) -> Result<(), Box<dyn std::error::Error>> {
+/// What a chart plots against wall time.
+#[derive(Clone, Copy)]
+enum Metric {
+    /// Relative RMSE at the points, the reference's noise out (the target's measure).
+    Rmse,
+    /// The 95th percentile of the points' relative errors.
+    P95,
+}
+
+impl Metric {
+    fn of(self, row: &Row) -> f64 {
+        f64::from(match self {
+            Metric::Rmse => row.point,
+            Metric::P95 => row.p95,
+        })
+    }
+}
+
+/// `metric` against wall time, one panel per scene: before and after, one point per preset
+/// (or per target), joined in order of time.
+fn chart(path: &Path, rows: &[Row], metric: Metric) -> Result<(), Box<dyn std::error::Error>> {
     font::register();
     let mut scenes: Vec<&str> = rows.iter().map(|r| r.scene.as_str()).collect();
     scenes.dedup();
@@ -309,11 +357,12 @@ fn chart(path: &Path, rows: &[Row]) -> Result<(), Box<dyn std::error::Error>> {
             (a.min(r.seconds), b.max(r.seconds))
         });
         let (e0, e1) = mine.iter().fold((f64::MAX, f64::MIN), |(a, b), r| {
-            let e = f64::from(r.point).max(1e-4);
-            (
-                a.min(e.min(f64::from(r.target))),
-                b.max(e.max(f64::from(r.target))),
-            )
+            let e = metric.of(r).max(1e-4);
+            let t = match metric {
+                Metric::Rmse => f64::from(r.target),
+                Metric::P95 => e,
+            };
+            (a.min(e.min(t)), b.max(e.max(t)))
         });
         let mut chart = ChartBuilder::on(panel)
             .caption(*scene, ("sans-serif", 18))
@@ -321,14 +370,17 @@ fn chart(path: &Path, rows: &[Row]) -> Result<(), Box<dyn std::error::Error>> {
             .x_label_area_size(32)
             .y_label_area_size(52)
             .build_cartesian_2d(
-                (t0 * 0.7..t1 * 1.4).log_scale(),
-                (e0 * 0.7..e1 * 1.4).log_scale(),
+                (t0 * 0.7..t1 * 1.4).log_scale().base(2.0),
+                (e0 * 0.85)..(e1 * 1.1),
             )?;
         chart
             .configure_mesh()
             .x_desc("wall time (s)")
-            .y_desc("point RMSE")
-            .x_labels(6)
+            .y_desc(match metric {
+                Metric::Rmse => "point RMSE",
+                Metric::P95 => "p95 point error",
+            })
+            .x_labels(12)
             .y_labels(8)
             .x_label_formatter(&|v| format!("{}", (v * 100.0).round() / 100.0))
             .y_label_formatter(&|v| format!("{:.1}%", v * 100.0))
@@ -337,11 +389,12 @@ fn chart(path: &Path, rows: &[Row]) -> Result<(), Box<dyn std::error::Error>> {
             ("before", RGBColor(150, 150, 150)),
             ("after", RGBColor(31, 119, 180)),
         ] {
-            let pts: Vec<(f64, f64)> = mine
+            let mut pts: Vec<(f64, f64)> = mine
                 .iter()
                 .filter(|r| r.binary == binary)
-                .map(|r| (r.seconds, f64::from(r.point)))
+                .map(|r| (r.seconds, metric.of(r)))
                 .collect();
+            pts.sort_by(|a, b| a.0.total_cmp(&b.0));
             chart
                 .draw_series(LineSeries::new(pts.clone(), color.stroke_width(2)))?
                 .label(binary)
@@ -349,9 +402,18 @@ fn chart(path: &Path, rows: &[Row]) -> Result<(), Box<dyn std::error::Error>> {
                     PathElement::new([(x, y), (x + 18, y)], color.stroke_width(2))
                 });
             chart.draw_series(pts.iter().map(|&p| Circle::new(p, 4, color.filled())))?;
+            // A preset at its own target (no `@`): ringed, so the front shows where it stops.
+            chart.draw_series(
+                mine.iter()
+                    .filter(|r| r.binary == binary && !r.quality.contains('@'))
+                    .map(|r| Circle::new((r.seconds, metric.of(r)), 8, color.stroke_width(2))),
+            )?;
         }
-        // The preset targets, as short dashes at the left edge.
-        for r in mine.iter().filter(|r| r.binary == "after") {
+        // The targets (of the RMSE: the p95 has none), as dashed lines across.
+        for r in mine
+            .iter()
+            .filter(|r| r.binary == "after" && matches!(metric, Metric::Rmse))
+        {
             let y = f64::from(r.target);
             chart.draw_series(DashedLineSeries::new(
                 [(t0 * 0.7, y), (t1 * 1.4, y)],

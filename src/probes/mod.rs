@@ -335,41 +335,70 @@ impl Probes {
     /// The interpolated coefficients at `p` (see the module docs); `visible(q)` says whether
     /// the point sees a probe at `q` (always true without ray queries).
     pub fn sh_at(&self, p: Vec3, visible: impl FnMut(Vec3) -> bool) -> Sh2 {
+        let mut sum = [Vec3::ZERO; 9];
+        self.weights_at(p, visible, |q, w| {
+            sum = sh::add(&sum, &sh::scaled(&self.sh[q], w));
+        });
+        sum
+    }
+
+    /// The probes [`Probes::sh_at`] blends at `p` and their weights, `emit(q, w)` once per
+    /// probe and part (a probe may come twice: the slab's continuation weighs the outer cell's
+    /// probes twice and subtracts those a step in). The lookup is `Σ w·sh[q]`, linear in the
+    /// probes' coefficients: a tool can precompute it, or fit the coefficients to light
+    /// gathered between probes (the `probe_fit` experiment; the guide's light-probe page).
+    /// Nothing is emitted when there are no probes.
+    pub fn weights_at(
+        &self,
+        p: Vec3,
+        visible: impl FnMut(Vec3) -> bool,
+        emit: impl FnMut(usize, f32),
+    ) {
         if self.is_empty() {
-            return [Vec3::ZERO; 9];
+            return;
         }
         match &self.grid {
-            Some(grid) => self.sh_on_grid(grid, p, visible),
-            None => self.sh_from_nearest(p, visible),
+            Some(grid) => self.weights_on_grid(grid, p, visible, emit),
+            None => self.weights_from_nearest(p, visible, emit),
         }
     }
 
-    /// [`Probes::sh_at`] on a grid: inside the box of the grid's positions, the cell's (or
+    /// [`Probes::weights_at`] on a grid: inside the box of the grid's positions, the cell's (or
     /// sub-cell's) corners; beyond a face of that box — the slab between the outermost probes
     /// and the walls — the outer cell's light continued linearly, `2·v(x) − v(x − d)` for `x`
     /// the nearest point of the box and `d` the step out (at most [`BEYOND`] of a spacing along
     /// each axis, the value held farther out).
-    fn sh_on_grid(&self, grid: &Grid, p: Vec3, mut visible: impl FnMut(Vec3) -> bool) -> Sh2 {
+    fn weights_on_grid(
+        &self,
+        grid: &Grid,
+        p: Vec3,
+        mut visible: impl FnMut(Vec3) -> bool,
+        mut emit: impl FnMut(usize, f32),
+    ) {
         let g = grid.local(p);
         let last = Vec3::from(grid.count.map(|c| c.saturating_sub(1) as f32));
         let x = g.clamp(Vec3::ZERO, last);
         let d = (g - x).clamp(Vec3::splat(-BEYOND), Vec3::splat(BEYOND));
         if d == Vec3::ZERO {
-            return self.sh_in_box(grid, p, visible);
+            return self.weights_in_box(grid, p, visible, emit);
         }
         // Holding the face's value instead left the slab reading light from a fifth of a
         // spacing in, where it is weaker beside an emitter and differs beside a wall.
         let world = |l: Vec3| grid.origin + grid.rotation * (grid.step * l);
-        let face = self.sh_in_box(grid, world(x), &mut visible);
+        self.weights_in_box(grid, world(x), &mut visible, |q, w| emit(q, 2.0 * w));
         let inner = (x - d).clamp(Vec3::ZERO, last);
-        let inside = self.sh_in_box(grid, world(inner), &mut visible);
-        sh::add(&sh::scaled(&face, 2.0), &sh::scaled(&inside, -1.0))
+        self.weights_in_box(grid, world(inner), &mut visible, |q, w| emit(q, -w));
     }
 
-    /// [`Probes::sh_on_grid`] at a point `p` of the box of the grid's positions (held on its
-    /// faces beyond).
-    fn sh_in_box(&self, grid: &Grid, p: Vec3, mut visible: impl FnMut(Vec3) -> bool) -> Sh2 {
-        let zero = [Vec3::ZERO; 9];
+    /// [`Probes::weights_on_grid`] at a point `p` of the box of the grid's positions (held on
+    /// its faces beyond).
+    fn weights_in_box(
+        &self,
+        grid: &Grid,
+        p: Vec3,
+        mut visible: impl FnMut(Vec3) -> bool,
+        mut emit: impl FnMut(usize, f32),
+    ) {
         let g = grid.local(p);
         let mut base = [0u32; 3];
         let mut x = Vec3::ZERO;
@@ -380,24 +409,26 @@ impl Probes {
         }
         // Trilinear over the corners of the cell, or of its sub-cell where it is refined, that
         // are valid and visible.
-        let corners = self.corners(grid, base, x);
-        let mut sum = zero;
+        let mut corners = self.corners(grid, base, x);
         let mut total = 0.0f32;
-        for (q, w) in corners {
-            if w <= 0.0 {
-                continue;
-            }
-            if self.valid[q] && visible(self.position[q]) {
-                sum = sh::add(&sum, &sh::scaled(&self.sh[q], w));
-                total += w;
+        for (q, w) in &mut corners {
+            if *w > 0.0 && self.valid[*q] && visible(self.position[*q]) {
+                total += *w;
+            } else {
+                *w = 0.0;
             }
         }
         if total > 1e-6 {
-            return sh::scaled(&sum, 1.0 / total);
+            for (q, w) in corners {
+                if w > 0.0 {
+                    emit(q, w / total);
+                }
+            }
+            return;
         }
         // None of the cell's corners: the visible valid probes of the 4 × 4 × 4 block around it.
-        let mut sum = zero;
-        let mut total = 0.0f32;
+        let mut block = [(0usize, 0.0f32); 64];
+        let (mut taken, mut total) = (0, 0.0f32);
         for dk in -1..=2i64 {
             for dj in -1..=2i64 {
                 for di in -1..=2i64 {
@@ -415,16 +446,20 @@ impl Probes {
                     let q = grid.index(at);
                     if self.valid[q] && visible(self.position[q]) {
                         let w = 1.0 / (self.position[q] - p).length_squared().max(1e-8);
-                        sum = sh::add(&sum, &sh::scaled(&self.sh[q], w));
+                        block[taken] = (q, w);
+                        taken += 1;
                         total += w;
                     }
                 }
             }
         }
         if total > 0.0 {
-            return sh::scaled(&sum, 1.0 / total);
+            for &(q, w) in &block[..taken] {
+                emit(q, w / total);
+            }
+        } else if let Some(q) = self.nearest_valid(p) {
+            emit(q, 1.0);
         }
-        self.nearest_valid(p).map_or(zero, |q| self.sh[q])
     }
 
     /// The probes around grid coordinates `x` (clamped to the grid) in the cell at `base` and
@@ -446,10 +481,15 @@ impl Probes {
         }
     }
 
-    /// [`Probes::sh_at`] for probes placed one by one: the `NEAREST` nearest valid probes that
-    /// `p` sees, by inverse squared distance (Shepard's weights: the value at a probe is
+    /// [`Probes::weights_at`] for probes placed one by one: the `NEAREST` nearest valid probes
+    /// that `p` sees, by inverse squared distance (Shepard's weights: the value at a probe is
     /// its own), else the nearest valid probe.
-    fn sh_from_nearest(&self, p: Vec3, mut visible: impl FnMut(Vec3) -> bool) -> Sh2 {
+    fn weights_from_nearest(
+        &self,
+        p: Vec3,
+        mut visible: impl FnMut(Vec3) -> bool,
+        mut emit: impl FnMut(usize, f32),
+    ) {
         /// Probes blended at most.
         const NEAREST: usize = 8;
         let mut by_distance: Vec<(f32, usize)> = (0..self.len())
@@ -458,27 +498,28 @@ impl Probes {
             .collect();
         // Ties by index: the same probes on any machine.
         by_distance.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-        let mut sum = [Vec3::ZERO; 9];
-        let (mut total, mut taken) = (0.0f32, 0);
+        let mut near = [(0usize, 0.0f32); NEAREST];
+        let (mut taken, mut total) = (0, 0.0f32);
         for &(d2, q) in &by_distance {
             if taken == NEAREST {
                 break;
             }
             if visible(self.position[q]) {
                 if d2 < 1e-12 {
-                    return self.sh[q];
+                    return emit(q, 1.0);
                 }
-                sum = sh::add(&sum, &sh::scaled(&self.sh[q], 1.0 / d2));
+                near[taken] = (q, 1.0 / d2);
                 total += 1.0 / d2;
                 taken += 1;
             }
         }
         if total > 0.0 {
-            return sh::scaled(&sum, 1.0 / total);
+            for &(q, w) in &near[..taken] {
+                emit(q, w / total);
+            }
+        } else if let Some(&(_, q)) = by_distance.first() {
+            emit(q, 1.0);
         }
-        by_distance
-            .first()
-            .map_or([Vec3::ZERO; 9], |&(_, q)| self.sh[q])
     }
 
     /// The valid probe nearest to `p` (the lowest index among equals).
