@@ -1035,7 +1035,7 @@ pub(crate) fn finish(prepared: Prepared, lit: Lighting, progress: &dyn Progress)
         solution,
         gather_rays,
         light_samples,
-        ..
+        texel_gather_rays,
     } = last;
     let t = Instant::now();
     let directional = config
@@ -1096,20 +1096,19 @@ pub(crate) fn finish(prepared: Prepared, lit: Lighting, progress: &dyn Progress)
         light_samples,
         ..config.transport.clone()
     };
+    // Each texel's own rays where the plan moved rays between texels.
+    let texel_rays = (plan.as_ref())
+        .is_some_and(|p| p.texel_rays.is_some())
+        .then_some(texel_gather_rays.as_slice());
+    let noise_model = (&noise_model, texel_rays);
     // Layers are denoised with the lightmap's own weights (see `relight`).
     let layer_guide = (denoised && config.output.layers.is_some()).then(|| {
         let noise =
-            lightmap::denoise::bake_noise(&texels, &transport.direct, &lightmap, &noise_model);
+            lightmap::denoise::bake_noise(&texels, &transport.direct, &lightmap, noise_model);
         (lightmap.clone(), noise)
     });
     if denoised {
-        lightmap::denoise::denoise_bake(
-            &texels,
-            &transport,
-            &mut lightmap,
-            &noise_model,
-            progress,
-        )?;
+        lightmap::denoise::denoise_bake(&texels, &transport, &mut lightmap, noise_model, progress)?;
     }
     timed(&mut stages, "denoise", t);
     let t = Instant::now();

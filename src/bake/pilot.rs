@@ -429,7 +429,7 @@ fn denoise_gain(
             &run.transport.direct,
             indirect_only,
         );
-        let noise = denoise::bake_noise(texels, &run.transport.direct, &values, &model);
+        let noise = denoise::bake_noise(texels, &run.transport.direct, &values, (&model, None));
         denoise::denoise(
             texels,
             &mut values,

@@ -190,8 +190,14 @@ pub fn relight(
         config.transport.indirect_only,
     );
     let denoised = config.transport.denoise && config.technique.is_monte_carlo();
-    let noise = denoised
-        .then(|| denoise::bake_noise(&texels, &transport.direct, &lightmap, &config.transport));
+    let noise = denoised.then(|| {
+        denoise::bake_noise(
+            &texels,
+            &transport.direct,
+            &lightmap,
+            (&config.transport, None),
+        )
+    });
     let guide = (noise.is_some() && planned.is_some()).then(|| lightmap.clone());
     if let Some(noise) = &noise {
         denoise::denoise(

@@ -23,7 +23,8 @@
 //! ≈ 1/√K); direct light from emitters from `L` stratified light samples, whose error falls
 //! about as 1/L; punctual direct light is exact but cannot be told apart from it, so
 //! `σ_i² = indirect_i²/K + (direct_i/L)²`, with the direct term dropped in scenes without
-//! emitters and sky (a lone floor under a point light is left exactly as it is). The range kernel is tied to that level: steps many
+//! emitters and sky (a lone floor under a point light is left exactly as it is); `K` and `L` are
+//! each texel's own where the plan moved rays between texels (`bake_noise`). The range kernel is tied to that level: steps many
 //! standard deviations high (hard shadow edges of punctual lights or small emitters) are kept,
 //! differences the size of the noise are smoothed. The whole value is filtered (not only the
 //! indirect part), so the noise of emitter direct light is reduced too.
@@ -91,15 +92,15 @@ impl Default for DenoiseParams {
 pub(crate) fn expected_noise(
     indirect: Vec3,
     direct: Vec3,
-    gather_rays: u32,
-    light_samples: u32,
+    gather_rays: f32,
+    light_samples: f32,
 ) -> f32 {
     let mean = |v: Vec3| v.max(Vec3::ZERO).element_sum() / 3.0;
-    let var_indirect = mean(indirect).powi(2) / gather_rays.max(1) as f32;
-    let var_direct = if light_samples == 0 {
+    let var_indirect = mean(indirect).powi(2) / gather_rays.max(1.0);
+    let var_direct = if light_samples <= 0.0 {
         0.0
     } else {
-        (mean(direct) / light_samples as f32).powi(2)
+        (mean(direct) / light_samples).powi(2)
     };
     let sigma = (var_indirect + var_direct).sqrt();
     if sigma.is_finite() { sigma } else { 0.0 }
@@ -107,15 +108,15 @@ pub(crate) fn expected_noise(
 
 /// The bake's denoising step: `lightmap` holds `H/π` per texel (indirect only when
 /// `params.indirect_only`); the noise model takes direct light from `transport.direct` and the
-/// ray counts from `params`.
+/// ray counts from `params`, per texel from `texel_rays` where given ([`bake_noise`]).
 pub(crate) fn denoise_bake(
     texels: &Texels,
     transport: &Transport,
     lightmap: &mut [Vec3],
-    params: &TransportParams,
+    (params, texel_rays): (&TransportParams, Option<&[f32]>),
     progress: &dyn Progress,
 ) -> Result<()> {
-    let noise = bake_noise(texels, &transport.direct, lightmap, params);
+    let noise = bake_noise(texels, &transport.direct, lightmap, (params, texel_rays));
     denoise(
         texels,
         lightmap,
@@ -126,12 +127,17 @@ pub(crate) fn denoise_bake(
 }
 
 /// [`expected_noise`] of every texel of a bake's `lightmap` (`H/π`, indirect only when
-/// `params.indirect_only`), with direct light `direct` (W/m²) and the ray counts of `params`.
+/// `params.indirect_only`), with direct light `direct` (W/m²) and the ray counts of `params`;
+/// where `texel_rays` gives a texel's own gathering rays (all runs together, where the plan
+/// moved rays between texels: `Plan::texel_rays`), its noise falls with those, and its light
+/// samples in proportion. With the bake's mean count everywhere, texels given fewer rays (bright
+/// ones, as rays follow the noise relative to the light) kept more noise than the filter was
+/// told, and those given more were smoothed as if noisier.
 pub(crate) fn bake_noise(
     texels: &Texels,
     direct: &[Vec3],
     lightmap: &[Vec3],
-    params: &TransportParams,
+    (params, texel_rays): (&TransportParams, Option<&[f32]>),
 ) -> Vec<f32> {
     // Without emitters or sky, direct light is punctual only, and that is exact.
     let sampled_direct =
@@ -141,16 +147,19 @@ pub(crate) fn bake_noise(
     } else {
         0
     };
+    let (k, l) = (params.gather_rays.max(1) as f32, light_samples as f32);
     lightmap
         .iter()
         .zip(direct)
-        .map(|(&v, &h_direct)| {
+        .enumerate()
+        .map(|(i, (&v, &h_direct))| {
             let direct = if params.indirect_only {
                 Vec3::ZERO
             } else {
                 h_direct / PI
             };
-            expected_noise(v - direct, direct, params.gather_rays, light_samples)
+            let k_i = texel_rays.map_or(k, |r| r[i]);
+            expected_noise(v - direct, direct, k_i, l * k_i / k)
         })
         .collect()
 }
@@ -337,6 +346,30 @@ mod tests {
         let mut c = vec![Vec3::splat(2.0); t.len()];
         denoise(&t, &mut c, &noise, &DenoiseParams::default(), &NoProgress).unwrap();
         assert!(c.iter().all(|x| (x.x - 2.0).abs() < 1e-5));
+    }
+
+    /// Where the plan moved rays between texels, each texel's expected noise falls with its own
+    /// rays (and its light samples in proportion), not with the bake's mean count.
+    #[test]
+    fn the_noise_model_reads_each_texels_own_rays() {
+        let mut t = flat(2, 1);
+        t.emission = vec![Vec3::ZERO, Vec3::ONE];
+        let params = TransportParams {
+            gather_rays: 64,
+            light_samples: 16,
+            sky: Vec3::ZERO,
+            indirect_only: false,
+            ..crate::BakeConfig::medium().transport
+        };
+        let (lightmap, direct) = (vec![Vec3::splat(2.0); 2], vec![Vec3::splat(PI); 2]);
+        let uniform = bake_noise(&t, &direct, &lightmap, (&params, None));
+        assert_eq!(uniform[0], uniform[1]);
+        // Indirect 1 and direct 1 (H/π): σ² = 1/K + (1/L)², L = K/4.
+        let expected = |k: f32| (1.0 / k + (4.0 / k).powi(2)).sqrt();
+        assert!((uniform[0] - expected(64.0)).abs() < 1e-6);
+        let own = bake_noise(&t, &direct, &lightmap, (&params, Some(&[16.0, 256.0])));
+        assert!((own[0] - expected(16.0)).abs() < 1e-6, "{own:?}");
+        assert!((own[1] - expected(256.0)).abs() < 1e-6, "{own:?}");
     }
 
     #[test]

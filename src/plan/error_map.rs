@@ -114,7 +114,7 @@ fn ray_moments(rows: &Transport, r: usize, texels: &Texels, h: &[Vec3], sky: Vec
 pub(crate) fn modelled_noise(h: &[Vec3], direct: &[Vec3], k: u32, l: u32) -> Vec<Vec3> {
     h.iter()
         .zip(direct)
-        .map(|(&h, &d)| Vec3::splat(expected_noise(h - d, d, k, l)))
+        .map(|(&h, &d)| Vec3::splat(expected_noise(h - d, d, k as f32, l as f32)))
         .collect()
 }
 
