@@ -83,23 +83,12 @@ fn main() {
             let from = p + n * tracer.epsilon;
             // The lookup's linear part (before its clamp at zero): band weight × basis at n.
             let basis = sh::basis(n);
-            let band = [
-                1.0,
-                2.0 / 3.0,
-                2.0 / 3.0,
-                2.0 / 3.0,
-                0.25,
-                0.25,
-                0.25,
-                0.25,
-                0.25,
-            ];
             let mut terms = Vec::new();
             probes.weights_at(
                 p,
                 |q| !tracer.occluded(from, q),
                 |q, w| {
-                    for (k, (b, c)) in basis.iter().zip(band).enumerate() {
+                    for (k, (b, c)) in basis.iter().zip(sh::COSINE_OVER_PI).enumerate() {
                         terms.push((9 * q + k, w * b * c));
                     }
                 },

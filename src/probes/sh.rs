@@ -49,7 +49,7 @@ pub fn basis(d: Vec3) -> [f32; 9] {
 }
 
 /// Band weight `Â_l/π` of the clamped-cosine convolution for each coefficient.
-const COSINE_OVER_PI: [f32; 9] = [
+pub const COSINE_OVER_PI: [f32; 9] = [
     1.0,
     2.0 / 3.0,
     2.0 / 3.0,
