@@ -634,7 +634,10 @@ impl PilotRuns {
                     // For the final bake's rays per texel (`plan::choose_texel_rays`), from a
                     // pair at 4× `PILOT_RAYS` only: spread by the variances of 16-ray pairs,
                     // `draft` bakes lost (over seeds 0–3 the Cornell box 6.02% → 6.21%, p95
-                    // 13.8% → 14.3%; the lamp room 4.93% → 5.45%).
+                    // 13.8% → 14.3%; the lamp room 4.93% → 5.45%), and lost again with the
+                    // denoiser told each texel's rays (7 December, 65,536-path references,
+                    // seeds 0–3 on average: the Cornell box at `draft` 6.07% → 6.77%, the lamp
+                    // room at `draft` 4.98% → 5.55%, two rooms at `medium` 1.50% → 1.68%).
                     ray_variance: k >= 4 * PILOT_RAYS,
                     ..transport.clone()
                 };
