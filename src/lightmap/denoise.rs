@@ -24,7 +24,8 @@
 //! about as 1/L; punctual direct light is exact but cannot be told apart from it, so
 //! `σ_i² = indirect_i²/K + (direct_i/L)²`, with the direct term dropped in scenes without
 //! emitters and sky (a lone floor under a point light is left exactly as it is); `K` and `L` are
-//! each texel's own where the plan moved rays between texels (`bake_noise`). The range kernel is tied to that level: steps many
+//! each texel's own where the plan moved rays between texels (`bake_noise`). The range kernel
+//! is tied to that level: steps many
 //! standard deviations high (hard shadow edges of punctual lights or small emitters) are kept,
 //! differences the size of the noise are smoothed. The whole value is filtered (not only the
 //! indirect part), so the noise of emitter direct light is reduced too.
