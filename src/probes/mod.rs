@@ -1090,6 +1090,19 @@ mod tests {
         ] {
             let p = world(l);
             assert!(close(&probes.sh_at(p, |_| true), &field(p)), "at {l}");
+            // The lookup's weights (`weights_at`) sum to one, inside and beyond: the slab's
+            // continuation weighs the face's probes twice and subtracts those a step in.
+            let (mut sum, mut negative) = (0.0f32, false);
+            probes.weights_at(
+                p,
+                |_| true,
+                |_, w| {
+                    sum += w;
+                    negative |= w < 0.0;
+                },
+            );
+            assert!((sum - 1.0).abs() < 1e-5, "at {l}: {sum}");
+            assert_eq!(negative, l != Vec3::new(1.3, 2.2, 0.6), "at {l}");
         }
         // Farther out than BEYOND: the value at BEYOND.
         let (far, held) = (Vec3::new(3.5, 1.0, 0.5), Vec3::new(2.0 + BEYOND, 1.0, 0.5));
