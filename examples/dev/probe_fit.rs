@@ -119,15 +119,15 @@ fn main() {
         );
     };
     report("gathered", &probes);
-    // Per flattened coefficient, its mean square weight over the rows: the prior's metric,
-    // so that λ = 1 holds a probe as one training point at it would.
-    let mut metric = vec![0.0f32; 9 * probes.len()];
+    // Per coefficient k, the rows' mean square weight on it: the prior's metric, so that λ = 1
+    // holds a probe about as one training point would.
+    let mut band = [0.0f32; 9];
     for r in &rows {
         for &(i, a) in &r.terms {
-            metric[i % 9] += a * a / rows.len() as f32;
+            band[i % 9] += a * a / rows.len() as f32;
         }
     }
-    let metric: Vec<f32> = (0..metric.len()).map(|i| metric[i % 9]).collect();
+    let metric: Vec<f32> = (0..9 * probes.len()).map(|i| band[i % 9]).collect();
     for &lambda in &lambdas {
         let fitted = fit(&probes, &rows, &metric, lambda);
         report(&format!("fitted λ={lambda}"), &fitted);
