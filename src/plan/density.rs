@@ -192,6 +192,58 @@ impl Regions {
     pub(crate) fn len(&self) -> usize {
         self.area.len()
     }
+
+    /// Region `r` as a reader finds it in the scene: its node (by name when it has one) and
+    /// mesh, the way it faces and its centre, e.g. `node "room" (0), mesh 0, facing −Y around
+    /// (0.00, 3.00, 0.00)`. A mesh is often many regions (a room's walls, floor and ceiling),
+    /// so the node alone does not say which. Walks every triangle: for a few lines of
+    /// `--explain`, not for a loop.
+    pub(crate) fn whereabouts(&self, scene: &Scene, r: usize) -> String {
+        let inst = &scene.instances[self.instance[r] as usize];
+        let node = scene
+            .nodes
+            .iter()
+            .find(|n| n.index == inst.node)
+            .and_then(|n| n.name.as_deref())
+            .map_or(format!("node {}", inst.node), |name| {
+                format!("node {name:?} ({})", inst.node)
+            });
+        let (mut centre, mut normal, mut weight) = (glam::DVec3::ZERO, glam::DVec3::ZERO, 0.0);
+        for (t, _) in (self.of_triangle.iter().enumerate()).filter(|&(_, &g)| g as usize == r) {
+            let [a, b, c] = scene.triangles[t].map(|v| scene.positions[v as usize].as_dvec3());
+            // Twice the area along the face normal: the sums weigh each face by its area.
+            let n = (b - a).cross(c - a);
+            centre += n.length() * (a + b + c) / 3.0;
+            normal += n;
+            weight += n.length();
+        }
+        // Rounded first, so that a centre on an axis reads 0.00, not -0.00.
+        let centre = (centre / weight.max(f64::MIN_POSITIVE) * 100.0).round() / 100.0 + 0.0;
+        format!(
+            "{node}, mesh {}, facing {} around ({:.2}, {:.2}, {:.2})",
+            inst.mesh,
+            facing(normal),
+            centre.x,
+            centre.y,
+            centre.z
+        )
+    }
+}
+
+/// The axis a summed face normal points along (`+Y`, `−X`, …), or its direction rounded when
+/// it is more than about 25° off every axis (a curved or tilted region).
+fn facing(normal: glam::DVec3) -> String {
+    let n = normal.normalize_or_zero();
+    let axis = n.abs().max_element();
+    if axis < 0.9 {
+        let n = (n * 100.0).round() / 100.0 + 0.0;
+        return format!("({:.2}, {:.2}, {:.2})", n.x, n.y, n.z);
+    }
+    let (name, value) = [("X", n.x), ("Y", n.y), ("Z", n.z)]
+        .into_iter()
+        .find(|&(_, v)| v.abs() == axis)
+        .unwrap_or(("Y", n.y));
+    format!("{}{name}", if value < 0.0 { "−" } else { "+" })
 }
 
 /// The density factor of every scene triangle (`AtlasParams::triangle_density`) from the
@@ -757,13 +809,11 @@ impl Model {
             .collect();
         let added = |r: usize| regions.area[r] * (f64::from(chosen[r]).powi(2) - 1.0) * self.tpu2;
         let describe = |r: usize| {
-            let inst = &scene.instances[regions.instance[r] as usize];
             let e = &evidence[r];
             format!(
-                "node {} mesh {} ({:.3} m², {} points, {:.0}% of those drawn there seen, RMS lookup \
+                "{} ({:.3} m², {} points, {:.0}% of those drawn there seen, RMS lookup \
                  error {:.1}% of the mean light at the pilot's density) ×{:.2}, {:+.0} texels",
-                inst.node,
-                inst.mesh,
+                regions.whereabouts(scene, r),
                 regions.area[r],
                 e.points.n,
                 100.0 * e.seen_share(),
@@ -935,6 +985,32 @@ mod tests {
         )
         .0;
         (chosen, plan)
+    }
+
+    #[test]
+    fn a_region_is_named_by_its_node_the_way_it_faces_and_its_centre() {
+        let mut scene = cube_and_floor();
+        scene.nodes = vec![crate::scene::SceneNode {
+            index: 1,
+            name: Some("box".into()),
+            world: glam::Mat4::IDENTITY,
+            children: vec![],
+        }];
+        let regions = Regions::of(&scene);
+        assert_eq!(
+            regions.whereabouts(&scene, 0),
+            "node 0, mesh 0, facing +Z around (4.00, 2.00, 0.00)"
+        );
+        let faces: Vec<String> = (1..7).map(|r| regions.whereabouts(&scene, r)).collect();
+        assert!(
+            faces
+                .contains(&"node \"box\" (1), mesh 0, facing −Y around (0.00, -0.50, 0.00)".into()),
+            "{faces:?}"
+        );
+        assert_eq!(
+            facing(glam::DVec3::new(1.0, 1.0, 0.0)),
+            "(0.71, 0.71, 0.00)"
+        );
     }
 
     #[test]
