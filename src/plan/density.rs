@@ -79,7 +79,13 @@ pub(crate) const ERROR_EXPONENT: f64 = 2.0;
 pub(crate) const MAX_TEXEL_RAISE: f64 = 4.0;
 /// The density pilot's atlas holds at most about this many texels: below the preset's density
 /// when the preset's atlas is larger (its mean squares are carried to the preset's density by
-/// [`ERROR_EXPONENT`]), so that the pilot costs a bounded share of a large bake.
+/// [`ERROR_EXPONENT`]), so that the pilot costs a bounded share of a large bake. Just past
+/// the cap the pilot is near the preset's density (the courtyard at `high`: 20.7 of 32 /m).
+/// Holding a pilot of its own to at most [`QUICK_PILOT_SCALE`] there too was tried on
+/// 7 December: the courtyard at `high`, seeds 0–3, wrote the same point error and p95 in
+/// 5.07–5.11 s against 5.45–5.82 s (planning 22–25% → 16%), but the furnished interior at
+/// `high` (16.5 → 16 /m) raised more on each of seeds 0–2: 1.16–1.19 M texels and 62–66 s
+/// against 0.84–1.19 M and 45–71 s, for 1.64–1.87% against 1.77–1.95%. Not taken.
 pub(crate) const PILOT_TEXELS: f64 = 131_072.0;
 /// A density pilot on an atlas of its own (not the bake's) that would be at the preset's
 /// density is at this share of it: a quarter of the texels, where the pilot's layout, pair and
