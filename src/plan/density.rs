@@ -84,8 +84,9 @@ pub(crate) const MAX_TEXEL_RAISE: f64 = 4.0;
 /// Holding a pilot of its own to at most [`QUICK_PILOT_SCALE`] there too was tried on
 /// 7 December: the courtyard at `high`, seeds 0–3, wrote the same point error and p95 in
 /// 5.07–5.11 s against 5.45–5.82 s (planning 22–25% → 16%), but the furnished interior at
-/// `high` (16.5 → 16 /m) raised more on each of seeds 0–2: 1.16–1.19 M texels and 62–66 s
-/// against 0.84–1.19 M and 45–71 s, for 1.64–1.87% against 1.77–1.95%. Not taken.
+/// `high` (16.5 → 16 /m) raised more on seeds 0–5: 1.12–1.19 M texels and 60–71 s (mean 64 s)
+/// against 0.84–1.19 M and 45–71 s (mean 55 s), for the same point error (1.78% on average
+/// over seeds 1–5 in both). Not taken.
 pub(crate) const PILOT_TEXELS: f64 = 131_072.0;
 /// A density pilot on an atlas of its own (not the bake's) that would be at the preset's
 /// density is at this share of it: a quarter of the texels, where the pilot's layout, pair and
