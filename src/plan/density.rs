@@ -231,8 +231,7 @@ impl Regions {
             normal += n;
             weight += n.length();
         }
-        // Rounded first, so that a centre on an axis reads 0.00, not -0.00.
-        let centre = (centre / weight.max(f64::MIN_POSITIVE) * 100.0).round() / 100.0 + 0.0;
+        let centre = hundredths(centre / weight.max(f64::MIN_POSITIVE));
         format!(
             "{node}, mesh {}, facing {} around ({:.2}, {:.2}, {:.2})",
             inst.mesh,
@@ -244,13 +243,19 @@ impl Regions {
     }
 }
 
+/// `v` rounded to hundredths before printing, so that a coordinate near zero reads 0.00, not
+/// -0.00.
+fn hundredths(v: glam::DVec3) -> glam::DVec3 {
+    (v * 100.0).round() / 100.0 + 0.0
+}
+
 /// The axis a summed face normal points along (`+Y`, `−X`, …), or its direction rounded when
 /// it is more than about 25° off every axis (a curved or tilted region).
 fn facing(normal: glam::DVec3) -> String {
     let n = normal.normalize_or_zero();
     let axis = n.abs().max_element();
     if axis < 0.9 {
-        let n = (n * 100.0).round() / 100.0 + 0.0;
+        let n = hundredths(n);
         return format!("({:.2}, {:.2}, {:.2})", n.x, n.y, n.z);
     }
     let (name, value) = [("X", n.x), ("Y", n.y), ("Z", n.z)]
