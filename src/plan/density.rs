@@ -365,7 +365,7 @@ impl DensityChoice {
         let calibration = (measured / predicted).powi(2);
         let cap = model.cap(plan);
         let wanted = model.solve(&|f| model.predicted(f, calibration) > room);
-        let capped = model.solve(&|f| model.texels_at(f) < cap);
+        let capped = model.most_within(cap);
         let chosen = model.factors(wanted.min(capped).max(self.scale));
         let (before, after) = (model.texels_at(&laid), model.texels_at(&chosen));
         if after <= before * 1.01 {
@@ -720,6 +720,20 @@ impl Model {
 
     /// The scale at which `over(factors)` turns false, by bisection on log c.
     fn solve(&self, over: &dyn Fn(&[f32]) -> bool) -> f64 {
+        self.bisect(over).1
+    }
+
+    /// The largest scale whose factors stay within `cap` texels (the least scale when none
+    /// does). Not [`Model::solve`]'s first scale past it: factors move in quarter-octave
+    /// steps, so that one is a whole step over the cap (the furnished interior at `high`,
+    /// seed 1: 1,094,972 texels for a budget of 1,048,576).
+    fn most_within(&self, cap: f64) -> f64 {
+        self.bisect(&|f| self.texels_at(f) <= cap).0
+    }
+
+    /// The last scale at which `over(factors)` holds and the first at which it does not, by
+    /// bisection on log c.
+    fn bisect(&self, over: &dyn Fn(&[f32]) -> bool) -> (f64, f64) {
         let (mut a, mut b) = (1e-3f64, 1e3f64);
         for _ in 0..50 {
             let c = (a * b).sqrt();
@@ -729,7 +743,7 @@ impl Model {
                 b = c;
             }
         }
-        b
+        (a, b)
     }
 
     /// The scale of the factors, and why: 0 (every seen region at the preset's density) unless
@@ -769,7 +783,7 @@ impl Model {
             return (same, why);
         }
         let wanted = self.solve(&|f| self.predicted(f, 1.0) > room);
-        let capped = self.solve(&|f| self.texels_at(f) < cap);
+        let capped = self.most_within(cap);
         let scale = wanted.min(capped);
         let reached = self.predicted(&self.factors(scale), 1.0);
         let why = format!(
@@ -782,7 +796,8 @@ impl Model {
             plan.target_error * 100.0,
             if wanted > capped {
                 format!(
-                    "capped at {:.0} texels (the preset's budget or ×{MAX_TEXEL_RAISE}): \
+                    "capped at {:.0} texels over the surfaces' area (the preset's budget or \
+                     ×{MAX_TEXEL_RAISE}; the laid-out atlas adds its charts' borders): \
                      predicted {:.2}%, above its share",
                     cap,
                     reached * 100.0
@@ -987,9 +1002,19 @@ mod tests {
     }
 
     fn choose(scene: &Scene, sample: &GatheredSample, target: f32) -> (Option<Vec<f32>>, Plan) {
+        choose_within(scene, sample, target, 1e9)
+    }
+
+    /// [`choose`] with the preset's texel budget at most `budget`.
+    fn choose_within(
+        scene: &Scene,
+        sample: &GatheredSample,
+        target: f32,
+        budget: f64,
+    ) -> (Option<Vec<f32>>, Plan) {
         let mut plan = Plan {
             target_error: target,
-            texel_budget: Some((0.0, 1e9)),
+            texel_budget: Some((0.0, budget)),
             ..Default::default()
         };
         let texels = texels_of(scene);
@@ -1162,6 +1187,33 @@ mod tests {
         let (_, plan) = choose(&scene, &steady, 0.2);
         assert!(
             plan.reasons.join(" ").contains("is not above"),
+            "{:?}",
+            plan.reasons
+        );
+    }
+
+    #[test]
+    fn a_raise_capped_by_the_budget_stays_within_it() {
+        let scene = cube_and_floor();
+        // Every region's error alike: the regions rise together by quarter-octave steps (×1.41
+        // texels), and the budget, 2.5× the uniform atlas's texels, falls between steps ×2 and
+        // ×2.83: the raise stops at ×2, not one step past the budget.
+        let steady = sample(&scene, 256.0, |_, k| {
+            16e-4 * if k % 2 == 0 { 0.9 } else { 1.1 }
+        });
+        let uniform = 22.0 * 256.0;
+        let (factors, plan) = choose_within(&scene, &steady, 0.02, 2.5 * uniform);
+        let factors = factors.expect("raised");
+        let texels: f64 = (0..scene.triangles.len())
+            .map(|t| scene.triangle_area(t) * f64::from(factors[t]).powi(2) * 256.0)
+            .sum();
+        assert!(
+            (1.9 * uniform..=2.5 * uniform).contains(&texels),
+            "{texels} texels against a budget of {}",
+            2.5 * uniform
+        );
+        assert!(
+            plan.reasons.join(" ").contains("capped"),
             "{:?}",
             plan.reasons
         );
