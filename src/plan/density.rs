@@ -1174,8 +1174,9 @@ mod tests {
         let texels: f64 = (0..scene.triangles.len())
             .map(|t| scene.triangle_area(t) * f64::from(factors[t]).powi(2))
             .sum();
+        // Within the cap itself (a raise stops at the last step within it), up to rounding.
         assert!(
-            (3.0..=MAX_TEXEL_RAISE * 1.2).contains(&(texels / 22.0)),
+            (3.0..=MAX_TEXEL_RAISE * (1.0 + 1e-9)).contains(&(texels / 22.0)),
             "{texels}"
         );
         assert!(
