@@ -472,7 +472,20 @@ struct Planned {
 /// Why an incremental bake cannot run (the outer `Ok(Err(..))`).
 type Fallback<T> = std::result::Result<T, String>;
 
-/// The incremental bake up to the solution, or why it must bake in full.
+/// The value of a `Fallback`, or a return from the enclosing `Result<Fallback<_>>` function
+/// with its reason.
+macro_rules! or_full {
+    ($fallback:expr) => {
+        match $fallback {
+            Ok(value) => value,
+            Err(why) => return Ok(Err(why)),
+        }
+    };
+}
+
+/// The incremental bake up to the solution, or why it must bake in full: the previous bake
+/// laid out again, the edit placed on its layout, the rows it can have changed traced again,
+/// solved.
 fn plan(
     input: &Path,
     kept: &Kept,
@@ -480,64 +493,13 @@ fn plan(
     retrace: Retrace,
     progress: &dyn Progress,
 ) -> Result<Fallback<Planned>> {
-    let settings = &kept.settings;
-    let Some(old) = &settings.input else {
+    let Some(old) = &kept.settings.input else {
         return Ok(Err("the kept transport records no input".to_string()));
     };
-    let mut config = settings.config()?;
-    let Technique::Stored {
-        form_factors: FormFactors::MonteCarlo,
-        solver,
-    } = config.technique
-    else {
-        return Ok(Err(format!(
-            "the previous bake's {} technique keeps no Monte Carlo rows",
-            config.technique
-        )));
-    };
-    // The output options are the caller's; everything that shapes the light is the old bake's.
-    config.output = out.output.clone();
-    config.max_memory = out.max_memory;
-    config.transport.split_direct = true;
+    let (config, solver) = or_full!(kept_config(kept, out)?);
     let (json, blob, files) = read_input(input)?;
     let now = record_of(json.clone(), blob.as_deref(), &files)?;
-    // The input's nodes in the previous bake's graph, the nodes it no longer has and those it
-    // has anew.
-    let nodes = match (&old.content, &old.graph, &now.graph) {
-        (Some(content), Some(before), Some(after)) => {
-            // Added nodes may bring meshes, accessors, materials and bytes of their own:
-            // appended, with nothing the previous bake read changed.
-            if now.content.as_ref() != Some(content) {
-                let grown = match &old.parts {
-                    Some(parts) => {
-                        parts.grown_into(&json, blob.as_deref().unwrap_or_default(), &files)?
-                    }
-                    None => Err("the previous bake's record predates additions".to_string()),
-                };
-                if let Err(why) = grown {
-                    return Ok(Err(format!(
-                        "the input changed in more than node transforms, removals and additions ({why}: meshes, materials, lights or textures)"
-                    )));
-                }
-            }
-            match match_nodes(before, after) {
-                Ok(map) => map,
-                Err(why) => return Ok(Err(why)),
-            }
-        }
-        // A record from before removals were baked incrementally: moves only.
-        _ if now.hash != old.hash || now.nodes.len() != old.nodes.len() => {
-            return Ok(Err(
-                "the input changed in more than node transforms (meshes, materials, lights, textures or nodes)"
-                    .to_string(),
-            ));
-        }
-        _ => NodeMap {
-            of_new: (0..now.nodes.len() as u32).map(Some).collect(),
-            removed: Vec::new(),
-            added: Vec::new(),
-        },
-    };
+    let nodes = or_full!(node_map(old, &now, &json, blob.as_deref(), &files)?);
     let moved_nodes: Vec<u32> = (0..now.nodes.len())
         .filter(|&k| nodes.of_new[k].is_some_and(|o| now.nodes[k] != old.nodes[o as usize]))
         .map(|k| k as u32)
@@ -556,94 +518,25 @@ fn plan(
                 .to_string(),
         ));
     }
-    let graph = old.graph.clone();
-    let put_back = |nodes: &[Value]| {
-        let (nodes, graph) = (nodes.to_vec(), graph.clone());
-        move |json: &mut Value| {
-            if let (Some(obj), Some(Value::Object(graph))) = (json.as_object_mut(), &graph) {
-                GRAPH_KEYS.iter().for_each(|k| {
-                    obj.remove(*k);
-                });
-                obj.extend(graph.iter().map(|(k, v)| (k.clone(), v.clone())));
-            }
-            let Some(list) = json.get_mut("nodes").and_then(Value::as_array_mut) else {
-                return;
-            };
-            for (node, t) in list.iter_mut().zip(&nodes) {
-                if let (Some(obj), Some(t)) = (node.as_object_mut(), t.as_object()) {
-                    TRANSFORM_KEYS.iter().for_each(|k| {
-                        obj.remove(*k);
-                    });
-                    obj.extend(t.iter().map(|(k, v)| (k.clone(), v.clone())));
-                }
-            }
-        }
-    };
-    let (layout_loaded, layout_source) = scene::load_edited(input, &put_back(&layout_nodes))?;
-    let (prev_loaded, _) = scene::load_edited(input, &put_back(&old.nodes))?;
+    let (layout_loaded, layout_source) =
+        scene::load_edited(input, &put_back(&layout_nodes, &old.graph))?;
+    let (prev_loaded, _) = scene::load_edited(input, &put_back(&old.nodes, &old.graph))?;
     let (new_loaded, new_source) = super::load(input, progress)?;
-    // Per instance of the layout, the input's instance (`None`: its node was removed); the
-    // input's instances placed by added nodes.
-    let (now_of, added) = match instance_map(&layout_loaded, &new_loaded, &nodes) {
-        Ok(map) => map,
-        Err(why) => return Ok(Err(why)),
-    };
-    let same: Vec<Option<usize>> = (0..layout_loaded.instances.len()).map(Some).collect();
-    let removed: Vec<usize> = (0..now_of.len()).filter(|&k| now_of[k].is_none()).collect();
-    if !removed.is_empty()
-        && let Some(atlas) = &kept.atlas
-        && !atlas.shared.is_empty()
-    {
-        return Ok(Err(
-            "nodes were removed from a bake whose atlas shares meshes".to_string(),
-        ));
-    }
-    if !added.is_empty() {
-        // The added instances' charts go onto pages of their own, after the old ones.
-        if let Some(atlas) = &kept.atlas
-            && (atlas.reused_input_uvs || !atlas.shared.is_empty())
-        {
-            return Ok(Err(
-                "nodes were added to a bake whose atlas reuses the input's UVs or shares meshes"
-                    .to_string(),
-            ));
-        }
-        if let Some(&m) = added.iter().find(|&&m| {
-            let material = new_loaded.instances[m].material as usize;
-            new_loaded.materials[material].emission.max_element() > 0.0
-        }) {
-            return Ok(Err(format!(
-                "an emissive node ({}) was added",
-                new_loaded.instances[m].node
-            )));
-        }
-        if layout_loaded.materials.len() != new_loaded.materials.len() {
-            return Ok(Err("the materials changed".to_string()));
-        }
-    }
-    let moves = (
-        moved_instances(&layout_loaded, &prev_loaded, &same),
-        moved_instances(&layout_loaded, &new_loaded, &now_of),
-        moved_instances(&prev_loaded, &new_loaded, &now_of),
-    );
-    let (moved_before, moved_now, moved) = match moves {
-        (Ok(a), Ok(b), Ok(c)) => (a, b, c),
-        (Err(why), _, _) | (_, Err(why), _) | (_, _, Err(why)) => return Ok(Err(why)),
-    };
-    if let Some(&k) = removed.iter().find(|&&k| {
-        let m = layout_loaded.instances[k].material as usize;
-        layout_loaded.materials[m].emission.max_element() > 0.0
-    }) {
-        return Ok(Err(format!(
-            "an emissive node ({}) was removed",
-            layout_loaded.instances[k].node
-        )));
-    }
+    let edit = or_full!(edit_of(
+        kept,
+        &layout_loaded,
+        &prev_loaded,
+        &new_loaded,
+        &nodes
+    ));
     let layout = match &kept.atlas {
-        Some(atlas) => match lay_out_again(layout_loaded, layout_source, atlas, &config, t)? {
-            Ok(layout) => layout,
-            Err(why) => return Ok(Err(why)),
-        },
+        Some(atlas) => or_full!(lay_out_again(
+            layout_loaded,
+            layout_source,
+            atlas,
+            &config,
+            t
+        )?),
         None => super::prepare_loaded(
             layout_loaded,
             layout_source,
@@ -654,253 +547,36 @@ fn plan(
             t,
         )?,
     };
-    let mut old = if moved_before.is_empty() {
-        layout
-    } else {
-        let t = Instant::now();
-        let mut old = layout;
-        old.scene = place(&old.scene, &prev_loaded, &same, &moved_before);
-        old.tracer = Tracer::new(&old.scene);
-        old.texels = texels::build(&old.scene, &old.atlas)?;
-        timed(&mut old.stages, "previous scene", t);
-        old
-    };
-    // The validity pass's results are the previous bake's, as kept (sample points, jitter,
-    // invalid texels, cell maps): what its rows were traced from. The raster's own values
-    // (normals, texel steps, albedo, emission) check the layout below.
-    if kept.atlas.is_some() && old.texels.len() == kept.texels.len() {
-        old.texels.position = kept.texels.position.clone();
-        old.texels.jitter = kept.jitter.clone();
-        old.texels.invalid = kept.texels.invalid.clone();
-        old.texels.cuts = kept.cuts.clone();
-    }
-    if let Some(why) = differs(&old.texels, &kept.texels) {
-        return Ok(Err(format!(
-            "the previous bake's texels could not be laid out again ({why}: another lightbake, or other settings)"
-        )));
-    }
+    let old = or_full!(previous_bake(layout, kept, &prev_loaded, &edit)?);
     let mut stages = old.stages.clone();
-
-    // The new scene: the old one (cuts and all) with the moved instances' vertices placed anew
-    // and the added instances after the old ones (uncut: cutting where they meet the old
-    // surfaces would move the old texels), so every old triangle keeps its id.
-    let t = Instant::now();
-    // Every instance placed away from the layout, before or now, takes its place now (one
-    // moved back to where the layout has it included).
-    let mut away: Vec<usize> = moved_before.iter().chain(&moved_now).copied().collect();
-    away.sort_unstable();
-    away.dedup();
-    let mut new_scene = place(&old.scene, &new_loaded, &now_of, &away);
-    let first_added = append_instances(&mut new_scene, &new_loaded, &added);
-    let added_here: Vec<usize> = (first_added..new_scene.instances.len()).collect();
-    // A removed node's triangles keep their ids (and its texels their places) but leave the
-    // BVH: no ray meets them. The ray offset stays the layout's (its extent).
-    let tracer = Tracer::without(&new_scene, &removed);
-    if tracer.epsilon != old.tracer.epsilon {
-        return Ok(Err(
-            "the scene's extent changed, and with it every ray's offset".to_string(),
-        ));
-    }
-    timed(&mut stages, "incremental bvh", t);
-    // The added instances' charts, on pages after the old ones: the texels are ordered by
-    // page, so every old texel keeps its id.
-    let atlas = if added.is_empty() {
-        old.atlas.clone()
-    } else {
-        let t = Instant::now();
-        let atlas = append_charts(
-            &old.atlas,
-            &new_loaded,
-            &new_source,
-            &added,
-            &config,
-            progress,
-        )?;
-        timed(&mut stages, "incremental atlas", t);
-        atlas
+    let edited = or_full!(lay_out_edit(
+        &old,
+        (&new_loaded, &new_source),
+        &edit,
+        (&config, retrace),
+        &mut stages,
+        progress
+    )?);
+    let (changed, boxes) = retraced(&old, &edited, &edit, retrace);
+    let base = Incremental {
+        full: None,
+        moved_nodes,
+        removed_nodes: nodes.removed.clone(),
+        added_nodes: nodes.added.clone(),
+        ..Default::default()
     };
-    let t = Instant::now();
-    let mut new_texels = texels::build(&new_scene, &atlas)?;
-    // The validity pass again only near what moved, where it was and where it is: elsewhere
-    // the previous pass's results hold (`validity::fix_near`). `Retrace::All`, the yardstick,
-    // runs the full pass.
-    let validity = if config.transport.validity && retrace == Retrace::Edited {
-        let near: Vec<(Vec3, Vec3)> =
-            (moved.iter())
-                .flat_map(|&inst| {
-                    [&old.scene, &new_scene]
-                        .map(|s| bounds(s, s.instances[inst].vertices.clone(), 0.0))
-                })
-                .chain((removed.iter()).map(|&inst| {
-                    bounds(&old.scene, old.scene.instances[inst].vertices.clone(), 0.0)
-                }))
-                .chain((added_here.iter()).map(|&inst| {
-                    bounds(&new_scene, new_scene.instances[inst].vertices.clone(), 0.0)
-                }))
-                .collect();
-        let params = texels::validity::ValidityParams {
-            seed: config.transport.seed,
-            ..Default::default()
-        };
-        texels::validity::fix_near(
-            &mut new_texels,
-            &old.texels,
-            &near,
-            &new_scene,
-            &tracer,
-            &params,
-            &Alone,
-            progress,
-        )?
-    } else {
-        super::fix_validity(
-            &mut new_texels,
-            &new_scene,
-            &tracer,
-            &config,
-            &Alone,
-            progress,
-        )?
-    };
-    let n_old = old.texels.len();
-    if new_texels.len() < n_old
-        || new_texels.page[..n_old] != old.texels.page[..]
-        || new_texels.xy[..n_old] != old.texels.xy[..]
-    {
-        return Ok(Err("the old texels changed places".to_string()));
-    }
-    // A removed node's texels: unused (no primitive of the output reads them), invalid, and
-    // their rows empty (`Rebuild::rows`).
-    let gone = removed_texels(&new_scene, &new_texels, &removed);
-    if gone.iter().any(|&g| g) {
-        new_texels.invalid = (0..new_texels.len() as u32)
-            .filter(|&i| gone[i as usize] || new_texels.invalid.binary_search(&i).is_ok())
-            .collect();
-    }
-    timed(&mut stages, "incremental texels", t);
-
-    // Texels that changed (their rows are traced whole), and the bounds flagged rays meet.
-    let t = Instant::now();
-    let mut changed = changed_texels(&old.texels, &new_texels);
-    if retrace == Retrace::All {
-        changed.iter_mut().for_each(|c| *c = true);
-    }
-    // A ray that meets no moved bounds hits the same triangle at the same point, and the same
-    // texel there, unless that texel's cell map changed (a moved surface now divides it, or no
-    // longer does: `texels::Cuts`); such a texel lies within its own size of the moved surface,
-    // so the bounds grow by the largest of them.
-    let margin = (0..n_old)
-        .filter(|&i| old.texels.cuts.cells(i) != new_texels.cuts.cells(i))
-        .map(|i| {
-            let size = |t: &Texels| t.du[i].length() + t.dv[i].length();
-            size(&old.texels).max(size(&new_texels))
-        })
-        .fold(0.0f32, f32::max)
-        + 8.0 * tracer.epsilon;
-    let mut boxes = Vec::new();
-    for &inst in &moved {
-        for s in [&old.scene, &new_scene] {
-            boxes.push(bounds(s, s.instances[inst].vertices.clone(), margin));
-        }
-    }
-    for &inst in &removed {
-        let s = &old.scene;
-        boxes.push(bounds(s, s.instances[inst].vertices.clone(), margin));
-    }
-    // An added instance: rays of the old rows that meet its bounds may end on it now.
-    for &inst in &added_here {
-        let s = &new_scene;
-        boxes.push(bounds(s, s.instances[inst].vertices.clone(), margin));
-    }
-    let n = new_texels.len();
-    let (k, l) = (config.transport.gather_rays, config.transport.light_samples);
-    // The rows, in a scope of their own: they borrow both scenes, which `Prepared` then takes.
-    let (transport, incremental) = {
-        let new_surfaces = Surfaces {
-            scene: &new_scene,
-            texels: &new_texels,
-            tracer: &tracer,
-        };
-        let emitters = Emitters::new(&new_scene, &new_texels);
-        let sources = Sources::new(&new_scene);
-        let was = &kept.transport.sources;
-        if (sources.lights, &sources.emissive) != (was.lights, &was.emissive) {
-            return Ok(Err("the light sources changed".to_string()));
-        }
-        let ctx = Context {
-            surfaces: new_surfaces,
-            params: &config.transport,
-            emitters: &emitters,
-            texel_rays: None,
-            sources: Some(&sources),
-        };
-        let rebuild = Rebuild {
-            kept,
-            old: old.surfaces(),
-            new: &ctx,
-            changed: &changed,
-            gone: &gone,
-            boxes: &boxes,
-            count_rows: config.transport.count_rows,
-            touched: Mutex::new(Vec::new()),
-            flagged: AtomicUsize::new(0),
-            busy: AtomicU64::new(0),
-            traced_busy: AtomicU64::new(0),
-        };
-        let mut transport =
-            rows::build(n, montecarlo::CHUNK, "transport", progress, |range, out| {
-                rebuild.rows(range, out)
-            })?;
-        let mut touched = std::mem::take(&mut *rebuild.touched.lock().unwrap());
-        touched.sort_unstable();
-        let retraced = touched.iter().filter(|t| t.1).count();
-        let counted = (
-            retraced,
-            touched.len() - retraced,
-            rebuild.flagged.load(Ordering::Relaxed) as u64,
-        );
-        let touched_rows: Vec<u32> = touched.iter().map(|t| t.0).collect();
-        transport.sources = sources.clone();
-        #[cfg(debug_assertions)]
-        transport.validate();
-        let seconds = t.elapsed().as_secs_f64();
-        timed(&mut stages, "incremental transport", t);
-        let lights = new_scene.lights.len() as u64 * u64::from(PUNCTUAL_GRID * PUNCTUAL_GRID);
-        let per_row = u64::from(k) + if emitters.is_empty() { 0 } else { u64::from(l) } + lights;
-        let full_rays = n as u64 * per_row;
-        let (retraced, patched, flagged_rays) = counted;
-        // The transport time saved, estimated: the rows traced whole cost `traced_busy` thread
-        // time, so every row would have cost about `n / retraced` times that; the thread time
-        // of all chunks against the wall time gives the parallel speed-up. Unknown (0) when no
-        // row was traced whole.
-        let busy = rebuild.busy.load(Ordering::Relaxed) as f64 * 1e-9;
-        let traced_busy = rebuild.traced_busy.load(Ordering::Relaxed) as f64 * 1e-9;
-        let seconds_saved = match (retraced, busy > 0.0) {
-            (0, _) | (_, false) => 0.0,
-            (r, true) => {
-                let full_wall = traced_busy * n as f64 / r as f64 * seconds / busy;
-                (full_wall - seconds).max(0.0)
-            }
-        };
-        let incremental = Incremental {
-            full: None,
-            moved_nodes,
-            removed_nodes: nodes.removed.clone(),
-            added_nodes: nodes.added.clone(),
-            rows: n,
-            retraced,
-            patched,
-            flagged_rays,
-            touched_rows,
-            rays: transport.rays,
-            full_rays,
-            seconds_saved,
-        };
-        (transport, incremental)
-    };
+    let (transport, incremental) = or_full!(rebuild_transport(
+        kept,
+        &old,
+        &edited,
+        (&config, &changed, &boxes),
+        base,
+        &mut stages,
+        progress
+    )?);
 
     let t = Instant::now();
-    let solution = solve::solve(&transport, &new_texels, solver, &config.solve, progress)?;
+    let solution = solve::solve(&transport, &edited.texels, solver, &config.solve, progress)?;
     if !solution.converged {
         progress.warn(&format!(
             "the solver stopped on the iteration cap ({}) at residual {:.2e}, above the tolerance {:.1e}",
@@ -910,13 +586,25 @@ fn plan(
         ));
     }
     timed(&mut stages, "solve", t);
+    let (k, l) = (config.transport.gather_rays, config.transport.light_samples);
+    let n = edited.texels.len();
+    let written = (!edit.removed.is_empty() || !edit.added.is_empty()).then(|| {
+        let mut of_input = vec![usize::MAX; new_loaded.instances.len()];
+        (edit.now_of.iter().enumerate()).for_each(|(k, m)| {
+            if let Some(m) = m {
+                of_input[*m] = k;
+            }
+        });
+        (edit.added.iter().enumerate()).for_each(|(a, &m)| of_input[m] = edited.first_added + a);
+        (of_input, new_loaded)
+    });
     let prepared = Prepared {
-        scene: new_scene,
+        scene: edited.scene,
         source: new_source,
-        tracer,
-        atlas,
-        texels: new_texels,
-        validity,
+        tracer: edited.tracer,
+        atlas: edited.atlas,
+        texels: edited.texels,
+        validity: edited.validity,
         config: config.clone(),
         plan: None,
         density: Default::default(),
@@ -936,16 +624,6 @@ fn plan(
             texel_gather_rays: vec![k as f32; n],
         },
     };
-    let written = (!removed.is_empty() || !added.is_empty()).then(|| {
-        let mut of_input = vec![usize::MAX; new_loaded.instances.len()];
-        (now_of.iter().enumerate()).for_each(|(k, m)| {
-            if let Some(m) = m {
-                of_input[*m] = k;
-            }
-        });
-        (added.iter().enumerate()).for_each(|(a, &m)| of_input[m] = first_added + a);
-        (of_input, new_loaded)
-    });
     Ok(Ok(Planned {
         prepared,
         incremental,
@@ -953,6 +631,467 @@ fn plan(
         layout_nodes,
         written,
     }))
+}
+
+/// The previous bake's settings with the caller's output options, and its solver: only a bake
+/// that kept Monte Carlo rows can be continued.
+fn kept_config(
+    kept: &Kept,
+    out: &BakeConfig,
+) -> Result<Fallback<(BakeConfig, crate::config::RowSolver)>> {
+    let mut config = kept.settings.config()?;
+    let Technique::Stored {
+        form_factors: FormFactors::MonteCarlo,
+        solver,
+    } = config.technique
+    else {
+        return Ok(Err(format!(
+            "the previous bake's {} technique keeps no Monte Carlo rows",
+            config.technique
+        )));
+    };
+    // The output options are the caller's; everything that shapes the light is the old bake's.
+    config.output = out.output.clone();
+    config.max_memory = out.max_memory;
+    config.transport.split_direct = true;
+    Ok(Ok((config, solver)))
+}
+
+/// The input's nodes in the previous bake's graph, the nodes it no longer has and those it
+/// has anew; `Err` when the input changed in more than that.
+fn node_map(
+    old: &InputRecord,
+    now: &InputRecord,
+    json: &Value,
+    blob: Option<&[u8]>,
+    files: &[Vec<u8>],
+) -> Result<Fallback<NodeMap>> {
+    Ok(match (&old.content, &old.graph, &now.graph) {
+        (Some(content), Some(before), Some(after)) => {
+            // Added nodes may bring meshes, accessors, materials and bytes of their own:
+            // appended, with nothing the previous bake read changed.
+            if now.content.as_ref() != Some(content) {
+                let grown = match &old.parts {
+                    Some(parts) => parts.grown_into(json, blob.unwrap_or_default(), files)?,
+                    None => Err("the previous bake's record predates additions".to_string()),
+                };
+                if let Err(why) = grown {
+                    return Ok(Err(format!(
+                        "the input changed in more than node transforms, removals and additions ({why}: meshes, materials, lights or textures)"
+                    )));
+                }
+            }
+            match_nodes(before, after)
+        }
+        // A record from before removals were baked incrementally: moves only.
+        _ if now.hash != old.hash || now.nodes.len() != old.nodes.len() => Err(
+            "the input changed in more than node transforms (meshes, materials, lights, textures or nodes)"
+                .to_string(),
+        ),
+        _ => Ok(NodeMap {
+            of_new: (0..now.nodes.len() as u32).map(Some).collect(),
+            removed: Vec::new(),
+            added: Vec::new(),
+        }),
+    })
+}
+
+/// An edit of the input's glTF that puts back a node graph (`None`: the input's own) and the
+/// node transforms `nodes`.
+fn put_back(nodes: &[Value], graph: &Option<Value>) -> impl Fn(&mut Value) + use<> {
+    let (nodes, graph) = (nodes.to_vec(), graph.clone());
+    move |json: &mut Value| {
+        if let (Some(obj), Some(Value::Object(graph))) = (json.as_object_mut(), &graph) {
+            GRAPH_KEYS.iter().for_each(|k| {
+                obj.remove(*k);
+            });
+            obj.extend(graph.iter().map(|(k, v)| (k.clone(), v.clone())));
+        }
+        let Some(list) = json.get_mut("nodes").and_then(Value::as_array_mut) else {
+            return;
+        };
+        for (node, t) in list.iter_mut().zip(&nodes) {
+            if let (Some(obj), Some(t)) = (node.as_object_mut(), t.as_object()) {
+                TRANSFORM_KEYS.iter().for_each(|k| {
+                    obj.remove(*k);
+                });
+                obj.extend(t.iter().map(|(k, v)| (k.clone(), v.clone())));
+            }
+        }
+    }
+}
+
+/// What the edit did to the layout's instances.
+struct Edit {
+    /// Per instance of the layout, the input's instance (`None`: its node was removed).
+    now_of: Vec<Option<usize>>,
+    /// The input's instances placed by added nodes.
+    added: Vec<usize>,
+    /// The layout's instances whose node was removed.
+    removed: Vec<usize>,
+    /// Instances the previous bake had placed away from the layout.
+    moved_before: Vec<usize>,
+    /// Instances the input places away from the layout.
+    moved_now: Vec<usize>,
+    /// Instances the input places away from where the previous bake had them.
+    moved: Vec<usize>,
+}
+
+/// The edit from the layout (`layout`), the previous bake's scene (`prev`) and the input's
+/// (`now`); `Err` for what an incremental bake cannot follow (emitters added or removed,
+/// additions or removals on shared or reused atlases, other materials).
+fn edit_of(
+    kept: &Kept,
+    layout: &Scene,
+    prev: &Scene,
+    now: &Scene,
+    nodes: &NodeMap,
+) -> Fallback<Edit> {
+    let (now_of, added) = instance_map(layout, now, nodes)?;
+    let same: Vec<Option<usize>> = (0..layout.instances.len()).map(Some).collect();
+    let removed: Vec<usize> = (0..now_of.len()).filter(|&k| now_of[k].is_none()).collect();
+    if !removed.is_empty()
+        && let Some(atlas) = &kept.atlas
+        && !atlas.shared.is_empty()
+    {
+        return Err("nodes were removed from a bake whose atlas shares meshes".to_string());
+    }
+    if !added.is_empty() {
+        // The added instances' charts go onto pages of their own, after the old ones.
+        if let Some(atlas) = &kept.atlas
+            && (atlas.reused_input_uvs || !atlas.shared.is_empty())
+        {
+            return Err(
+                "nodes were added to a bake whose atlas reuses the input's UVs or shares meshes"
+                    .to_string(),
+            );
+        }
+        if let Some(&m) = added.iter().find(|&&m| {
+            let material = now.instances[m].material as usize;
+            now.materials[material].emission.max_element() > 0.0
+        }) {
+            return Err(format!(
+                "an emissive node ({}) was added",
+                now.instances[m].node
+            ));
+        }
+        if layout.materials.len() != now.materials.len() {
+            return Err("the materials changed".to_string());
+        }
+    }
+    let moved_before = moved_instances(layout, prev, &same)?;
+    let moved_now = moved_instances(layout, now, &now_of)?;
+    let moved = moved_instances(prev, now, &now_of)?;
+    if let Some(&k) = removed.iter().find(|&&k| {
+        let m = layout.instances[k].material as usize;
+        layout.materials[m].emission.max_element() > 0.0
+    }) {
+        return Err(format!(
+            "an emissive node ({}) was removed",
+            layout.instances[k].node
+        ));
+    }
+    Ok(Edit {
+        now_of,
+        added,
+        removed,
+        moved_before,
+        moved_now,
+        moved,
+    })
+}
+
+/// The previous bake's scene: the `layout` with the instances the previous bake had moved
+/// placed as it had them, and the validity pass's results it kept; `Err` when its texels
+/// differ from the kept ones.
+fn previous_bake(
+    layout: Prepared,
+    kept: &Kept,
+    prev: &Scene,
+    edit: &Edit,
+) -> Result<Fallback<Prepared>> {
+    let mut old = if edit.moved_before.is_empty() {
+        layout
+    } else {
+        let t = Instant::now();
+        let mut old = layout;
+        let same: Vec<Option<usize>> = (0..old.scene.instances.len()).map(Some).collect();
+        old.scene = place(&old.scene, prev, &same, &edit.moved_before);
+        old.tracer = Tracer::new(&old.scene);
+        old.texels = texels::build(&old.scene, &old.atlas)?;
+        timed(&mut old.stages, "previous scene", t);
+        old
+    };
+    // The validity pass's results are the previous bake's, as kept (sample points, jitter,
+    // invalid texels, cell maps): what its rows were traced from. The raster's own values
+    // (normals, texel steps, albedo, emission) check the layout below.
+    if kept.atlas.is_some() && old.texels.len() == kept.texels.len() {
+        old.texels.position = kept.texels.position.clone();
+        old.texels.jitter = kept.jitter.clone();
+        old.texels.invalid = kept.texels.invalid.clone();
+        old.texels.cuts = kept.cuts.clone();
+    }
+    if let Some(why) = differs(&old.texels, &kept.texels) {
+        return Ok(Err(format!(
+            "the previous bake's texels could not be laid out again ({why}: another lightbake, or other settings)"
+        )));
+    }
+    Ok(Ok(old))
+}
+
+/// The edited scene on the previous bake's layout.
+struct Edited {
+    /// The old scene (cuts and all) with the moved instances placed anew and the added ones
+    /// after the old ones.
+    scene: Scene,
+    /// Its BVH, without the removed instances.
+    tracer: Tracer,
+    /// The old atlas, with the added instances' charts on pages after the old ones.
+    atlas: crate::atlas::Atlas,
+    texels: Texels,
+    validity: texels::validity::ValidityReport,
+    /// The first added instance of `scene`.
+    first_added: usize,
+    /// Texels of removed instances: unused, invalid, their rows empty.
+    gone: Vec<bool>,
+}
+
+impl Edited {
+    /// The added instances of `scene`.
+    fn added(&self) -> Range<usize> {
+        self.first_added..self.scene.instances.len()
+    }
+}
+
+/// The edit placed on the previous bake's layout `old`: every old triangle keeps its id and
+/// every old texel its place (`Err` otherwise); the validity pass runs again only near what
+/// moved (`Retrace::All`, the yardstick, runs the full pass).
+fn lay_out_edit(
+    old: &Prepared,
+    (now, source): (&Scene, &scene::Source),
+    edit: &Edit,
+    (config, retrace): (&BakeConfig, Retrace),
+    stages: &mut Vec<super::StageTime>,
+    progress: &dyn Progress,
+) -> Result<Fallback<Edited>> {
+    // The new scene: the old one (cuts and all) with the moved instances' vertices placed anew
+    // and the added instances after the old ones (uncut: cutting where they meet the old
+    // surfaces would move the old texels), so every old triangle keeps its id.
+    let t = Instant::now();
+    // Every instance placed away from the layout, before or now, takes its place now (one
+    // moved back to where the layout has it included).
+    let mut away: Vec<usize> = (edit.moved_before.iter().chain(&edit.moved_now))
+        .copied()
+        .collect();
+    away.sort_unstable();
+    away.dedup();
+    let mut scene = place(&old.scene, now, &edit.now_of, &away);
+    let first_added = append_instances(&mut scene, now, &edit.added);
+    // A removed node's triangles keep their ids (and its texels their places) but leave the
+    // BVH: no ray meets them. The ray offset stays the layout's (its extent).
+    let tracer = Tracer::without(&scene, &edit.removed);
+    if tracer.epsilon != old.tracer.epsilon {
+        return Ok(Err(
+            "the scene's extent changed, and with it every ray's offset".to_string(),
+        ));
+    }
+    timed(stages, "incremental bvh", t);
+    // The added instances' charts, on pages after the old ones: the texels are ordered by
+    // page, so every old texel keeps its id.
+    let atlas = if edit.added.is_empty() {
+        old.atlas.clone()
+    } else {
+        let t = Instant::now();
+        let atlas = append_charts(&old.atlas, now, source, &edit.added, config, progress)?;
+        timed(stages, "incremental atlas", t);
+        atlas
+    };
+    let t = Instant::now();
+    let mut texels = texels::build(&scene, &atlas)?;
+    // The validity pass again only near what moved, where it was and where it is: elsewhere
+    // the previous pass's results hold (`validity::fix_near`).
+    let validity = if config.transport.validity && retrace == Retrace::Edited {
+        let instance_bounds =
+            |s: &Scene, inst: usize| bounds(s, s.instances[inst].vertices.clone(), 0.0);
+        let near: Vec<(Vec3, Vec3)> = (edit.moved.iter())
+            .flat_map(|&inst| [&old.scene, &scene].map(|s| instance_bounds(s, inst)))
+            .chain((edit.removed.iter()).map(|&inst| instance_bounds(&old.scene, inst)))
+            .chain((first_added..scene.instances.len()).map(|inst| instance_bounds(&scene, inst)))
+            .collect();
+        let params = texels::validity::ValidityParams {
+            seed: config.transport.seed,
+            ..Default::default()
+        };
+        texels::validity::fix_near(
+            &mut texels,
+            &old.texels,
+            &near,
+            &scene,
+            &tracer,
+            &params,
+            &Alone,
+            progress,
+        )?
+    } else {
+        super::fix_validity(&mut texels, &scene, &tracer, config, &Alone, progress)?
+    };
+    let n_old = old.texels.len();
+    if texels.len() < n_old
+        || texels.page[..n_old] != old.texels.page[..]
+        || texels.xy[..n_old] != old.texels.xy[..]
+    {
+        return Ok(Err("the old texels changed places".to_string()));
+    }
+    // A removed node's texels: unused (no primitive of the output reads them), invalid, and
+    // their rows empty (`Rebuild::rows`).
+    let gone = removed_texels(&scene, &texels, &edit.removed);
+    if gone.iter().any(|&g| g) {
+        texels.invalid = (0..texels.len() as u32)
+            .filter(|&i| gone[i as usize] || texels.invalid.binary_search(&i).is_ok())
+            .collect();
+    }
+    timed(stages, "incremental texels", t);
+    Ok(Ok(Edited {
+        scene,
+        tracer,
+        atlas,
+        texels,
+        validity,
+        first_added,
+        gone,
+    }))
+}
+
+/// The texels that changed (their rows are traced whole; all of them for `Retrace::All`), and
+/// the boxes whose rays are traced again: every moved, removed or added instance's, where it
+/// was and where it is.
+fn retraced(
+    old: &Prepared,
+    edited: &Edited,
+    edit: &Edit,
+    retrace: Retrace,
+) -> (Vec<bool>, Vec<(Vec3, Vec3)>) {
+    let mut changed = changed_texels(&old.texels, &edited.texels);
+    if retrace == Retrace::All {
+        changed.iter_mut().for_each(|c| *c = true);
+    }
+    // A ray that meets no moved bounds hits the same triangle at the same point, and the same
+    // texel there, unless that texel's cell map changed (a moved surface now divides it, or no
+    // longer does: `texels::Cuts`); such a texel lies within its own size of the moved surface,
+    // so the bounds grow by the largest of them.
+    let new = &edited.texels;
+    let margin = (0..old.texels.len())
+        .filter(|&i| old.texels.cuts.cells(i) != new.cuts.cells(i))
+        .map(|i| {
+            let size = |t: &Texels| t.du[i].length() + t.dv[i].length();
+            size(&old.texels).max(size(new))
+        })
+        .fold(0.0f32, f32::max)
+        + 8.0 * edited.tracer.epsilon;
+    let mut boxes = Vec::new();
+    for &inst in &edit.moved {
+        for s in [&old.scene, &edited.scene] {
+            boxes.push(bounds(s, s.instances[inst].vertices.clone(), margin));
+        }
+    }
+    for &inst in &edit.removed {
+        let s = &old.scene;
+        boxes.push(bounds(s, s.instances[inst].vertices.clone(), margin));
+    }
+    // An added instance: rays of the old rows that meet its bounds may end on it now.
+    for inst in edited.added() {
+        let s = &edited.scene;
+        boxes.push(bounds(s, s.instances[inst].vertices.clone(), margin));
+    }
+    (changed, boxes)
+}
+
+/// The edited bake's rows: the kept ones, traced again whole where `changed` and ray by ray
+/// where a ray meets `boxes`; `base` with what was traced and reused filled in. `Err` when the
+/// light sources changed.
+fn rebuild_transport(
+    kept: &Kept,
+    old: &Prepared,
+    edited: &Edited,
+    (config, changed, boxes): (&BakeConfig, &[bool], &[(Vec3, Vec3)]),
+    base: Incremental,
+    stages: &mut Vec<super::StageTime>,
+    progress: &dyn Progress,
+) -> Result<Fallback<(crate::transport::Transport, Incremental)>> {
+    let t = Instant::now();
+    let n = edited.texels.len();
+    let (k, l) = (config.transport.gather_rays, config.transport.light_samples);
+    let scene = &edited.scene;
+    let emitters = Emitters::new(scene, &edited.texels);
+    let sources = Sources::new(scene);
+    let was = &kept.transport.sources;
+    if (sources.lights, &sources.emissive) != (was.lights, &was.emissive) {
+        return Ok(Err("the light sources changed".to_string()));
+    }
+    let ctx = Context {
+        surfaces: Surfaces {
+            scene,
+            texels: &edited.texels,
+            tracer: &edited.tracer,
+        },
+        params: &config.transport,
+        emitters: &emitters,
+        texel_rays: None,
+        sources: Some(&sources),
+    };
+    let rebuild = Rebuild {
+        kept,
+        old: old.surfaces(),
+        new: &ctx,
+        changed,
+        gone: &edited.gone,
+        boxes,
+        count_rows: config.transport.count_rows,
+        touched: Mutex::new(Vec::new()),
+        flagged: AtomicUsize::new(0),
+        busy: AtomicU64::new(0),
+        traced_busy: AtomicU64::new(0),
+    };
+    let mut transport = rows::build(n, montecarlo::CHUNK, "transport", progress, |range, out| {
+        rebuild.rows(range, out)
+    })?;
+    let mut touched = std::mem::take(&mut *rebuild.touched.lock().unwrap());
+    touched.sort_unstable();
+    let retraced = touched.iter().filter(|t| t.1).count();
+    let patched = touched.len() - retraced;
+    let flagged_rays = rebuild.flagged.load(Ordering::Relaxed) as u64;
+    transport.sources = sources.clone();
+    #[cfg(debug_assertions)]
+    transport.validate();
+    let seconds = t.elapsed().as_secs_f64();
+    timed(stages, "incremental transport", t);
+    let lights = scene.lights.len() as u64 * u64::from(PUNCTUAL_GRID * PUNCTUAL_GRID);
+    let per_row = u64::from(k) + if emitters.is_empty() { 0 } else { u64::from(l) } + lights;
+    // The transport time saved, estimated: the rows traced whole cost `traced_busy` thread
+    // time, so every row would have cost about `n / retraced` times that; the thread time
+    // of all chunks against the wall time gives the parallel speed-up. Unknown (0) when no
+    // row was traced whole.
+    let busy = rebuild.busy.load(Ordering::Relaxed) as f64 * 1e-9;
+    let traced_busy = rebuild.traced_busy.load(Ordering::Relaxed) as f64 * 1e-9;
+    let seconds_saved = match (retraced, busy > 0.0) {
+        (0, _) | (_, false) => 0.0,
+        (r, true) => {
+            let full_wall = traced_busy * n as f64 / r as f64 * seconds / busy;
+            (full_wall - seconds).max(0.0)
+        }
+    };
+    let incremental = Incremental {
+        rows: n,
+        retraced,
+        patched,
+        flagged_rays,
+        touched_rows: touched.iter().map(|t| t.0).collect(),
+        rays: transport.rays,
+        full_rays: n as u64 * per_row,
+        seconds_saved,
+        ..base
+    };
+    Ok(Ok((transport, incremental)))
 }
 
 /// The old bake's scene laid out again on its kept `atlas` (what `prepare_loaded` does with
