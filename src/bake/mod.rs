@@ -1020,7 +1020,8 @@ pub(crate) fn lightmap_rays(transport_rays: u64, plan: Option<&Plan>) -> u64 {
     transport_rays + plan.map_or(0, |p| p.discarded_rays)
 }
 
-/// Denoising, dilation and seams of a lit bake.
+/// Denoising, dilation and seams of a lit bake, and the outputs gathered from its solution
+/// (directional pages, probes, layers).
 pub(crate) fn finish(prepared: Prepared, lit: Lighting, progress: &dyn Progress) -> Result<Baked> {
     let Lighting {
         config,
@@ -1038,42 +1039,13 @@ pub(crate) fn finish(prepared: Prepared, lit: Lighting, progress: &dyn Progress)
         texel_gather_rays,
     } = last;
     let t = Instant::now();
-    let directional = config
-        .output
-        .directional
-        .map(|rays| {
-            let params = lightmap::directional::DirectionalParams {
-                rays,
-                seed: config.transport.seed,
-                sky: config.transport.sky,
-                indirect_only: config.transport.indirect_only,
-            };
-            let surfaces = prepared.surfaces();
-            lightmap::directional::gather(surfaces, &solution.irradiance, &params, progress)
-        })
-        .transpose()?;
+    let directional = gather_directional(&prepared, &config, &solution, progress)?;
     if directional.is_some() {
         timed(&mut stages, "directional", t);
     }
     let t = Instant::now();
-    let probes = (config.output.probes.as_ref())
-        .map(|params| {
-            let bake_rays = lightmap_rays(transport.rays, plan.as_ref());
-            let bake = (
-                config.transport.seed,
-                config.transport.sky,
-                prepared.source.path.as_path(),
-                bake_rays,
-            );
-            crate::probes::bake(
-                prepared.surfaces(),
-                &solution.irradiance,
-                params,
-                bake,
-                progress,
-            )
-        })
-        .transpose()?;
+    let bake_rays = lightmap_rays(transport.rays, plan.as_ref());
+    let probes = gather_probes(&prepared, &config, &solution, bake_rays, progress)?;
     if probes.is_some() {
         timed(&mut stages, "probes", t);
     }
@@ -1088,9 +1060,6 @@ pub(crate) fn finish(prepared: Prepared, lit: Lighting, progress: &dyn Progress)
     } = prepared;
 
     let t = Instant::now();
-    let indirect_only = config.transport.indirect_only;
-    let mut lightmap = stored_values(&solution.irradiance, &transport.direct, indirect_only);
-    let denoised = config.transport.denoise && config.technique.is_monte_carlo();
     let noise_model = TransportParams {
         gather_rays,
         light_samples,
@@ -1100,16 +1069,18 @@ pub(crate) fn finish(prepared: Prepared, lit: Lighting, progress: &dyn Progress)
     let texel_rays = (plan.as_ref())
         .is_some_and(|p| p.texel_rays.is_some())
         .then_some(texel_gather_rays.as_slice());
-    let noise_model = (&noise_model, texel_rays);
-    // Layers are denoised with the lightmap's own weights (see `relight`).
-    let layer_guide = (denoised && config.output.layers.is_some()).then(|| {
-        let noise =
-            lightmap::denoise::bake_noise(&texels, &transport.direct, &lightmap, noise_model);
-        (lightmap.clone(), noise)
-    });
-    if denoised {
-        lightmap::denoise::denoise_bake(&texels, &transport, &mut lightmap, noise_model, progress)?;
-    }
+    let Denoised {
+        mut lightmap,
+        denoised,
+        layer_guide,
+    } = denoised_lightmap(
+        &texels,
+        &transport,
+        &solution,
+        &config,
+        (&noise_model, texel_rays),
+        progress,
+    )?;
     timed(&mut stages, "denoise", t);
     let t = Instant::now();
     let mut pages = pages_of(&texels, &mut lightmap, config.atlas.padding);
@@ -1151,18 +1122,8 @@ pub(crate) fn finish(prepared: Prepared, lit: Lighting, progress: &dyn Progress)
     check_aborted(progress)?;
     let directional = directional.map(|gathered| {
         let t = Instant::now();
+        let pages = directional_pages(&scene, &atlas, &texels, &gathered, &config);
         let agreement = lightmap::directional::agreement(&texels, &gathered, &lightmap);
-        let mut pages = lightmap::directional::pages(&texels, &gathered.sh);
-        for (c, p) in pages.iter_mut().enumerate() {
-            lightmap::dilate(p, config.atlas.padding.max(2) * 2);
-            if config.output.seams {
-                let params = lightmap::seams::SeamParams {
-                    non_negative: c == 0,
-                    ..Default::default()
-                };
-                lightmap::seams::stitch_bake(&scene, &atlas, p, &params);
-            }
-        }
         timed(&mut stages, "directional pages", t);
         (pages, agreement, gathered.rays)
     });
@@ -1189,6 +1150,117 @@ pub(crate) fn finish(prepared: Prepared, lit: Lighting, progress: &dyn Progress)
         layout_nodes: None,
         written: None,
     })
+}
+
+/// The directional lightmap's gather from the solution (`config.output.directional`).
+fn gather_directional(
+    prepared: &Prepared,
+    config: &BakeConfig,
+    solution: &solve::Solution,
+    progress: &dyn Progress,
+) -> Result<Option<lightmap::directional::Gathered>> {
+    let Some(rays) = config.output.directional else {
+        return Ok(None);
+    };
+    let params = lightmap::directional::DirectionalParams {
+        rays,
+        seed: config.transport.seed,
+        sky: config.transport.sky,
+        indirect_only: config.transport.indirect_only,
+    };
+    let surfaces = prepared.surfaces();
+    lightmap::directional::gather(surfaces, &solution.irradiance, &params, progress).map(Some)
+}
+
+/// The light probes gathered from the solution (`config.output.probes`), their budget
+/// following the bake's `bake_rays` when none is given.
+fn gather_probes(
+    prepared: &Prepared,
+    config: &BakeConfig,
+    solution: &solve::Solution,
+    bake_rays: u64,
+    progress: &dyn Progress,
+) -> Result<Option<crate::probes::Probes>> {
+    let Some(params) = config.output.probes.as_ref() else {
+        return Ok(None);
+    };
+    let bake = (
+        config.transport.seed,
+        config.transport.sky,
+        prepared.source.path.as_path(),
+        bake_rays,
+    );
+    crate::probes::bake(
+        prepared.surfaces(),
+        &solution.irradiance,
+        params,
+        bake,
+        progress,
+    )
+    .map(Some)
+}
+
+/// The stored lightmap values, denoised where the bake denoises.
+struct Denoised {
+    lightmap: Vec<Vec3>,
+    /// The denoiser ran (Monte Carlo transport with denoising on).
+    denoised: bool,
+    /// The values before denoising and their noise, which layers are denoised with (the
+    /// lightmap's own weights; see `relight`), when the bake has layers.
+    layer_guide: Option<(Vec<Vec3>, Vec<f32>)>,
+}
+
+/// The texels' stored values `H/π` from the solution, denoised with the noise model of the
+/// rays cast (`noise_model`: the transport's rays, each texel's own where the plan moved rays).
+fn denoised_lightmap(
+    texels: &texels::Texels,
+    transport: &transport::Transport,
+    solution: &solve::Solution,
+    config: &BakeConfig,
+    noise_model: (&TransportParams, Option<&[f32]>),
+    progress: &dyn Progress,
+) -> Result<Denoised> {
+    let indirect_only = config.transport.indirect_only;
+    let mut lightmap = stored_values(&solution.irradiance, &transport.direct, indirect_only);
+    let denoised = config.transport.denoise && config.technique.is_monte_carlo();
+    // Layers are denoised with the lightmap's own weights (see `relight`).
+    let layer_guide = (denoised && config.output.layers.is_some()).then(|| {
+        let noise =
+            lightmap::denoise::bake_noise(texels, &transport.direct, &lightmap, noise_model);
+        (lightmap.clone(), noise)
+    });
+    if denoised {
+        lightmap::denoise::denoise_bake(texels, transport, &mut lightmap, noise_model, progress)?;
+    }
+    Ok(Denoised {
+        lightmap,
+        denoised,
+        layer_guide,
+    })
+}
+
+/// The directional pages from their gather: dilated as the lightmap's pages are (at least
+/// two texels a side), stitched across seams when the bake stitches (only the first page,
+/// the ambient term, kept non-negative).
+fn directional_pages(
+    scene: &scene::Scene,
+    atlas: &atlas::Atlas,
+    texels: &texels::Texels,
+    gathered: &lightmap::directional::Gathered,
+    config: &BakeConfig,
+) -> [LightmapPages; 4] {
+    let mut pages = lightmap::directional::pages(texels, &gathered.sh);
+    for (c, p) in pages.iter_mut().enumerate() {
+        lightmap::dilate(p, config.atlas.padding.max(2) * 2);
+        if config.output.seams {
+            let params = lightmap::seams::SeamParams {
+                non_negative: c == 0,
+                ..Default::default()
+            };
+            lightmap::seams::stitch_bake(scene, atlas, p, &params);
+        }
+    }
+    pages
 }
 
 /// What a texel stores, `H/π`, from the solved irradiance `h` and the direct light `direct`;

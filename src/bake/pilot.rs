@@ -43,143 +43,14 @@ pub(crate) fn choose_transport(
 ) -> Result<Option<PilotRuns>> {
     let texels = surfaces.texels;
     let n = texels.len();
-    let e = plan.target_error;
     let mut pilot = None;
     plan::choose_method(config, plan, keep);
     let emitters = texels.emission.iter().any(|l| l.max_element() > 0.0);
     let monte_carlo = config.technique.is_monte_carlo();
     if monte_carlo && !keep.rays && n > 0 && lit(surfaces, &config.transport) {
-        progress.begin("pilot", 2);
-        let start = Instant::now();
-        let tolerance = pilot_tolerance(e);
-        let bake = |k| {
-            PilotRuns::bake(
-                surfaces,
-                &config.transport,
-                k,
-                tolerance,
-                processes,
-                progress,
-            )
-        };
-        let indirect_only = config.transport.indirect_only;
-        let measured = density.noise.filter(|&n| n > 0.0 && n.is_finite());
-        plan.noise_from_density_pilot = measured.is_some();
-        // The density pilot's pair, when it was baked on this atlas (the bake's own first).
-        let mut kept = density.pair.take();
-        let mut kept_seconds = 0.0;
-        let mut pair_at_pilot_rays = |kept: Option<KeptPair>| match kept {
-            Some(kept) => {
-                kept_seconds = kept.seconds;
-                Ok(kept.runs)
-            }
-            None => bake(PILOT_RAYS),
-        };
-        let (mut first, mut runs) = match measured {
-            Some(noise) => (noise, None),
-            None => {
-                let runs = pair_at_pilot_rays(kept.take())?;
-                (runs.noise(texels, indirect_only), Some(runs))
-            }
-        };
-        progress.advance(1);
-        let mut second = None;
-        if plan::needs_second_pilot(first, e) {
-            // A first pair on this atlas (baked here, or the density pilot's) is averaged into
-            // the result beside the second: its rays are spent on these texels.
-            let earlier = match (runs.take(), kept.take()) {
-                (Some(runs), _) => Some(runs),
-                (None, Some(kept)) => Some(pair_at_pilot_rays(Some(kept))?),
-                (None, None) => None,
-            };
-            let earlier = earlier.map(|mut earlier| {
-                // Only the last pair's rows can be a result's (`final_bake`): these go before
-                // the second pair builds its own, with the punctual light its sample will not
-                // read.
-                earlier.take_punctual();
-                for run in &mut earlier.runs {
-                    run.transport.rows = Default::default();
-                }
-                Box::new(earlier)
-            });
-            let mut pair = bake(4 * PILOT_RAYS)?;
-            second = Some(pair.noise(texels, indirect_only));
-            pair.earlier = earlier;
-            runs = Some(pair);
-        }
-        let mut runs = match runs {
-            Some(runs) => runs,
-            None => {
-                // No second pilot: the pair at PILOT_RAYS on this atlas, reused by the final
-                // bake, and its noise rather than the density pilot's.
-                let pair = pair_at_pilot_rays(kept)?;
-                first = pair.noise(texels, indirect_only);
-                plan.noise_from_density_pilot = false;
-                pair
-            }
-        };
-        // The denoiser's share of the noise, from a pair at 4× only (see `denoise_gain`).
-        let denoised = match second {
-            Some(_) => denoise_gain(texels, config, &runs, progress)?,
-            None => None,
-        };
-        plan.denoise_gain = denoised.as_ref().map(|d| d.gain);
-        let rays = runs.rays();
-        progress.advance(1);
-        progress.end();
-        plan.pilot_seconds = start.elapsed().as_secs_f64() + kept_seconds;
-        plan.pilot_rays = rays + runs.earlier.as_ref().map_or(0, |e| e.rays());
-        let earlier_rays = runs.earlier.as_ref().map_or(0, |e| e.gather_rays);
-        runs.enough = plan::choose_rays(config, plan, first, second, earlier_rays);
-        let [a, b] = runs.stored(config.transport.indirect_only);
-        let stored = [a.as_slice(), b.as_slice()];
-        // After a density pilot's sample, this one confirms the laid-out atlas at its points,
-        // reading the light gathered there: no budget past them (rays only for points the
-        // pilot's atlas buried). It tells the prediction, which may send the bake back to
-        // lay the atlas out again (`DensityChoice::raise_after`), once; new points
-        // cost the furnished interior at `medium` 0.7 s of a 17 s bake for an interval about
-        // 1.3× narrower (the guide: "The final atlas's sample draws no new points").
-        let budget = if density.lights.is_empty() {
-            rays / 2
-        } else {
-            0
-        };
-        // The runs' punctual light goes to the sample (not held twice, nor through the bake).
-        let own_punctual = runs.take_punctual();
-        let Samples {
-            punctual,
-            gathered,
-            seconds,
-        } = Samples::measure(
-            surfaces,
-            &config.transport,
-            // The pair as the final lightmap will be read: denoised when the denoiser's gain
-            // is credited, so the resolution error holds what its smoothing costs at edges.
-            match &denoised {
-                Some(d) => [&d.irradiance[0], &d.irradiance[1]],
-                None => runs.irradiance(),
-            },
-            (stored, own_punctual),
-            e,
-            (budget, &density.lights),
-            density.punctual.take(),
-            processes,
-        )?;
-        if let Some(g) = &gathered {
-            // The last pair's own noise per texel, measured above.
-            let texel_noise = second.unwrap_or(first);
-            plan.reasons.push(lookup_noise_reason(
-                g,
-                runs.gather_rays,
-                texel_noise,
-                denoised.is_some(),
-            ));
-        }
-        plan.resolution_seconds = seconds;
-        plan.overhead_seconds += seconds;
-        plan.resolution_pilot_rays = runs.gather_rays;
-        plan::predict_resolution(texels, [&a, &b], punctual.as_ref(), gathered.as_ref(), plan);
-        pilot = Some(runs);
+        pilot = Some(measure(
+            surfaces, config, plan, progress, density, processes,
+        )?);
     } else if monte_carlo && !keep.rays {
         plan::keep_rays_unmeasured(config, plan);
     }
@@ -210,6 +81,191 @@ pub(crate) fn choose_transport(
     }
     plan.finish(config);
     Ok(pilot)
+}
+
+/// The ray pilots and what they measure ([`choose_transport`] on a lit scene): the pairs
+/// ([`pilot_pairs`]), the denoiser's share of their noise, the rays, and the lookup-error
+/// sample on this atlas, which predicts the resolution error.
+fn measure(
+    surfaces: Surfaces,
+    config: &mut BakeConfig,
+    plan: &mut Plan,
+    progress: &dyn Progress,
+    density: &mut Reused,
+    processes: &dyn Processes,
+) -> Result<PilotRuns> {
+    let texels = surfaces.texels;
+    let e = plan.target_error;
+    progress.begin("pilot", 2);
+    let start = Instant::now();
+    let Pairs {
+        mut runs,
+        first,
+        second,
+        kept_seconds,
+    } = pilot_pairs(surfaces, config, plan, density, processes, progress)?;
+    // The denoiser's share of the noise, from a pair at 4× only (see `denoise_gain`).
+    let denoised = match second {
+        Some(_) => denoise_gain(texels, config, &runs, progress)?,
+        None => None,
+    };
+    plan.denoise_gain = denoised.as_ref().map(|d| d.gain);
+    let rays = runs.rays();
+    progress.advance(1);
+    progress.end();
+    plan.pilot_seconds = start.elapsed().as_secs_f64() + kept_seconds;
+    plan.pilot_rays = rays + runs.earlier.as_ref().map_or(0, |e| e.rays());
+    let earlier_rays = runs.earlier.as_ref().map_or(0, |e| e.gather_rays);
+    runs.enough = plan::choose_rays(config, plan, first, second, earlier_rays);
+    let [a, b] = runs.stored(config.transport.indirect_only);
+    let stored = [a.as_slice(), b.as_slice()];
+    // After a density pilot's sample, this one confirms the laid-out atlas at its points,
+    // reading the light gathered there: no budget past them (rays only for points the
+    // pilot's atlas buried). It tells the prediction, which may send the bake back to
+    // lay the atlas out again (`DensityChoice::raise_after`), once; new points
+    // cost the furnished interior at `medium` 0.7 s of a 17 s bake for an interval about
+    // 1.3× narrower (the guide: "The final atlas's sample draws no new points").
+    let budget = if density.lights.is_empty() {
+        rays / 2
+    } else {
+        0
+    };
+    // The runs' punctual light goes to the sample (not held twice, nor through the bake).
+    let own_punctual = runs.take_punctual();
+    let Samples {
+        punctual,
+        gathered,
+        seconds,
+    } = Samples::measure(
+        surfaces,
+        &config.transport,
+        // The pair as the final lightmap will be read: denoised when the denoiser's gain
+        // is credited, so the resolution error holds what its smoothing costs at edges.
+        match &denoised {
+            Some(d) => [&d.irradiance[0], &d.irradiance[1]],
+            None => runs.irradiance(),
+        },
+        (stored, own_punctual),
+        e,
+        (budget, &density.lights),
+        density.punctual.take(),
+        processes,
+    )?;
+    if let Some(g) = &gathered {
+        // The last pair's own noise per texel, measured above.
+        let texel_noise = second.unwrap_or(first);
+        plan.reasons.push(lookup_noise_reason(
+            g,
+            runs.gather_rays,
+            texel_noise,
+            denoised.is_some(),
+        ));
+    }
+    plan.resolution_seconds = seconds;
+    plan.overhead_seconds += seconds;
+    plan.resolution_pilot_rays = runs.gather_rays;
+    plan::predict_resolution(texels, [&a, &b], punctual.as_ref(), gathered.as_ref(), plan);
+    Ok(runs)
+}
+
+/// The pilot pairs of [`measure`].
+struct Pairs {
+    /// The last pair (the earlier one, if any, inside it).
+    runs: PilotRuns,
+    /// The relative noise at [`PILOT_RAYS`].
+    first: f32,
+    /// The relative noise of a second pair at 4× [`PILOT_RAYS`], when one was cast.
+    second: Option<f32>,
+    /// Seconds the density pilot spent on a pair reused here.
+    kept_seconds: f64,
+}
+
+/// The pair at [`PILOT_RAYS`] (the density pilot's when it was baked on this atlas; its noise
+/// alone, measured on the density pilot's own atlas, when a second pair follows) and, when
+/// that noise asks for one, a second pair at 4×, into which a first pair on this atlas is
+/// averaged.
+fn pilot_pairs(
+    surfaces: Surfaces,
+    config: &BakeConfig,
+    plan: &mut Plan,
+    density: &mut Reused,
+    processes: &dyn Processes,
+    progress: &dyn Progress,
+) -> Result<Pairs> {
+    let texels = surfaces.texels;
+    let tolerance = pilot_tolerance(plan.target_error);
+    let bake = |k| {
+        PilotRuns::bake(
+            surfaces,
+            &config.transport,
+            k,
+            tolerance,
+            processes,
+            progress,
+        )
+    };
+    let indirect_only = config.transport.indirect_only;
+    let measured = density.noise.filter(|&n| n > 0.0 && n.is_finite());
+    plan.noise_from_density_pilot = measured.is_some();
+    // The density pilot's pair, when it was baked on this atlas (the bake's own first).
+    let mut kept = density.pair.take();
+    let mut kept_seconds = 0.0;
+    let mut pair_at_pilot_rays = |kept: Option<KeptPair>| match kept {
+        Some(kept) => {
+            kept_seconds = kept.seconds;
+            Ok(kept.runs)
+        }
+        None => bake(PILOT_RAYS),
+    };
+    let (mut first, mut runs) = match measured {
+        Some(noise) => (noise, None),
+        None => {
+            let runs = pair_at_pilot_rays(kept.take())?;
+            (runs.noise(texels, indirect_only), Some(runs))
+        }
+    };
+    progress.advance(1);
+    let mut second = None;
+    if plan::needs_second_pilot(first, plan.target_error) {
+        // A first pair on this atlas (baked here, or the density pilot's) is averaged into
+        // the result beside the second: its rays are spent on these texels.
+        let earlier = match (runs.take(), kept.take()) {
+            (Some(runs), _) => Some(runs),
+            (None, Some(kept)) => Some(pair_at_pilot_rays(Some(kept))?),
+            (None, None) => None,
+        };
+        let earlier = earlier.map(|mut earlier| {
+            // Only the last pair's rows can be a result's (`final_bake`): these go before
+            // the second pair builds its own, with the punctual light its sample will not
+            // read.
+            earlier.take_punctual();
+            for run in &mut earlier.runs {
+                run.transport.rows = Default::default();
+            }
+            Box::new(earlier)
+        });
+        let mut pair = bake(4 * PILOT_RAYS)?;
+        second = Some(pair.noise(texels, indirect_only));
+        pair.earlier = earlier;
+        runs = Some(pair);
+    }
+    let runs = match runs {
+        Some(runs) => runs,
+        None => {
+            // No second pilot: the pair at PILOT_RAYS on this atlas, reused by the final
+            // bake, and its noise rather than the density pilot's.
+            let pair = pair_at_pilot_rays(kept)?;
+            first = pair.noise(texels, indirect_only);
+            plan.noise_from_density_pilot = false;
+            pair
+        }
+    };
+    Ok(Pairs {
+        runs,
+        first,
+        second,
+        kept_seconds,
+    })
 }
 
 /// The mean over a pilot pair's runs of each texel's per-ray variance, and the rays per texel
