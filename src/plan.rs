@@ -430,26 +430,12 @@ pub(crate) fn choose_rays(
     earlier: u32,
 ) -> bool {
     let e = plan.target_error;
-    let gain = plan.denoise_gain.unwrap_or(1.0);
-    let k0 = PILOT_RAYS as f32;
-    let (mut noise, mut k_pilot, mut alpha) = (first, k0, 0.5f32);
-    let mut wanted = rays_for_target(k0, first * gain, alpha, e);
-    if let Some(n1) = second {
-        // A hard scene: measured again at 4× the rays, fit how fast the noise falls.
-        if n1 > 0.0 {
-            alpha = ((first / n1).ln() / 4f32.ln()).clamp(0.5, MAX_EXPONENT);
-            (noise, k_pilot) = (n1, 4.0 * k0);
-            wanted = rays_for_target(k_pilot, n1 * gain, alpha, e);
-            // Beyond the pair's rays the denoiser is credited less: a few steps settle it (the
-            // credit rises as K^¼, the noise falls at least as K^−½).
-            for _ in 0..8 {
-                let credited = denoise_gain_at(plan.denoise_gain, wanted / (2.0 * k_pilot));
-                wanted = rays_for_target(k_pilot, n1 * credited, alpha, e);
-            }
-        } else {
-            wanted = 4.0 * k0;
-        }
-    }
+    let NoiseFit {
+        noise,
+        k_pilot,
+        alpha,
+        wanted,
+    } = fit_noise(plan, first, second);
     plan.pilot_noise = Some(noise);
     let k = round_up_quarter_octave(wanted).clamp(RAYS_RANGE.0, RAYS_RANGE.1);
     // The last pilot's two runs are reused: only the rays they lack are cast again.
@@ -573,6 +559,51 @@ pub(crate) fn choose_rays(
         }
     ));
     enough
+}
+
+/// How a run's noise falls with its rays, fitted to the pilot pairs ([`choose_rays`]).
+struct NoiseFit {
+    /// One run's relative noise at `k_pilot` rays: the last pair's.
+    noise: f32,
+    /// The last pair's rays per run.
+    k_pilot: f32,
+    /// The noise falls as `K^−alpha` (½ unless a second pair measured it).
+    alpha: f32,
+    /// The rays per run at which the noise, less what the denoiser takes, meets
+    /// `NOISE_SHARE` of the target.
+    wanted: f32,
+}
+
+/// The fit from the pair at [`PILOT_RAYS`] (relative noise `first`) and, on a hard scene, a
+/// second pair at 4× (`second`): the exponent from the two, else ½.
+fn fit_noise(plan: &Plan, first: f32, second: Option<f32>) -> NoiseFit {
+    let e = plan.target_error;
+    let gain = plan.denoise_gain.unwrap_or(1.0);
+    let k0 = PILOT_RAYS as f32;
+    let (mut noise, mut k_pilot, mut alpha) = (first, k0, 0.5f32);
+    let mut wanted = rays_for_target(k0, first * gain, alpha, e);
+    if let Some(n1) = second {
+        // A hard scene: measured again at 4× the rays, fit how fast the noise falls.
+        if n1 > 0.0 {
+            alpha = ((first / n1).ln() / 4f32.ln()).clamp(0.5, MAX_EXPONENT);
+            (noise, k_pilot) = (n1, 4.0 * k0);
+            wanted = rays_for_target(k_pilot, n1 * gain, alpha, e);
+            // Beyond the pair's rays the denoiser is credited less: a few steps settle it (the
+            // credit rises as K^¼, the noise falls at least as K^−½).
+            for _ in 0..8 {
+                let credited = denoise_gain_at(plan.denoise_gain, wanted / (2.0 * k_pilot));
+                wanted = rays_for_target(k_pilot, n1 * credited, alpha, e);
+            }
+        } else {
+            wanted = 4.0 * k0;
+        }
+    }
+    NoiseFit {
+        noise,
+        k_pilot,
+        alpha,
+        wanted,
+    }
 }
 
 /// Step 3 when no pilot can measure anything (no light reaches the texels).

@@ -512,6 +512,7 @@ pub fn read(gltf: &Path) -> Result<Kept> {
 }
 
 /// The body, parsed, and its settings block as written; an error says what is inconsistent.
+/// The sections in the order [`encode`] writes them.
 fn decode<'a>(r: &mut Reader<'a>) -> std::result::Result<(Kept, &'a [u8]), String> {
     let json_len = r.u64()? as usize;
     let json = r.take(json_len)?;
@@ -525,6 +526,47 @@ fn decode<'a>(r: &mut Reader<'a>) -> std::result::Result<(Kept, &'a [u8]), Strin
             settings.lights.len() + settings.emissive.len()
         ));
     }
+    let (texels, material) = decode_texels(r, n, pages, settings.materials.len())?;
+    let mut transport = decode_rows(r, n)?;
+    transport.direct_terms = r.vec3s(n * sources)?;
+    let direct = r.vec3s(n)?;
+    transport.sources = Sources {
+        lights: settings.lights.len(),
+        emissive: settings.emissive.clone(),
+        ..Default::default()
+    };
+    let seams = decode_seams(r, pages)?;
+    let atlas = decode_atlas(r)?;
+    let jitter = r.f32s(n)?;
+    let cuts = decode_cuts(r, n)?;
+    if r.at != r.bytes.len() {
+        return Err(format!(
+            "{} bytes after the last section",
+            r.bytes.len() - r.at
+        ));
+    }
+    let kept = Kept {
+        settings,
+        texels,
+        material,
+        transport,
+        direct,
+        seams,
+        atlas,
+        jitter,
+        cuts,
+    };
+    Ok((kept, json))
+}
+
+/// The texels' section: `pages` page sizes, each of the `n` texels' page, place, raster values
+/// and material (fewer than `materials`), and the invalid texels.
+fn decode_texels(
+    r: &mut Reader,
+    n: usize,
+    pages: usize,
+    materials: usize,
+) -> std::result::Result<(Texels, Vec<u32>), String> {
     let mut texels = Texels::default();
     for _ in 0..pages {
         let (width, height) = (r.u32()?, r.u32()?);
@@ -553,10 +595,7 @@ fn decode<'a>(r: &mut Reader<'a>) -> std::result::Result<(Kept, &'a [u8]), Strin
     texels.albedo = r.vec3s(n)?;
     texels.emission = r.vec3s(n)?;
     let material = r.u32s(n)?;
-    if material
-        .iter()
-        .any(|&m| m as usize >= settings.materials.len())
-    {
+    if material.iter().any(|&m| m as usize >= materials) {
         return Err("a texel's material is out of range".to_string());
     }
     let invalid = r.u32()? as usize;
@@ -564,6 +603,11 @@ fn decode<'a>(r: &mut Reader<'a>) -> std::result::Result<(Kept, &'a [u8]), Strin
     if texels.invalid.iter().any(|&i| i as usize >= n) {
         return Err("an invalid texel id is out of range".to_string());
     }
+    Ok((texels, material))
+}
+
+/// The rows' section: per texel its escaping share and its row of `(texel, factor)` pairs.
+fn decode_rows(r: &mut Reader, n: usize) -> std::result::Result<Transport, String> {
     let escape = r.f32s(n)?;
     let lengths = r.u32s(n)?;
     let entries: usize = lengths.iter().map(|&l| l as usize).sum();
@@ -577,17 +621,15 @@ fn decode<'a>(r: &mut Reader<'a>) -> std::result::Result<(Kept, &'a [u8]), Strin
             (word(0), f32::from_bits(word(4)))
         })
     });
-    let mut transport = Transport::from_rows(rows, escape);
+    let transport = Transport::from_rows(rows, escape);
     if (0..n).any(|i| transport.row(i).any(|(j, _)| j as usize >= n)) {
         return Err("a row names a texel out of range".to_string());
     }
-    transport.direct_terms = r.vec3s(n * sources)?;
-    let direct = r.vec3s(n)?;
-    transport.sources = Sources {
-        lights: settings.lights.len(),
-        emissive: settings.emissive.clone(),
-        ..Default::default()
-    };
+    Ok(transport)
+}
+
+/// The seams' section: sample pairs on the `pages` pages.
+fn decode_seams(r: &mut Reader, pages: usize) -> std::result::Result<Seams, String> {
     let samples = r.u32()? as usize;
     let mut seams = Seams::default();
     for _ in 0..samples {
@@ -601,54 +643,59 @@ fn decode<'a>(r: &mut Reader<'a>) -> std::result::Result<(Kept, &'a [u8]), Strin
             uv: [Vec2::new(v[0], v[1]), Vec2::new(v[2], v[3])],
         });
     }
-    let atlas = match r.u32()? {
-        0 => None,
-        _ => {
-            let texels_per_unit = r.f32s(1)?[0];
-            let pages = r.u32()? as usize;
-            let sizes = r.u32s(2 * pages)?;
-            let pages: Vec<PageSize> = sizes
-                .chunks(2)
-                .map(|c| PageSize {
-                    width: c[0],
-                    height: c[1],
-                })
-                .collect();
-            let count = r.u32()? as usize;
-            let mut instances = Vec::with_capacity(count.min(1 << 20));
-            for _ in 0..count {
-                let verts = r.u32()? as usize;
-                let xref = r.u32s(verts)?;
-                let uv = r.f32s(2 * verts)?;
-                let uv = uv.chunks(2).map(|c| Vec2::new(c[0], c[1])).collect();
-                let tris = r.u32()? as usize;
-                let corners = r.u32s(3 * tris)?;
-                let triangles: Vec<[u32; 3]> =
-                    corners.chunks(3).map(|c| [c[0], c[1], c[2]]).collect();
-                if triangles.iter().flatten().any(|&v| v as usize >= verts) {
-                    return Err("an atlas triangle names a vertex out of range".to_string());
-                }
-                let triangle_page = r.u32s(tris)?;
-                if triangle_page.iter().any(|&p| p as usize >= pages.len()) {
-                    return Err("an atlas triangle's page is out of range".to_string());
-                }
-                instances.push(InstanceUv {
-                    xref,
-                    uv,
-                    triangles,
-                    triangle_page,
-                });
-            }
-            Some(Atlas {
-                pages,
-                instances,
-                texels_per_unit,
-                reused_input_uvs: false,
-                shared: Vec::new(),
-            })
+    Ok(seams)
+}
+
+/// The atlas' section, when the bake kept its atlas: page sizes and each instance's charts.
+fn decode_atlas(r: &mut Reader) -> std::result::Result<Option<Atlas>, String> {
+    if r.u32()? == 0 {
+        return Ok(None);
+    }
+    let texels_per_unit = r.f32s(1)?[0];
+    let pages = r.u32()? as usize;
+    let sizes = r.u32s(2 * pages)?;
+    let pages: Vec<PageSize> = sizes
+        .chunks(2)
+        .map(|c| PageSize {
+            width: c[0],
+            height: c[1],
+        })
+        .collect();
+    let count = r.u32()? as usize;
+    let mut instances = Vec::with_capacity(count.min(1 << 20));
+    for _ in 0..count {
+        let verts = r.u32()? as usize;
+        let xref = r.u32s(verts)?;
+        let uv = r.f32s(2 * verts)?;
+        let uv = uv.chunks(2).map(|c| Vec2::new(c[0], c[1])).collect();
+        let tris = r.u32()? as usize;
+        let corners = r.u32s(3 * tris)?;
+        let triangles: Vec<[u32; 3]> = corners.chunks(3).map(|c| [c[0], c[1], c[2]]).collect();
+        if triangles.iter().flatten().any(|&v| v as usize >= verts) {
+            return Err("an atlas triangle names a vertex out of range".to_string());
         }
-    };
-    let jitter = r.f32s(n)?;
+        let triangle_page = r.u32s(tris)?;
+        if triangle_page.iter().any(|&p| p as usize >= pages.len()) {
+            return Err("an atlas triangle's page is out of range".to_string());
+        }
+        instances.push(InstanceUv {
+            xref,
+            uv,
+            triangles,
+            triangle_page,
+        });
+    }
+    Ok(Some(Atlas {
+        pages,
+        instances,
+        texels_per_unit,
+        reused_input_uvs: false,
+        shared: Vec::new(),
+    }))
+}
+
+/// The cell maps of the divided texels, in texel order.
+fn decode_cuts(r: &mut Reader, n: usize) -> std::result::Result<crate::texels::Cuts, String> {
     let divided = r.u32()? as usize;
     let mut entries = Vec::with_capacity(divided.min(n));
     for _ in 0..divided {
@@ -660,25 +707,7 @@ fn decode<'a>(r: &mut Reader<'a>) -> std::result::Result<(Kept, &'a [u8]), Strin
         }
         entries.push((i, cells.try_into().unwrap()));
     }
-    let cuts = crate::texels::Cuts::from_entries(n, entries);
-    if r.at != r.bytes.len() {
-        return Err(format!(
-            "{} bytes after the last section",
-            r.bytes.len() - r.at
-        ));
-    }
-    let kept = Kept {
-        settings,
-        texels,
-        material,
-        transport,
-        direct,
-        seams,
-        atlas,
-        jitter,
-        cuts,
-    };
-    Ok((kept, json))
+    Ok(crate::texels::Cuts::from_entries(n, entries))
 }
 
 #[derive(Default)]

@@ -221,34 +221,7 @@ impl Context<'_> {
         }
 
         // Punctual lights at stratified footprint points.
-        let mut punctual = Vec3::ZERO;
-        let mut shadow_rays = 0u64;
-        if !scene.lights.is_empty() {
-            let g = PUNCTUAL_GRID;
-            for s in 0..g * g {
-                let u = (Vec2::new((s % g) as f32, (s / g) as f32) + rng.next_vec2()) / g as f32;
-                let p = texels.punctual_point(tracer, i, self.footprint_point(i, u));
-                for (l, light) in scene.lights.iter().enumerate() {
-                    let e = punctual_irradiance(light, p, n, tracer);
-                    punctual += e;
-                    add_term(out, l, e);
-                }
-            }
-            punctual /= (g * g) as f32;
-            if self.sources.is_some() {
-                for term in &mut out.terms[terms..terms + scene.lights.len()] {
-                    *term /= (g * g) as f32;
-                }
-            }
-            shadow_rays = (g * g) as u64 * scene.lights.len() as u64;
-            if p.keep_punctual {
-                out.punctual.push(if punctual.is_finite() {
-                    punctual
-                } else {
-                    Vec3::ZERO
-                });
-            }
-        }
+        let (punctual, shadow_rays) = self.punctual_light(i, n, &mut rng, out, terms);
 
         let escape = escaped as f32 / kf;
         let sky = self.params.sky * (PI * escape);
@@ -275,5 +248,54 @@ impl Context<'_> {
         }
         out.end_row(before, escape, direct);
         out.rays += k as u64 + l as u64 + shadow_rays;
+    }
+
+    /// Texel `i`'s direct light from the punctual lights (normal `n`), the mean over
+    /// [`PUNCTUAL_GRID`]² stratified footprint points, each light's share added to its source
+    /// term (from `terms` in `out.terms`) when they are split; kept in `out.punctual` when the
+    /// parameters ask. Returns the light and the shadow rays cast.
+    fn punctual_light(
+        &self,
+        i: usize,
+        n: Vec3,
+        rng: &mut Rng,
+        out: &mut ChunkRows,
+        terms: usize,
+    ) -> (Vec3, u64) {
+        let Surfaces {
+            scene,
+            texels,
+            tracer,
+        } = self.surfaces;
+        let mut punctual = Vec3::ZERO;
+        if scene.lights.is_empty() {
+            return (punctual, 0);
+        }
+        let g = PUNCTUAL_GRID;
+        for s in 0..g * g {
+            let u = (Vec2::new((s % g) as f32, (s / g) as f32) + rng.next_vec2()) / g as f32;
+            let p = texels.punctual_point(tracer, i, self.footprint_point(i, u));
+            for (l, light) in scene.lights.iter().enumerate() {
+                let e = punctual_irradiance(light, p, n, tracer);
+                punctual += e;
+                if self.sources.is_some() {
+                    out.terms[terms + l] += e;
+                }
+            }
+        }
+        punctual /= (g * g) as f32;
+        if self.sources.is_some() {
+            for term in &mut out.terms[terms..terms + scene.lights.len()] {
+                *term /= (g * g) as f32;
+            }
+        }
+        if self.params.keep_punctual {
+            out.punctual.push(if punctual.is_finite() {
+                punctual
+            } else {
+                Vec3::ZERO
+            });
+        }
+        (punctual, (g * g) as u64 * scene.lights.len() as u64)
     }
 }
