@@ -13,6 +13,7 @@ mod docs;
 mod form_factors;
 mod hardening;
 mod hierarchical;
+mod house;
 mod incremental;
 mod instancing;
 mod junctions;
